@@ -1,0 +1,165 @@
+//! Point clouds: the point type, input validation, rigid transforms and simple statistics.
+
+use crate::error::{Error, Result};
+use nalgebra::{Isometry3, Matrix3, Matrix4, Point3, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3};
+
+/// A 3-D point in millimetres.
+pub type Point = Point3<f64>;
+
+/// Checks that every coordinate is finite; names the first bad row.
+pub fn check_finite(arg: &str, points: &[Point]) -> Result<()> {
+    for (i, p) in points.iter().enumerate() {
+        for v in p.coords.iter() {
+            if !v.is_finite() {
+                return Err(Error::NonFinite { arg: arg.into(), index: i, value: format!("{v}") });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Checks that a cloud has at least `needed` points.
+pub fn check_count(arg: &str, points: &[Point], needed: usize, hint: &str) -> Result<()> {
+    if points.len() < needed {
+        let hint = if hint.is_empty() { String::new() } else { format!("; {hint}") };
+        return Err(Error::TooFewPoints { arg: arg.into(), got: points.len(), needed, hint });
+    }
+    Ok(())
+}
+
+/// Mean of the points (the origin for an empty slice).
+pub fn centroid(points: &[Point]) -> Point {
+    if points.is_empty() {
+        return Point::origin();
+    }
+    let sum = points.iter().fold(Vector3::zeros(), |acc, p| acc + p.coords);
+    Point::from(sum / points.len() as f64)
+}
+
+/// Centroid and covariance (divided by n) of the points.
+pub fn covariance(points: &[Point]) -> (Point, Matrix3<f64>) {
+    let c = centroid(points);
+    let mut cov = Matrix3::zeros();
+    for p in points {
+        let d = p - c;
+        cov += d * d.transpose();
+    }
+    if !points.is_empty() {
+        cov /= points.len() as f64;
+    }
+    (c, cov)
+}
+
+/// Principal axes of a covariance: eigenvalues sorted descending with their unit eigenvectors.
+pub fn principal_axes(cov: &Matrix3<f64>) -> ([f64; 3], [Vector3<f64>; 3]) {
+    let eig = SymmetricEigen::new(*cov);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let vals = order.map(|i| eig.eigenvalues[i].max(0.0));
+    let vecs = order.map(|i| eig.eigenvectors.column(i).into_owned());
+    (vals, vecs)
+}
+
+/// How many dimensions a cloud spans: 0 all points equal, 1 collinear, 2 coplanar, 3 solid.
+/// A direction counts when its standard deviation exceeds `1e-9` of the cloud's extent (and 1e-12 mm).
+pub fn spanned_dimensions(points: &[Point]) -> usize {
+    if points.len() < 2 {
+        return 0;
+    }
+    let (_, cov) = covariance(points);
+    let (vals, _) = principal_axes(&cov);
+    let scale = vals[0].sqrt();
+    if scale <= 1e-12 {
+        return 0;
+    }
+    1 + vals[1..].iter().filter(|v| v.sqrt() > 1e-9 * scale).count()
+}
+
+/// Fails with [`Error::Degenerate`] when the cloud spans fewer than `needed` dimensions.
+pub fn check_spread(arg: &str, points: &[Point], needed: usize, advice: &str) -> Result<()> {
+    let dims = spanned_dimensions(points);
+    if dims < needed {
+        let what = match dims {
+            0 => "all points are equal",
+            1 => "all points lie on one line",
+            _ => "all points lie in one plane",
+        };
+        return Err(Error::Degenerate { arg: arg.into(), what: what.into(), advice: advice.into() });
+    }
+    Ok(())
+}
+
+/// Applies a rigid transform to every point.
+pub fn transform_points(t: &Isometry3<f64>, points: &[Point]) -> Vec<Point> {
+    points.iter().map(|p| t * p).collect()
+}
+
+/// Converts a 4×4 homogeneous matrix into a rigid transform, checking that it is one:
+/// the rotation block orthonormal with determinant +1 (to 1e-6) and the last row `0 0 0 1`.
+pub fn isometry_from_matrix(arg: &str, m: &Matrix4<f64>) -> Result<Isometry3<f64>> {
+    if m.iter().any(|v| !v.is_finite()) {
+        return Err(Error::invalid(arg, "the transform holds NaN or inf; pass a finite 4×4 rigid transform"));
+    }
+    let last = m.row(3);
+    if (last[0].abs() + last[1].abs() + last[2].abs() + (last[3] - 1.0).abs()) > 1e-9 {
+        return Err(Error::invalid(arg, format!("the last row must be [0, 0, 0, 1], got {last}")));
+    }
+    let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let ortho_err = (r.transpose() * r - Matrix3::identity()).abs().max();
+    if ortho_err > 1e-6 || r.determinant() < 0.0 {
+        return Err(Error::invalid(
+            arg,
+            format!(
+                "the upper-left 3×3 block is not a rotation (|RᵀR − I| = {ortho_err:.2e}, det = {:.6}); pass a rigid transform without scale or reflection",
+                r.determinant()
+            ),
+        ));
+    }
+    let rot = Rotation3::from_matrix_eps(&r, 1e-12, 100, Rotation3::identity());
+    let t = Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]);
+    Ok(Isometry3::from_parts(t, UnitQuaternion::from_rotation_matrix(&rot)))
+}
+
+/// Rotation angle (radians, in [0, π]) between two rotations.
+pub fn rotation_angle_between(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>) -> f64 {
+    a.angle_to(b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spread_classifies_degenerate_sets() {
+        let same = vec![Point::new(1.0, 2.0, 3.0); 10];
+        assert_eq!(spanned_dimensions(&same), 0);
+        let line: Vec<Point> = (0..10).map(|i| Point::new(i as f64, 2.0 * i as f64, 5.0)).collect();
+        assert_eq!(spanned_dimensions(&line), 1);
+        let plane: Vec<Point> = (0..100).map(|i| Point::new((i % 10) as f64, (i / 10) as f64, 5.0)).collect();
+        assert_eq!(spanned_dimensions(&plane), 2);
+        let mut solid = plane.clone();
+        solid.push(Point::new(0.0, 0.0, 9.0));
+        assert_eq!(spanned_dimensions(&solid), 3);
+        assert!(matches!(check_spread("x", &line, 2, "fix it"), Err(Error::Degenerate { .. })));
+    }
+
+    #[test]
+    fn finite_check_names_row() {
+        let pts = vec![Point::new(0.0, 0.0, 0.0), Point::new(0.0, f64::NAN, 0.0)];
+        match check_finite("scene", &pts) {
+            Err(Error::NonFinite { index, .. }) => assert_eq!(index, 1),
+            other => panic!("unexpected {other:?}"),
+        }
+    }
+
+    #[test]
+    fn isometry_check_rejects_scale_and_reflection() {
+        let mut m = Matrix4::identity();
+        assert!(isometry_from_matrix("init", &m).is_ok());
+        m[(0, 0)] = 2.0;
+        assert!(isometry_from_matrix("init", &m).is_err());
+        let mut refl = Matrix4::identity();
+        refl[(2, 2)] = -1.0;
+        assert!(isometry_from_matrix("init", &refl).is_err());
+    }
+}

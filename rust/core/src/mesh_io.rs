@@ -1,0 +1,504 @@
+//! Reading meshes (STL binary and ASCII, PLY ASCII and binary, OBJ) and reading and writing
+//! PLY point clouds that MeshLab and CloudCompare open.
+
+use crate::cloud::Point;
+use crate::error::{Error, Result};
+use crate::mesh::TriMesh;
+use nalgebra::Vector3;
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::Path;
+
+fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    let shown = path.display().to_string();
+    if path.is_dir() {
+        return Err(Error::FileNotFound { path: shown, reason: "it is a directory".into() });
+    }
+    let bytes = std::fs::read(path).map_err(|e| Error::FileNotFound { path: shown.clone(), reason: e.to_string() })?;
+    if bytes.is_empty() {
+        return Err(Error::bad_file(shown, "the file is empty"));
+    }
+    Ok(bytes)
+}
+
+/// Reads a triangle mesh, choosing the format by the file extension (`.stl`, `.ply`, `.obj`).
+/// Coordinates are returned as stored; convert units with [`crate::mesh::unit_scale`].
+pub fn read_mesh(path: &Path) -> Result<TriMesh> {
+    let shown = path.display().to_string();
+    let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).unwrap_or_default();
+    if !matches!(ext.as_str(), "stl" | "ply" | "obj") {
+        return Err(Error::bad_file(shown, format!("unsupported extension {ext:?}; binpick reads .stl, .ply and .obj meshes")));
+    }
+    let bytes = read_bytes(path)?;
+    let mut mesh = match ext.as_str() {
+        "stl" => parse_stl(&bytes),
+        "ply" => parse_ply(&bytes).and_then(|p| {
+            if p.faces.is_empty() {
+                Err("the PLY file has no faces; it is a point cloud, not a mesh (use read_ply)".to_string())
+            } else {
+                Ok(TriMesh { vertices: p.points, faces: p.faces })
+            }
+        }),
+        _ => parse_obj(&bytes),
+    }
+    .map_err(|problem| Error::bad_file(shown.clone(), problem))?;
+    if let Err(Error::NonFinite { index, .. }) = crate::cloud::check_finite("vertices", &mesh.vertices) {
+        return Err(Error::bad_file(shown, format!("vertex {index} is not finite; the file is corrupt")));
+    }
+    mesh.drop_degenerate_faces();
+    if mesh.faces.is_empty() {
+        return Err(Error::bad_file(shown, "the mesh has no triangle with a non-zero area"));
+    }
+    Ok(mesh)
+}
+
+/// Merges exactly equal vertices, as STL repeats every corner per triangle.
+struct Welder {
+    map: HashMap<[u64; 3], u32>,
+    vertices: Vec<Point>,
+}
+
+impl Welder {
+    fn new() -> Self {
+        Welder { map: HashMap::new(), vertices: Vec::new() }
+    }
+    fn add(&mut self, p: [f64; 3]) -> u32 {
+        // +0.0 and -0.0 are the same place.
+        let key = p.map(|v| if v == 0.0 { 0u64 } else { v.to_bits() });
+        let next = self.vertices.len() as u32;
+        *self.map.entry(key).or_insert_with(|| {
+            self.vertices.push(Point::new(p[0], p[1], p[2]));
+            next
+        })
+    }
+}
+
+fn parse_stl(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
+    if bytes.len() >= 84 {
+        let n = u32::from_le_bytes(bytes[80..84].try_into().unwrap()) as usize;
+        if 84 + 50 * n == bytes.len() {
+            return parse_stl_binary(bytes, n);
+        }
+    }
+    let text = std::str::from_utf8(bytes).map_err(|_| {
+        "not a valid STL: the size does not match a binary STL's triangle count and the content is not ASCII text".to_string()
+    })?;
+    if !text.trim_start().to_ascii_lowercase().starts_with("solid") {
+        return Err("not a valid STL: neither a binary STL (size mismatch) nor an ASCII one (no 'solid' header)".into());
+    }
+    parse_stl_ascii(text)
+}
+
+fn parse_stl_binary(bytes: &[u8], n: usize) -> std::result::Result<TriMesh, String> {
+    if n == 0 {
+        return Err("the binary STL holds zero triangles".into());
+    }
+    let mut w = Welder::new();
+    let mut faces = Vec::with_capacity(n);
+    for t in 0..n {
+        let base = 84 + 50 * t + 12;
+        let mut corner = |k: usize| {
+            let o = base + 12 * k;
+            let f = |i: usize| f32::from_le_bytes(bytes[o + 4 * i..o + 4 * i + 4].try_into().unwrap()) as f64;
+            w.add([f(0), f(1), f(2)])
+        };
+        faces.push([corner(0), corner(1), corner(2)]);
+    }
+    Ok(TriMesh { vertices: w.vertices, faces })
+}
+
+fn parse_stl_ascii(text: &str) -> std::result::Result<TriMesh, String> {
+    let mut w = Welder::new();
+    let mut faces = Vec::new();
+    let mut corners: Vec<u32> = Vec::with_capacity(3);
+    for (lineno, line) in text.lines().enumerate() {
+        let mut it = line.split_whitespace();
+        match it.next() {
+            Some("vertex") => {
+                let v: Vec<f64> = it.map(|s| s.parse::<f64>()).collect::<std::result::Result<_, _>>().map_err(|_| format!("line {}: a vertex with a bad number: {line:?}", lineno + 1))?;
+                if v.len() != 3 {
+                    return Err(format!("line {}: a vertex needs 3 coordinates: {line:?}", lineno + 1));
+                }
+                corners.push(w.add([v[0], v[1], v[2]]));
+            }
+            Some("endloop") => {
+                if corners.len() != 3 {
+                    return Err(format!("line {}: a facet with {} vertices; STL facets have 3", lineno + 1, corners.len()));
+                }
+                faces.push([corners[0], corners[1], corners[2]]);
+                corners.clear();
+            }
+            _ => {}
+        }
+    }
+    if faces.is_empty() {
+        return Err("the ASCII STL holds no complete facet".into());
+    }
+    Ok(TriMesh { vertices: w.vertices, faces })
+}
+
+fn parse_obj(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
+    let text = String::from_utf8_lossy(bytes);
+    let mut vertices = Vec::new();
+    let mut faces = Vec::new();
+    for (lineno, line) in text.lines().enumerate() {
+        let mut it = line.split_whitespace();
+        match it.next() {
+            Some("v") => {
+                let v: Vec<f64> = it.take(3).map(|s| s.parse::<f64>()).collect::<std::result::Result<_, _>>().map_err(|_| format!("line {}: a vertex with a bad number: {line:?}", lineno + 1))?;
+                if v.len() != 3 {
+                    return Err(format!("line {}: a vertex needs 3 coordinates: {line:?}", lineno + 1));
+                }
+                vertices.push(Point::new(v[0], v[1], v[2]));
+            }
+            Some("f") => {
+                let mut idx = Vec::new();
+                for tok in it {
+                    let first = tok.split('/').next().unwrap_or("");
+                    let i: i64 = first.parse().map_err(|_| format!("line {}: a face index that is not a number: {tok:?}", lineno + 1))?;
+                    let n = vertices.len() as i64;
+                    let resolved = if i > 0 { i - 1 } else if i < 0 { n + i } else { -1 };
+                    if resolved < 0 || resolved >= n {
+                        return Err(format!("line {}: face index {i} refers to no vertex (only {n} defined so far)", lineno + 1));
+                    }
+                    idx.push(resolved as u32);
+                }
+                if idx.len() < 3 {
+                    return Err(format!("line {}: a face needs at least 3 vertices", lineno + 1));
+                }
+                for k in 1..idx.len() - 1 {
+                    faces.push([idx[0], idx[k], idx[k + 1]]);
+                }
+            }
+            _ => {}
+        }
+    }
+    if faces.is_empty() {
+        return Err("the OBJ file defines no face".into());
+    }
+    Ok(TriMesh { vertices, faces })
+}
+
+/// What a PLY file holds: points, optional normals, and faces if it is a mesh.
+#[derive(Debug, Clone, Default)]
+pub struct PlyData {
+    /// Vertex positions.
+    pub points: Vec<Point>,
+    /// Vertex normals, if the file has nx, ny, nz.
+    pub normals: Option<Vec<Vector3<f64>>>,
+    /// Triangles (polygons fan-triangulated); empty for a point cloud.
+    pub faces: Vec<[u32; 3]>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Scalar {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl Scalar {
+    fn parse(s: &str) -> Option<Self> {
+        Some(match s {
+            "char" | "int8" => Scalar::I8,
+            "uchar" | "uint8" => Scalar::U8,
+            "short" | "int16" => Scalar::I16,
+            "ushort" | "uint16" => Scalar::U16,
+            "int" | "int32" => Scalar::I32,
+            "uint" | "uint32" => Scalar::U32,
+            "float" | "float32" => Scalar::F32,
+            "double" | "float64" => Scalar::F64,
+            _ => return None,
+        })
+    }
+    fn size(self) -> usize {
+        match self {
+            Scalar::I8 | Scalar::U8 => 1,
+            Scalar::I16 | Scalar::U16 => 2,
+            Scalar::I32 | Scalar::U32 | Scalar::F32 => 4,
+            Scalar::F64 => 8,
+        }
+    }
+    fn read(self, b: &[u8], big: bool) -> f64 {
+        macro_rules! rd {
+            ($t:ty, $n:expr) => {{
+                let a: [u8; $n] = b[..$n].try_into().unwrap();
+                (if big { <$t>::from_be_bytes(a) } else { <$t>::from_le_bytes(a) }) as f64
+            }};
+        }
+        match self {
+            Scalar::I8 => b[0] as i8 as f64,
+            Scalar::U8 => b[0] as f64,
+            Scalar::I16 => rd!(i16, 2),
+            Scalar::U16 => rd!(u16, 2),
+            Scalar::I32 => rd!(i32, 4),
+            Scalar::U32 => rd!(u32, 4),
+            Scalar::F32 => rd!(f32, 4),
+            Scalar::F64 => rd!(f64, 8),
+        }
+    }
+}
+
+#[derive(Debug)]
+enum Property {
+    Scalar(String, Scalar),
+    List(String, Scalar, Scalar),
+}
+
+#[derive(Debug)]
+struct Element {
+    name: String,
+    count: usize,
+    props: Vec<Property>,
+}
+
+#[derive(PartialEq)]
+enum PlyFormat {
+    Ascii,
+    BinaryLe,
+    BinaryBe,
+}
+
+/// Parses PLY bytes (ASCII, binary little- or big-endian).
+fn parse_ply(bytes: &[u8]) -> std::result::Result<PlyData, String> {
+    if !bytes.starts_with(b"ply") {
+        return Err("not a PLY file: it does not start with 'ply'".into());
+    }
+    let end = find_header_end(bytes).ok_or("the PLY header has no 'end_header' line")?;
+    let header = std::str::from_utf8(&bytes[..end.0]).map_err(|_| "the PLY header is not text")?;
+    let mut format = None;
+    let mut elements: Vec<Element> = Vec::new();
+    for line in header.lines().skip(1) {
+        let tok: Vec<&str> = line.split_whitespace().collect();
+        match tok.first().copied() {
+            Some("format") => {
+                format = Some(match tok.get(1).copied() {
+                    Some("ascii") => PlyFormat::Ascii,
+                    Some("binary_little_endian") => PlyFormat::BinaryLe,
+                    Some("binary_big_endian") => PlyFormat::BinaryBe,
+                    other => return Err(format!("unknown PLY format {other:?}")),
+                })
+            }
+            Some("element") => {
+                let name = tok.get(1).ok_or("an element line without a name")?.to_string();
+                let count = tok.get(2).and_then(|c| c.parse().ok()).ok_or(format!("element {name} has no valid count"))?;
+                elements.push(Element { name, count, props: Vec::new() });
+            }
+            Some("property") => {
+                let el = elements.last_mut().ok_or("a property before any element")?;
+                if tok.get(1) == Some(&"list") {
+                    let (c, i, n) = (tok.get(2), tok.get(3), tok.get(4));
+                    let c = c.and_then(|s| Scalar::parse(s)).ok_or(format!("bad list count type in {line:?}"))?;
+                    let i = i.and_then(|s| Scalar::parse(s)).ok_or(format!("bad list item type in {line:?}"))?;
+                    el.props.push(Property::List(n.unwrap_or(&"").to_string(), c, i));
+                } else {
+                    let t = tok.get(1).and_then(|s| Scalar::parse(s)).ok_or(format!("bad property type in {line:?}"))?;
+                    el.props.push(Property::Scalar(tok.get(2).unwrap_or(&"").to_string(), t));
+                }
+            }
+            _ => {}
+        }
+    }
+    let format = format.ok_or("the PLY header has no format line")?;
+    let body = &bytes[end.1..];
+    let mut out = PlyData::default();
+    let big = format == PlyFormat::BinaryBe;
+    let mut ascii_values = match format {
+        PlyFormat::Ascii => Some(std::str::from_utf8(body).map_err(|_| "the ASCII PLY body is not text")?.split_ascii_whitespace()),
+        _ => None,
+    };
+    let mut pos = 0usize;
+    let mut next = |t: Scalar| -> std::result::Result<f64, String> {
+        match ascii_values.as_mut() {
+            Some(it) => {
+                let s = it.next().ok_or("the ASCII PLY body ends early; the file is truncated")?;
+                s.parse::<f64>().map_err(|_| format!("a value that is not a number: {s:?}"))
+            }
+            None => {
+                let n = t.size();
+                if pos + n > body.len() {
+                    return Err("the binary PLY body ends early; the file is truncated".into());
+                }
+                let v = t.read(&body[pos..], big);
+                pos += n;
+                Ok(v)
+            }
+        }
+    };
+    for el in &elements {
+        let is_vertex = el.name == "vertex";
+        let is_face = el.name == "face";
+        let names: Vec<&str> = el.props.iter().map(|p| match p {
+            Property::Scalar(n, _) | Property::List(n, _, _) => n.as_str(),
+        }).collect();
+        let col = |n: &str| names.iter().position(|x| *x == n);
+        let (xi, yi, zi) = (col("x"), col("y"), col("z"));
+        let (nxi, nyi, nzi) = (col("nx"), col("ny"), col("nz"));
+        if is_vertex && (xi.is_none() || yi.is_none() || zi.is_none()) {
+            return Err("the PLY vertex element lacks x, y or z".into());
+        }
+        let has_normals = is_vertex && nxi.is_some() && nyi.is_some() && nzi.is_some();
+        let mut normals = Vec::new();
+        let mut row = vec![0.0; el.props.len()];
+        for _ in 0..el.count {
+            let mut list: Vec<u32> = Vec::new();
+            for (k, p) in el.props.iter().enumerate() {
+                match p {
+                    Property::Scalar(_, t) => row[k] = next(*t)?,
+                    Property::List(name, ct, it) => {
+                        let n = next(*ct)?;
+                        if !(n >= 0.0 && n < 1e6) {
+                            return Err(format!("a list of {n} items; the file is corrupt"));
+                        }
+                        let keep = is_face && (name == "vertex_indices" || name == "vertex_index");
+                        for _ in 0..n as usize {
+                            let v = next(*it)?;
+                            if keep {
+                                list.push(v as u32);
+                            }
+                        }
+                    }
+                }
+            }
+            if is_vertex {
+                out.points.push(Point::new(row[xi.unwrap()], row[yi.unwrap()], row[zi.unwrap()]));
+                if has_normals {
+                    normals.push(Vector3::new(row[nxi.unwrap()], row[nyi.unwrap()], row[nzi.unwrap()]));
+                }
+            }
+            if is_face && list.len() >= 3 {
+                for k in 1..list.len() - 1 {
+                    out.faces.push([list[0], list[k], list[k + 1]]);
+                }
+            }
+        }
+        if has_normals {
+            out.normals = Some(normals);
+        }
+    }
+    let n = out.points.len() as u32;
+    if let Some(f) = out.faces.iter().find(|f| f.iter().any(|&v| v >= n)) {
+        return Err(format!("a face {f:?} indexes past the {n} vertices; the file is corrupt"));
+    }
+    Ok(out)
+}
+
+/// (end of the header text, start of the body) after the `end_header` line.
+fn find_header_end(bytes: &[u8]) -> Option<(usize, usize)> {
+    let pat = b"end_header";
+    let at = bytes.windows(pat.len()).position(|w| w == pat)?;
+    let mut body = at + pat.len();
+    if bytes.get(body) == Some(&b'\r') {
+        body += 1;
+    }
+    if bytes.get(body) == Some(&b'\n') {
+        body += 1;
+    }
+    Some((at, body))
+}
+
+/// Reads a PLY point cloud (or the vertices of a PLY mesh) with normals when present.
+pub fn read_ply(path: &Path) -> Result<PlyData> {
+    let shown = path.display().to_string();
+    let bytes = read_bytes(path)?;
+    let data = parse_ply(&bytes).map_err(|p| Error::bad_file(shown.clone(), p))?;
+    if data.points.is_empty() {
+        return Err(Error::bad_file(shown, "the PLY file holds no vertex"));
+    }
+    if let Err(Error::NonFinite { index, .. }) = crate::cloud::check_finite("points", &data.points) {
+        return Err(Error::bad_file(shown, format!("vertex {index} is not finite; the file is corrupt")));
+    }
+    Ok(data)
+}
+
+/// Writes points (and normals) as a PLY file, binary little-endian (float64) or ASCII.
+pub fn write_ply(path: &Path, points: &[Point], normals: Option<&[Vector3<f64>]>, ascii: bool) -> Result<()> {
+    let shown = path.display().to_string();
+    if let Some(n) = normals {
+        if n.len() != points.len() {
+            return Err(Error::invalid("normals", format!("has {} rows but points has {}", n.len(), points.len())));
+        }
+    }
+    let mut buf: Vec<u8> = Vec::with_capacity(64 + points.len() * 48);
+    let fmt = if ascii { "ascii" } else { "binary_little_endian" };
+    write!(buf, "ply\nformat {fmt} 1.0\ncomment written by binpick, units mm\nelement vertex {}\nproperty double x\nproperty double y\nproperty double z\n", points.len()).unwrap();
+    if normals.is_some() {
+        buf.extend_from_slice(b"property double nx\nproperty double ny\nproperty double nz\n");
+    }
+    buf.extend_from_slice(b"end_header\n");
+    for (i, p) in points.iter().enumerate() {
+        let mut vals = vec![p.x, p.y, p.z];
+        if let Some(n) = normals {
+            vals.extend_from_slice(&[n[i].x, n[i].y, n[i].z]);
+        }
+        if ascii {
+            let line: Vec<String> = vals.iter().map(|v| format!("{v:?}")).collect();
+            buf.extend_from_slice(line.join(" ").as_bytes());
+            buf.push(b'\n');
+        } else {
+            for v in vals {
+                buf.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+    }
+    std::fs::write(path, buf).map_err(|e| Error::WriteFailed { path: shown, reason: e.to_string() })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tetra_ascii_stl() -> String {
+        let tris = [
+            [[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]],
+            [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]],
+            [[0.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, 1.0, 0.0]],
+            [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+        ];
+        let mut s = String::from("solid t\n");
+        for t in tris {
+            s.push_str("facet normal 0 0 0\nouter loop\n");
+            for v in t {
+                s.push_str(&format!("vertex {} {} {}\n", v[0], v[1], v[2]));
+            }
+            s.push_str("endloop\nendfacet\n");
+        }
+        s.push_str("endsolid t\n");
+        s
+    }
+
+    #[test]
+    fn ascii_stl_welds_corners() {
+        let m = parse_stl(tetra_ascii_stl().as_bytes()).unwrap();
+        assert_eq!(m.vertices.len(), 4);
+        assert_eq!(m.faces.len(), 4);
+        assert!((m.volume() - 1.0 / 6.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn ply_binary_roundtrip() {
+        let dir = std::env::temp_dir().join(format!("binpick-ply-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let pts = vec![Point::new(1.0, 2.0, 3.0), Point::new(-4.5, 0.25, 1e-3)];
+        let ns = vec![Vector3::z(), Vector3::x()];
+        for ascii in [false, true] {
+            let p = dir.join(format!("c{ascii}.ply"));
+            write_ply(&p, &pts, Some(&ns), ascii).unwrap();
+            let back = read_ply(&p).unwrap();
+            assert_eq!(back.points, pts);
+            assert_eq!(back.normals.unwrap(), ns);
+        }
+    }
+
+    #[test]
+    fn obj_polygons_and_negative_indices() {
+        let m = parse_obj(b"v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf -4 -3 -2 -1\n").unwrap();
+        assert_eq!(m.faces, vec![[0, 1, 2], [0, 2, 3]]);
+        assert!(parse_obj(b"v 0 0 0\nf 1 2 3\n").is_err());
+    }
+}

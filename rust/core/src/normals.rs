@@ -1,0 +1,66 @@
+//! Surface normals from k-nearest-neighbour PCA, oriented toward a viewpoint.
+
+use crate::cloud::{check_count, check_finite, covariance, principal_axes, Point};
+use crate::error::{Error, Result};
+use crate::knn::KdIndex;
+use nalgebra::Vector3;
+use rayon::prelude::*;
+
+/// Where normals should face.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Orientation {
+    /// Toward a point, e.g. the camera centre of the scan (mm).
+    TowardPoint(Point),
+    /// Along a direction, e.g. `+z` for a scene seen from above.
+    TowardDirection(Vector3<f64>),
+}
+
+/// Estimates a unit normal per point from the PCA of its `k` nearest neighbours (itself included),
+/// flipped to face `orientation`. `index` must be built over `points`.
+pub fn estimate_normals(points: &[Point], index: &KdIndex, k: usize, orientation: Orientation) -> Result<Vec<Vector3<f64>>> {
+    if k < 3 {
+        return Err(Error::invalid("k", format!("must be at least 3 to fit a plane, got {k}")));
+    }
+    check_finite("points", points)?;
+    check_count("points", points, 3, "normals need at least 3 points")?;
+    if let Orientation::TowardDirection(d) = orientation {
+        if !(d.norm() > 0.0) || d.iter().any(|v| !v.is_finite()) {
+            return Err(Error::invalid("orientation", "the direction must be finite and non-zero"));
+        }
+    }
+    let normals = points
+        .par_iter()
+        .map(|p| {
+            let neigh = index.knn(p, k);
+            let local: Vec<Point> = neigh.iter().map(|n| points[n.index]).collect();
+            let (_, cov) = covariance(&local);
+            let (_, axes) = principal_axes(&cov);
+            let mut n = axes[2];
+            let facing = match orientation {
+                Orientation::TowardPoint(v) => v - p,
+                Orientation::TowardDirection(d) => d,
+            };
+            if n.dot(&facing) < 0.0 {
+                n = -n;
+            }
+            n
+        })
+        .collect();
+    Ok(normals)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn plane_normals_face_the_viewpoint() {
+        let pts: Vec<Point> = (0..400).map(|i| Point::new((i % 20) as f64, (i / 20) as f64, 0.3 * (i % 20) as f64)).collect();
+        let idx = KdIndex::new(&pts);
+        let ns = estimate_normals(&pts, &idx, 10, Orientation::TowardPoint(Point::new(0.0, 0.0, 100.0))).unwrap();
+        let expect = Vector3::new(-0.3, 0.0, 1.0).normalize();
+        for n in ns {
+            assert!((n - expect).norm() < 1e-9, "{n}");
+        }
+    }
+}

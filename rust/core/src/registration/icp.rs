@@ -1,0 +1,343 @@
+//! KD-tree ICP: point-to-point (closed-form SVD) and point-to-plane (Gauss–Newton on SE(3)).
+//!
+//! Each iteration finds, for every source point moved by the current estimate, its nearest
+//! target point in a kiddo KD-tree; pairs farther than `max_correspondence_distance` are
+//! ignored. The sums the solver needs are accumulated per rayon task and merged, so the
+//! work splits across threads without locks. Sums are taken about the target's centroid,
+//! which keeps them well conditioned for scenes far from the origin.
+
+use super::criteria::{IcpConfig, IcpMethod};
+use crate::cloud::{centroid, check_count, check_finite, check_spread, Point};
+use crate::error::{Error, Result};
+use crate::knn::KdIndex;
+use crate::parallel::with_threads;
+use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6};
+use rayon::prelude::*;
+
+const CHUNK: usize = 2048;
+
+/// A target cloud prepared for ICP: its points, optional unit normals and its KD-tree.
+/// Build it once and reuse it across many registrations against the same target.
+pub struct IcpTarget {
+    points: Vec<Point>,
+    normals: Option<Vec<Vector3<f64>>>,
+    index: KdIndex,
+    center: Point,
+}
+
+impl IcpTarget {
+    /// Validates the cloud (finite, at least 3 points, not all on one line) and builds the KD-tree.
+    pub fn new(points: Vec<Point>, normals: Option<Vec<Vector3<f64>>>) -> Result<Self> {
+        check_finite("target", &points)?;
+        check_count("target", &points, 3, "ICP needs a target surface")?;
+        check_spread("target", &points, 2, "ICP cannot fix a rotation against a line or a single point; pass a cloud that covers a surface")?;
+        if let Some(n) = &normals {
+            if n.len() != points.len() {
+                return Err(Error::invalid("target_normals", format!("has {} rows but target has {}", n.len(), points.len())));
+            }
+            for (i, v) in n.iter().enumerate() {
+                if !v.iter().all(|x| x.is_finite()) || (v.norm() - 1.0).abs() > 1e-3 {
+                    return Err(Error::invalid("target_normals", format!("row {i} is not a finite unit vector ({v:?}); normalise the normals or let binpick estimate them")));
+                }
+            }
+        }
+        let index = KdIndex::new(&points);
+        let center = centroid(&points);
+        Ok(IcpTarget { points, normals, index, center })
+    }
+
+    /// The target's points.
+    pub fn points(&self) -> &[Point] {
+        &self.points
+    }
+
+    /// The target's normals, if it has them.
+    pub fn normals(&self) -> Option<&[Vector3<f64>]> {
+        self.normals.as_deref()
+    }
+
+    /// The KD-tree over the target.
+    pub fn index(&self) -> &KdIndex {
+        &self.index
+    }
+}
+
+/// The outcome of one ICP run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IcpResult {
+    /// The estimated transform taking source points into the target frame.
+    pub t_target_source: Isometry3<f64>,
+    /// True when the last update fell below both tolerances before `max_iterations`.
+    pub converged: bool,
+    /// Number of updates applied.
+    pub iterations: usize,
+    /// Fraction of source points that found a target point within the correspondence distance.
+    pub fitness: f64,
+    /// Root-mean-square distance of those pairs, mm.
+    pub rmse: f64,
+    /// Number of such pairs.
+    pub num_inliers: usize,
+}
+
+/// Sums for the point-to-point closed form.
+#[derive(Clone, Copy)]
+struct PointSums {
+    w: f64,
+    q: Vector3<f64>,
+    t: Vector3<f64>,
+    qt: Matrix3<f64>,
+}
+
+/// Sums for the point-to-plane normal equations.
+#[derive(Clone, Copy)]
+struct PlaneSums {
+    h: Matrix6<f64>,
+    g: Vector6<f64>,
+    w: f64,
+}
+
+trait Sums: Copy + Send + Sync {
+    fn zero() -> Self;
+    /// `q` the moved source point, `t` its target match, both relative to the centre.
+    fn add(&mut self, q: &Vector3<f64>, t: &Vector3<f64>, n: &Vector3<f64>, w: f64);
+    fn merge(self, o: Self) -> Self;
+    fn residual(q: &Vector3<f64>, t: &Vector3<f64>, n: &Vector3<f64>) -> f64;
+    fn min_pairs() -> usize;
+    /// The solver's step from the sums: (rotation vector, translation) about the centre.
+    fn step(&self) -> Option<(Vector3<f64>, Vector3<f64>)>;
+}
+
+impl Sums for PointSums {
+    fn zero() -> Self {
+        PointSums { w: 0.0, q: Vector3::zeros(), t: Vector3::zeros(), qt: Matrix3::zeros() }
+    }
+    #[inline(always)]
+    fn add(&mut self, q: &Vector3<f64>, t: &Vector3<f64>, _n: &Vector3<f64>, w: f64) {
+        self.w += w;
+        self.q += w * q;
+        self.t += w * t;
+        self.qt += (w * q) * t.transpose();
+    }
+    fn merge(self, o: Self) -> Self {
+        PointSums { w: self.w + o.w, q: self.q + o.q, t: self.t + o.t, qt: self.qt + o.qt }
+    }
+    #[inline(always)]
+    fn residual(q: &Vector3<f64>, t: &Vector3<f64>, _n: &Vector3<f64>) -> f64 {
+        (q - t).norm()
+    }
+    fn min_pairs() -> usize {
+        3
+    }
+    fn step(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        point_step(self)
+    }
+}
+
+impl Sums for PlaneSums {
+    fn zero() -> Self {
+        PlaneSums { h: Matrix6::zeros(), g: Vector6::zeros(), w: 0.0 }
+    }
+    #[inline(always)]
+    fn add(&mut self, q: &Vector3<f64>, t: &Vector3<f64>, n: &Vector3<f64>, w: f64) {
+        let r = n.dot(&(q - t));
+        let c = q.cross(n);
+        let j = Vector6::new(c.x, c.y, c.z, n.x, n.y, n.z);
+        self.h += (w * j) * j.transpose();
+        self.g += (w * r) * j;
+        self.w += w;
+    }
+    fn merge(self, o: Self) -> Self {
+        PlaneSums { h: self.h + o.h, g: self.g + o.g, w: self.w + o.w }
+    }
+    #[inline(always)]
+    fn residual(q: &Vector3<f64>, t: &Vector3<f64>, n: &Vector3<f64>) -> f64 {
+        n.dot(&(q - t)).abs()
+    }
+    fn min_pairs() -> usize {
+        6
+    }
+    fn step(&self) -> Option<(Vector3<f64>, Vector3<f64>)> {
+        plane_step(self)
+    }
+}
+
+/// One pass's sums plus the statistics of all pairs within the correspondence distance.
+#[derive(Clone, Copy)]
+struct Pass<S> {
+    sums: S,
+    inliers: usize,
+    sq_dist: f64,
+}
+
+impl<S: Sums> Pass<S> {
+    fn zero() -> Self {
+        Pass { sums: S::zero(), inliers: 0, sq_dist: 0.0 }
+    }
+    fn merge(self, o: Self) -> Self {
+        Pass { sums: self.sums.merge(o.sums), inliers: self.inliers + o.inliers, sq_dist: self.sq_dist + o.sq_dist }
+    }
+}
+
+/// Registers `source` onto `target` starting from `init` (source → target).
+///
+/// Errors are for misuse (bad config, non-finite or degenerate source, point-to-plane without
+/// normals); a registration that finds too few correspondences is an outcome, reported with
+/// `converged = false`.
+pub fn icp(source: &[Point], target: &IcpTarget, init: &Isometry3<f64>, config: &IcpConfig) -> Result<IcpResult> {
+    config.validate()?;
+    check_finite("source", source)?;
+    let needed = match config.method {
+        IcpMethod::PointToPoint => PointSums::min_pairs(),
+        IcpMethod::PointToPlane => PlaneSums::min_pairs(),
+    };
+    check_count("source", source, needed, "register more points, or use a coarser voxel size")?;
+    check_spread("source", source, 2, "ICP cannot fix a rotation from points on a line; pass a cloud that covers a surface")?;
+    match config.method {
+        IcpMethod::PointToPoint => Ok(with_threads(config.num_threads, || run::<PointSums>(source, target, init, config))),
+        IcpMethod::PointToPlane => {
+            if target.normals.is_none() {
+                return Err(Error::invalid("target_normals", "point-to-plane ICP needs target normals; estimate them first (binpick.estimate_normals) or use method=\"point_to_point\""));
+            }
+            Ok(with_threads(config.num_threads, || run::<PlaneSums>(source, target, init, config)))
+        }
+    }
+}
+
+fn run<S: Sums>(
+    source: &[Point],
+    target: &IcpTarget,
+    init: &Isometry3<f64>,
+    config: &IcpConfig,
+) -> IcpResult {
+    let c = target.center.coords;
+    let max_sq = config.max_correspondence_distance * config.max_correspondence_distance;
+    let zero_normal = Vector3::zeros();
+    let normals = target.normals.as_deref();
+    let mut t_est = *init;
+    let mut converged = false;
+    let mut iterations = 0;
+    let mut last = Pass::<S>::zero();
+    let trim = config.trim_fraction > 0.0;
+
+    for _ in 0..config.max_iterations {
+        let rot: Matrix3<f64> = t_est.rotation.to_rotation_matrix().into_inner();
+        // Moving each source point relative to the centre: q_c = R p + (t − c).
+        let shift = t_est.translation.vector - c;
+        let kernel = config.kernel;
+
+        let pair_at = |p: &Point| -> Option<(Vector3<f64>, usize, f64)> {
+            let q = rot * p.coords + shift;
+            let nn = target.index.nearest(&Point::from(q + c))?;
+            (nn.distance_squared <= max_sq).then_some((q, nn.index, nn.distance_squared))
+        };
+
+        let pass = if trim {
+            let mut pairs: Vec<(u32, u32, f64)> = source
+                .par_iter()
+                .enumerate()
+                .filter_map(|(i, p)| pair_at(p).map(|(_, j, d)| (i as u32, j as u32, d)))
+                .collect();
+            let inliers = pairs.len();
+            let sq_dist: f64 = pairs.iter().map(|x| x.2).sum();
+            let keep = ((1.0 - config.trim_fraction) * inliers as f64).ceil() as usize;
+            if keep > 0 && keep < inliers {
+                pairs.select_nth_unstable_by(keep - 1, |a, b| a.2.total_cmp(&b.2));
+                pairs.truncate(keep);
+            }
+            let sums = pairs
+                .par_chunks(CHUNK)
+                .map(|chunk| {
+                    let mut s = S::zero();
+                    for &(i, j, _) in chunk {
+                        let q = rot * source[i as usize].coords + shift;
+                        let tq = target.points[j as usize].coords - c;
+                        let n = normals.map_or(&zero_normal, |ns| &ns[j as usize]);
+                        s.add(&q, &tq, n, kernel.weight(S::residual(&q, &tq, n)));
+                    }
+                    s
+                })
+                .reduce(S::zero, S::merge);
+            Pass { sums, inliers, sq_dist }
+        } else {
+            source
+                .par_chunks(CHUNK)
+                .map(|chunk| {
+                    let mut acc = Pass::<S>::zero();
+                    for p in chunk {
+                        if let Some((q, j, d)) = pair_at(p) {
+                            let tq = target.points[j].coords - c;
+                            let n = normals.map_or(&zero_normal, |ns| &ns[j]);
+                            acc.sums.add(&q, &tq, n, kernel.weight(S::residual(&q, &tq, n)));
+                            acc.inliers += 1;
+                            acc.sq_dist += d;
+                        }
+                    }
+                    acc
+                })
+                .reduce(Pass::zero, Pass::merge)
+        };
+        last = pass;
+        if pass.inliers < S::min_pairs() {
+            break;
+        }
+        let Some((omega, v)) = pass.sums.step() else { break };
+        if !(omega.iter().chain(v.iter()).all(|x| x.is_finite())) {
+            break;
+        }
+        let r_inc = UnitQuaternion::from_scaled_axis(omega);
+        // The increment acts about the centre: x ↦ R (x − c) + c + v.
+        let inc = Isometry3::from_parts(Translation3::from(c + v - (r_inc * c)), r_inc);
+        t_est = inc * t_est;
+        iterations += 1;
+        if omega.norm() < config.rotation_tolerance && v.norm() < config.translation_tolerance {
+            converged = true;
+            break;
+        }
+    }
+    t_est.rotation.renormalize();
+    let fitness = last.inliers as f64 / source.len() as f64;
+    let rmse = if last.inliers > 0 { (last.sq_dist / last.inliers as f64).sqrt() } else { f64::INFINITY };
+    IcpResult { t_target_source: t_est, converged, iterations, fitness, rmse, num_inliers: last.inliers }
+}
+
+/// Closed-form point-to-point step (Arun/Kabsch): the rotation from the SVD of the centred
+/// cross-covariance with the reflection case fixed, then the translation between the means.
+fn point_step(s: &PointSums) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    if s.w <= 0.0 {
+        return None;
+    }
+    let qm = s.q / s.w;
+    let tm = s.t / s.w;
+    let h = s.qt - s.w * qm * tm.transpose();
+    let svd = h.svd(true, true);
+    let (u, vt) = (svd.u?, svd.v_t?);
+    let mut d = Matrix3::identity();
+    if (vt.transpose() * u.transpose()).determinant() < 0.0 {
+        d[(2, 2)] = -1.0;
+    }
+    let r = vt.transpose() * d * u.transpose();
+    let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
+    let omega = rot.scaled_axis();
+    let v = tm - rot * qm;
+    Some((omega, v))
+}
+
+/// Gauss–Newton step for point-to-plane, solved through the eigen-decomposition of the 6×6
+/// normal matrix so that directions the geometry cannot observe (sliding along a plane) get no
+/// motion instead of a huge one.
+fn plane_step(s: &PlaneSums) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    let eig = SymmetricEigen::new(s.h);
+    let max = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
+    if max <= 0.0 {
+        return None;
+    }
+    let mut delta = Vector6::zeros();
+    for k in 0..6 {
+        let lambda = eig.eigenvalues[k];
+        if lambda > 1e-10 * max {
+            let e = eig.eigenvectors.column(k);
+            delta -= e * (e.dot(&s.g) / lambda);
+        }
+    }
+    Some((Vector3::new(delta[0], delta[1], delta[2]), Vector3::new(delta[3], delta[4], delta[5])))
+}

@@ -1,0 +1,8 @@
+//! Registration: ICP (point-to-point and point-to-plane) and its configuration.
+
+pub mod corr_tree;
+pub mod criteria;
+pub mod icp;
+
+pub use criteria::{IcpConfig, IcpMethod, RobustKernel};
+pub use icp::{icp, IcpResult, IcpTarget};

@@ -1,0 +1,76 @@
+//! Voxel-grid downsampling: one point per occupied voxel, the mean of the points inside it.
+
+use crate::cloud::Point;
+use crate::error::{Error, Result};
+use nalgebra::Vector3;
+use std::collections::HashMap;
+
+/// Downsampled cloud: the voxel means, the averaged unit normals if normals were given,
+/// and for each output point the index of the first input point that fell in its voxel.
+#[derive(Debug, Clone)]
+pub struct Downsampled {
+    /// Mean point of each occupied voxel, in first-seen order.
+    pub points: Vec<Point>,
+    /// Mean normal of each voxel, renormalised (empty if no normals were given).
+    pub normals: Vec<Vector3<f64>>,
+    /// Index into the input of the first point of each voxel.
+    pub first_index: Vec<usize>,
+}
+
+/// Averages the points (and normals) that fall in each cube of edge `voxel_size` mm.
+pub fn voxel_downsample(points: &[Point], normals: Option<&[Vector3<f64>]>, voxel_size: f64) -> Result<Downsampled> {
+    if !(voxel_size.is_finite() && voxel_size > 0.0) {
+        return Err(Error::invalid("voxel_size", format!("must be a positive length in mm, got {voxel_size}")));
+    }
+    if let Some(n) = normals {
+        if n.len() != points.len() {
+            return Err(Error::invalid("normals", format!("has {} rows but points has {}", n.len(), points.len())));
+        }
+    }
+    let inv = 1.0 / voxel_size;
+    let mut slot_of: HashMap<[i64; 3], usize> = HashMap::with_capacity(points.len() / 4 + 1);
+    let mut sums: Vec<(Vector3<f64>, Vector3<f64>, usize)> = Vec::new();
+    let mut first_index = Vec::new();
+    for (i, p) in points.iter().enumerate() {
+        let key = [(p.x * inv).floor() as i64, (p.y * inv).floor() as i64, (p.z * inv).floor() as i64];
+        let slot = *slot_of.entry(key).or_insert_with(|| {
+            sums.push((Vector3::zeros(), Vector3::zeros(), 0));
+            first_index.push(i);
+            sums.len() - 1
+        });
+        let s = &mut sums[slot];
+        s.0 += p.coords;
+        if let Some(n) = normals {
+            s.1 += n[i];
+        }
+        s.2 += 1;
+    }
+    let points_out = sums.iter().map(|s| Point::from(s.0 / s.2 as f64)).collect();
+    let normals_out = if normals.is_some() {
+        sums.iter()
+            .zip(&first_index)
+            .map(|(s, &i)| {
+                let n = s.1.norm();
+                if n > 1e-12 { s.1 / n } else { normals.unwrap()[i] }
+            })
+            .collect()
+    } else {
+        Vec::new()
+    };
+    Ok(Downsampled { points: points_out, normals: normals_out, first_index })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn one_point_per_voxel_at_the_mean() {
+        let pts = vec![Point::new(0.1, 0.1, 0.1), Point::new(0.3, 0.5, 0.9), Point::new(1.5, 0.0, 0.0)];
+        let d = voxel_downsample(&pts, None, 1.0).unwrap();
+        assert_eq!(d.points.len(), 2);
+        assert!((d.points[0] - Point::new(0.2, 0.3, 0.5)).norm() < 1e-12);
+        assert_eq!(d.first_index, vec![0, 2]);
+        assert!(voxel_downsample(&pts, None, 0.0).is_err());
+    }
+}
