@@ -1,0 +1,116 @@
+"""The exceptions binpick raises.
+
+``BinpickError`` is the base of all of them. Invalid input raises a subclass of both
+``BinpickError`` and ``ValueError``; device faults raise ``DeviceError`` and its subclasses;
+motion outside the cell's limits raises ``SafetyError`` before anything is sent.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "BinpickError",
+    "InvalidInputError",
+    "ShapeError",
+    "DTypeError",
+    "NonFiniteError",
+    "TooFewPointsError",
+    "DegenerateCloudError",
+    "UnknownUnitError",
+    "MeshFileError",
+    "MeshFileNotFoundError",
+    "FileWriteError",
+    "CalibrationError",
+    "NoObjectFound",
+    "DeviceError",
+    "DeviceTimeout",
+    "ProtocolError",
+    "ChecksumError",
+    "DeviceFault",
+    "PortClosedError",
+    "SafetyError",
+    "InternalError",
+]
+
+
+class BinpickError(Exception):
+    """Base class of every error binpick raises on purpose."""
+
+
+class InvalidInputError(BinpickError, ValueError):
+    """An argument is wrong: its message names the argument, the problem and the fix."""
+
+
+class ShapeError(InvalidInputError):
+    """An array has the wrong shape (for example not ``(N, 3)``)."""
+
+
+class DTypeError(InvalidInputError, TypeError):
+    """An array's dtype cannot be converted to float64 (strings, objects, complex)."""
+
+
+class NonFiniteError(InvalidInputError):
+    """An array holds NaN or infinity."""
+
+
+class TooFewPointsError(InvalidInputError):
+    """A cloud has fewer points than the method needs."""
+
+
+class DegenerateCloudError(InvalidInputError):
+    """A cloud's points are all equal, collinear, or otherwise span too few dimensions."""
+
+
+class UnknownUnitError(InvalidInputError):
+    """A length unit binpick does not know; use mm, cm, m or in."""
+
+
+class MeshFileError(InvalidInputError):
+    """A mesh or point-cloud file is corrupt, empty or of an unsupported format."""
+
+
+class MeshFileNotFoundError(MeshFileError, FileNotFoundError):
+    """A mesh or point-cloud file does not exist or cannot be opened."""
+
+
+class FileWriteError(BinpickError, OSError):
+    """A result file could not be written."""
+
+
+class CalibrationError(InvalidInputError):
+    """A calibration file or calibration data is missing, inconsistent or insufficient."""
+
+
+class NoObjectFound(BinpickError):
+    """No object in the scene matches the model well enough; binpick never returns a guess."""
+
+
+class DeviceError(BinpickError):
+    """A device (robot, motor, gripper, camera) failed or answered something unusable."""
+
+
+class DeviceTimeout(DeviceError, TimeoutError):
+    """A device did not answer within the allowed time."""
+
+
+class ProtocolError(DeviceError):
+    """A device's reply is garbled, truncated or not what the protocol allows."""
+
+
+class ChecksumError(ProtocolError):
+    """A reply's checksum or CRC does not match its content."""
+
+
+class DeviceFault(DeviceError):
+    """The device answered with an error of its own (for example the robot controller's QeR)."""
+
+
+class PortClosedError(DeviceError):
+    """The serial port is closed or disappeared."""
+
+
+class SafetyError(BinpickError):
+    """A motion would leave the cell's limits; nothing was sent to the device."""
+
+
+class InternalError(BinpickError, RuntimeError):
+    """A bug in binpick's native core was caught before it could crash Python; please report it."""

@@ -1,0 +1,191 @@
+"""Part models from CAD meshes, point-cloud files, normals and downsampling."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from typing import Any, Optional, Sequence
+
+import numpy as np
+
+from . import _core
+from ._validate import as_points, as_transform, as_vector, count, positive
+from .errors import InvalidInputError
+
+__all__ = ["Model", "Branch", "read_ply", "write_ply", "estimate_normals", "voxel_downsample"]
+
+
+@dataclass(frozen=True)
+class Branch:
+    """A cylindrical branch of a pipe fitting, in the model frame (what CCP needs).
+
+    ``direction`` is the unit vector from the junction (the model origin) to the open end,
+    ``length`` the distance from the junction to the end face (mm), ``radius`` the outer radius (mm).
+    """
+
+    direction: tuple[float, float, float]
+    length: float
+    radius: float
+
+
+class Model:
+    """A rigid part: its triangle mesh in millimetres and an even surface sample with normals.
+
+    Build one with :meth:`from_mesh` (STL, PLY, OBJ files) or :meth:`from_arrays`, or take a
+    built-in part from :mod:`binpick.parts`. The model frame is the mesh file's frame.
+
+    Attributes:
+        vertices: (V, 3) mesh vertices, mm.
+        faces: (F, 3) triangle vertex indices.
+        points: (N, 3) surface samples, mm.
+        normals: (N, 3) outward unit normals of the samples.
+        spacing: nominal sample spacing, mm (None when sampled by count).
+        diameter: largest vertex-to-vertex distance, mm.
+        area: surface area, mm².
+        name: a label for reports.
+        branches: cylindrical branches for CCP, or empty when the part has none declared.
+        grasps: named gripper poses ``T_gripper_object`` declared with :meth:`add_grasp`.
+    """
+
+    def __init__(
+        self,
+        vertices: np.ndarray,
+        faces: np.ndarray,
+        points: np.ndarray,
+        normals: np.ndarray,
+        *,
+        spacing: Optional[float],
+        diameter: float,
+        area: float,
+        name: str,
+        branches: Sequence[Branch] = (),
+    ) -> None:
+        self.vertices = vertices
+        self.faces = faces
+        self.points = points
+        self.normals = normals
+        self.spacing = spacing
+        self.diameter = float(diameter)
+        self.area = float(area)
+        self.name = name
+        self.branches: tuple[Branch, ...] = tuple(branches)
+        self.grasps: dict[str, np.ndarray] = {}
+        for arr in (self.vertices, self.faces, self.points, self.normals):
+            arr.setflags(write=False)
+
+    @classmethod
+    def from_mesh(
+        cls,
+        path: "str | os.PathLike[str]",
+        *,
+        unit: str = "mm",
+        spacing: Optional[float] = None,
+        count: Optional[int] = None,
+        seed: int = 0,
+        name: Optional[str] = None,
+    ) -> "Model":
+        """Reads a mesh (binary/ASCII STL, ASCII/binary PLY, OBJ), converts ``unit`` (mm, cm, m, in)
+        to millimetres and samples its surface: evenly at ``spacing`` mm, or ``count`` points.
+        With neither, the spacing is 1/100 of the bounding-box diagonal."""
+        path = os.fspath(path)
+        if not isinstance(unit, str):
+            raise InvalidInputError(f"unit: must be a string such as 'mm' or 'm', got {unit!r}")
+        vertices, faces = _core.read_mesh(path, unit)
+        label = name if name is not None else os.path.splitext(os.path.basename(path))[0]
+        return cls.from_arrays(vertices, faces, unit="mm", spacing=spacing, count=count, seed=seed, name=label)
+
+    @classmethod
+    def from_arrays(
+        cls,
+        vertices: Any,
+        faces: Any,
+        *,
+        unit: str = "mm",
+        spacing: Optional[float] = None,
+        count: Optional[int] = None,
+        seed: int = 0,
+        name: str = "part",
+        branches: Sequence[Branch] = (),
+    ) -> "Model":
+        """A model from a vertex array (V, 3) in ``unit`` and a face index array (F, 3)."""
+        v = as_points(vertices, "vertices", min_points=3)
+        f = np.asarray(faces)
+        if f.ndim != 2 or f.shape[1] != 3 or f.dtype.kind not in "iu":
+            raise InvalidInputError(f"faces: expected an (F, 3) integer array, got shape {f.shape} dtype {f.dtype}")
+        scale = _unit_scale(unit)
+        v = v * scale
+        f = np.ascontiguousarray(f, dtype=np.int64)
+        if spacing is not None and count is not None:
+            raise InvalidInputError("spacing/count: give one of them, not both")
+        if spacing is None and count is None:
+            spacing = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))) / 100.0
+        if spacing is not None:
+            spacing = positive(spacing, "spacing")
+        if count is not None:
+            count = _count(count)
+        pts, nrm, diameter, area = _core.sample_mesh(v, f, spacing, count, int(seed))
+        return cls(v, f, pts, nrm, spacing=spacing, diameter=diameter, area=area, name=name, branches=branches)
+
+    def add_grasp(self, name: str, T_gripper_object: Any) -> None:
+        """Declares a grasp: the object's pose in the gripper frame when the gripper holds it."""
+        self.grasps[str(name)] = as_transform(T_gripper_object, "T_gripper_object")
+
+    def __repr__(self) -> str:
+        return (
+            f"Model(name={self.name!r}, vertices={len(self.vertices)}, faces={len(self.faces)}, "
+            f"points={len(self.points)}, diameter={self.diameter:.2f} mm, branches={len(self.branches)})"
+        )
+
+
+def _count(value: Any) -> int:
+    return count(value, "count", minimum=1)
+
+
+_UNITS = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
+
+
+def _unit_scale(unit: Any) -> float:
+    from .errors import UnknownUnitError
+
+    if not isinstance(unit, str) or unit.strip().lower() not in _UNITS:
+        raise UnknownUnitError(f"unit: unknown unit {unit!r}; use one of 'mm', 'cm', 'm', 'in'")
+    return _UNITS[unit.strip().lower()]
+
+
+def read_ply(path: "str | os.PathLike[str]") -> tuple[np.ndarray, Optional[np.ndarray]]:
+    """Reads a PLY point cloud (ASCII or binary): ``(points, normals or None)``, in the file's units."""
+    return _core.read_ply(os.fspath(path))
+
+
+def write_ply(path: "str | os.PathLike[str]", points: Any, normals: Any = None, *, ascii: bool = False) -> None:
+    """Writes points (and normals) as PLY that MeshLab and CloudCompare open (binary by default)."""
+    pts = as_points(points, "points", min_points=0)
+    nrm = None if normals is None else as_points(normals, "normals", min_points=0)
+    if nrm is not None and len(nrm) != len(pts):
+        raise InvalidInputError(f"normals: has {len(nrm)} rows but points has {len(pts)}")
+    _core.write_ply(os.fspath(path), pts, nrm, bool(ascii))
+
+
+def estimate_normals(
+    points: Any,
+    *,
+    k: int = 20,
+    viewpoint: Any = None,
+    direction: Any = (0.0, 0.0, 1.0),
+    num_threads: int = 0,
+) -> np.ndarray:
+    """Unit normals from the PCA of each point's ``k`` nearest neighbours, flipped to face
+    ``viewpoint`` (a point, e.g. the camera centre) when given, else ``direction`` (+z by default)."""
+    pts = as_points(points, "points", min_points=3)
+    k = count(k, "k", minimum=3)
+    vp = None if viewpoint is None else as_vector(viewpoint, "viewpoint")
+    d = None if viewpoint is not None else as_vector(direction, "direction")
+    return _core.estimate_normals(pts, k, vp, d, count(num_threads, "num_threads"))
+
+
+def voxel_downsample(points: Any, voxel_size: float, normals: Any = None) -> tuple[np.ndarray, Optional[np.ndarray], np.ndarray]:
+    """One point per occupied ``voxel_size`` mm cube (the mean of its points):
+    ``(points, normals or None, index of each voxel's first input point)``."""
+    pts = as_points(points, "points", min_points=0)
+    nrm = None if normals is None else as_points(normals, "normals", min_points=0)
+    return _core.voxel_downsample(pts, nrm, positive(voxel_size, "voxel_size"))

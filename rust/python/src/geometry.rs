@@ -1,0 +1,185 @@
+//! Clouds, normals, voxels, meshes, PLY files and built-in parts.
+
+use crate::convert::{indices_to_py, points, points_to_py, vectors, vectors_to_py};
+use crate::errors::{invalid, run};
+use binpick_core::cloud::Point;
+use binpick_core::knn::KdIndex;
+use binpick_core::mesh::{unit_scale, TriMesh};
+use binpick_core::model::{sample_surface, Density};
+use binpick_core::normals::{estimate_normals as core_normals, Orientation};
+use binpick_core::parts::{self, Part};
+use binpick_core::voxel::voxel_downsample as core_voxel;
+use binpick_core::{mesh_io, parallel};
+use nalgebra::Vector3;
+use numpy::ndarray::Array2;
+use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use std::path::PathBuf;
+
+type Arr<'py> = Bound<'py, PyArray2<f64>>;
+
+/// Normals by k-NN PCA, facing `viewpoint` (a point) or else `direction`.
+#[pyfunction]
+#[pyo3(signature = (points_in, k, viewpoint, direction, num_threads))]
+fn estimate_normals<'py>(
+    py: Python<'py>,
+    points_in: PyReadonlyArray2<'py, f64>,
+    k: usize,
+    viewpoint: Option<PyReadonlyArray1<'py, f64>>,
+    direction: Option<PyReadonlyArray1<'py, f64>>,
+    num_threads: usize,
+) -> PyResult<Arr<'py>> {
+    let pts = points(&points_in, "points")?;
+    let vec3 = |a: &PyReadonlyArray1<'py, f64>, arg: &str| -> PyResult<Vector3<f64>> {
+        let s = a.as_slice()?;
+        if s.len() != 3 {
+            return Err(invalid(arg, &format!("must have 3 elements, got {}", s.len())));
+        }
+        Ok(Vector3::new(s[0], s[1], s[2]))
+    };
+    let orientation = match (viewpoint, direction) {
+        (Some(v), _) => Orientation::TowardPoint(Point::from(vec3(&v, "viewpoint")?)),
+        (None, Some(d)) => Orientation::TowardDirection(vec3(&d, "direction")?),
+        (None, None) => Orientation::TowardDirection(Vector3::z()),
+    };
+    let normals = run(py, move || {
+        parallel::with_threads(num_threads, || {
+            let index = KdIndex::new(&pts);
+            core_normals(&pts, &index, k, orientation)
+        })
+    })?;
+    Ok(vectors_to_py(py, &normals))
+}
+
+/// Voxel downsampling: (points, normals or None, first indices).
+#[pyfunction]
+#[pyo3(signature = (points_in, normals, voxel_size))]
+fn voxel_downsample<'py>(
+    py: Python<'py>,
+    points_in: PyReadonlyArray2<'py, f64>,
+    normals: Option<PyReadonlyArray2<'py, f64>>,
+    voxel_size: f64,
+) -> PyResult<(Arr<'py>, Option<Arr<'py>>, Bound<'py, numpy::PyArray1<i64>>)> {
+    let pts = points(&points_in, "points")?;
+    let ns = normals.as_ref().map(|n| vectors(n, "normals")).transpose()?;
+    let has_normals = ns.is_some();
+    let d = run(py, move || core_voxel(&pts, ns.as_deref(), voxel_size))?;
+    let n_out = has_normals.then(|| vectors_to_py(py, &d.normals));
+    Ok((points_to_py(py, &d.points), n_out, indices_to_py(py, &d.first_index)))
+}
+
+fn faces_to_py<'py>(py: Python<'py>, faces: &[[u32; 3]]) -> Bound<'py, PyArray2<i64>> {
+    let flat: Vec<i64> = faces.iter().flat_map(|f| f.map(|v| v as i64)).collect();
+    PyArray2::from_owned_array(py, Array2::from_shape_vec((faces.len(), 3), flat).expect("m×3"))
+}
+
+fn mesh_from_py(vertices: &PyReadonlyArray2<'_, f64>, faces: &PyReadonlyArray2<'_, i64>) -> PyResult<TriMesh> {
+    let v = points(vertices, "vertices")?;
+    let f = faces.as_array();
+    if f.ncols() != 3 {
+        return Err(invalid("faces", &format!("must have shape (M, 3), got {:?}", f.shape())));
+    }
+    let mut out = Vec::with_capacity(f.nrows());
+    for (i, r) in f.rows().into_iter().enumerate() {
+        if r.iter().any(|&x| x < 0 || x >= v.len() as i64) {
+            return Err(invalid("faces", &format!("row {i} {:?} indexes outside the {} vertices", r.to_vec(), v.len())));
+        }
+        out.push([r[0] as u32, r[1] as u32, r[2] as u32]);
+    }
+    TriMesh::new(v, out).map_err(crate::errors::to_py)
+}
+
+/// Reads a mesh file and converts it to mm: (vertices, faces).
+#[pyfunction]
+fn read_mesh<'py>(py: Python<'py>, path: PathBuf, unit: &str) -> PyResult<(Arr<'py>, Bound<'py, PyArray2<i64>>)> {
+    let unit = unit.to_string();
+    let mesh = run(py, move || {
+        let scale = unit_scale(&unit)?;
+        Ok(mesh_io::read_mesh(&path)?.scaled(scale))
+    })?;
+    Ok((points_to_py(py, &mesh.vertices), faces_to_py(py, &mesh.faces)))
+}
+
+/// Samples a mesh: (points, normals, diameter, area).
+#[pyfunction]
+#[pyo3(signature = (vertices, faces, spacing, count, seed))]
+fn sample_mesh<'py>(
+    py: Python<'py>,
+    vertices: PyReadonlyArray2<'py, f64>,
+    faces: PyReadonlyArray2<'py, i64>,
+    spacing: Option<f64>,
+    count: Option<usize>,
+    seed: u64,
+) -> PyResult<(Arr<'py>, Arr<'py>, f64, f64)> {
+    let mesh = mesh_from_py(&vertices, &faces)?;
+    let density = match (spacing, count) {
+        (Some(s), None) => Density::Spacing(s),
+        (None, Some(c)) => Density::Count(c),
+        _ => return Err(invalid("spacing/count", "give exactly one of spacing (mm) or count")),
+    };
+    let (s, diameter, area) = run(py, move || Ok((sample_surface(&mesh, density, seed)?, mesh.diameter(), mesh.area())))?;
+    Ok((points_to_py(py, &s.points), vectors_to_py(py, &s.normals), diameter, area))
+}
+
+/// Reads a PLY point cloud: (points, normals or None).
+#[pyfunction]
+fn read_ply<'py>(py: Python<'py>, path: PathBuf) -> PyResult<(Arr<'py>, Option<Arr<'py>>)> {
+    let d = run(py, move || mesh_io::read_ply(&path))?;
+    Ok((points_to_py(py, &d.points), d.normals.as_ref().map(|n| vectors_to_py(py, n))))
+}
+
+/// Writes a PLY point cloud.
+#[pyfunction]
+#[pyo3(signature = (path, points_in, normals, ascii))]
+fn write_ply(py: Python<'_>, path: PathBuf, points_in: PyReadonlyArray2<'_, f64>, normals: Option<PyReadonlyArray2<'_, f64>>, ascii: bool) -> PyResult<()> {
+    let pts = points(&points_in, "points")?;
+    let ns = normals.as_ref().map(|n| vectors(n, "normals")).transpose()?;
+    run(py, move || mesh_io::write_ply(&path, &pts, ns.as_deref(), ascii))
+}
+
+fn part_to_py<'py>(py: Python<'py>, part: Part) -> (Arr<'py>, Bound<'py, PyArray2<i64>>, Arr<'py>) {
+    let rows: Vec<f64> = part.branches.iter().flat_map(|b| [b.direction.x, b.direction.y, b.direction.z, b.length, b.radius]).collect();
+    let branches = PyArray2::from_owned_array(py, Array2::from_shape_vec((part.branches.len(), 5), rows).expect("k×5"));
+    (points_to_py(py, &part.mesh.vertices), faces_to_py(py, &part.mesh.faces), branches)
+}
+
+/// The paper's tee: (vertices, faces, branches as rows [dx, dy, dz, length, radius]).
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn part_tee<'py>(
+    py: Python<'py>,
+    outer_diameter: f64,
+    run_length: f64,
+    branch_length: f64,
+    boss_semi_axes: (f64, f64),
+    boss_height: f64,
+    resolution: f64,
+) -> PyResult<(Arr<'py>, Bound<'py, PyArray2<i64>>, Arr<'py>)> {
+    let p = parts::TeeParams { outer_diameter, run_length, branch_length, boss_semi_axes, boss_height, resolution };
+    Ok(part_to_py(py, run(py, move || parts::tee(&p))?))
+}
+
+/// An elbow or a cross: (vertices, faces, branches).
+#[pyfunction]
+#[allow(clippy::type_complexity)]
+fn part_fitting<'py>(py: Python<'py>, kind: &str, outer_diameter: f64, branch_length: f64, resolution: f64) -> PyResult<(Arr<'py>, Bound<'py, PyArray2<i64>>, Arr<'py>)> {
+    let p = parts::FittingParams { outer_diameter, branch_length, resolution };
+    let part = match kind {
+        "elbow" => run(py, move || parts::elbow(&p))?,
+        "cross" => run(py, move || parts::cross(&p))?,
+        other => return Err(invalid("kind", &format!("unknown fitting {other:?}; use \"elbow\" or \"cross\""))),
+    };
+    Ok(part_to_py(py, part))
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(estimate_normals, m)?)?;
+    m.add_function(wrap_pyfunction!(voxel_downsample, m)?)?;
+    m.add_function(wrap_pyfunction!(read_mesh, m)?)?;
+    m.add_function(wrap_pyfunction!(sample_mesh, m)?)?;
+    m.add_function(wrap_pyfunction!(read_ply, m)?)?;
+    m.add_function(wrap_pyfunction!(write_ply, m)?)?;
+    m.add_function(wrap_pyfunction!(part_tee, m)?)?;
+    m.add_function(wrap_pyfunction!(part_fitting, m)?)?;
+    Ok(())
+}
