@@ -29,6 +29,8 @@ __all__ = [
     "PortClosedError",
     "SafetyError",
     "InternalError",
+    "ScanFormatError",
+    "SingularGeometryError",
 ]
 
 
@@ -114,3 +116,12 @@ class SafetyError(BinpickError):
 
 class InternalError(BinpickError, RuntimeError):
     """A bug in binpick's native core was caught before it could crash Python; please report it."""
+
+
+class ScanFormatError(InvalidInputError):
+    """A scan folder's scan.json is missing, corrupt or of a version this binpick does not read."""
+
+
+class SingularGeometryError(InvalidInputError):
+    """The geometry has no unique answer: a camera ray parallel to the laser plane, a point behind
+    the camera, calibration poses that do not constrain the unknowns."""
