@@ -19,3 +19,4 @@ pub mod rng;
 pub mod model;
 pub mod sdf;
 pub mod parts;
+pub mod triangulate;

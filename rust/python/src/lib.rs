@@ -5,6 +5,7 @@ mod convert;
 mod errors;
 mod geometry;
 mod registration;
+mod triangulate;
 
 use pyo3::prelude::*;
 
@@ -20,5 +21,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_panic_for_test, m)?)?;
     geometry::register(m)?;
     registration::register(m)?;
+    triangulate::register(m)?;
     Ok(())
 }

@@ -1,0 +1,354 @@
+//! Laser-line triangulation (paper section 3.1, Eq. 10–14, generalised): undistorted camera
+//! rays from the OpenCV intrinsics, the laser plane from the projector pose and the motor
+//! angle, ray–plane intersection, and the points carried to the robot's base frame.
+//!
+//! Frames: camera x right, y down, z forward. The light sheet is the plane `x_L = 0` of the
+//! laser frame; the motor turns the projector about its own y axis, so
+//! `T_camera_laser(θ) = T_camera_laser0 · Rot_y(θ)` and, with `T_camera_laser0 = I`, the plane
+//! normal in the camera frame is `(cos θ, 0, −sin θ)` (Eq. 11).
+
+use crate::cloud::Point;
+use crate::{Error, Result};
+use nalgebra::{Isometry3, Matrix3, Vector3};
+use rayon::prelude::*;
+
+/// An OpenCV pinhole camera with the five-coefficient distortion `[k1, k2, p1, p2, k3]`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
+    /// Focal length along x, pixels.
+    pub fx: f64,
+    /// Focal length along y, pixels.
+    pub fy: f64,
+    /// Principal point x, pixels.
+    pub cx: f64,
+    /// Principal point y, pixels.
+    pub cy: f64,
+    /// Skew `K[0][1]`, pixels (0 for nearly every camera).
+    pub skew: f64,
+    /// Distortion `[k1, k2, p1, p2, k3]`.
+    pub dist: [f64; 5],
+}
+
+/// Why a pixel gave no point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum PointStatus {
+    /// The point is valid.
+    Valid = 0,
+    /// The camera ray is parallel to the laser plane (within 1e-9 rad): no unique intersection.
+    Parallel = 1,
+    /// The intersection lies behind the camera: the pixel cannot show the lit surface.
+    Behind = 2,
+    /// The distortion could not be inverted at this pixel (far outside the calibrated field).
+    NotUndistortable = 3,
+}
+
+/// A plane `normal · x = offset` (unit normal, offset in mm).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plane {
+    /// Unit normal.
+    pub normal: Vector3<f64>,
+    /// Signed distance of the plane from the origin along `normal`, mm.
+    pub offset: f64,
+}
+
+/// The robot pose and motor angle of one frame of a scan.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FramePose {
+    /// Motor angle, radians.
+    pub angle: f64,
+    /// Flange pose in the base frame at capture.
+    pub t_base_flange: Isometry3<f64>,
+}
+
+/// The fixed geometry of the sensor: camera, projector pose at angle 0, hand-eye transform.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sensor {
+    /// The camera's intrinsics and distortion.
+    pub camera: Camera,
+    /// Laser frame in the camera frame at motor angle 0.
+    pub t_camera_laser0: Isometry3<f64>,
+    /// Camera frame in the flange frame (hand-eye).
+    pub t_flange_camera: Isometry3<f64>,
+}
+
+/// Points of a scan in the base frame, with a status per input pixel; invalid points are NaN.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Triangulation {
+    /// One point per input pixel, base frame, mm (NaN where `status` is not `Valid`).
+    pub points: Vec<Point>,
+    /// Why each point is or is not valid.
+    pub status: Vec<PointStatus>,
+}
+
+const UNDISTORT_ITERATIONS: usize = 20;
+const UNDISTORT_TOLERANCE: f64 = 1e-14;
+/// Sine of the smallest angle between a ray and the laser plane that still gives a point.
+const PARALLEL_SINE: f64 = 1e-9;
+
+impl Camera {
+    /// A camera from the 3×3 intrinsic matrix `k`, the distortion and the image size; checks
+    /// that the focal lengths are positive, the last row is `0 0 1` and everything is finite.
+    pub fn new(width: u32, height: u32, k: &Matrix3<f64>, dist: [f64; 5]) -> Result<Self> {
+        if width < 2 || height < 2 {
+            return Err(Error::invalid("camera", format!("image size {width}×{height} is too small; pass the sensor's size in pixels")));
+        }
+        if k.iter().chain(dist.iter()).any(|v| !v.is_finite()) {
+            return Err(Error::invalid("camera", "K or dist holds NaN or inf; pass a calibrated camera"));
+        }
+        if k[(0, 0)] <= 0.0 || k[(1, 1)] <= 0.0 {
+            return Err(Error::invalid("K", format!("focal lengths fx={}, fy={} must be positive pixels", k[(0, 0)], k[(1, 1)])));
+        }
+        if k[(1, 0)] != 0.0 || k[(2, 0)] != 0.0 || k[(2, 1)] != 0.0 || k[(2, 2)] != 1.0 {
+            return Err(Error::invalid("K", "must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]]"));
+        }
+        Ok(Camera { width, height, fx: k[(0, 0)], fy: k[(1, 1)], cx: k[(0, 2)], cy: k[(1, 2)], skew: k[(0, 1)], dist })
+    }
+
+    /// Applies the distortion to normalised coordinates `(x, y)` (`z = 1`).
+    pub fn distort(&self, x: f64, y: f64) -> (f64, f64) {
+        let [k1, k2, p1, p2, k3] = self.dist;
+        let r2 = x * x + y * y;
+        let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+        (
+            x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
+        )
+    }
+
+    /// Projects a point of the camera frame to a pixel `(u, v)`; `None` when it is not in front.
+    pub fn project(&self, p: &Point) -> Option<[f64; 2]> {
+        if p.z <= 0.0 {
+            return None;
+        }
+        let (xd, yd) = self.distort(p.x / p.z, p.y / p.z);
+        Some([self.fx * xd + self.skew * yd + self.cx, self.fy * yd + self.cy])
+    }
+
+    /// The undistorted normalised ray `(x, y, 1)` through pixel `(u, v)`, by Newton's method on
+    /// the distortion model; `None` if it does not converge (pixel far outside the model's range).
+    pub fn ray(&self, u: f64, v: f64) -> Option<Vector3<f64>> {
+        let yd = (v - self.cy) / self.fy;
+        let xd = (u - self.cx - self.skew * yd) / self.fx;
+        if self.dist == [0.0; 5] {
+            return Some(Vector3::new(xd, yd, 1.0));
+        }
+        let [k1, k2, p1, p2, k3] = self.dist;
+        let (mut x, mut y) = (xd, yd);
+        for _ in 0..UNDISTORT_ITERATIONS {
+            let r2 = x * x + y * y;
+            let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+            let dradial = k1 + r2 * (2.0 * k2 + 3.0 * k3 * r2);
+            let ex = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd;
+            let ey = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd;
+            if ex * ex + ey * ey < UNDISTORT_TOLERANCE * UNDISTORT_TOLERANCE {
+                return Some(Vector3::new(x, y, 1.0));
+            }
+            let cross = 2.0 * x * y * dradial + 2.0 * p1 * x + 2.0 * p2 * y;
+            let jxx = radial + 2.0 * x * x * dradial + 2.0 * p1 * y + 6.0 * p2 * x;
+            let jyy = radial + 2.0 * y * y * dradial + 6.0 * p1 * y + 2.0 * p2 * x;
+            let det = jxx * jyy - cross * cross;
+            if !det.is_finite() || det.abs() < 1e-12 {
+                return None;
+            }
+            x -= (jyy * ex - cross * ey) / det;
+            y -= (jxx * ey - cross * ex) / det;
+        }
+        None
+    }
+}
+
+/// The laser plane in the camera frame at motor angle `angle`: the plane `x_L = 0` of
+/// `T_camera_laser0 · Rot_y(angle)` (Eq. 9–12).
+pub fn laser_plane(t_camera_laser0: &Isometry3<f64>, angle: f64) -> Plane {
+    let (s, c) = angle.sin_cos();
+    let normal = t_camera_laser0.rotation * Vector3::new(c, 0.0, -s);
+    Plane { normal, offset: normal.dot(&t_camera_laser0.translation.vector) }
+}
+
+/// Intersects the ray `s · dir` (from the origin) with `plane`: the point, or why there is none.
+pub fn intersect_ray_plane(dir: &Vector3<f64>, plane: &Plane) -> std::result::Result<Point, PointStatus> {
+    let denom = plane.normal.dot(dir);
+    if denom.abs() <= PARALLEL_SINE * dir.norm() {
+        return Err(PointStatus::Parallel);
+    }
+    let s = plane.offset / denom;
+    if s <= 0.0 {
+        return Err(PointStatus::Behind);
+    }
+    Ok(Point::from(dir * s))
+}
+
+/// Checks a pixel list: finite, inside the image (half a pixel of margin), frame indices valid.
+fn check_pixels(camera: &Camera, pixels: &[[f64; 2]], frame_index: Option<(&[u32], usize)>) -> Result<()> {
+    let (w, h) = (camera.width as f64 - 0.5, camera.height as f64 - 0.5);
+    for (i, &[u, v]) in pixels.iter().enumerate() {
+        if !(u.is_finite() && v.is_finite()) {
+            return Err(Error::NonFinite { arg: "pixels".into(), index: i, value: format!("({u}, {v})") });
+        }
+        if !(-0.5..=w).contains(&u) || !(-0.5..=h).contains(&v) {
+            return Err(Error::invalid(
+                "pixels",
+                format!("row {i} is ({u}, {v}), outside the {}×{} image; pixels are (u, v) = (column, row)", camera.width, camera.height),
+            ));
+        }
+    }
+    if let Some((index, frames)) = frame_index {
+        if index.len() != pixels.len() {
+            return Err(Error::invalid("frame_index", format!("has {} entries for {} pixels; give one frame index per pixel", index.len(), pixels.len())));
+        }
+        if let Some((i, &f)) = index.iter().enumerate().find(|(_, &f)| f as usize >= frames) {
+            return Err(Error::invalid("frame_index", format!("entry {i} is {f} but the scan has {frames} frames")));
+        }
+    }
+    Ok(())
+}
+
+/// The undistorted normalised rays `(x, y, 1)` of `pixels`; `None` where the distortion
+/// cannot be inverted.
+pub fn pixel_rays(camera: &Camera, pixels: &[[f64; 2]]) -> Result<Vec<Option<Vector3<f64>>>> {
+    check_pixels(camera, pixels, None)?;
+    Ok(pixels.par_iter().with_min_len(4096).map(|&[u, v]| camera.ray(u, v)).collect())
+}
+
+/// Triangulates laser-line pixels of a whole scan into points of the base frame.
+///
+/// `pixels[i]` was seen in frame `frame_index[i]`, captured at motor angle `frames[f].angle`
+/// with the flange at `frames[f].t_base_flange`. Pixels whose ray is parallel to the laser
+/// plane, meets it behind the camera, or cannot be undistorted give NaN points and a status
+/// saying why; malformed input (bad index, pixel outside the image, NaN) is an error.
+/// Runs on the current rayon pool.
+pub fn triangulate(sensor: &Sensor, frames: &[FramePose], pixels: &[[f64; 2]], frame_index: &[u32]) -> Result<Triangulation> {
+    check_pixels(&sensor.camera, pixels, Some((frame_index, frames.len())))?;
+    if let Some((i, f)) = frames.iter().enumerate().find(|(_, f)| !f.angle.is_finite()) {
+        return Err(Error::NonFinite { arg: "angles".into(), index: i, value: f.angle.to_string() });
+    }
+    let per_frame: Vec<(Plane, Isometry3<f64>)> = frames
+        .iter()
+        .map(|f| (laser_plane(&sensor.t_camera_laser0, f.angle), f.t_base_flange * sensor.t_flange_camera))
+        .collect();
+    let camera = sensor.camera;
+    let (points, status): (Vec<Point>, Vec<PointStatus>) = pixels
+        .par_iter()
+        .zip(frame_index.par_iter())
+        .with_min_len(4096)
+        .map(|(&[u, v], &f)| {
+            let (plane, t_base_camera) = &per_frame[f as usize];
+            let hit = camera.ray(u, v).ok_or(PointStatus::NotUndistortable).and_then(|ray| intersect_ray_plane(&ray, plane));
+            match hit {
+                Ok(p) => (t_base_camera * p, PointStatus::Valid),
+                Err(s) => (Point::new(f64::NAN, f64::NAN, f64::NAN), s),
+            }
+        })
+        .unzip();
+    Ok(Triangulation { points, status })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    fn camera(dist: [f64; 5]) -> Camera {
+        let k = Matrix3::new(1200.0, 0.0, 516.0, 0.0, 1190.0, 389.0, 0.0, 0.0, 1.0);
+        Camera::new(1032, 778, &k, dist).unwrap()
+    }
+
+    fn sensor() -> Sensor {
+        Sensor {
+            camera: camera([-0.12, 0.08, 0.001, -0.0007, -0.01]),
+            t_camera_laser0: Isometry3::from_parts(
+                Translation3::new(-150.0, 3.0, 10.0),
+                UnitQuaternion::from_euler_angles(0.01, 0.02, -0.015),
+            ),
+            t_flange_camera: Isometry3::from_parts(Translation3::new(20.0, -5.0, 80.0), UnitQuaternion::from_euler_angles(0.1, -0.05, 0.3)),
+        }
+    }
+
+    #[test]
+    fn undistortion_inverts_the_distortion_across_the_image() {
+        let cam = camera([-0.12, 0.08, 0.001, -0.0007, -0.01]);
+        for u in (0..1032).step_by(37) {
+            for v in (0..778).step_by(29) {
+                let ray = cam.ray(u as f64, v as f64).expect("converges");
+                let back = cam.project(&Point::from(ray * 3.0)).unwrap();
+                assert!((back[0] - u as f64).abs() < 1e-9 && (back[1] - v as f64).abs() < 1e-9, "{u},{v} -> {back:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn plane_normal_follows_eq_11() {
+        for &theta in &[-0.7, 0.0, 0.3, 1.2] {
+            let p = laser_plane(&Isometry3::identity(), theta);
+            assert!((p.normal - Vector3::new(theta.cos(), 0.0, -theta.sin())).norm() < 1e-15);
+            assert_eq!(p.offset, 0.0);
+        }
+    }
+
+    #[test]
+    fn triangulation_recovers_points_on_the_laser_plane() {
+        let s = sensor();
+        let frames: Vec<FramePose> = (0..5)
+            .map(|i| FramePose {
+                angle: 0.2 + 0.06 * i as f64,
+                t_base_flange: Isometry3::from_parts(Translation3::new(300.0 + i as f64, -40.0, 700.0), UnitQuaternion::from_euler_angles(3.1, 0.05 * i as f64, 0.2)),
+            })
+            .collect();
+        let (mut pixels, mut index, mut truth) = (vec![], vec![], vec![]);
+        for (f, fp) in frames.iter().enumerate() {
+            let plane = laser_plane(&s.t_camera_laser0, fp.angle);
+            let t_base_camera = fp.t_base_flange * s.t_flange_camera;
+            for k in 0..40 {
+                let y = -120.0 + 6.0 * k as f64;
+                let z = 450.0 + 3.0 * k as f64;
+                // Solve the plane equation for x so that the point lies on the sheet.
+                let x = (plane.offset - plane.normal.y * y - plane.normal.z * z) / plane.normal.x;
+                let pc = Point::new(x, y, z);
+                if let Some(px) = s.camera.project(&pc) {
+                    if px[0] >= 0.0 && px[0] <= 1031.0 && px[1] >= 0.0 && px[1] <= 777.0 {
+                        pixels.push(px);
+                        index.push(f as u32);
+                        truth.push(t_base_camera * pc);
+                    }
+                }
+            }
+        }
+        assert!(pixels.len() > 100);
+        let out = triangulate(&s, &frames, &pixels, &index).unwrap();
+        for ((p, t), st) in out.points.iter().zip(&truth).zip(&out.status) {
+            assert_eq!(*st, PointStatus::Valid);
+            assert!((p - t).norm() < 1e-8, "{p} vs {t}");
+        }
+    }
+
+    #[test]
+    fn singular_geometry_is_reported_per_point() {
+        let s = Sensor { camera: camera([0.0; 5]), t_camera_laser0: Isometry3::identity(), t_flange_camera: Isometry3::identity() };
+        let frames = [FramePose { angle: 0.0, t_base_flange: Isometry3::identity() }];
+        // The laser plane x = 0 contains the optical centre: every ray is in the plane or misses it.
+        let out = triangulate(&s, &frames, &[[516.0, 100.0], [700.0, 100.0]], &[0, 0]).unwrap();
+        assert_eq!(out.status[0], PointStatus::Parallel);
+        assert!(out.points[0].x.is_nan());
+        let behind = Sensor { t_camera_laser0: Isometry3::translation(50.0, 0.0, 0.0), ..s };
+        let out = triangulate(&behind, &frames, &[[300.0, 100.0], [700.0, 100.0]], &[0, 0]).unwrap();
+        assert_eq!(out.status, vec![PointStatus::Behind, PointStatus::Valid]);
+    }
+
+    #[test]
+    fn malformed_input_is_an_error_naming_the_argument() {
+        let s = sensor();
+        let frames = [FramePose { angle: 0.1, t_base_flange: Isometry3::identity() }];
+        let e = triangulate(&s, &frames, &[[10.0, 10.0]], &[1]).unwrap_err();
+        assert!(e.to_string().starts_with("frame_index"), "{e}");
+        let e = triangulate(&s, &frames, &[[2000.0, 10.0]], &[0]).unwrap_err();
+        assert!(e.to_string().contains("outside"), "{e}");
+        let e = triangulate(&s, &frames, &[[f64::NAN, 10.0]], &[0]).unwrap_err();
+        assert!(matches!(e, Error::NonFinite { .. }));
+        assert!(Camera::new(1032, 778, &Matrix3::zeros(), [0.0; 5]).is_err());
+    }
+}
