@@ -125,3 +125,14 @@ class ScanFormatError(InvalidInputError):
 class SingularGeometryError(InvalidInputError):
     """The geometry has no unique answer: a camera ray parallel to the laser plane, a point behind
     the camera, calibration poses that do not constrain the unknowns."""
+
+
+class TruncatedReplyError(ProtocolError):
+    """A device's reply stopped part-way: some bytes arrived, the rest never did."""
+
+
+class UnknownReplyError(ProtocolError):
+    """A device answered with a well-formed reply that the protocol does not define for the request."""
+
+
+__all__ += ["TruncatedReplyError", "UnknownReplyError"]

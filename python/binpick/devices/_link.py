@@ -1,0 +1,283 @@
+"""The serial transport every driver shares, and the small input checks of this package.
+
+A :class:`SerialLink` owns one pyserial port and reads against absolute deadlines, so no read
+can wait longer than the configured reply timeout. pyserial and OS errors become
+:class:`~binpick.errors.PortClosedError`; silence becomes :class:`~binpick.errors.DeviceTimeout`;
+a reply that stops part-way becomes :class:`~binpick.errors.TruncatedReplyError`.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import Any, Callable, Iterator, Optional, TypeVar, Union
+
+import numpy as np
+import serial
+
+try:
+    import termios
+
+    _PORT_ERRORS: tuple = (serial.SerialException, OSError, termios.error)
+except ImportError:  # pragma: no cover - not POSIX
+    _PORT_ERRORS = (serial.SerialException, OSError)
+
+from ..errors import (
+    BinpickError,
+    DeviceError,
+    DeviceTimeout,
+    InvalidInputError,
+    PortClosedError,
+    ProtocolError,
+    ShapeError,
+    TruncatedReplyError,
+)
+
+__all__ = ["SerialSettings", "SerialLink"]
+
+T = TypeVar("T")
+
+_SLICE_S = 0.01  # the port's read timeout: reads return at least this often to check their deadline
+
+_PARITIES = {"N": serial.PARITY_NONE, "E": serial.PARITY_EVEN, "O": serial.PARITY_ODD,
+             "M": serial.PARITY_MARK, "S": serial.PARITY_SPACE}
+
+
+# --------------------------------------------------------------------------- input checks
+
+def check_number(value: Any, name: str, *, low: Optional[float] = None, high: Optional[float] = None,
+                 unit: str = "") -> float:
+    """``value`` as a finite float within [low, high], or InvalidInputError naming ``name``."""
+    if isinstance(value, bool):
+        raise InvalidInputError(f"{name}: must be a number{_unit(unit)}, got the boolean {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{name}: must be a number{_unit(unit)}, got {value!r}") from None
+    if not math.isfinite(v):
+        raise InvalidInputError(f"{name}: must be finite, got {v}")
+    if (low is not None and v < low) or (high is not None and v > high):
+        raise InvalidInputError(f"{name}: {v:g}{unit and ' ' + unit} is outside [{low}, {high}]{_unit(unit)}; "
+                                "pass a value inside that range")
+    return v
+
+
+def check_int(value: Any, name: str, low: int, high: int) -> int:
+    """``value`` as an int within [low, high], or InvalidInputError naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise InvalidInputError(f"{name}: must be an integer in [{low}, {high}], got {value!r}")
+    v = int(value)
+    if not low <= v <= high:
+        raise InvalidInputError(f"{name}: {v} is outside [{low}, {high}]; pass an integer inside that range")
+    return v
+
+
+def check_transform(value: Any, name: str) -> np.ndarray:
+    """A finite 4×4 float64 rigid transform, or a specific InvalidInputError saying what is wrong."""
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{name}: cannot be read as a 4×4 numeric array; pass a numpy (4, 4) float array") from None
+    if arr.shape != (4, 4):
+        raise ShapeError(f"{name}: expected a (4, 4) homogeneous transform, got shape {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise InvalidInputError(f"{name}: holds NaN or infinity; pass a finite transform")
+    if not np.allclose(arr[3], (0.0, 0.0, 0.0, 1.0), atol=1e-9):
+        raise InvalidInputError(f"{name}: the last row must be [0, 0, 0, 1], got {arr[3].tolist()}")
+    rot = arr[:3, :3]
+    if np.abs(rot.T @ rot - np.eye(3)).max() > 1e-6 or np.linalg.det(rot) < 0:
+        raise InvalidInputError(f"{name}: the 3×3 block is not a rotation; pass a rigid transform without scale "
+                                "or reflection")
+    return arr
+
+
+def _unit(unit: str) -> str:
+    return f" ({unit})" if unit else ""
+
+
+# --------------------------------------------------------------------------- settings
+
+@dataclass(frozen=True)
+class SerialSettings:
+    """How a driver opens and talks over its serial port.
+
+    Attributes:
+        baudrate: line speed, bits per second.
+        bytesize: data bits, 5 to 8.
+        parity: ``"N"`` none, ``"E"`` even, ``"O"`` odd, ``"M"`` mark or ``"S"`` space.
+        stopbits: 1, 1.5 or 2.
+        timeout_s: longest wait for one complete reply, seconds.
+        write_timeout_s: longest wait for a write to leave the port, seconds.
+        retries: how many more times a *query* is sent after a timeout or an unusable reply.
+            Commands that move something are never sent twice.
+    """
+
+    baudrate: int = 9600
+    bytesize: int = 8
+    parity: str = "N"
+    stopbits: float = 1
+    timeout_s: float = 1.0
+    write_timeout_s: float = 1.0
+    retries: int = 2
+
+    def __post_init__(self) -> None:
+        check_int(self.baudrate, "SerialSettings.baudrate", 50, 20_000_000)
+        check_int(self.bytesize, "SerialSettings.bytesize", 5, 8)
+        if self.parity not in _PARITIES:
+            raise InvalidInputError(f"SerialSettings.parity: {self.parity!r} is not one of {sorted(_PARITIES)}")
+        if self.stopbits not in (1, 1.5, 2):
+            raise InvalidInputError(f"SerialSettings.stopbits: {self.stopbits!r} must be 1, 1.5 or 2")
+        check_number(self.timeout_s, "SerialSettings.timeout_s", low=0.001, high=3600, unit="s")
+        check_number(self.write_timeout_s, "SerialSettings.write_timeout_s", low=0.001, high=3600, unit="s")
+        check_int(self.retries, "SerialSettings.retries", 0, 10)
+
+
+# --------------------------------------------------------------------------- link
+
+class SerialLink:
+    """One open serial port read against deadlines.
+
+    Args:
+        port: a device path such as ``/dev/ttyUSB0`` (or a pty slave path), or an already open
+            ``serial.SerialBase`` that the link then owns.
+        settings: line settings, timeouts and retries.
+        device: a short name of the device used in error messages ("robot", "laser motor").
+    """
+
+    def __init__(self, port: Union[str, serial.SerialBase], settings: SerialSettings, *, device: str) -> None:
+        self.settings = settings
+        self.device = device
+        if isinstance(port, serial.SerialBase):
+            self._ser = port
+            self.port_name = str(port.port)
+            port.timeout = _SLICE_S
+            return
+        if not isinstance(port, str) or not port:
+            raise InvalidInputError(f"{device}: port must be a device path such as '/dev/ttyUSB0', got {port!r}")
+        self.port_name = port
+        try:
+            self._ser = serial.Serial(
+                port, baudrate=settings.baudrate, bytesize=settings.bytesize, parity=_PARITIES[settings.parity],
+                stopbits=settings.stopbits, timeout=_SLICE_S, write_timeout=settings.write_timeout_s,
+            )
+        except (serial.SerialException, OSError, ValueError) as exc:
+            raise PortClosedError(
+                f"{device}: cannot open serial port {port!r} ({exc}); check that the device is plugged in, "
+                "the path is right and you may read and write it"
+            ) from None
+
+    # -- housekeeping
+    @property
+    def is_open(self) -> bool:
+        """Whether the port is still open."""
+        return bool(self._ser.is_open)
+
+    def close(self) -> None:
+        """Closes the port; closing twice is harmless."""
+        try:
+            self._ser.close()
+        except (serial.SerialException, OSError):
+            pass
+
+    def deadline(self, timeout_s: Optional[float] = None) -> float:
+        """The monotonic time by which a reply must be complete."""
+        return time.monotonic() + (self.settings.timeout_s if timeout_s is None else timeout_s)
+
+    @contextmanager
+    def _io(self) -> Iterator[None]:
+        if not self._ser.is_open:
+            raise PortClosedError(f"{self.device}: serial port {self.port_name} is closed; open a new driver")
+        try:
+            yield
+        except BinpickError:
+            raise
+        except _PORT_ERRORS as exc:
+            raise PortClosedError(
+                f"{self.device}: serial port {self.port_name} failed ({exc}); the device or adapter disappeared — "
+                "check the cable and power, then open a new driver"
+            ) from None
+
+    # -- bytes
+    def discard_input(self) -> None:
+        """Drops whatever stale bytes wait in the input buffer."""
+        with self._io():
+            self._ser.reset_input_buffer()
+
+    def write(self, data: bytes) -> None:
+        """Writes all of ``data`` or raises PortClosedError / DeviceTimeout."""
+        with self._io():
+            try:
+                self._ser.write(data)
+                self._ser.flush()
+            except serial.SerialTimeoutException:
+                raise DeviceTimeout(f"{self.device}: writing to {self.port_name} did not finish in "
+                                    f"{self.settings.write_timeout_s} s; check the line and flow control") from None
+
+    def read_some(self, n: int, deadline: float) -> bytes:
+        """Up to ``n`` bytes: whatever arrives first, or b'' once the deadline has passed.
+
+        The port's own timeout is a short slice set once at opening (changing it later would
+        reprogram the line each time), so the deadline is kept here.
+        """
+        with self._io():
+            while time.monotonic() < deadline:
+                data = self._ser.read(n)
+                if data:
+                    return bytes(data)
+        return b""
+
+    def read_exact(self, n: int, deadline: float, *, what: str, got: bytes = b"") -> bytes:
+        """Exactly ``n`` bytes by ``deadline``; ``got`` are the reply's bytes already read (for the message)."""
+        buf = bytearray()
+        while len(buf) < n:
+            chunk = self.read_some(n - len(buf), deadline)
+            if not chunk:
+                self.silence(what, got + bytes(buf))
+            buf += chunk
+        return bytes(buf)
+
+    def read_until(self, terminator: bytes, deadline: float, *, what: str, max_bytes: int = 4096) -> bytes:
+        """Bytes up to and including ``terminator``; ProtocolError past ``max_bytes`` without one."""
+        buf = bytearray()
+        while not buf.endswith(terminator):
+            if len(buf) >= max_bytes:
+                raise ProtocolError(f"{self.device}: {what} ran past {max_bytes} bytes without its terminator "
+                                    f"{terminator!r}: {bytes(buf[:40])!r}…")
+            chunk = self.read_some(1, deadline)
+            if not chunk:
+                self.silence(what, bytes(buf))
+            buf += chunk
+        return bytes(buf)
+
+    def silence(self, what: str, got: bytes) -> None:
+        """Raises for a reply that did not (fully) come: DeviceTimeout when ``got`` is empty, else TruncatedReplyError."""
+        t = self.settings.timeout_s
+        if got:
+            raise TruncatedReplyError(f"{self.device}: {what} stopped after {len(got)} bytes ({got[:40]!r}) and "
+                                      f"the rest did not come within {t} s; check the cable and line settings")
+        raise DeviceTimeout(f"{self.device}: no {what} on {self.port_name} within {t} s; check power, cable, "
+                            "baud rate and the device's address")
+
+
+def with_retries(attempts: int, action: Callable[[], T]) -> T:
+    """Runs ``action`` up to ``1 + attempts`` times while it fails with a timeout or an unusable reply.
+
+    Only for requests that change nothing (queries) or whose repetition is harmless; the last
+    failure is raised again with the number of attempts in its message.
+    """
+    for attempt in range(attempts + 1):
+        try:
+            return action()
+        except (DeviceTimeout, ProtocolError) as exc:
+            if attempt == attempts:
+                if attempts == 0:
+                    raise
+                raise type(exc)(f"{exc} (gave up after {attempts + 1} attempts)") from exc
+    raise AssertionError("unreachable")  # pragma: no cover
+
+
+def raise_after_stop(exc: DeviceError, note: str) -> None:
+    """Raises ``exc``'s class again with ``note`` appended, chained to ``exc``."""
+    raise type(exc)(f"{exc} — {note}") from exc

@@ -1,0 +1,228 @@
+"""A device served on a pseudo-terminal: the base of every emulator, with fault injection.
+
+The emulator opens a pty pair with :func:`os.openpty`, puts it in raw mode and serves the master
+side from a background thread; a driver opens :attr:`PtyEmulator.slave_path` with pyserial like
+any serial port. Faults armed with :meth:`PtyEmulator.inject` change the next matching replies.
+"""
+
+from __future__ import annotations
+
+import enum
+import os
+import select
+import threading
+import time
+import tty
+from dataclasses import dataclass
+from typing import Any, Callable, List, Optional
+
+from ...errors import InvalidInputError
+
+__all__ = ["Fault", "PtyEmulator"]
+
+
+class Fault(enum.Enum):
+    """A transport or device fault the emulator can play on its next replies.
+
+    NO_REPLY: the request is carried out, the reply is lost.
+    DELAY: the reply comes ``delay_s`` late.
+    PARTIAL: only the first half of the reply is sent.
+    GARBLED: the reply's bytes are corrupted (framing or characters).
+    BAD_CRC: the reply's checksum is wrong (protocols with a checksum only).
+    UNKNOWN_REPLY: a well-formed reply the protocol does not define for the request.
+    DEVICE_ERROR: the device refuses the request with an error of its own (not carried out).
+    CLOSE_PORT: the port disappears: the pty is closed without a reply.
+    """
+
+    NO_REPLY = "no_reply"
+    DELAY = "delay"
+    PARTIAL = "partial"
+    GARBLED = "garbled"
+    BAD_CRC = "bad_crc"
+    UNKNOWN_REPLY = "unknown_reply"
+    DEVICE_ERROR = "device_error"
+    CLOSE_PORT = "close_port"
+
+
+@dataclass
+class _Armed:
+    fault: Fault
+    times: int
+    when: Optional[Callable[[Any], bool]]
+    delay_s: float
+
+
+class PtyEmulator:
+    """Base class: serves a protocol on a pty from a background thread.
+
+    Subclasses implement :meth:`_take_requests` (cut complete requests off the input buffer),
+    :meth:`_handle` (carry one out and return the reply bytes, or None for no reply) and the
+    fault hooks :meth:`_garble`, :meth:`_bad_crc`, :meth:`_unknown_reply`, :meth:`_error_reply`.
+
+    Use as a context manager, or call :meth:`start` and :meth:`close`.
+    """
+
+    #: faults this protocol can play; subclasses without a checksum drop BAD_CRC
+    supported_faults = frozenset(Fault)
+    #: the device's name in thread names and messages
+    device = "device"
+
+    def __init__(self) -> None:
+        self._master, self._slave = os.openpty()
+        tty.setraw(self._slave)
+        tty.setraw(self._master)
+        self.slave_path = os.ttyname(self._slave)
+        self._stop = threading.Event()
+        self._lock = threading.RLock()
+        self._faults: List[_Armed] = []
+        self._requests: List[Any] = []
+        self._closed = False
+        #: exceptions raised while handling requests (an emulator bug); tests assert it stays empty
+        self.failures: List[str] = []
+        self._thread = threading.Thread(target=self._serve, name=f"{self.device}-emulator", daemon=True)
+
+    # -- public
+    def start(self) -> "PtyEmulator":
+        """Starts serving (returns self)."""
+        if not self._thread.is_alive() and not self._closed:
+            self._thread.start()
+        return self
+
+    def close(self) -> None:
+        """Stops the thread and closes the pty; safe to call twice."""
+        self._stop.set()
+        if self._thread.is_alive() and threading.current_thread() is not self._thread:
+            self._thread.join(timeout=5.0)
+        self._close_fds()
+
+    def __enter__(self) -> "PtyEmulator":
+        return self.start()
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    @property
+    def port_closed(self) -> bool:
+        """Whether the pty has been closed (by :meth:`close` or a CLOSE_PORT fault)."""
+        return self._closed
+
+    @property
+    def requests(self) -> List[Any]:
+        """Every request received so far, in order (the protocol's own representation)."""
+        with self._lock:
+            return list(self._requests)
+
+    def inject(self, fault: Fault, *, times: int = 1, when: Optional[Callable[[Any], bool]] = None,
+               delay_s: float = 0.5) -> None:
+        """Plays ``fault`` on the next ``times`` requests for which ``when(request)`` is true (all if None)."""
+        if not isinstance(fault, Fault):
+            raise InvalidInputError(f"fault: expected a Fault, got {fault!r}")
+        if fault not in self.supported_faults:
+            raise InvalidInputError(f"fault: the {self.device} protocol cannot play {fault.name} (no checksum)")
+        if not isinstance(times, int) or times < 1:
+            raise InvalidInputError(f"times: must be a positive integer, got {times!r}")
+        with self._lock:
+            self._faults.append(_Armed(fault, times, when, float(delay_s)))
+
+    def clear_faults(self) -> None:
+        """Disarms every pending fault."""
+        with self._lock:
+            self._faults.clear()
+
+    def send_raw(self, data: bytes) -> None:
+        """Writes ``data`` to the driver as if the device had sent it (unsolicited bytes)."""
+        os.write(self._master, bytes(data))
+
+    # -- protocol hooks
+    def _take_requests(self, buf: bytearray) -> List[Any]:
+        raise NotImplementedError
+
+    def _handle(self, request: Any) -> Optional[bytes]:
+        raise NotImplementedError
+
+    def _garble(self, reply: bytes) -> bytes:
+        raise NotImplementedError
+
+    def _bad_crc(self, reply: bytes) -> bytes:
+        raise NotImplementedError
+
+    def _unknown_reply(self, request: Any) -> bytes:
+        raise NotImplementedError
+
+    def _error_reply(self, request: Any) -> Optional[bytes]:
+        raise NotImplementedError
+
+    # -- machinery
+    def _serve(self) -> None:
+        buf = bytearray()
+        while not self._stop.is_set() and not self._closed:
+            try:
+                ready, _, _ = select.select([self._master], [], [], 0.02)
+                if not ready:
+                    continue
+                data = os.read(self._master, 4096)
+            except (OSError, ValueError):
+                break
+            buf += data
+            for request in self._take_requests(buf):
+                with self._lock:
+                    self._requests.append(request)
+                try:
+                    self._dispatch(request)
+                except Exception as exc:  # an emulator bug: keep serving, let the test see it
+                    self.failures.append(f"{request!r}: {type(exc).__name__}: {exc}")
+                if self._closed:
+                    return
+
+    def _pop_fault(self, request: Any) -> Optional[_Armed]:
+        with self._lock:
+            for armed in self._faults:
+                if armed.when is None or armed.when(request):
+                    armed.times -= 1
+                    if armed.times == 0:
+                        self._faults.remove(armed)
+                    return armed
+        return None
+
+    def _dispatch(self, request: Any) -> None:
+        armed = self._pop_fault(request)
+        fault = armed.fault if armed else None
+        if fault is Fault.CLOSE_PORT:
+            self._close_fds()
+            return
+        reply = self._error_reply(request) if fault is Fault.DEVICE_ERROR else self._handle(request)
+        if reply is None or fault is Fault.NO_REPLY:
+            return
+        if fault is Fault.DELAY:
+            self._stop.wait(armed.delay_s)  # type: ignore[union-attr]
+        elif fault is Fault.PARTIAL:
+            reply = reply[: max(1, len(reply) // 2)]
+        elif fault is Fault.GARBLED:
+            reply = self._garble(reply)
+        elif fault is Fault.BAD_CRC:
+            reply = self._bad_crc(reply)
+        elif fault is Fault.UNKNOWN_REPLY:
+            reply = self._unknown_reply(request)
+        self._send_bytes(reply)
+
+    def _send_bytes(self, data: bytes) -> None:
+        try:
+            os.write(self._master, data)
+        except OSError:
+            pass
+
+    def _close_fds(self) -> None:
+        with self._lock:
+            if self._closed:
+                return
+            self._closed = True
+            for fd in (self._master, self._slave):
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+
+
+def monotonic() -> float:
+    """The clock every emulator's motion model runs on."""
+    return time.monotonic()

@@ -1,0 +1,520 @@
+"""Driver for Mitsubishi MELFA controllers (CR1/CR2 class, e.g. the RV-1A's) over the R3 protocol.
+
+Wire format implemented here (RS-232C, default 9600 baud, 8 data bits, even parity, 2 stop bits):
+
+* Request: ``<robot>;<slot>;<COMMAND>`` + CR, ASCII, e.g. ``1;1;OPEN=NARCUSR\\r``.
+* Reply: one CR-terminated line starting with a status:
+
+  ======  ===================================================================
+  QoK…    accepted, controller has no alarm; the rest of the line is the data
+  Qok…    accepted, but the controller has an alarm active
+  QeR…    refused; the digits that follow are the error number
+  Qer…    refused while an alarm is active; digits as for QeR
+  ======  ===================================================================
+
+Commands used and the replies parsed (angles on the wire in degrees, lengths in mm):
+
+* ``OPEN=<client>`` / ``CLOSE`` — start and end the session; ``CNTLON`` / ``CNTLOFF`` — take and
+  give back operation rights; ``SRVON`` / ``SRVOFF`` — servo power; ``RSTALRM`` — reset alarm;
+  ``STOP`` — stop the running motion.
+* ``OVRD=<percent>`` — speed override; ``EXECSPD <mm/s>`` — straight-line speed.
+* ``EXECP<n>=(X,Y,Z,A,B,C)(FL1,FL2)`` — define position variable P<n> (2 decimals), then
+  ``EXECMOV P<n>`` (joint interpolation) or ``EXECMVS P<n>`` (straight line).
+* ``PPOSF`` → ``QoKX;<x>;Y;<y>;Z;<z>;A;<a>;B;<b>;C;<c>;;<FL1>,<FL2>;…`` (fields after the flags
+  are ignored; extra axes such as ``L1;<v>`` before the empty field are skipped).
+* ``JPOSF`` → ``QoKJ1;<j1>;J2;<j2>;…;J6;<j6>;;****,****;…``.
+* ``HNDON<n>`` opens hand n, ``HNDOFF<n>`` closes it.
+* ``ERRORMES<error number>`` → ``QoK<message text>``.
+* ``DSTATE`` → ``QoK<SS><EEEE>…`` where SS are two hex digits of status bits (0x80 operation
+  rights held, 0x40 program/motion running, 0x20 servo on) and EEEE the active alarm's number
+  (``0000`` when none); whatever follows is ignored. This is the subset of the controller's
+  status reply the driver relies on; check it against your controller's manual.
+
+FL1 is the posture flag (bit 2 right/left, bit 1 above/below, bit 0 non-flip/flip; 7 = R, A, N).
+Conversion between transforms and (X, Y, Z, A, B, C) lives in :mod:`binpick.devices.xyzabc`.
+
+Queries (PPOSF, JPOSF, DSTATE, ERRORMES, STOP, position definitions) are retried after a timeout
+or an unusable reply; motion commands are never sent twice. When anything fails after a motion
+has been commanded the driver sends STOP and raises the failure with what it did.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from dataclasses import dataclass, field
+from typing import Any, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import serial
+
+from ..errors import (
+    DeviceError,
+    DeviceFault,
+    DeviceTimeout,
+    InvalidInputError,
+    ProtocolError,
+    SafetyError,
+    UnknownReplyError,
+)
+from ._link import SerialLink, SerialSettings, check_int, check_number, raise_after_stop, with_retries
+from .safety import CellLimits, check_linear_speed, check_move, check_override, check_pose, check_sequence
+from .xyzabc import transform_from_xyzabc, xyzabc_from_transform, xyzabc_from_wire, xyzabc_to_wire
+
+__all__ = [
+    "R3Reply",
+    "RobotState",
+    "MelfaConfig",
+    "MelfaRobot",
+    "encode_command",
+    "parse_reply",
+    "format_position",
+    "parse_position",
+    "parse_joints",
+    "parse_state",
+]
+
+_STATUSES = {"QoK": (True, False), "Qok": (True, True), "QeR": (False, False), "Qer": (False, True)}
+_UNCHECKED_MOTION = re.compile(r"^\s*(EXEC(?!P\d+=|SPD)|OVRD)")
+_COMMAND_OK = re.compile(r"^[\x20-\x7e]{1,250}$")
+_POSE_NAMES = ("X", "Y", "Z", "A", "B", "C")
+_JOINT_NAMES = ("J1", "J2", "J3", "J4", "J5", "J6")
+
+BIT_CONTROL = 0x80
+BIT_RUNNING = 0x40
+BIT_SERVO = 0x20
+
+
+# --------------------------------------------------------------------------- codec
+
+@dataclass(frozen=True)
+class R3Reply:
+    """One parsed reply line.
+
+    Attributes:
+        status: the three-letter status, ``QoK``, ``Qok``, ``QeR`` or ``Qer``.
+        ok: the command was accepted (QoK, Qok).
+        alarm: the controller has an alarm active (Qok, Qer).
+        data: the text after the status (for QeR/Qer the error number and anything after it).
+        error_number: for QeR/Qer, the controller's error number; None otherwise.
+    """
+
+    status: str
+    ok: bool
+    alarm: bool
+    data: str
+    error_number: Optional[int] = None
+
+
+@dataclass(frozen=True)
+class RobotState:
+    """The controller's state from ``DSTATE``.
+
+    Attributes:
+        control_on: operation rights are held (CNTLON).
+        moving: a motion or program is running.
+        servo_on: servo power is on.
+        error_number: number of the active alarm, 0 when none.
+    """
+
+    control_on: bool
+    moving: bool
+    servo_on: bool
+    error_number: int
+
+
+def encode_command(command: str, *, robot: int = 1, slot: int = 1) -> bytes:
+    """``<robot>;<slot>;<command>`` + CR as ASCII bytes.
+
+    Raises InvalidInputError for an empty command, non-printable or non-ASCII characters, or
+    robot/slot numbers outside 0–99.
+    """
+    check_int(robot, "robot", 0, 99)
+    check_int(slot, "slot", 0, 99)
+    if not isinstance(command, str) or not _COMMAND_OK.match(command):
+        raise InvalidInputError(f"command: {command!r} must be 1–250 printable ASCII characters without CR or LF")
+    return f"{robot};{slot};{command}\r".encode("ascii")
+
+
+def parse_reply(raw: bytes) -> R3Reply:
+    """Parses one reply line (with or without its trailing CR).
+
+    Raises ProtocolError for bytes that are not printable ASCII or a line too short to hold a
+    status, UnknownReplyError for printable text whose status is none of QoK/Qok/QeR/Qer, and
+    ProtocolError for a QeR/Qer without an error number.
+    """
+    if not isinstance(raw, (bytes, bytearray)):
+        raise InvalidInputError(f"raw: expected bytes, got {type(raw).__name__}")
+    body = bytes(raw[:-1] if raw.endswith(b"\r") else raw)
+    if any(b < 0x20 or b > 0x7E for b in body):
+        raise ProtocolError(f"robot: garbled reply {bytes(raw[:60])!r} (bytes outside printable ASCII); "
+                            "check baud rate, parity (even) and stop bits (2)")
+    text = body.decode("ascii")
+    if len(text) < 3:
+        raise ProtocolError(f"robot: reply {text!r} is too short to hold a status (QoK/QeR…)")
+    status = text[:3]
+    if status not in _STATUSES:
+        raise UnknownReplyError(f"robot: unknown reply {text[:60]!r}; the R3 protocol answers QoK, Qok, QeR or Qer")
+    ok, alarm = _STATUSES[status]
+    data = text[3:]
+    if ok:
+        return R3Reply(status, ok, alarm, data)
+    digits = re.match(r"\d+", data)
+    if not digits:
+        raise ProtocolError(f"robot: error reply {text[:60]!r} lacks its error number")
+    return R3Reply(status, ok, alarm, data, int(digits.group()))
+
+
+def _number(text: str, what: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise ProtocolError(f"robot: {what} {text!r} is not a number") from None
+    if not math.isfinite(v):
+        raise ProtocolError(f"robot: {what} {text!r} is not finite")
+    return v
+
+
+def _named_values(data: str, names: Tuple[str, ...], what: str) -> Tuple[np.ndarray, list]:
+    """Values of ``name;value;`` pairs up to the first empty field, then the remaining fields."""
+    fields = data.split(";")
+    values = {}
+    i = 0
+    while i < len(fields) and fields[i] != "":
+        if i + 1 >= len(fields):
+            raise ProtocolError(f"robot: {what} reply {data[:80]!r} ends inside a name;value pair")
+        values[fields[i]] = _number(fields[i + 1], f"{what} value of {fields[i]}")
+        i += 2
+    missing = [n for n in names if n not in values]
+    if missing:
+        raise ProtocolError(f"robot: {what} reply {data[:80]!r} lacks {', '.join(missing)}")
+    return np.array([values[n] for n in names]), fields[i + 1:]
+
+
+def parse_position(data: str) -> Tuple[np.ndarray, Tuple[int, int]]:
+    """(X, Y, Z, A, B, C) in mm and degrees and the flags (FL1, FL2) from a PPOSF reply's data."""
+    xyzabc, rest = _named_values(data, _POSE_NAMES, "PPOSF")
+    m = re.fullmatch(r"(\d+),(-?\d+)", rest[0]) if rest else None
+    if not m:
+        raise ProtocolError(f"robot: PPOSF reply {data[:80]!r} lacks the posture flags 'FL1,FL2'")
+    return xyzabc, (int(m.group(1)), int(m.group(2)))
+
+
+def parse_joints(data: str) -> np.ndarray:
+    """Joint angles J1..J6 in degrees from a JPOSF reply's data."""
+    return _named_values(data, _JOINT_NAMES, "JPOSF")[0]
+
+
+def parse_state(data: str) -> RobotState:
+    """The state bits and alarm number from a DSTATE reply's data (see the module docstring)."""
+    m = re.match(r"([0-9A-Fa-f]{2})(\d{4})?", data)
+    if not m:
+        raise ProtocolError(f"robot: DSTATE reply {data[:40]!r} does not start with two hex status digits")
+    bits = int(m.group(1), 16)
+    return RobotState(bool(bits & BIT_CONTROL), bool(bits & BIT_RUNNING), bool(bits & BIT_SERVO),
+                      int(m.group(2) or 0))
+
+
+def format_position(number: int, xyzabc_deg: Any, flags: Tuple[int, int]) -> str:
+    """``P<n>=(X,Y,Z,A,B,C)(FL1,FL2)`` with two decimals, the body of an EXECP command."""
+    check_int(number, "position number", 1, 999)
+    v = [check_number(x, "xyzabc_deg", low=-99999.0, high=99999.0) for x in np.asarray(xyzabc_deg, dtype=float)]
+    if len(v) != 6:
+        raise InvalidInputError(f"xyzabc_deg: expected six numbers, got {len(v)}")
+    fl1 = check_int(flags[0], "FL1", 0, 7)
+    fl2 = check_int(flags[1], "FL2", -(2 ** 31), 2 ** 31 - 1)
+    return f"P{number}=(" + ",".join(f"{x:.2f}" for x in v) + f")({fl1},{fl2})"
+
+
+# --------------------------------------------------------------------------- driver
+
+@dataclass(frozen=True)
+class MelfaConfig:
+    """Settings of a :class:`MelfaRobot`.
+
+    Attributes:
+        serial: line settings; R3 over RS-232C defaults to 9600 baud, 8E2, 2 s per reply.
+        robot_number: the ``<robot>`` field of every request.
+        slot: the ``<slot>`` field of every request.
+        client_name: the name sent with ``OPEN=``.
+        position_variable: number n of the position variable P<n> used for moves.
+        default_flags: (FL1, FL2) used when the arm's current flags cannot be read.
+        initial_override_percent: override set when the session opens, percent.
+        initial_linear_speed_mm_s: straight-line speed set when the session opens, mm/s.
+        servo_on_timeout_s: longest wait for servo power after SRVON, seconds.
+        motion_timeout_s: longest wait for one motion to finish, seconds.
+        poll_interval_s: pause between two DSTATE polls while waiting, seconds.
+        arrival_tolerance_mm: largest distance between target and reached position, mm.
+    """
+
+    serial: SerialSettings = SerialSettings(baudrate=9600, bytesize=8, parity="E", stopbits=2, timeout_s=2.0)
+    robot_number: int = 1
+    slot: int = 1
+    client_name: str = "NARCUSR"
+    position_variable: int = 1
+    default_flags: Tuple[int, int] = (7, 0)
+    initial_override_percent: float = 10.0
+    initial_linear_speed_mm_s: float = 50.0
+    servo_on_timeout_s: float = 5.0
+    motion_timeout_s: float = 60.0
+    poll_interval_s: float = 0.05
+    arrival_tolerance_mm: float = 1.0
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.serial, SerialSettings):
+            raise InvalidInputError(f"MelfaConfig.serial: expected SerialSettings, got {type(self.serial).__name__}")
+        check_int(self.robot_number, "MelfaConfig.robot_number", 0, 99)
+        check_int(self.slot, "MelfaConfig.slot", 0, 99)
+        if not re.fullmatch(r"[A-Za-z0-9_]{1,32}", str(self.client_name)):
+            raise InvalidInputError(f"MelfaConfig.client_name: {self.client_name!r} must be 1–32 letters/digits")
+        check_int(self.position_variable, "MelfaConfig.position_variable", 1, 999)
+        check_number(self.initial_override_percent, "MelfaConfig.initial_override_percent", low=1, high=100, unit="%")
+        check_number(self.initial_linear_speed_mm_s, "MelfaConfig.initial_linear_speed_mm_s", low=0.001, unit="mm/s")
+        for name in ("servo_on_timeout_s", "motion_timeout_s", "poll_interval_s"):
+            check_number(getattr(self, name), f"MelfaConfig.{name}", low=0.001, high=86400, unit="s")
+        check_number(self.arrival_tolerance_mm, "MelfaConfig.arrival_tolerance_mm", low=0.0, unit="mm")
+
+
+class MelfaRobot:
+    """A MELFA arm driven over R3; every motion is checked against ``limits`` before it is sent.
+
+    Use as a context manager to open and close the session::
+
+        with MelfaRobot("/dev/ttyUSB0", limits=CellLimits()) as robot:
+            robot.move_to(T_base_flange, linear=True)
+
+    Args:
+        port: serial device path, or an open ``serial.SerialBase``.
+        config: protocol and timing settings.
+        limits: the cell's workspace, approach and speed rules.
+    """
+
+    def __init__(self, port: Union[str, serial.SerialBase], *, config: MelfaConfig = MelfaConfig(),
+                 limits: CellLimits = CellLimits()) -> None:
+        if not isinstance(config, MelfaConfig):
+            raise InvalidInputError(f"config: expected MelfaConfig, got {type(config).__name__}")
+        if not isinstance(limits, CellLimits):
+            raise InvalidInputError(f"limits: expected CellLimits, got {type(limits).__name__}")
+        self.config = config
+        self.limits = limits
+        self.alarm_active = False
+        self._link = SerialLink(port, config.serial, device="robot")
+
+    # -- life cycle
+    def __enter__(self) -> "MelfaRobot":
+        try:
+            self.open_session()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def __exit__(self, exc_type: Any, exc: Any, tb: Any) -> None:
+        try:
+            if self._link.is_open:
+                self.close_session()
+        except DeviceError:
+            if exc_type is None:
+                raise  # otherwise the failure that ended the block is the one to see
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Closes the serial port (the session should be closed first)."""
+        self._link.close()
+
+    def open_session(self) -> None:
+        """OPEN, CNTLON, SRVON (waiting for servo power), then the initial override and speed."""
+        cfg = self.config
+        self._send(f"OPEN={cfg.client_name}")
+        self._send("CNTLON")
+        self._send("SRVON")
+        deadline = time.monotonic() + cfg.servo_on_timeout_s
+        while not self.state().servo_on:
+            if time.monotonic() > deadline:
+                raise DeviceTimeout(f"robot: servo power not on {cfg.servo_on_timeout_s} s after SRVON; check the "
+                                    "emergency stop, the door switch and the controller's display")
+            time.sleep(cfg.poll_interval_s)
+        self.set_override(cfg.initial_override_percent)
+        self.set_linear_speed(cfg.initial_linear_speed_mm_s)
+
+    def close_session(self) -> None:
+        """SRVOFF, CNTLOFF and CLOSE; all three are tried, the first failure is raised after."""
+        first: Optional[DeviceError] = None
+        for cmd in ("SRVOFF", "CNTLOFF", "CLOSE"):
+            try:
+                self._send(cmd)
+            except DeviceError as exc:
+                first = first or exc
+        if first is not None:
+            raise first
+
+    # -- transactions
+    def command(self, command: str, *, retry: bool = False) -> R3Reply:
+        """Sends one R3 command that does not move the arm and returns the accepted reply.
+
+        Motion and speed commands (``EXEC…`` other than ``EXECP<n>=``/``EXECSPD``, ``OVRD``) are
+        refused with SafetyError: use :meth:`move_to`, :meth:`set_override` and
+        :meth:`set_linear_speed`, which check them. ``retry`` resends after a timeout or an
+        unusable reply (only for commands harmless to repeat). A refusal (QeR/Qer) raises
+        DeviceFault carrying the controller's error number and its ERRORMES text.
+        """
+        if not isinstance(command, str):
+            raise InvalidInputError(f"command: expected a string such as 'PPOSF', got {type(command).__name__}")
+        if _UNCHECKED_MOTION.match(command.upper()):
+            raise SafetyError(f"command: {command!r} moves the arm or changes its speed without the cell's checks; "
+                              "nothing was sent — use move_to, set_override or set_linear_speed")
+        return self._send(command, retry=retry)
+
+    def _send(self, command: str, *, retry: bool = False, timeout_s: Optional[float] = None) -> R3Reply:
+        frame = encode_command(command, robot=self.config.robot_number, slot=self.config.slot)
+
+        def once() -> R3Reply:
+            self._link.discard_input()
+            self._link.write(frame)
+            deadline = self._link.deadline(timeout_s)
+            return parse_reply(self._link.read_until(b"\r", deadline, what=f"reply to {command!r}"))
+
+        reply = with_retries(self.config.serial.retries if retry else 0, once)
+        self.alarm_active = reply.alarm
+        if not reply.ok:
+            self._refused(command, reply)
+        return reply
+
+    def _refused(self, command: str, reply: R3Reply) -> None:
+        if command.startswith("ERRORMES"):  # no text to fetch for the text request itself
+            err = DeviceFault(f"robot: the controller refused {command!r} with error {reply.error_number}")
+            err.error_number = reply.error_number  # type: ignore[attr-defined]
+            raise err
+        raise self._fault(int(reply.error_number or 0), f"the controller refused {command!r} with")
+
+    def _fault(self, number: int, what: str) -> DeviceFault:
+        try:
+            text = self.error_message(number)
+        except DeviceError as exc:
+            text = f"(its text could not be read: {exc})"
+        err = DeviceFault(f"robot: {what} error {number}: {text}")
+        err.error_number = number  # type: ignore[attr-defined]
+        return err
+
+    def error_message(self, error_number: int) -> str:
+        """The controller's text for ``error_number`` (ERRORMES)."""
+        check_int(error_number, "error_number", 0, 99999)
+        reply = self._send(f"ERRORMES{error_number}", retry=True)
+        return reply.data.strip()
+
+    # -- queries
+    def state(self) -> RobotState:
+        """Operation rights, servo power, running and alarm number (DSTATE)."""
+        return parse_state(self._send("DSTATE", retry=True).data)
+
+    def read_xyzabc(self) -> Tuple[np.ndarray, Tuple[int, int]]:
+        """The flange pose as (X, Y, Z, A, B, C) in mm and radians, and the posture flags (PPOSF)."""
+        deg, flags = parse_position(self._send("PPOSF", retry=True).data)
+        return xyzabc_from_wire(deg), flags
+
+    def read_pose(self) -> np.ndarray:
+        """The flange pose ``T_base_flange`` (4×4, mm)."""
+        return transform_from_xyzabc(self.read_xyzabc()[0])
+
+    def read_joints(self) -> np.ndarray:
+        """Joint angles J1..J6 in radians (JPOSF)."""
+        return np.radians(parse_joints(self._send("JPOSF", retry=True).data))
+
+    # -- settings
+    def set_override(self, percent: float) -> None:
+        """Speed override in percent, refused above ``limits.max_override_percent``."""
+        v = check_override(percent, self.limits)
+        self._send(f"OVRD={int(round(v))}", retry=True)
+
+    def set_linear_speed(self, speed_mm_s: float) -> None:
+        """Straight-line speed in mm/s, refused above ``limits.max_linear_speed_mm_s``."""
+        v = check_linear_speed(speed_mm_s, self.limits)
+        self._send(f"EXECSPD {v:.2f}", retry=True)
+
+    def reset_alarm(self) -> None:
+        """Resets the controller's alarm (RSTALRM)."""
+        self._send("RSTALRM", retry=True)
+
+    # -- hand
+    def open_hand(self, hand: int = 1) -> None:
+        """Opens hand ``hand`` (HNDON<n>)."""
+        self._send(f"HNDON{check_int(hand, 'hand', 1, 8)}")
+
+    def close_hand(self, hand: int = 1) -> None:
+        """Closes hand ``hand`` (HNDOFF<n>)."""
+        self._send(f"HNDOFF{check_int(hand, 'hand', 1, 8)}")
+
+    # -- motion
+    def stop(self) -> None:
+        """Stops the arm (STOP); harmless to repeat, so it is retried."""
+        self._send("STOP", retry=True)
+
+    def wait_until_idle(self, timeout_s: Optional[float] = None) -> None:
+        """Polls DSTATE until nothing runs; DeviceFault if an alarm appears, DeviceTimeout past the timeout."""
+        limit = self.config.motion_timeout_s if timeout_s is None else check_number(timeout_s, "timeout_s", low=0)
+        deadline = time.monotonic() + limit
+        while True:
+            st = self.state()
+            if st.error_number:
+                raise self._fault(st.error_number, "alarm during motion:")
+            if not st.moving:
+                return
+            if time.monotonic() > deadline:
+                raise DeviceTimeout(f"robot: the motion did not finish within {limit} s")
+            time.sleep(self.config.poll_interval_s)
+
+    def move_to(self, T_base_flange: Any, *, linear: bool = False, flags: Optional[Tuple[int, int]] = None,
+                wait: bool = True) -> None:
+        """Moves the flange to ``T_base_flange`` (MOV, or MVS when ``linear``).
+
+        The target is checked against the cell's limits (SafetyError, nothing sent), then the
+        move from the current pose is checked against the approach rules. ``flags`` default to
+        the arm's current posture flags. With ``wait`` the call returns when the arm has arrived.
+        """
+        target = check_pose(T_base_flange, self.limits)
+        start_xyzabc, start_flags = self.read_xyzabc()
+        check_move(transform_from_xyzabc(start_xyzabc), target, linear=linear, limits=self.limits)
+        self._execute(target, linear, flags or start_flags, wait)
+
+    def move_sequence(self, targets: Sequence[Any], *, linear: Union[bool, Sequence[bool]] = False) -> None:
+        """Moves through ``targets`` in order, each step waited for.
+
+        The whole sequence is checked before the first byte of it is sent. If a step fails,
+        the arm is stopped, later steps are not sent, and the failure is raised naming the step.
+        """
+        targets = list(targets)
+        lin = [bool(linear)] * len(targets) if isinstance(linear, (bool, np.bool_)) else list(linear)
+        for i, T in enumerate(targets):
+            check_pose(T, self.limits, name=f"targets[{i}]")
+        start_xyzabc, flags = self.read_xyzabc()
+        checked = check_sequence(transform_from_xyzabc(start_xyzabc), targets, lin, self.limits)
+        for i, (T, is_linear) in enumerate(zip(checked, lin)):
+            try:
+                self._execute(T, is_linear, flags, True)
+            except DeviceError as exc:
+                raise type(exc)(f"step {i + 1} of {len(checked)} failed, later steps were not sent: {exc}") from exc
+
+    def _execute(self, target: np.ndarray, linear: bool, flags: Tuple[int, int], wait: bool) -> None:
+        n = self.config.position_variable
+        self._send("EXEC" + format_position(n, xyzabc_to_wire(xyzabc_from_transform(target)), flags), retry=True)
+        verb = "MVS" if linear else "MOV"
+        try:
+            self._send(f"EXEC{verb} P{n}")
+            if wait:
+                self.wait_until_idle()
+                reached = self.read_pose()
+                miss = float(np.linalg.norm(reached[:3, 3] - target[:3, 3]))
+                if miss > self.config.arrival_tolerance_mm:
+                    raise DeviceFault(f"robot: the arm stopped {miss:.2f} mm from the target (tolerance "
+                                      f"{self.config.arrival_tolerance_mm} mm)")
+        except DeviceError as exc:
+            raise_after_stop(exc, self._stop_after_fault())
+
+    def _stop_after_fault(self) -> str:
+        try:
+            self.stop()
+        except DeviceError as exc:
+            return f"STOP could not be sent ({exc}); stop the arm by hand"
+        return "the arm was stopped (STOP sent)"

@@ -1,0 +1,137 @@
+"""The interface every laser-motor driver offers, and the range and timing it is held to.
+
+The laser projector turns on one motor; scanning needs only: is it there, hold torque or not,
+go to an angle (radians, 0 at the motor's mechanical centre), where is it now, has it arrived.
+:class:`LaserMotor` implements the waiting and the range check once; drivers supply the bytes.
+"""
+
+from __future__ import annotations
+
+import abc
+import math
+import time
+from dataclasses import dataclass
+from typing import Any, Optional
+
+from ..errors import DeviceTimeout, InvalidInputError, SafetyError
+from ._link import SerialLink, check_number
+
+__all__ = ["MotorRange", "LaserMotor"]
+
+
+@dataclass(frozen=True)
+class MotorRange:
+    """Where and how fast the laser motor may turn, and how arrival is judged.
+
+    Attributes:
+        min_angle_rad: smallest goal angle accepted, radians (0 = mechanical centre).
+        max_angle_rad: largest goal angle accepted, radians.
+        max_speed_rad_s: speed the motor is limited to where its protocol allows, rad/s.
+        tolerance_rad: a goal counts as reached within this angle, radians.
+        move_timeout_s: longest wait for one move, seconds.
+        poll_interval_s: pause between two position reads while waiting, seconds.
+    """
+
+    min_angle_rad: float = -math.pi / 2
+    max_angle_rad: float = math.pi / 2
+    max_speed_rad_s: float = math.pi
+    tolerance_rad: float = math.radians(0.5)
+    move_timeout_s: float = 10.0
+    poll_interval_s: float = 0.02
+
+    def __post_init__(self) -> None:
+        lo = check_number(self.min_angle_rad, "MotorRange.min_angle_rad", low=-math.pi, high=math.pi, unit="rad")
+        hi = check_number(self.max_angle_rad, "MotorRange.max_angle_rad", low=-math.pi, high=math.pi, unit="rad")
+        if hi <= lo:
+            raise InvalidInputError(f"MotorRange: max_angle_rad {hi} must exceed min_angle_rad {lo}")
+        check_number(self.max_speed_rad_s, "MotorRange.max_speed_rad_s", low=1e-6, unit="rad/s")
+        check_number(self.tolerance_rad, "MotorRange.tolerance_rad", low=0.0, high=math.pi, unit="rad")
+        check_number(self.move_timeout_s, "MotorRange.move_timeout_s", low=1e-3, unit="s")
+        check_number(self.poll_interval_s, "MotorRange.poll_interval_s", low=1e-4, unit="s")
+
+
+class LaserMotor(abc.ABC):
+    """A rotary axis turning the laser projector; angles in radians.
+
+    Subclasses implement :meth:`ping`, :meth:`enable`, :meth:`disable`, :meth:`present_angle`
+    and :meth:`_send_goal`; they may override :meth:`is_moving` when the device reports it.
+    """
+
+    range: MotorRange
+    _link: SerialLink
+
+    def __init__(self) -> None:
+        self._goal: Optional[float] = None
+
+    @abc.abstractmethod
+    def ping(self) -> int:
+        """Checks that the motor answers; returns its model number (0 when the protocol has none)."""
+
+    @abc.abstractmethod
+    def enable(self) -> None:
+        """Turns holding torque on."""
+
+    @abc.abstractmethod
+    def disable(self) -> None:
+        """Turns holding torque off (the axis turns freely)."""
+
+    @abc.abstractmethod
+    def present_angle(self) -> float:
+        """The angle the motor is at now, radians."""
+
+    @abc.abstractmethod
+    def _send_goal(self, angle_rad: float) -> None:
+        """Sends the goal (already checked against the range) to the motor."""
+
+    @property
+    def goal_angle(self) -> Optional[float]:
+        """The last goal sent, radians (None before the first)."""
+        return self._goal
+
+    def is_moving(self) -> bool:
+        """Whether the motor is still away from its goal."""
+        return self._goal is not None and abs(self.present_angle() - self._goal) > self.range.tolerance_rad
+
+    def move_to(self, angle_rad: float, *, wait: bool = True) -> float:
+        """Sends goal ``angle_rad`` and (with ``wait``) returns the angle reached.
+
+        SafetyError, with nothing sent, when the angle is outside ``range``.
+        """
+        a = check_number(angle_rad, "angle_rad", unit="rad")
+        r = self.range
+        if not r.min_angle_rad <= a <= r.max_angle_rad:
+            raise SafetyError(f"laser motor: goal {math.degrees(a):.2f}° is outside the allowed range "
+                              f"[{math.degrees(r.min_angle_rad):.2f}°, {math.degrees(r.max_angle_rad):.2f}°]; "
+                              "nothing was sent — choose an angle inside MotorRange")
+        self._send_goal(a)
+        self._goal = a
+        return self.wait_until_reached() if wait else a
+
+    def wait_until_reached(self, timeout_s: Optional[float] = None) -> float:
+        """Polls until the goal is reached; returns the present angle. DeviceTimeout past the timeout."""
+        if self._goal is None:
+            raise InvalidInputError("laser motor: no goal has been sent yet; call move_to first")
+        limit = self.range.move_timeout_s if timeout_s is None else check_number(timeout_s, "timeout_s", low=0)
+        deadline = time.monotonic() + limit
+        while True:
+            angle = self.present_angle()
+            if abs(angle - self._goal) <= self.range.tolerance_rad and not self._still_moving():
+                return angle
+            if time.monotonic() > deadline:
+                raise DeviceTimeout(f"laser motor: still at {math.degrees(angle):.2f}° {limit} s after the goal "
+                                    f"{math.degrees(self._goal):.2f}° was sent; check torque, load and the speed limit")
+            time.sleep(self.range.poll_interval_s)
+
+    def _still_moving(self) -> bool:
+        """A device-reported 'moving' flag, where the protocol has one."""
+        return False
+
+    def close(self) -> None:
+        """Closes the serial port."""
+        self._link.close()
+
+    def __enter__(self) -> "LaserMotor":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()

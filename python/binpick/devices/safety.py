@@ -1,0 +1,147 @@
+"""The cell's motion rules, checked before any byte of a motion reaches the robot.
+
+Every check raises :class:`~binpick.errors.SafetyError` naming the rule, the offending value and
+what to change. The rules, all in the robot's base frame on the flange pose ``T_base_flange``:
+
+1. **Workspace box** — every target's origin lies inside ``workspace_min_mm``..``workspace_max_mm``.
+   A straight-line move between two points of a box stays inside it; a joint move's path is not
+   straight, so rule 3 keeps joint moves above the bin.
+2. **Tool attitude** — the flange's Z axis points down: its angle to −Z_base is at most
+   ``max_tool_tilt_rad``.
+3. **Approach** — below ``approach_height_mm`` (the pile's safety plane) the arm only moves in
+   straight lines (``linear=True``), and such a move travels at most ``max_lateral_below_mm``
+   sideways: it goes into and out of the bin vertically.
+4. **Speed** — the speed override never exceeds ``max_override_percent`` and the straight-line
+   speed never exceeds ``max_linear_speed_mm_s``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Sequence, Tuple
+
+import numpy as np
+
+from ..errors import InvalidInputError, SafetyError
+from ._link import check_number, check_transform
+
+__all__ = ["CellLimits", "check_pose", "check_move", "check_sequence", "check_override", "check_linear_speed"]
+
+Vec3 = Tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class CellLimits:
+    """The cell's motion limits (base frame, flange pose).
+
+    Attributes:
+        workspace_min_mm: lower corner (x, y, z) of the box the flange must stay in, mm.
+        workspace_max_mm: upper corner (x, y, z) of that box, mm.
+        max_tool_tilt_rad: largest angle between the flange's Z axis and straight down, radians.
+        approach_height_mm: z below which only straight, near-vertical moves are allowed, mm.
+        max_lateral_below_mm: largest sideways (x, y) travel of a move with an end below
+            ``approach_height_mm``, mm.
+        max_override_percent: largest speed override sent to the controller, percent (1–100).
+        max_linear_speed_mm_s: largest straight-line speed sent to the controller, mm/s.
+    """
+
+    workspace_min_mm: Vec3 = (100.0, -300.0, 0.0)
+    workspace_max_mm: Vec3 = (420.0, 300.0, 520.0)
+    max_tool_tilt_rad: float = math.radians(45.0)
+    approach_height_mm: float = 200.0
+    max_lateral_below_mm: float = 30.0
+    max_override_percent: float = 50.0
+    max_linear_speed_mm_s: float = 250.0
+
+    def __post_init__(self) -> None:
+        lo = [check_number(v, "CellLimits.workspace_min_mm", unit="mm") for v in _triple(self.workspace_min_mm, "min")]
+        hi = [check_number(v, "CellLimits.workspace_max_mm", unit="mm") for v in _triple(self.workspace_max_mm, "max")]
+        if any(h <= low for low, h in zip(lo, hi)):
+            raise InvalidInputError(f"CellLimits: workspace_max_mm {hi} must exceed workspace_min_mm {lo} on every axis")
+        check_number(self.max_tool_tilt_rad, "CellLimits.max_tool_tilt_rad", low=0.0, high=math.pi, unit="rad")
+        check_number(self.approach_height_mm, "CellLimits.approach_height_mm", unit="mm")
+        check_number(self.max_lateral_below_mm, "CellLimits.max_lateral_below_mm", low=0.0, unit="mm")
+        check_number(self.max_override_percent, "CellLimits.max_override_percent", low=1.0, high=100.0, unit="%")
+        check_number(self.max_linear_speed_mm_s, "CellLimits.max_linear_speed_mm_s", low=0.001, unit="mm/s")
+
+
+def _triple(value: Any, which: str) -> Sequence[Any]:
+    if not isinstance(value, (tuple, list, np.ndarray)) or len(value) != 3:
+        raise InvalidInputError(f"CellLimits.workspace_{which}_mm: expected (x, y, z) in mm, got {value!r}")
+    return list(value)
+
+
+def check_pose(T_base_flange: Any, limits: CellLimits, *, name: str = "target") -> np.ndarray:
+    """Rules 1 and 2 for one pose; returns it as a float64 (4, 4) array."""
+    T = check_transform(T_base_flange, name)
+    p = T[:3, 3]
+    lo, hi = np.asarray(limits.workspace_min_mm), np.asarray(limits.workspace_max_mm)
+    outside = [(axis, p[i]) for i, axis in enumerate("xyz") if not lo[i] <= p[i] <= hi[i]]
+    if outside:
+        axis, v = outside[0]
+        i = "xyz".index(axis)
+        raise SafetyError(
+            f"{name}: {axis} = {v:.1f} mm is outside the cell's workspace [{lo[i]:g}, {hi[i]:g}] mm; nothing was "
+            "sent — choose a pose inside CellLimits.workspace_min_mm/max_mm"
+        )
+    tilt = math.acos(max(-1.0, min(1.0, -float(T[2, 2]))))
+    if tilt > limits.max_tool_tilt_rad + 1e-12:
+        raise SafetyError(
+            f"{name}: the tool is tilted {math.degrees(tilt):.1f}° from straight down, more than the allowed "
+            f"{math.degrees(limits.max_tool_tilt_rad):.1f}°; nothing was sent — approach with the tool pointing down"
+        )
+    return T
+
+
+def check_move(T_start: Any, T_target: Any, *, linear: bool, limits: CellLimits, name: str = "target") -> np.ndarray:
+    """Rules 1–3 for one move from ``T_start`` (where the arm is) to ``T_target``; returns the target."""
+    start = check_transform(T_start, "T_start")
+    target = check_pose(T_target, limits, name=name)
+    z0, z1 = float(start[2, 3]), float(target[2, 3])
+    low = min(z0, z1) < limits.approach_height_mm
+    if low and not linear:
+        raise SafetyError(
+            f"{name}: a joint move (linear=False) from z = {z0:.1f} mm to z = {z1:.1f} mm goes below the approach "
+            f"height {limits.approach_height_mm:g} mm, where its curved path could hit the bin; nothing was sent — "
+            "move above the approach height first, then descend with linear=True"
+        )
+    if low:
+        lateral = float(np.hypot(*(target[:2, 3] - start[:2, 3])))
+        if lateral > limits.max_lateral_below_mm:
+            raise SafetyError(
+                f"{name}: a straight move below the approach height {limits.approach_height_mm:g} mm travels "
+                f"{lateral:.1f} mm sideways, more than {limits.max_lateral_below_mm:g} mm; nothing was sent — go "
+                "up and across above the approach height, then descend vertically"
+            )
+    return target
+
+
+def check_sequence(T_start: Any, targets: Sequence[Any], linear: Sequence[bool], limits: CellLimits) -> list:
+    """:func:`check_move` for each step of a sequence, each step starting where the previous one ends."""
+    if len(targets) != len(linear):
+        raise InvalidInputError(f"linear: has {len(linear)} entries for {len(targets)} targets; give one per target")
+    checked = []
+    previous = T_start
+    for i, (T, lin) in enumerate(zip(targets, linear)):
+        previous = check_move(previous, T, linear=bool(lin), limits=limits, name=f"targets[{i}]")
+        checked.append(previous)
+    return checked
+
+
+def check_override(percent: Any, limits: CellLimits) -> float:
+    """Rule 4 for a speed override, percent."""
+    v = check_number(percent, "override_percent", low=1.0, high=100.0, unit="%")
+    if v > limits.max_override_percent:
+        raise SafetyError(f"override_percent: {v:g} % exceeds the cell's limit of {limits.max_override_percent:g} %; "
+                          "nothing was sent — use a lower override or raise CellLimits.max_override_percent")
+    return v
+
+
+def check_linear_speed(speed_mm_s: Any, limits: CellLimits) -> float:
+    """Rule 4 for a straight-line speed, mm/s."""
+    v = check_number(speed_mm_s, "speed_mm_s", low=0.001, unit="mm/s")
+    if v > limits.max_linear_speed_mm_s:
+        raise SafetyError(f"speed_mm_s: {v:g} mm/s exceeds the cell's limit of {limits.max_linear_speed_mm_s:g} mm/s; "
+                          "nothing was sent — use a lower speed or raise CellLimits.max_linear_speed_mm_s")
+    return v

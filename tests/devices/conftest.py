@@ -1,0 +1,95 @@
+"""Fixtures: each emulator on a real pty, and the real driver opened on its slave path."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from binpick.devices import (
+    AiMotor,
+    AiMotorConfig,
+    CellLimits,
+    DynamixelConfig,
+    DynamixelMotor,
+    GripperConfig,
+    MelfaConfig,
+    MelfaRobot,
+    ModbusGripper,
+    MotorRange,
+    SerialSettings,
+)
+from binpick.devices.emulators import (
+    AiMotorEmulator,
+    DynamixelEmulator,
+    GripperEmulator,
+    RobotEmulator,
+    RobotEmulatorConfig,
+)
+
+FAST_ROBOT = MelfaConfig(
+    serial=SerialSettings(baudrate=9600, parity="E", stopbits=2, timeout_s=0.15, retries=2),
+    initial_override_percent=50,
+    initial_linear_speed_mm_s=200,
+    poll_interval_s=0.005,
+    motion_timeout_s=5.0,
+)
+FAST_RANGE = MotorRange(max_speed_rad_s=30.0, move_timeout_s=2.0, poll_interval_s=0.005)
+
+
+def _serve(emulator):
+    emulator.start()
+    yield emulator
+    emulator.close()
+    assert emulator.failures == [], "the emulator raised while handling requests"
+
+
+@pytest.fixture
+def robot_emulator():
+    yield from _serve(RobotEmulator(config=RobotEmulatorConfig(speed_scale=40.0)))
+
+
+@pytest.fixture
+def robot(robot_emulator):
+    with MelfaRobot(robot_emulator.slave_path, config=FAST_ROBOT, limits=CellLimits()) as r:
+        yield r
+
+
+@pytest.fixture
+def dxl_emulator():
+    yield from _serve(DynamixelEmulator())
+
+
+@pytest.fixture
+def dxl_motor(dxl_emulator):
+    m = DynamixelMotor(dxl_emulator.slave_path, config=DynamixelConfig(
+        serial=SerialSettings(baudrate=57600, timeout_s=0.05), range=FAST_RANGE))
+    yield m
+    m.close()
+
+
+@pytest.fixture
+def ai_emulator():
+    yield from _serve(AiMotorEmulator())
+
+
+@pytest.fixture
+def ai_motor(ai_emulator):
+    m = AiMotor(ai_emulator.slave_path, config=AiMotorConfig(
+        serial=SerialSettings(baudrate=57600, timeout_s=0.05),
+        range=MotorRange(tolerance_rad=math.radians(1.5), move_timeout_s=2.0, poll_interval_s=0.005)))
+    yield m
+    m.close()
+
+
+@pytest.fixture
+def gripper_emulator():
+    yield from _serve(GripperEmulator())
+
+
+@pytest.fixture
+def gripper(gripper_emulator):
+    g = ModbusGripper(gripper_emulator.slave_path, config=GripperConfig(
+        serial=SerialSettings(baudrate=115200, timeout_s=0.05), poll_interval_s=0.005, move_timeout_s=2.0))
+    yield g
+    g.close_port()
