@@ -6,6 +6,8 @@ import math
 
 import pytest
 
+from binpick.errors import DeviceError
+
 from binpick.devices import (
     AiMotor,
     AiMotorConfig,
@@ -51,8 +53,15 @@ def robot_emulator():
 
 @pytest.fixture
 def robot(robot_emulator):
-    with MelfaRobot(robot_emulator.slave_path, config=FAST_ROBOT, limits=CellLimits()) as r:
-        yield r
+    r = MelfaRobot(robot_emulator.slave_path, config=FAST_ROBOT, limits=CellLimits())
+    r.open_session()
+    yield r
+    try:
+        r.close_session()
+    except DeviceError:  # tests that kill the port leave no session to close
+        pass
+    finally:
+        r.close()
 
 
 @pytest.fixture

@@ -38,6 +38,7 @@ from ..errors import (
 __all__ = ["SerialSettings", "SerialLink"]
 
 T = TypeVar("T")
+E = TypeVar("E", bound=BaseException)
 
 _SLICE_S = 0.01  # the port's read timeout: reads return at least this often to check their deadline
 
@@ -274,10 +275,17 @@ def with_retries(attempts: int, action: Callable[[], T]) -> T:
             if attempt == attempts:
                 if attempts == 0:
                     raise
-                raise type(exc)(f"{exc} (gave up after {attempts + 1} attempts)") from exc
+                raise restate(exc, f"{exc} (gave up after {attempts + 1} attempts)") from exc
     raise AssertionError("unreachable")  # pragma: no cover
+
+
+def restate(exc: E, message: str) -> E:
+    """A new exception of ``exc``'s class with ``message`` and ``exc``'s attributes (e.g. error_number)."""
+    new = type(exc)(message)
+    new.__dict__.update(exc.__dict__)
+    return new
 
 
 def raise_after_stop(exc: DeviceError, note: str) -> None:
     """Raises ``exc``'s class again with ``note`` appended, chained to ``exc``."""
-    raise type(exc)(f"{exc} — {note}") from exc
+    raise restate(exc, f"{exc} — {note}") from exc

@@ -58,7 +58,7 @@ from ..errors import (
     SafetyError,
     UnknownReplyError,
 )
-from ._link import SerialLink, SerialSettings, check_int, check_number, raise_after_stop, with_retries
+from ._link import SerialLink, SerialSettings, check_int, check_number, raise_after_stop, restate, with_retries
 from .safety import CellLimits, check_linear_speed, check_move, check_override, check_pose, check_sequence
 from .xyzabc import transform_from_xyzabc, xyzabc_from_transform, xyzabc_from_wire, xyzabc_to_wire
 
@@ -494,7 +494,7 @@ class MelfaRobot:
             try:
                 self._execute(T, is_linear, flags, True)
             except DeviceError as exc:
-                raise type(exc)(f"step {i + 1} of {len(checked)} failed, later steps were not sent: {exc}") from exc
+                raise restate(exc, f"step {i + 1} of {len(checked)} failed, later steps were not sent: {exc}") from exc
 
     def _execute(self, target: np.ndarray, linear: bool, flags: Tuple[int, int], wait: bool) -> None:
         n = self.config.position_variable

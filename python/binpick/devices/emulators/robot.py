@@ -388,7 +388,7 @@ class RobotEmulator(PtyEmulator):
         if cmd.startswith("OPEN="):
             self._opened = True
             return self.config.model_name
-        if not self._opened:
+        if not self._opened and not cmd.startswith("ERRORMES"):
             raise _Refused(ERR_NOT_OPEN)
         simple = {"CLOSE": self._close_session, "CNTLON": lambda: setattr(self, "_control", True),
                   "CNTLOFF": lambda: setattr(self, "_control", False), "SRVON": self._servo_on,
