@@ -25,6 +25,7 @@ class Fault(enum.Enum):
     """A transport or device fault the emulator can play on its next replies.
 
     NO_REPLY: the request is carried out, the reply is lost.
+    IGNORED: the request is lost on the way in: not carried out, no reply.
     DELAY: the reply comes ``delay_s`` late.
     PARTIAL: only the first half of the reply is sent.
     GARBLED: the reply's bytes are corrupted (framing or characters).
@@ -35,6 +36,7 @@ class Fault(enum.Enum):
     """
 
     NO_REPLY = "no_reply"
+    IGNORED = "ignored"
     DELAY = "delay"
     PARTIAL = "partial"
     GARBLED = "garbled"
@@ -189,6 +191,8 @@ class PtyEmulator:
         fault = armed.fault if armed else None
         if fault is Fault.CLOSE_PORT:
             self._close_fds()
+            return
+        if fault is Fault.IGNORED:
             return
         reply = self._error_reply(request) if fault is Fault.DEVICE_ERROR else self._handle(request)
         if reply is None or fault is Fault.NO_REPLY:
