@@ -20,3 +20,4 @@ pub mod model;
 pub mod sdf;
 pub mod parts;
 pub mod triangulate;
+pub mod sim;

@@ -1,0 +1,11 @@
+//! The simulated cell: physics piles of parts in a bin ([`pile`], rapier3d) and an eye-in-hand
+//! camera with a swept laser line projector, rendered by ray casting ([`render`], parry3d).
+//!
+//! Default cell layout (base frame, +z up, mm): the bin's inner floor at z = 0, centred at
+//! (400, 0); the camera about 500 mm above the pile looking down; the laser projector beside the
+//! camera on the flange, turned about its own y axis by the motor.
+
+pub mod convert;
+pub mod pile;
+
+pub use pile::{BinSpec, Pile, PileParams, SettleReport};
