@@ -8,18 +8,7 @@ import pytest
 
 from binpick.calibration import CameraIntrinsics, CellCalibration
 from binpick.vision import _synthetic as syn
-
-
-def pose(rx: float = 0.0, ry: float = 0.0, rz: float = 0.0, t=(0.0, 0.0, 0.0)) -> np.ndarray:
-    """A 4×4 transform from XYZ Euler angles (rad) and a translation (mm)."""
-    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
-    Rx = np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
-    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
-    Rz = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
-    T = np.eye(4)
-    T[:3, :3] = Rz @ Ry @ Rx
-    T[:3, 3] = t
-    return T
+from binpick.vision._synthetic import pose
 
 
 class Cell:

@@ -16,6 +16,15 @@ from .. import _core
 from ..calibration import CameraIntrinsics, CellCalibration
 
 
+def pose(rx: float = 0.0, ry: float = 0.0, rz: float = 0.0, t=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """A 4×4 transform ``Rz·Ry·Rx`` (angles in radians) with translation ``t`` (mm)."""
+    cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
+    T = np.eye(4)
+    T[:3, :3] = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]]) @ np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]]) @ np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    T[:3, 3] = t
+    return T
+
+
 @dataclass(frozen=True)
 class Plane:
     """The plane through ``point`` with normal ``normal`` (base frame, mm)."""

@@ -1,0 +1,123 @@
+"""Camera intrinsics and distortion from checkerboard images (OpenCV), and board poses (Eq. 15)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from .._validate import positive
+from ..errors import CalibrationError, InvalidInputError
+from ._checks import as_image
+from ._file import CameraIntrinsics
+
+__all__ = ["CameraCalibration", "board_object_points", "board_pose", "calibrate_camera", "find_checkerboard"]
+
+
+def _pattern(pattern) -> tuple[int, int]:
+    try:
+        cols, rows = (int(p) for p in pattern)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"pattern: expected (columns, rows) of inner corners, got {pattern!r}") from None
+    if cols < 2 or rows < 2:
+        raise InvalidInputError(f"pattern: needs at least 2×2 inner corners, got {pattern!r}")
+    return cols, rows
+
+
+def board_object_points(pattern: tuple[int, int], square: float) -> np.ndarray:
+    """The inner corners in the board frame (z = 0), row by row as OpenCV finds them, mm (N, 3)."""
+    cols, rows = _pattern(pattern)
+    sq = positive(square, "square")
+    gx, gy = np.meshgrid(np.arange(cols), np.arange(rows))
+    return np.stack([gx.ravel(), gy.ravel(), np.zeros(cols * rows)], axis=1) * sq
+
+
+def find_checkerboard(image: np.ndarray, pattern: tuple[int, int]) -> np.ndarray | None:
+    """The checkerboard's inner corners to sub-pixel accuracy, (N, 2) float64, or None if not found."""
+    img = as_image(image, "image")
+    grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
+    size = _pattern(pattern)
+    found, corners = cv2.findChessboardCorners(grey, size, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+    if not found:
+        return None
+    criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
+    corners = cv2.cornerSubPix(grey, corners, (7, 7), (-1, -1), criteria)
+    return corners.reshape(-1, 2).astype(np.float64)
+
+
+def _pose(rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = cv2.Rodrigues(rvec)[0]
+    T[:3, 3] = np.ravel(tvec)
+    return T
+
+
+def board_pose(corners: np.ndarray, camera: CameraIntrinsics, pattern: tuple[int, int], square: float) -> np.ndarray:
+    """``T_camera_board`` from the board's detected corners (the paper's Eq. 15, by PnP)."""
+    obj = board_object_points(pattern, square)
+    corners = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
+    if len(corners) != len(obj):
+        raise InvalidInputError(f"corners: {len(corners)} corners for a {pattern} pattern of {len(obj)}")
+    ok, rvec, tvec = cv2.solvePnP(obj, corners, camera.K, camera.dist, flags=cv2.SOLVEPNP_ITERATIVE)
+    if not ok:
+        raise CalibrationError("corners: solvePnP found no board pose; check the pattern size and the corners")
+    return _pose(rvec, tvec)
+
+
+@dataclass(frozen=True, eq=False)
+class CameraCalibration:
+    """The outcome of :func:`calibrate_camera`.
+
+    ``camera``: the intrinsics; ``rms``: the RMS reprojection error over all corners (pixels);
+    ``per_view_rms``: that error per used view; ``views``: indices of the images where the
+    board was found; ``T_camera_boards``: the board pose in each used view.
+    """
+
+    camera: CameraIntrinsics
+    rms: float
+    per_view_rms: np.ndarray
+    views: np.ndarray
+    T_camera_boards: tuple[np.ndarray, ...]
+
+    def __repr__(self) -> str:
+        return f"CameraCalibration({self.camera!r}, rms={self.rms:.3f} px over {len(self.views)} views)"
+
+
+def calibrate_camera(
+    images: Sequence[np.ndarray], pattern: tuple[int, int], square: float, *, flags: int = 0, min_views: int = 3
+) -> CameraCalibration:
+    """Intrinsics and distortion ``[k1, k2, p1, p2, k3]`` from checkerboard images.
+
+    ``pattern`` is (columns, rows) of inner corners, ``square`` the square size in mm. Images
+    where the board is not found are skipped; fewer than ``min_views`` usable views is an error.
+    The reprojection error is reported overall and per view.
+    """
+    imgs = list(images)
+    if not imgs:
+        raise CalibrationError("images: no checkerboard images given")
+    shapes = {as_image(im, f"images[{i}]").shape[:2] for i, im in enumerate(imgs)}
+    if len(shapes) != 1:
+        raise CalibrationError(f"images: all images must come from one camera at one size, got sizes {sorted(shapes)}")
+    height, width = shapes.pop()
+    obj = board_object_points(pattern, square).astype(np.float32)
+    corners, views = [], []
+    for i, im in enumerate(imgs):
+        c = find_checkerboard(im, pattern)
+        if c is not None:
+            corners.append(c.astype(np.float32).reshape(-1, 1, 2))
+            views.append(i)
+    if len(views) < min_views:
+        raise CalibrationError(
+            f"images: the {pattern} checkerboard was found in {len(views)} of {len(imgs)} images, "
+            f"at least {min_views} are needed; check the pattern size (inner corners) and the lighting"
+        )
+    rms, K, dist, rvecs, tvecs = cv2.calibrateCamera([obj] * len(views), corners, (width, height), None, None, flags=flags)
+    per_view = []
+    for c, r, t in zip(corners, rvecs, tvecs):
+        proj, _ = cv2.projectPoints(obj, r, t, K, dist)
+        per_view.append(float(np.sqrt(np.mean(np.sum((proj - c).reshape(-1, 2) ** 2, axis=1)))))
+    camera = CameraIntrinsics(width=width, height=height, K=K, dist=np.ravel(dist)[:5])
+    poses = tuple(_pose(r, t) for r, t in zip(rvecs, tvecs))
+    return CameraCalibration(camera=camera, rms=float(rms), per_view_rms=np.array(per_view), views=np.array(views), T_camera_boards=poses)

@@ -1,0 +1,130 @@
+"""General laser calibration: the lit line on checkerboard planes at several board poses and
+motor angles gives points of each sheet; a robust plane per angle; the projector's rotation
+axis and its pose at angle 0 fitted across angles."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validate import as_points, as_transform, positive
+from ..errors import CalibrationError, SingularGeometryError
+from ._checks import as_angles
+from ._file import CameraIntrinsics
+
+__all__ = ["LaserCalibration", "fit_plane", "laser_points_on_board"]
+
+
+def laser_points_on_board(pixels: np.ndarray, camera: CameraIntrinsics, T_camera_board: np.ndarray) -> np.ndarray:
+    """The 3-D points (camera frame, mm) where the rays through ``pixels`` meet the board plane."""
+    from ..vision import pixel_rays  # vision depends on calibration's file types, not the reverse
+
+    T = as_transform(T_camera_board, "T_camera_board")
+    rays = pixel_rays(pixels, camera)
+    n = T[:3, 2]
+    denom = rays @ n
+    if (np.abs(denom) < 1e-9 * np.linalg.norm(rays, axis=1)).any():
+        raise SingularGeometryError("pixels: a ray is parallel to the board; tilt the board towards the camera")
+    s = (n @ T[:3, 3]) / denom
+    if (s <= 0).any():
+        raise SingularGeometryError("T_camera_board: the board plane lies behind the camera for some pixels")
+    return rays * s[:, None]
+
+
+def fit_plane(points: np.ndarray, *, inlier_distance: float = 0.5, iterations: int = 200, seed: int = 0) -> tuple[np.ndarray, float, np.ndarray]:
+    """A robust plane through ``points`` (N, 3): RANSAC on triples, then a least-squares refit on
+    the inliers (within ``inlier_distance`` mm). Returns (unit normal, offset, inlier mask),
+    the plane being ``normal · x = offset``."""
+    pts = as_points(points, "points", min_points=3)
+    tol = positive(inlier_distance, "inlier_distance")
+    rng = np.random.default_rng(seed)
+    best = None
+    for _ in range(iterations):
+        a, b, c = pts[rng.choice(len(pts), 3, replace=False)]
+        n = np.cross(b - a, c - a)
+        norm = np.linalg.norm(n)
+        if norm < 1e-9:
+            continue
+        n /= norm
+        inl = np.abs((pts - a) @ n) < tol
+        if best is None or inl.sum() > best.sum():
+            best = inl
+    if best is None or best.sum() < 3:
+        raise SingularGeometryError("points: collinear or too few to define a plane; observe the line on the board at more than one pose")
+    for _ in range(3):
+        centre = pts[best].mean(axis=0)
+        _, sv, vt = np.linalg.svd(pts[best] - centre, full_matrices=False)
+        if sv[1] < 1e-6 * max(sv[0], 1e-12):
+            raise SingularGeometryError("points: all on one line; the sheet needs the line on at least two board poses")
+        n = vt[2]
+        best = np.abs((pts - centre) @ n) < tol
+    return n, float(n @ centre), best
+
+
+@dataclass(frozen=True, eq=False)
+class LaserCalibration:
+    """The outcome of :meth:`LaserCalibration.fit`.
+
+    ``T_camera_laser``: the projector pose at motor angle 0 (its y axis is the rotation axis,
+    its origin the axis point nearest the camera centre); ``planes``: the plane fitted at each
+    angle, (K, 4) rows ``(nx, ny, nz, offset)``; ``rms``: RMS distance (mm) of all inlier points
+    to the model's sheet at their angle; ``per_angle_rms``: the same per angle.
+    """
+
+    T_camera_laser: np.ndarray
+    angles: np.ndarray
+    planes: np.ndarray
+    rms: float
+    per_angle_rms: np.ndarray
+
+    def __repr__(self) -> str:
+        return f"LaserCalibration({len(self.angles)} angles, rms={self.rms:.4f} mm)"
+
+    @classmethod
+    def fit(cls, angles: Sequence[float], points: Sequence[np.ndarray], *, inlier_distance: float = 0.5) -> "LaserCalibration":
+        """Fits the projector from the sheet's points at each motor angle.
+
+        ``points[k]`` (N_k, 3) are lit points in the camera frame (from :func:`laser_points_on_board`
+        on two or more board poses) seen at motor angle ``angles[k]`` (radians); at least three
+        distinct angles are needed.
+        """
+        theta = as_angles(angles, "angles")
+        pts = [as_points(p, f"points[{k}]", min_points=3) for k, p in enumerate(points)]
+        if len(pts) != len(theta):
+            raise CalibrationError(f"points: {len(pts)} point sets for {len(theta)} angles; give one set per angle")
+        if len(np.unique(np.round(theta, 9))) < 3:
+            raise CalibrationError("angles: at least three distinct motor angles are needed to find the rotation axis")
+        fits = [fit_plane(p, inlier_distance=inlier_distance) for p in pts]
+        normals = np.array([f[0] for f in fits])
+        offsets = np.array([f[1] for f in fits])
+        # Orient every normal like the one at the middle angle: the sweep spans less than π.
+        ref = normals[np.argsort(theta)[len(theta) // 2]]
+        flip = np.where(normals @ ref < 0, -1.0, 1.0)
+        normals, offsets = normals * flip[:, None], offsets * flip
+        # n(θ) = cos θ · x0 − sin θ · z0 for the laser axes x0, z0 at angle 0.
+        A = np.stack([np.cos(theta), -np.sin(theta)], axis=1)
+        (x0, z0), *_ = np.linalg.lstsq(A, normals, rcond=None)
+        axis = np.linalg.svd(normals)[2][2]
+        if np.cross(x0, axis) @ z0 < 0:
+            axis = -axis
+        x0 = x0 - (x0 @ axis) * axis
+        x0 /= np.linalg.norm(x0)
+        z0 = np.cross(x0, axis)
+        # Every sheet contains the axis: n_k · o = d_k; the row `axis · o = 0` picks the point nearest the camera.
+        origin, *_ = np.linalg.lstsq(np.vstack([normals, axis]), np.append(offsets, 0.0), rcond=None)
+        T = np.eye(4)
+        T[:3, :3] = np.stack([x0, axis, z0], axis=1)
+        T[:3, 3] = origin
+        per_angle, all_res = [], []
+        for th, p, (_, _, inl) in zip(theta, pts, fits):
+            n = np.cos(th) * x0 - np.sin(th) * z0
+            res = (p[inl] - origin) @ n
+            per_angle.append(float(np.sqrt(np.mean(res**2))))
+            all_res.append(res)
+        res = np.concatenate(all_res)
+        return cls(
+            T_camera_laser=T, angles=theta, planes=np.column_stack([normals, offsets]),
+            rms=float(np.sqrt(np.mean(res**2))), per_angle_rms=np.array(per_angle),
+        )
