@@ -61,7 +61,8 @@ pub fn principal_axes(cov: &Matrix3<f64>) -> ([f64; 3], [Vector3<f64>; 3]) {
 }
 
 /// How many dimensions a cloud spans: 0 all points equal, 1 collinear, 2 coplanar, 3 solid.
-/// A direction counts when its standard deviation exceeds `1e-9` of the cloud's extent (and 1e-12 mm).
+/// A direction counts when its standard deviation exceeds 1e-6 of the largest one (rounding in
+/// the eigen-decomposition reaches about 1e-8), and the largest must exceed 1e-12 mm.
 pub fn spanned_dimensions(points: &[Point]) -> usize {
     if points.len() < 2 {
         return 0;
@@ -72,7 +73,7 @@ pub fn spanned_dimensions(points: &[Point]) -> usize {
     if scale <= 1e-12 {
         return 0;
     }
-    1 + vals[1..].iter().filter(|v| v.sqrt() > 1e-9 * scale).count()
+    1 + vals[1..].iter().filter(|v| v.sqrt() > 1e-6 * scale).count()
 }
 
 /// Fails with [`Error::Degenerate`] when the cloud spans fewer than `needed` dimensions.

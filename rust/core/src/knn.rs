@@ -79,3 +79,18 @@ impl KdIndex {
             .collect()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn duplicate_points_do_not_break_the_tree() {
+        let mut pts = vec![Point::new(1.0, 2.0, 3.0); 500];
+        pts.extend((0..500).map(|i| Point::new(5.0, i as f64 * 0.01, 0.0)));
+        let idx = KdIndex::new(&pts);
+        assert_eq!(idx.knn(&Point::new(1.0, 2.0, 3.1), 40).len(), 40);
+        assert_eq!(idx.within(&Point::new(1.0, 2.0, 3.0), 0.5).len(), 500);
+        assert!((idx.nearest(&Point::new(5.0, 1.0, 0.2)).unwrap().distance_squared - 0.04).abs() < 1e-9);
+    }
+}

@@ -1,27 +1,29 @@
 //! KD-tree ICP: point-to-point (closed-form SVD) and point-to-plane (Gauss–Newton on SE(3)).
 //!
 //! Each iteration finds, for every source point moved by the current estimate, its nearest
-//! target point in a kiddo KD-tree; pairs farther than `max_correspondence_distance` are
-//! ignored. The sums the solver needs are accumulated per rayon task and merged, so the
-//! work splits across threads without locks. Sums are taken about the target's centroid,
-//! which keeps them well conditioned for scenes far from the origin.
+//! target point within `max_correspondence_distance` ([`CorrespondenceTree`]); from the second
+//! iteration on the search is bounded by the point's previous match distance plus how far the
+//! point moved, which keeps it exact and cheap. Source points are visited in Z-order so that
+//! consecutive searches touch nearby memory. The sums the solver needs are accumulated per
+//! rayon task and merged, so the work splits across threads without locks. Sums are taken
+//! about the target's centroid, which keeps them well conditioned far from the origin.
 
 use super::criteria::{IcpConfig, IcpMethod};
 use crate::cloud::{centroid, check_count, check_finite, check_spread, Point};
 use crate::error::{Error, Result};
-use crate::knn::KdIndex;
+use super::corr_tree::{spatial_order, CorrespondenceTree};
 use crate::parallel::with_threads;
 use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6};
 use rayon::prelude::*;
 
 const CHUNK: usize = 2048;
 
-/// A target cloud prepared for ICP: its points, optional unit normals and its KD-tree.
+/// A target cloud prepared for ICP: its points, optional unit normals and its search structure.
 /// Build it once and reuse it across many registrations against the same target.
 pub struct IcpTarget {
     points: Vec<Point>,
     normals: Option<Vec<Vector3<f64>>>,
-    index: KdIndex,
+    search: CorrespondenceTree,
     center: Point,
 }
 
@@ -41,9 +43,9 @@ impl IcpTarget {
                 }
             }
         }
-        let index = KdIndex::new(&points);
+        let search = CorrespondenceTree::new(&points);
         let center = centroid(&points);
-        Ok(IcpTarget { points, normals, index, center })
+        Ok(IcpTarget { points, normals, search, center })
     }
 
     /// The target's points.
@@ -54,11 +56,6 @@ impl IcpTarget {
     /// The target's normals, if it has them.
     pub fn normals(&self) -> Option<&[Vector3<f64>]> {
         self.normals.as_deref()
-    }
-
-    /// The KD-tree over the target.
-    pub fn index(&self) -> &KdIndex {
-        &self.index
     }
 }
 
@@ -203,39 +200,62 @@ pub fn icp(source: &[Point], target: &IcpTarget, init: &Isometry3<f64>, config: 
     }
 }
 
-fn run<S: Sums>(
-    source: &[Point],
-    target: &IcpTarget,
-    init: &Isometry3<f64>,
-    config: &IcpConfig,
-) -> IcpResult {
+fn run<S: Sums>(source_in: &[Point], target: &IcpTarget, init: &Isometry3<f64>, config: &IcpConfig) -> IcpResult {
     let c = target.center.coords;
     let max_sq = config.max_correspondence_distance * config.max_correspondence_distance;
     let zero_normal = Vector3::zeros();
     let normals = target.normals.as_deref();
+    let source: Vec<Point> = spatial_order(source_in, config.max_correspondence_distance.max(1e-3) * 0.25)
+        .into_iter()
+        .map(|i| source_in[i as usize])
+        .collect();
+    // Distance of each source point's last match (infinite when it had none).
+    let mut last_match = vec![f64::INFINITY; source.len()];
     let mut t_est = *init;
+    let mut t_prev = *init;
     let mut converged = false;
     let mut iterations = 0;
     let mut last = Pass::<S>::zero();
     let trim = config.trim_fraction > 0.0;
+    let kernel = config.kernel;
 
     for _ in 0..config.max_iterations {
         let rot: Matrix3<f64> = t_est.rotation.to_rotation_matrix().into_inner();
+        let rot_prev: Matrix3<f64> = t_prev.rotation.to_rotation_matrix().into_inner();
         // Moving each source point relative to the centre: q_c = R p + (t − c).
         let shift = t_est.translation.vector - c;
-        let kernel = config.kernel;
-
-        let pair_at = |p: &Point| -> Option<(Vector3<f64>, usize, f64)> {
+        let shift_prev = t_prev.translation.vector - c;
+        // `hint` is the match of the previous point in Z-order: being near, its distance to
+        // this point bounds the search from the first iteration on.
+        let find = |p: &Point, last: &mut f64, hint: &mut Option<Point>| -> Option<(Vector3<f64>, usize, f64)> {
             let q = rot * p.coords + shift;
-            let nn = target.index.nearest(&Point::from(q + c))?;
-            (nn.distance_squared <= max_sq).then_some((q, nn.index, nn.distance_squared))
+            let qw = Point::from(q + c);
+            let moved = (q - (rot_prev * p.coords + shift_prev)).norm();
+            // The previous match is at most `last + moved` away now, so nothing nearer is missed.
+            let bound = (*last + moved) * (1.0 + 1e-9) + 1e-12;
+            let mut bound_sq = if bound.is_finite() { (bound * bound).min(max_sq) } else { max_sq };
+            if let Some(h) = hint {
+                bound_sq = bound_sq.min((qw - *h).norm_squared() * (1.0 + 1e-9) + 1e-12);
+            }
+            match target.search.nearest_within(&[qw.x, qw.y, qw.z], bound_sq) {
+                Some((j, d)) => {
+                    *last = d.sqrt();
+                    *hint = Some(target.points[j]);
+                    Some((q, j, d))
+                }
+                None => {
+                    *last = f64::INFINITY;
+                    None
+                }
+            }
         };
 
         let pass = if trim {
             let mut pairs: Vec<(u32, u32, f64)> = source
                 .par_iter()
+                .zip(last_match.par_iter_mut())
                 .enumerate()
-                .filter_map(|(i, p)| pair_at(p).map(|(_, j, d)| (i as u32, j as u32, d)))
+                .filter_map(|(i, (p, l))| find(p, l, &mut None).map(|(_, j, d)| (i as u32, j as u32, d)))
                 .collect();
             let inliers = pairs.len();
             let sq_dist: f64 = pairs.iter().map(|x| x.2).sum();
@@ -261,10 +281,12 @@ fn run<S: Sums>(
         } else {
             source
                 .par_chunks(CHUNK)
-                .map(|chunk| {
+                .zip(last_match.par_chunks_mut(CHUNK))
+                .map(|(chunk, lasts)| {
                     let mut acc = Pass::<S>::zero();
-                    for p in chunk {
-                        if let Some((q, j, d)) = pair_at(p) {
+                    let mut hint = None;
+                    for (p, l) in chunk.iter().zip(lasts.iter_mut()) {
+                        if let Some((q, j, d)) = find(p, l, &mut hint) {
                             let tq = target.points[j].coords - c;
                             let n = normals.map_or(&zero_normal, |ns| &ns[j]);
                             acc.sums.add(&q, &tq, n, kernel.weight(S::residual(&q, &tq, n)));
@@ -287,6 +309,7 @@ fn run<S: Sums>(
         let r_inc = UnitQuaternion::from_scaled_axis(omega);
         // The increment acts about the centre: x ↦ R (x − c) + c + v.
         let inc = Isometry3::from_parts(Translation3::from(c + v - (r_inc * c)), r_inc);
+        t_prev = t_est;
         t_est = inc * t_est;
         iterations += 1;
         if omega.norm() < config.rotation_tolerance && v.norm() < config.translation_tolerance {
