@@ -6,7 +6,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 
 import binpick
 from binpick.devices import DynamixelConfig, DynamixelMotor, MelfaConfig, MelfaRobot, SerialSettings

@@ -8,13 +8,14 @@ import numpy as np
 import pytest
 from conftest import FAST_ROBOT
 
-from binpick.devices import CellLimits, MelfaHandGripper, MelfaRobot
+from binpick.devices import MelfaConfig, MelfaHandGripper, MelfaRobot, SerialSettings
 from binpick.devices.emulators import Fault, RobotEmulator, RobotEmulatorConfig
 from binpick.devices.emulators.robot import ArmModel
 from binpick.devices.xyzabc import transform_from_xyzabc
 from binpick.errors import (
     DeviceFault,
     DeviceTimeout,
+    InvalidInputError,
     PortClosedError,
     ProtocolError,
     SafetyError,
@@ -109,6 +110,26 @@ def test_joint_limits_enforced_by_the_controller():
             with pytest.raises(DeviceFault, match="Joint limit"):
                 r.move_to(down(300, 150, 300))
             assert "STOP" in commands(emu)
+
+
+def test_operation_range_enforced_by_the_controller():
+    arm = ArmModel(workspace_min_mm=(-450, -450, 180), workspace_max_mm=(450, 450, 750))
+    with RobotEmulator(config=RobotEmulatorConfig(arm=arm, speed_scale=40)) as emu:
+        with MelfaRobot(emu.slave_path, config=FAST_ROBOT) as r:
+            r.move_to(down(300, 0, 250))
+            with pytest.raises(DeviceFault, match="operation range") as info:
+                r.move_to(down(300, 0, 150), linear=True)
+            assert info.value.error_number == 3005
+            np.testing.assert_allclose(r.read_pose()[:3, 3], [300, 0, 250], atol=0.02)
+
+
+def test_config_is_validated():
+    with pytest.raises(InvalidInputError, match="client_name"):
+        MelfaConfig(client_name="A;B")
+    with pytest.raises(InvalidInputError, match="parity"):
+        SerialSettings(parity="X")
+    with pytest.raises(InvalidInputError, match="stopbits"):
+        SerialSettings(stopbits=3)
 
 
 def test_commands_need_operation_rights(robot_emulator):

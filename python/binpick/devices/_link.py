@@ -153,7 +153,11 @@ class SerialLink:
         if isinstance(port, serial.SerialBase):
             self._ser = port
             self.port_name = str(port.port)
-            port.timeout = _SLICE_S
+            try:
+                port.timeout = _SLICE_S
+            except (*_PORT_ERRORS, ValueError) as exc:
+                raise PortClosedError(f"{device}: cannot set the read timeout of {self.port_name} ({exc}); "
+                                      "pass a port path instead and let the driver open it") from None
             return
         if not isinstance(port, str) or not port:
             raise InvalidInputError(f"{device}: port must be a device path such as '/dev/ttyUSB0', got {port!r}")

@@ -9,7 +9,7 @@ UNKNOWN_REPLY and DEVICE_ERROR cannot be played.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, List, Optional, Tuple
+from typing import List, Optional, Tuple
 
 from .._link import check_int, check_number
 from ..aimotor import MODE_PASSIVE, MODE_STATUS
