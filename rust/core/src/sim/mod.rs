@@ -7,5 +7,7 @@
 
 pub mod convert;
 pub mod pile;
+pub mod render;
 
 pub use pile::{BinSpec, Pile, PileParams, SettleReport};
+pub use render::{render_checkerboard, Camera, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View};
