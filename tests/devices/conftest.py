@@ -30,7 +30,7 @@ from binpick.devices.emulators import (
 )
 
 FAST_ROBOT = MelfaConfig(
-    serial=SerialSettings(baudrate=9600, parity="E", stopbits=2, timeout_s=0.15, retries=2),
+    serial=SerialSettings(baudrate=9600, parity="E", stopbits=2, timeout_s=0.3, retries=2),
     initial_override_percent=50,
     initial_linear_speed_mm_s=200,
     poll_interval_s=0.005,
@@ -72,7 +72,7 @@ def dxl_emulator():
 @pytest.fixture
 def dxl_motor(dxl_emulator):
     m = DynamixelMotor(dxl_emulator.slave_path, config=DynamixelConfig(
-        serial=SerialSettings(baudrate=57600, timeout_s=0.05), range=FAST_RANGE))
+        serial=SerialSettings(baudrate=57600, timeout_s=0.1), range=FAST_RANGE))
     yield m
     m.close()
 
@@ -85,7 +85,7 @@ def ai_emulator():
 @pytest.fixture
 def ai_motor(ai_emulator):
     m = AiMotor(ai_emulator.slave_path, config=AiMotorConfig(
-        serial=SerialSettings(baudrate=57600, timeout_s=0.05),
+        serial=SerialSettings(baudrate=57600, timeout_s=0.1),
         range=MotorRange(tolerance_rad=math.radians(1.5), move_timeout_s=2.0, poll_interval_s=0.005)))
     yield m
     m.close()
@@ -99,6 +99,6 @@ def gripper_emulator():
 @pytest.fixture
 def gripper(gripper_emulator):
     g = ModbusGripper(gripper_emulator.slave_path, config=GripperConfig(
-        serial=SerialSettings(baudrate=115200, timeout_s=0.05), poll_interval_s=0.005, move_timeout_s=2.0))
+        serial=SerialSettings(baudrate=115200, timeout_s=0.1), poll_interval_s=0.005, move_timeout_s=2.0))
     yield g
     g.close_port()

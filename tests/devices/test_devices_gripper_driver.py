@@ -65,7 +65,7 @@ def test_status_faults_after_bounded_retries(gripper, gripper_emulator, fault, e
     t = time.monotonic()
     with pytest.raises(error, match="3 attempts"):
         gripper.status()
-    assert time.monotonic() - t < 1.0
+    assert time.monotonic() - t < 2.0  # 3 attempts × 0.1 s, never more
 
 
 def test_device_exception_is_a_fault(gripper, gripper_emulator):

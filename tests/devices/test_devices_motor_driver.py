@@ -88,7 +88,7 @@ def test_read_faults_after_bounded_retries(dxl_motor, dxl_emulator, fault, error
     t = time.monotonic()
     with pytest.raises(error, match="3 attempts"):
         dxl_motor.present_angle()
-    assert time.monotonic() - t < 1.0
+    assert time.monotonic() - t < 2.0  # 3 attempts × 0.1 s, never more
     assert sum(map(reads, dxl_emulator.requests)) == 3
 
 

@@ -44,7 +44,7 @@ import math
 import re
 import time
 from dataclasses import dataclass
-from typing import Any, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import serial
@@ -367,20 +367,39 @@ class MelfaRobot:
                               "nothing was sent — use move_to, set_override or set_linear_speed")
         return self._send(command, retry=retry)
 
-    def _send(self, command: str, *, retry: bool = False, timeout_s: Optional[float] = None) -> R3Reply:
-        frame = encode_command(command, robot=self.config.robot_number, slot=self.config.slot)
+    def _send(self, command: str, *, retry: bool = False, parse: Optional[Callable[[str], Any]] = None) -> Any:
+        """One transaction; returns the reply, or ``parse(reply.data)`` when ``parse`` is given.
 
-        def once() -> R3Reply:
+        With ``parse``, an accepted reply whose data does not parse is taken for a late answer
+        to an earlier request and skipped while the deadline allows.
+        """
+        frame = encode_command(command, robot=self.config.robot_number, slot=self.config.slot)
+        what = f"reply to {command!r}"
+
+        def once() -> Tuple[R3Reply, Any]:
             self._link.discard_input()
             self._link.write(frame)
-            deadline = self._link.deadline(timeout_s)
-            return parse_reply(self._link.read_until(b"\r", deadline, what=f"reply to {command!r}"))
+            deadline = self._link.deadline()
+            stale: Optional[ProtocolError] = None
+            while True:
+                try:
+                    reply = parse_reply(self._link.read_until(b"\r", deadline, what=what))
+                except DeviceTimeout:
+                    if stale is None:
+                        raise
+                    raise ProtocolError(f"{stale} (no fitting reply followed)") from None
+                if parse is None or not reply.ok:
+                    return reply, None
+                try:
+                    return reply, parse(reply.data)
+                except ProtocolError as exc:
+                    stale = exc
 
-        reply = with_retries(self.config.serial.retries if retry else 0, once)
+        reply, parsed = with_retries(self.config.serial.retries if retry else 0, once)
         self.alarm_active = reply.alarm
         if not reply.ok:
             self._refused(command, reply)
-        return reply
+        return reply if parse is None else parsed
 
     def _refused(self, command: str, reply: R3Reply) -> None:
         if command.startswith("ERRORMES"):  # no text to fetch for the text request itself
@@ -407,11 +426,11 @@ class MelfaRobot:
     # -- queries
     def state(self) -> RobotState:
         """Operation rights, servo power, running and alarm number (DSTATE)."""
-        return parse_state(self._send("DSTATE", retry=True).data)
+        return self._send("DSTATE", retry=True, parse=parse_state)
 
     def read_xyzabc(self) -> Tuple[np.ndarray, Tuple[int, int]]:
         """The flange pose as (X, Y, Z, A, B, C) in mm and radians, and the posture flags (PPOSF)."""
-        deg, flags = parse_position(self._send("PPOSF", retry=True).data)
+        deg, flags = self._send("PPOSF", retry=True, parse=parse_position)
         return xyzabc_from_wire(deg), flags
 
     def read_pose(self) -> np.ndarray:
@@ -420,7 +439,7 @@ class MelfaRobot:
 
     def read_joints(self) -> np.ndarray:
         """Joint angles J1..J6 in radians (JPOSF)."""
-        return np.radians(parse_joints(self._send("JPOSF", retry=True).data))
+        return np.radians(self._send("JPOSF", retry=True, parse=parse_joints))
 
     # -- settings
     def set_override(self, percent: float) -> None:
