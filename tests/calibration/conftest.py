@@ -14,6 +14,12 @@ PATTERN = (9, 6)
 SQUARE = 25.0
 
 
+def rotation_angle_deg(A: np.ndarray, B: np.ndarray) -> float:
+    """The angle (degrees) of the rotation between the rotation parts of ``A`` and ``B``."""
+    c = (np.trace(A[:3, :3].T @ B[:3, :3]) - 1) / 2
+    return float(np.degrees(np.arccos(np.clip(c, -1, 1))))
+
+
 class Rig:
     def __init__(self, width: int = 1032, height: int = 778) -> None:
         s = width / 1032

@@ -1,6 +1,6 @@
 """Eye-in-hand calibration: ``T_flange_camera`` from robot poses and board poses, by every
-method of ``cv2.calibrateHandEye`` (or a Park–Martin solver where OpenCV lacks it), each judged
-by how still the board stays in the base frame."""
+method of ``cv2.calibrateHandEye`` (Tsai, Park, Horaud, Andreff, Daniilidis), each judged by how
+still the board stays in the base frame; the stillest wins."""
 
 from __future__ import annotations
 
@@ -15,28 +15,25 @@ from ..errors import CalibrationError, InvalidInputError
 
 __all__ = ["HAND_EYE_METHODS", "HandEyeCalibration", "calibrate_hand_eye"]
 
-#: The methods of cv2.calibrateHandEye, by name. Some OpenCV builds (the 5.0 wheels) lack the
-#: function; then only "park", binpick's own Park–Martin solver, is available.
-HAND_EYE_METHODS = (
-    {
-        "tsai": cv2.CALIB_HAND_EYE_TSAI,
-        "park": cv2.CALIB_HAND_EYE_PARK,
-        "horaud": cv2.CALIB_HAND_EYE_HORAUD,
-        "andreff": cv2.CALIB_HAND_EYE_ANDREFF,
-        "daniilidis": cv2.CALIB_HAND_EYE_DANIILIDIS,
-    }
-    if hasattr(cv2, "calibrateHandEye")
-    else {"park": None}
-)
+#: The methods of cv2.calibrateHandEye, by name (OpenCV 4.x; the 5.0 wheels lack the function,
+#: which is why the project pins opencv-python-headless below 5).
+HAND_EYE_METHODS = {
+    "tsai": cv2.CALIB_HAND_EYE_TSAI,
+    "park": cv2.CALIB_HAND_EYE_PARK,
+    "horaud": cv2.CALIB_HAND_EYE_HORAUD,
+    "andreff": cv2.CALIB_HAND_EYE_ANDREFF,
+    "daniilidis": cv2.CALIB_HAND_EYE_DANIILIDIS,
+}
 #: Lever arm (mm) that turns a rotation residual into a length when methods are ranked.
 _LEVER_ARM = 500.0
 
 
 @dataclass(frozen=True, eq=False)
 class HandEyeCalibration:
-    """The chosen ``T_flange_camera`` and ``method``, and for every method its transform and its
-    residuals: ``residuals[m] = (translation RMS mm, rotation RMS deg)`` of the board's pose in
-    the base frame across the views (zero for perfect data)."""
+    """The chosen ``T_flange_camera`` and ``method``, and for every method that found a solution
+    its transform and its residuals: ``residuals[m] = (translation RMS mm, rotation RMS deg)`` of
+    the board's pose in the base frame across the views (zero for perfect data).
+    :meth:`residual_table` prints them side by side."""
 
     T_flange_camera: np.ndarray
     method: str
@@ -46,6 +43,13 @@ class HandEyeCalibration:
     def __repr__(self) -> str:
         t, r = self.residuals[self.method]
         return f"HandEyeCalibration(method={self.method!r}, residual {t:.3f} mm, {r:.4f}°)"
+
+    def residual_table(self) -> str:
+        """The residuals of every method, one line each, the chosen one marked with ``*``."""
+        lines = [f"{'method':<12}{'mm':>9}{'deg':>9}"]
+        for name, (t, r) in self.residuals.items():
+            lines.append(f"{name:<12}{t:>9.3f}{r:>9.4f}{'  *' if name == self.method else ''}")
+        return "\n".join(lines)
 
 
 def _residuals(X: np.ndarray, T_base_flanges: list[np.ndarray], T_camera_boards: list[np.ndarray]) -> tuple[float, float]:
@@ -57,26 +61,6 @@ def _residuals(X: np.ndarray, T_base_flanges: list[np.ndarray], T_camera_boards:
     cosines = (np.einsum("kij,ij->k", boards[:, :3, :3], mean_r) - 1) / 2
     r_rms = float(np.degrees(np.sqrt(np.mean(np.arccos(np.clip(cosines, -1, 1)) ** 2))))
     return t_rms, r_rms
-
-
-def _park_martin(flanges: list[np.ndarray], boards: list[np.ndarray]) -> np.ndarray:
-    """AX = XB over every pair of stations (Park & Martin 1994): the rotation from the rotation
-    vectors by an orthogonal Procrustes step, then the translation by linear least squares."""
-    As, Bs = [], []
-    for i in range(len(flanges)):
-        for j in range(i + 1, len(flanges)):
-            As.append(np.linalg.inv(flanges[j]) @ flanges[i])
-            Bs.append(boards[j] @ np.linalg.inv(boards[i]))
-    alpha = np.array([cv2.Rodrigues(A[:3, :3])[0].ravel() for A in As])
-    beta = np.array([cv2.Rodrigues(B[:3, :3])[0].ravel() for B in Bs])
-    u, _, vt = np.linalg.svd(beta.T @ alpha)
-    R = (u @ np.diag([1, 1, np.linalg.det(u @ vt)]) @ vt).T
-    lhs = np.vstack([A[:3, :3] - np.eye(3) for A in As])
-    rhs = np.concatenate([R @ B[:3, 3] - A[:3, 3] for A, B in zip(As, Bs)])
-    X = np.eye(4)
-    X[:3, :3] = R
-    X[:3, 3] = np.linalg.lstsq(lhs, rhs, rcond=None)[0]
-    return X
 
 
 def calibrate_hand_eye(
@@ -103,15 +87,15 @@ def calibrate_hand_eye(
     names = list(HAND_EYE_METHODS) if method == "best" else [method]
     transforms, residuals = {}, {}
     for name in names:
-        if HAND_EYE_METHODS[name] is None:
-            X = _park_martin(flanges, boards)
-        else:
+        try:
             R, t = cv2.calibrateHandEye(
                 [f[:3, :3] for f in flanges], [f[:3, 3] for f in flanges],
                 [b[:3, :3] for b in boards], [b[:3, 3] for b in boards], method=HAND_EYE_METHODS[name],
             )
-            X = np.eye(4)
-            X[:3, :3], X[:3, 3] = R, np.ravel(t)
+        except cv2.error:
+            continue
+        X = np.eye(4)
+        X[:3, :3], X[:3, 3] = R, np.ravel(t)
         if not np.isfinite(X).all():
             continue
         transforms[name] = X
