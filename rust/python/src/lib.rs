@@ -6,6 +6,7 @@ mod errors;
 mod geometry;
 mod registration;
 mod triangulate;
+mod sim;
 
 use pyo3::prelude::*;
 
@@ -22,5 +23,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     geometry::register(m)?;
     registration::register(m)?;
     triangulate::register(m)?;
+    sim::register(m)?;
     Ok(())
 }

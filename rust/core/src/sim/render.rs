@@ -143,7 +143,7 @@ impl Default for Laser {
         Laser {
             t_camera_laser0: Isometry3::new(Vector3::new(130.0, 0.0, 0.0), Vector3::y() * aim),
             sheet_sigma: 0.35,
-            power: 200.0,
+            power: 400.0,
             fan_angle: 60f64.to_radians(),
             color: [1.0, 0.12, 0.05],
             reference_distance: 500.0,

@@ -1,0 +1,147 @@
+"""Physics piles: instances of a part dropped into a bin and settled (rapier3d in the core)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .. import _core
+from .._validate import count, non_negative, positive
+from ..errors import InvalidInputError
+from ..models import Model
+from .cell import Bin
+
+__all__ = ["Pile", "SettleReport", "max_interpenetration", "convex_decomposition"]
+
+
+class SettleReport:
+    """What one settling did: ``steps``, ``simulated_time`` (s), ``settled`` (all parts at rest), ``max_speed`` (mm/s)."""
+
+    __slots__ = ("steps", "simulated_time", "settled", "max_speed")
+
+    def __init__(self, raw: tuple) -> None:
+        self.steps, self.simulated_time, self.settled, self.max_speed = int(raw[0]), float(raw[1]), bool(raw[2]), float(raw[3])
+
+    def __repr__(self) -> str:
+        return f"SettleReport(settled={self.settled}, steps={self.steps}, simulated_time={self.simulated_time:.3f} s, max_speed={self.max_speed:.3g} mm/s)"
+
+
+def _model(model: Any) -> Model:
+    if not isinstance(model, Model):
+        raise InvalidInputError(f"model: expected a binpick.Model (e.g. binpick.parts.tee()), got {type(model).__name__}")
+    return model
+
+
+class Pile:
+    """``count`` instances of ``model`` dropped from random poses into ``bin`` and left to settle.
+
+    Deterministic for ``seed``. Parts collide through convex pieces enclosing the mesh (V-HACD,
+    rebuilt on the mesh's vertices, rounded by ``skin`` mm). Instance ids run 0..count−1 in drop
+    order and stay valid after removals. ``poses`` are ``T_base_object`` (model frame → base).
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        count_: int = 12,
+        *,
+        bin: Bin | None = None,
+        seed: int = 0,
+        friction: float = 0.5,
+        restitution: float = 0.05,
+        time_step: float = 1.0 / 120.0,
+        max_settle_time: float = 6.0,
+        skin: float = 0.3,
+        decomposition_resolution: int = 48,
+        max_convex_hulls: int = 24,
+    ) -> None:
+        self.model = _model(model)
+        self.bin = bin if bin is not None else Bin()
+        if not isinstance(self.bin, Bin):
+            raise InvalidInputError(f"bin: expected a binpick.sim.Bin, got {type(self.bin).__name__}")
+        n = count(count_, "count", 1)
+        self._raw = _core.SimPile(
+            np.ascontiguousarray(self.model.vertices, dtype=np.float64),
+            np.ascontiguousarray(self.model.faces, dtype=np.int64),
+            n,
+            tuple(self.bin.center),
+            tuple(self.bin.size),
+            float(self.bin.floor_z),
+            float(self.bin.wall_thickness),
+            count(seed, "seed"),
+            non_negative(friction, "friction"),
+            non_negative(restitution, "restitution"),
+            positive(time_step, "time_step", "s"),
+            positive(max_settle_time, "max_settle_time", "s"),
+            non_negative(skin, "skin"),
+            count(decomposition_resolution, "decomposition_resolution", 8),
+            count(max_convex_hulls, "max_convex_hulls", 1),
+        )
+
+    @property
+    def ids(self) -> np.ndarray:
+        """Ids of the parts still in the bin (int64)."""
+        return self._raw.poses()[0]
+
+    @property
+    def poses(self) -> np.ndarray:
+        """``T_base_object`` of the remaining parts, (N, 4, 4), in the order of :attr:`ids`."""
+        return self._raw.poses()[1]
+
+    def pose(self, id: int) -> np.ndarray:
+        """``T_base_object`` of part ``id``."""
+        ids, poses = self._raw.poses()
+        hit = np.flatnonzero(ids == id)
+        if len(hit) == 0:
+            raise InvalidInputError(f"id: no part {id} in the pile (remaining: {ids.tolist()})")
+        return poses[hit[0]]
+
+    def __len__(self) -> int:
+        return int(self._raw.remaining())
+
+    def remove(self, id: int) -> SettleReport:
+        """Takes part ``id`` out (a pick) and lets the others settle again."""
+        return SettleReport(self._raw.remove(count(id, "id")))
+
+    def settle(self) -> SettleReport:
+        """Steps the simulation until every part is at rest."""
+        return SettleReport(self._raw.settle())
+
+    @property
+    def last_settle(self) -> SettleReport:
+        """The report of the last settling."""
+        return SettleReport(self._raw.last_settle())
+
+    def collision_hulls(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The convex pieces (vertices, faces) each part collides with, in the model frame."""
+        return self._raw.collision_hulls()
+
+    def max_interpenetration(self, spacing: float = 1.0) -> float:
+        """Deepest penetration (mm) of any part's surface into another part's mesh (real meshes)."""
+        return max_interpenetration(self.model, self.poses, spacing=spacing)
+
+    def __repr__(self) -> str:
+        return f"Pile({self.model.name!r}, parts={len(self)}, bin={self.bin.size}, {self.last_settle!r})"
+
+
+def max_interpenetration(model: Model, poses: Any, *, spacing: float = 1.0) -> float:
+    """How deep (mm) points sampled every ``spacing`` mm on each instance's surface lie inside
+    another instance's mesh; 0 when no instance overlaps another."""
+    model = _model(model)
+    T = np.ascontiguousarray(poses, dtype=np.float64)
+    if T.ndim != 3 or T.shape[1:] != (4, 4):
+        raise InvalidInputError(f"poses: expected an (N, 4, 4) array, got shape {T.shape}")
+    samples = _core.sample_mesh(np.ascontiguousarray(model.vertices, dtype=np.float64), np.ascontiguousarray(model.faces, dtype=np.int64), positive(spacing, "spacing"), None, 1)[0]
+    return float(_core.sim_max_interpenetration(np.ascontiguousarray(model.vertices, dtype=np.float64), np.ascontiguousarray(model.faces, dtype=np.int64), T, np.ascontiguousarray(samples, dtype=np.float64)))
+
+
+def convex_decomposition(model: Model, *, decomposition_resolution: int = 48, max_convex_hulls: int = 24) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The convex pieces (vertices, faces) enclosing ``model`` that a pile collides with."""
+    model = _model(model)
+    return _core.sim_convex_decomposition(
+        np.ascontiguousarray(model.vertices, dtype=np.float64),
+        np.ascontiguousarray(model.faces, dtype=np.int64),
+        count(decomposition_resolution, "decomposition_resolution", 8),
+        count(max_convex_hulls, "max_convex_hulls", 1),
+    )

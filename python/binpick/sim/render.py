@@ -1,0 +1,193 @@
+"""The simulated camera and laser: a scene of the bin and the parts, rendered by ray casting.
+
+``World`` holds the meshes and their poses in the base frame; ``World.view(cell)`` casts the
+camera's rays once for the cell's robot pose and returns a :class:`View`, whose
+:meth:`View.frame` lights the laser line for a motor angle. Depth and instance-id images are the
+ground truth; instance ids are the pile's part ids (≥ 0), −2 for the bin, −3 for the table,
+−1 where nothing is hit.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional, Sequence
+
+import numpy as np
+
+from .. import _core
+from .._validate import as_transform, count, positive
+from ..errors import InvalidInputError
+from ..models import Model
+from .cell import Bin, Camera, Cell, Laser, Lighting, SensorNoise
+
+__all__ = ["World", "View", "render_checkerboard", "BIN_ID", "TABLE_ID", "NO_SURFACE"]
+
+BIN_ID = -2
+TABLE_ID = -3
+NO_SURFACE = -1
+
+PART_ALBEDO = (0.72, 0.72, 0.70)
+BIN_ALBEDO = (0.30, 0.34, 0.40)
+TABLE_ALBEDO = (0.45, 0.40, 0.33)
+
+
+def _box(lo: Sequence[float], hi: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    v = np.array([[hi[0] if i & 1 else lo[0], hi[1] if i & 2 else lo[1], hi[2] if i & 4 else lo[2]] for i in range(8)], dtype=np.float64)
+    quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]]
+    f = np.array([t for q in quads for t in ([q[0], q[1], q[2]], [q[0], q[2], q[3]])], dtype=np.int64)
+    return v, f
+
+
+class World:
+    """Meshes placed in the robot's base frame, ready to be rendered."""
+
+    def __init__(self) -> None:
+        self._scene = _core.SimScene()
+        self._meshes: dict[int, int] = {}
+
+    @classmethod
+    def of_pile(cls, pile: Any, *, bin: Bin | None = None, table: bool = True, part_specular: float = 0.0) -> "World":
+        """The bin, a table under it, and every part of ``pile`` (a :class:`binpick.sim.Pile`) at its pose."""
+        w = cls()
+        b = bin if bin is not None else pile.bin
+        w.add_bin(b, table=table)
+        w.add_parts(pile.model, pile.ids, pile.poses, specular=part_specular)
+        return w
+
+    def add_bin(self, bin: Bin, *, table: bool = True) -> None:
+        """Adds the bin (id −2) and, if ``table``, a table top under it (id −3)."""
+        v, f = _core.sim_bin_mesh(tuple(bin.center), tuple(bin.size), float(bin.floor_z), float(bin.wall_thickness))
+        m = self._scene.add_mesh(v, f, list(BIN_ALBEDO), 0.0, 10.0)
+        self._scene.add_instance(m, np.eye(4), BIN_ID)
+        if table:
+            z = bin.floor_z - bin.wall_thickness
+            cx, cy = bin.center
+            tv, tf = _box((cx - 600, cy - 500, z - 20), (cx + 600, cy + 500, z))
+            t = self._scene.add_mesh(tv, tf, list(TABLE_ALBEDO), 0.0, 10.0)
+            self._scene.add_instance(t, np.eye(4), TABLE_ID)
+
+    def add_mesh(self, vertices: Any, faces: Any, *, albedo: Sequence[float] = PART_ALBEDO, specular: float = 0.0, shininess: float = 20.0) -> int:
+        """Adds a mesh (mm, its own frame) and returns its index for :meth:`add_instance`."""
+        v = np.ascontiguousarray(vertices, dtype=np.float64)
+        f = np.ascontiguousarray(faces, dtype=np.int64)
+        return int(self._scene.add_mesh(v, f, [float(a) for a in albedo], float(specular), positive(shininess, "shininess")))
+
+    def add_instance(self, mesh: int, T_base_object: Any, id: int) -> None:
+        """Places mesh ``mesh`` at ``T_base_object`` under instance id ``id``."""
+        self._scene.add_instance(int(mesh), as_transform(T_base_object, "T_base_object"), int(id))
+
+    def add_parts(self, model: Model, ids: Sequence[int], poses: Any, *, specular: float = 0.0) -> None:
+        """Adds instances of ``model`` (mesh built once) at ``poses`` (N, 4, 4) with ``ids``."""
+        if not isinstance(model, Model):
+            raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}")
+        key = id(model)
+        if key not in self._meshes:
+            self._meshes[key] = self.add_mesh(model.vertices, model.faces, specular=specular)
+        poses = np.asarray(poses, dtype=np.float64)
+        if len(ids) != len(poses):
+            raise InvalidInputError(f"ids/poses: {len(ids)} ids but {len(poses)} poses")
+        for i, T in zip(ids, poses):
+            self.add_instance(self._meshes[key], T, int(i))
+
+    def set_pose(self, id: int, T_base_object: Any) -> None:
+        """Moves instance ``id``."""
+        self._scene.set_pose(int(id), as_transform(T_base_object, "T_base_object"))
+
+    def remove(self, id: int) -> None:
+        """Removes instance ``id`` (e.g. after a pick)."""
+        self._scene.remove_instance(int(id))
+
+    @property
+    def ids(self) -> list[int]:
+        """Ids of the placed instances."""
+        return list(self._scene.instance_ids())
+
+    def view(self, cell: Cell, T_base_flange: Optional[Any] = None, *, num_threads: int = 0) -> "View":
+        """Casts the camera's rays at robot pose ``T_base_flange`` (default: the cell's scan pose)."""
+        if not isinstance(cell, Cell):
+            raise InvalidInputError(f"cell: expected a binpick.sim.Cell, got {type(cell).__name__}")
+        T_bf = cell.T_base_flange if T_base_flange is None else as_transform(T_base_flange, "T_base_flange")
+        T_bc = T_bf @ cell.T_flange_camera
+        raw = self._scene.view(cell.camera._args(), T_bc, cell.lighting._args(), count(num_threads, "num_threads"))
+        return View(raw, cell, T_bf)
+
+
+class View:
+    """The geometry the camera sees from one robot pose; frames are lit from it per laser angle."""
+
+    def __init__(self, raw: Any, cell: Cell, T_base_flange: np.ndarray) -> None:
+        self._raw = raw
+        self.cell = cell
+        self.T_base_flange = T_base_flange
+
+    @property
+    def depth(self) -> np.ndarray:
+        """(H, W) float32: z of the seen surface in the camera frame, mm; NaN where none."""
+        return self._raw.depth()
+
+    @property
+    def ids(self) -> np.ndarray:
+        """(H, W) int32 instance ids (parts ≥ 0, bin −2, table −3, nothing −1)."""
+        return self._raw.ids()
+
+    @property
+    def points(self) -> np.ndarray:
+        """(H, W, 3) float32 surface points in the camera frame, mm (NaN where none)."""
+        return self._raw.points()
+
+    @property
+    def normals(self) -> np.ndarray:
+        """(H, W, 3) float32 camera-facing unit normals in the camera frame."""
+        return self._raw.normals()
+
+    def frame(self, angle: float, *, seed: int = 0, laser: Optional[Laser] = None, noise: Optional[SensorNoise] = None) -> np.ndarray:
+        """The RGB frame (H, W, 3) uint8 the camera grabs with the laser at motor angle ``angle`` (rad)."""
+        return self.frames([angle], seed=seed, laser=laser, noise=noise)[0]
+
+    def frames(self, angles: Sequence[float], *, seed: int = 0, laser: Optional[Laser] = None, noise: Optional[SensorNoise] = None, num_threads: int = 0) -> np.ndarray:
+        """(K, H, W, 3) uint8 RGB frames, one per motor angle; frame k's noise is seeded by ``seed + k``."""
+        laser = self.cell.laser if laser is None else laser
+        noise = self.cell.noise if noise is None else noise
+        a = np.asarray(angles, dtype=np.float64).ravel()
+        if not np.isfinite(a).all():
+            raise InvalidInputError("angles: must be finite radians")
+        return self._raw.frames(*laser._args(), a.tolist(), noise._args(), count(seed, "seed"), count(num_threads, "num_threads"))
+
+    def ambient_frame(self, *, seed: int = 0, noise: Optional[SensorNoise] = None) -> np.ndarray:
+        """The RGB frame without the laser."""
+        noise = self.cell.noise if noise is None else noise
+        return self._raw.ambient_frame(noise._args(), count(seed, "seed"))
+
+
+def render_checkerboard(
+    camera: Camera,
+    T_camera_board: Any,
+    *,
+    pattern: tuple[int, int] = (9, 6),
+    square: float = 20.0,
+    margin: float = 15.0,
+    lighting: Optional[Lighting] = None,
+    laser: Optional[Laser] = None,
+    angle: float = 0.0,
+    noise: Optional[SensorNoise] = None,
+    supersample: int = 3,
+    seed: int = 0,
+) -> np.ndarray:
+    """An RGB image (H, W, 3) uint8 of a checkerboard with ``pattern`` = (columns, rows) inner
+    corners, ``square`` mm, at ``T_camera_board`` (OpenCV board frame: origin at the first inner
+    corner, corners at (i·square, j·square, 0)); with the laser line at ``angle`` if ``laser``."""
+    if not isinstance(camera, Camera):
+        raise InvalidInputError(f"camera: expected a binpick.sim.Camera, got {type(camera).__name__}")
+    cols, rows = (count(pattern[0], "pattern[0]", 1), count(pattern[1], "pattern[1]", 1))
+    lighting = lighting or Lighting(ambient=150.0, lamp=60.0)
+    noise = noise or SensorNoise()
+    return _core.sim_render_checkerboard(
+        camera._args(),
+        (cols + 1, rows + 1, positive(square, "square"), float(margin)),
+        as_transform(T_camera_board, "T_camera_board"),
+        lighting._args(),
+        None if laser is None else laser._args(),
+        float(angle),
+        noise._args(),
+        count(supersample, "supersample", 1),
+        count(seed, "seed"),
+    )

@@ -1,0 +1,381 @@
+//! The simulated cell: physics piles (`SimPile`), the ray-cast scene (`SimScene`), the geometry
+//! of one robot pose (`SimView`, lit per laser angle) and checkerboard images. The Python
+//! package `binpick.sim` wraps these with validated, documented classes.
+
+use crate::convert::{matrix4, points};
+use crate::errors::{invalid, run};
+use binpick_core::cloud::Point;
+use binpick_core::mesh::TriMesh;
+use binpick_core::sim::pile::{convex_decomposition, max_interpenetration, BinSpec, Pile, PileParams, SettleReport};
+use binpick_core::sim::render::{render_checkerboard, Camera, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View};
+use binpick_core::Error;
+use nalgebra::{Isometry3, Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
+use numpy::ndarray::{Array2, Array3};
+use numpy::{PyArray2, PyArray3, PyReadonlyArray2, PyReadonlyArray3};
+use pyo3::prelude::*;
+use std::sync::Arc;
+
+type Arr<'py> = Bound<'py, PyArray2<f64>>;
+
+/// A rigid transform from a 4×4 matrix already checked rigid by the Python layer.
+fn isometry(m: &Matrix4<f64>) -> Isometry3<f64> {
+    let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
+    let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(&r));
+    Isometry3::from_parts(Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]), rot)
+}
+
+fn transform(arr: &PyReadonlyArray2<'_, f64>, arg: &str) -> PyResult<Isometry3<f64>> {
+    Ok(isometry(&matrix4(arr, arg)?))
+}
+
+fn mesh_in(vertices: &PyReadonlyArray2<'_, f64>, faces: &PyReadonlyArray2<'_, i64>) -> PyResult<TriMesh> {
+    let v = points(vertices, "vertices")?;
+    let f = faces.as_array();
+    if f.ncols() != 3 {
+        return Err(invalid("faces", &format!("must have shape (M, 3), got {:?}", f.shape())));
+    }
+    let n = v.len() as i64;
+    let mut out = Vec::with_capacity(f.nrows());
+    for (i, row) in f.rows().into_iter().enumerate() {
+        if row.iter().any(|&x| x < 0 || x >= n) {
+            return Err(invalid("faces", &format!("face {i} indexes outside the {n} vertices")));
+        }
+        out.push([row[0] as u32, row[1] as u32, row[2] as u32]);
+    }
+    Ok(TriMesh { vertices: v, faces: out })
+}
+
+fn mesh_out<'py>(py: Python<'py>, v: &[Point], f: &[[u32; 3]]) -> (Arr<'py>, Bound<'py, PyArray2<i64>>) {
+    let flat: Vec<f64> = v.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
+    let faces: Vec<i64> = f.iter().flat_map(|t| t.map(|x| x as i64)).collect();
+    (
+        PyArray2::from_owned_array(py, Array2::from_shape_vec((v.len(), 3), flat).expect("n×3")),
+        PyArray2::from_owned_array(py, Array2::from_shape_vec((f.len(), 3), faces).expect("m×3")),
+    )
+}
+
+fn poses_out<'py>(py: Python<'py>, poses: &[Isometry3<f64>]) -> Bound<'py, PyArray3<f64>> {
+    let mut a = Array3::<f64>::zeros((poses.len(), 4, 4));
+    for (k, t) in poses.iter().enumerate() {
+        let m = t.to_homogeneous();
+        for r in 0..4 {
+            for c in 0..4 {
+                a[[k, r, c]] = m[(r, c)];
+            }
+        }
+    }
+    PyArray3::from_owned_array(py, a)
+}
+
+fn report(r: SettleReport) -> (usize, f64, bool, f64) {
+    (r.steps, r.simulated_time, r.settled, r.max_speed)
+}
+
+fn bin_spec(center: (f64, f64), size: (f64, f64, f64), floor_z: f64, wall_thickness: f64) -> BinSpec {
+    BinSpec { center, inner_size: Vector3::new(size.0, size.1, size.2), floor_z, wall_thickness }
+}
+
+/// A physics pile: `count` instances of a mesh dropped into a bin and settled.
+#[pyclass(module = "binpick._core", name = "SimPile")]
+pub struct PySimPile {
+    inner: Pile,
+}
+
+#[pymethods]
+impl PySimPile {
+    #[new]
+    #[pyo3(signature = (vertices, faces, count, bin_center, bin_size, floor_z, wall_thickness, seed, friction, restitution, time_step, max_settle_time, skin, decomposition_resolution, max_convex_hulls))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        vertices: PyReadonlyArray2<'_, f64>,
+        faces: PyReadonlyArray2<'_, i64>,
+        count: usize,
+        bin_center: (f64, f64),
+        bin_size: (f64, f64, f64),
+        floor_z: f64,
+        wall_thickness: f64,
+        seed: u64,
+        friction: f64,
+        restitution: f64,
+        time_step: f64,
+        max_settle_time: f64,
+        skin: f64,
+        decomposition_resolution: u32,
+        max_convex_hulls: u32,
+    ) -> PyResult<Self> {
+        let mesh = mesh_in(&vertices, &faces)?;
+        let bin = bin_spec(bin_center, bin_size, floor_z, wall_thickness);
+        let params = PileParams { seed, friction, restitution, time_step, max_settle_time, skin, decomposition_resolution, max_convex_hulls, ..Default::default() };
+        let inner = run(py, move || Pile::drop(&mesh, count, &bin, &params))?;
+        Ok(PySimPile { inner })
+    }
+
+    /// (ids int64 (N,), T_base_object (N, 4, 4)) of the remaining parts.
+    fn poses<'py>(&self, py: Python<'py>) -> (Bound<'py, numpy::PyArray1<i64>>, Bound<'py, PyArray3<f64>>) {
+        let p = self.inner.poses();
+        let ids: Vec<i64> = p.iter().map(|(i, _)| *i as i64).collect();
+        let t: Vec<Isometry3<f64>> = p.into_iter().map(|(_, t)| t).collect();
+        (numpy::PyArray1::from_vec(py, ids), poses_out(py, &t))
+    }
+
+    /// Removes part `id` and settles: (steps, simulated_time, settled, max_speed).
+    fn remove(&mut self, py: Python<'_>, id: usize) -> PyResult<(usize, f64, bool, f64)> {
+        let pile = &mut self.inner;
+        Ok(report(run(py, move || pile.remove(id))?))
+    }
+
+    /// Steps until at rest: (steps, simulated_time, settled, max_speed).
+    fn settle(&mut self, py: Python<'_>) -> PyResult<(usize, f64, bool, f64)> {
+        let pile = &mut self.inner;
+        Ok(report(run(py, move || Ok::<_, Error>(pile.settle()))?))
+    }
+
+    /// The last settling's (steps, simulated_time, settled, max_speed).
+    fn last_settle(&self) -> (usize, f64, bool, f64) {
+        report(self.inner.last_settle())
+    }
+
+    /// Parts left.
+    fn remaining(&self) -> usize {
+        self.inner.remaining()
+    }
+
+    /// Deepest overlap of the convex collision pieces, mm.
+    fn max_contact_penetration(&self) -> f64 {
+        self.inner.max_contact_penetration()
+    }
+
+    /// The convex pieces (vertices, faces) a part collides with, model frame.
+    fn collision_hulls<'py>(&self, py: Python<'py>) -> Vec<(Arr<'py>, Bound<'py, PyArray2<i64>>)> {
+        self.inner.collision_hulls().iter().map(|(v, f)| mesh_out(py, v, f)).collect()
+    }
+}
+
+/// Convex pieces enclosing a mesh, as the pile uses them: list of (vertices, faces).
+#[pyfunction]
+#[pyo3(signature = (vertices, faces, decomposition_resolution, max_convex_hulls))]
+fn sim_convex_decomposition<'py>(py: Python<'py>, vertices: PyReadonlyArray2<'py, f64>, faces: PyReadonlyArray2<'py, i64>, decomposition_resolution: u32, max_convex_hulls: u32) -> PyResult<Vec<(Arr<'py>, Bound<'py, PyArray2<i64>>)>> {
+    let mesh = mesh_in(&vertices, &faces)?;
+    let params = PileParams { decomposition_resolution, max_convex_hulls, ..Default::default() };
+    let hulls = run(py, move || convex_decomposition(&mesh, &params))?;
+    Ok(hulls.iter().map(|(v, f)| mesh_out(py, v, f)).collect())
+}
+
+/// Deepest interpenetration (mm) of mesh instances at `poses` (N, 4, 4), from surface `samples`.
+#[pyfunction]
+fn sim_max_interpenetration(py: Python<'_>, vertices: PyReadonlyArray2<'_, f64>, faces: PyReadonlyArray2<'_, i64>, poses: PyReadonlyArray3<'_, f64>, samples: PyReadonlyArray2<'_, f64>) -> PyResult<f64> {
+    let mesh = mesh_in(&vertices, &faces)?;
+    let p = poses.as_array();
+    if p.shape()[1] != 4 || p.shape()[2] != 4 {
+        return Err(invalid("poses", &format!("must have shape (N, 4, 4), got {:?}", p.shape())));
+    }
+    let t: Vec<Isometry3<f64>> = (0..p.shape()[0]).map(|k| isometry(&Matrix4::from_fn(|r, c| p[[k, r, c]]))).collect();
+    let s = points(&samples, "samples")?;
+    run(py, move || max_interpenetration(&mesh, &t, &s))
+}
+
+/// The bin's render mesh (vertices, faces) in the base frame.
+#[pyfunction]
+fn sim_bin_mesh<'py>(py: Python<'py>, center: (f64, f64), size: (f64, f64, f64), floor_z: f64, wall_thickness: f64) -> PyResult<(Arr<'py>, Bound<'py, PyArray2<i64>>)> {
+    let bin = bin_spec(center, size, floor_z, wall_thickness);
+    bin.validate().map_err(crate::errors::to_py)?;
+    let m = bin.mesh();
+    Ok(mesh_out(py, &m.vertices, &m.faces))
+}
+
+type CameraArgs = (usize, usize, f64, f64, f64, f64, [f64; 5]);
+type LightingArgs = (f64, f64, [f64; 3], f64);
+type NoiseArgs = (f64, f64, f64, f64, f64);
+
+fn camera(c: CameraArgs) -> Camera {
+    Camera { width: c.0, height: c.1, fx: c.2, fy: c.3, cx: c.4, cy: c.5, dist: c.6 }
+}
+
+fn lighting(l: LightingArgs) -> Lighting {
+    Lighting { ambient: l.0, lamp: l.1, lamp_direction: Vector3::from(l.2), background: l.3 }
+}
+
+fn noise(n: NoiseArgs) -> SensorNoise {
+    SensorNoise { read_noise: n.0, shot_noise: n.1, speckle: n.2, reflections: n.3, blur: n.4 }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn laser(t: &PyReadonlyArray2<'_, f64>, sheet_sigma: f64, power: f64, fan_angle: f64, color: [f64; 3], reference_distance: f64) -> PyResult<Laser> {
+    Ok(Laser { t_camera_laser0: transform(t, "T_camera_laser")?, sheet_sigma, power, fan_angle, color, reference_distance })
+}
+
+fn image_out<'py>(py: Python<'py>, data: Vec<u8>, h: usize, w: usize) -> Bound<'py, PyArray3<u8>> {
+    PyArray3::from_owned_array(py, Array3::from_shape_vec((h, w, 3), data).expect("h×w×3"))
+}
+
+/// Meshes and instances in the base frame, ray-cast by `view`.
+#[pyclass(module = "binpick._core", name = "SimScene")]
+pub struct PySimScene {
+    inner: Scene,
+}
+
+#[pymethods]
+impl PySimScene {
+    #[new]
+    fn new() -> Self {
+        PySimScene { inner: Scene::new() }
+    }
+
+    /// Adds a mesh with its material; returns the mesh index.
+    fn add_mesh(&mut self, py: Python<'_>, vertices: PyReadonlyArray2<'_, f64>, faces: PyReadonlyArray2<'_, i64>, albedo: [f64; 3], specular: f64, shininess: f64) -> PyResult<usize> {
+        let mesh = mesh_in(&vertices, &faces)?;
+        let scene = &mut self.inner;
+        run(py, move || scene.add_mesh(&mesh, Material { albedo, specular, shininess }))
+    }
+
+    /// Places mesh `mesh` at `T_base_object` as instance `id`.
+    fn add_instance(&mut self, mesh: usize, t_base_object: PyReadonlyArray2<'_, f64>, id: i32) -> PyResult<()> {
+        let t = transform(&t_base_object, "T_base_object")?;
+        self.inner.add_instance(mesh, t, id).map_err(crate::errors::to_py)
+    }
+
+    /// Moves instance `id`.
+    fn set_pose(&mut self, id: i32, t_base_object: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
+        let t = transform(&t_base_object, "T_base_object")?;
+        self.inner.set_pose(id, t).map_err(crate::errors::to_py)
+    }
+
+    /// Removes instance `id`.
+    fn remove_instance(&mut self, id: i32) -> PyResult<()> {
+        self.inner.remove_instance(id).map_err(crate::errors::to_py)
+    }
+
+    /// Ids of the placed instances.
+    fn instance_ids(&self) -> Vec<i32> {
+        self.inner.instance_ids()
+    }
+
+    /// Casts the camera's rays from `T_base_camera`.
+    #[pyo3(signature = (camera_args, t_base_camera, lighting_args, num_threads))]
+    fn view(&self, py: Python<'_>, camera_args: CameraArgs, t_base_camera: PyReadonlyArray2<'_, f64>, lighting_args: LightingArgs, num_threads: usize) -> PyResult<PySimView> {
+        let t = transform(&t_base_camera, "T_base_camera")?;
+        let (cam, light) = (camera(camera_args), lighting(lighting_args));
+        let scene = self.inner.clone();
+        let view = run(py, move || binpick_core::parallel::with_threads(num_threads, || scene.view(&cam, &t, &light)))?;
+        Ok(PySimView { inner: Arc::new(view) })
+    }
+}
+
+/// The ray-cast geometry of one robot pose.
+#[pyclass(module = "binpick._core", name = "SimView")]
+pub struct PySimView {
+    inner: Arc<View>,
+}
+
+#[pymethods]
+impl PySimView {
+    /// (H, W) float32 depth, mm, NaN where nothing is hit.
+    fn depth<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
+        let c = self.inner.camera();
+        PyArray2::from_owned_array(py, Array2::from_shape_vec((c.height, c.width), self.inner.depth()).expect("h×w"))
+    }
+
+    /// (H, W) int32 instance ids, −1 for none.
+    fn ids<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i32>> {
+        let c = self.inner.camera();
+        PyArray2::from_owned_array(py, Array2::from_shape_vec((c.height, c.width), self.inner.ids()).expect("h×w"))
+    }
+
+    /// (H, W, 3) float32 surface points in the camera frame (NaN where none).
+    fn points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f32>> {
+        let c = self.inner.camera();
+        let flat: Vec<f32> = self.inner.points().into_iter().flatten().collect();
+        PyArray3::from_owned_array(py, Array3::from_shape_vec((c.height, c.width, 3), flat).expect("h×w×3"))
+    }
+
+    /// (H, W, 3) float32 camera-facing unit normals in the camera frame.
+    fn normals<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f32>> {
+        let c = self.inner.camera();
+        let flat: Vec<f32> = self.inner.normals().into_iter().flatten().collect();
+        PyArray3::from_owned_array(py, Array3::from_shape_vec((c.height, c.width, 3), flat).expect("h×w×3"))
+    }
+
+    /// The frame without the laser.
+    fn ambient_frame<'py>(&self, py: Python<'py>, noise_args: NoiseArgs, seed: u64) -> PyResult<Bound<'py, PyArray3<u8>>> {
+        let view = self.inner.clone();
+        let n = noise(noise_args);
+        let img = run(py, move || view.ambient_frame(&n, seed))?;
+        let c = self.inner.camera();
+        Ok(image_out(py, img, c.height, c.width))
+    }
+
+    /// (K, H, W, 3) uint8 frames with the laser at each angle (rad); frame k's noise is seeded
+    /// by `seed + k`.
+    #[pyo3(signature = (t_camera_laser0, sheet_sigma, power, fan_angle, color, reference_distance, angles, noise_args, seed, num_threads))]
+    #[allow(clippy::too_many_arguments)]
+    fn frames<'py>(
+        &self,
+        py: Python<'py>,
+        t_camera_laser0: PyReadonlyArray2<'py, f64>,
+        sheet_sigma: f64,
+        power: f64,
+        fan_angle: f64,
+        color: [f64; 3],
+        reference_distance: f64,
+        angles: Vec<f64>,
+        noise_args: NoiseArgs,
+        seed: u64,
+        num_threads: usize,
+    ) -> PyResult<Bound<'py, numpy::PyArray4<u8>>> {
+        let l = laser(&t_camera_laser0, sheet_sigma, power, fan_angle, color, reference_distance)?;
+        let n = noise(noise_args);
+        let view = self.inner.clone();
+        let k = angles.len();
+        let frames = run(py, move || {
+            binpick_core::parallel::with_threads(num_threads, || {
+                let mut all = Vec::new();
+                for (i, a) in angles.iter().enumerate() {
+                    all.extend(view.frame(&l, *a, &n, seed.wrapping_add(i as u64))?);
+                }
+                Ok::<_, Error>(all)
+            })
+        })?;
+        let c = self.inner.camera();
+        let arr = numpy::ndarray::Array4::from_shape_vec((k, c.height, c.width, 3), frames).expect("k×h×w×3");
+        Ok(numpy::PyArray4::from_owned_array(py, arr))
+    }
+}
+
+/// (H, W, 3) uint8 image of a checkerboard at `T_camera_board`, optionally with the laser line.
+#[pyfunction]
+#[pyo3(signature = (camera_args, board, t_camera_board, lighting_args, laser_args, angle, noise_args, supersample, seed))]
+#[allow(clippy::too_many_arguments)]
+fn sim_render_checkerboard<'py>(
+    py: Python<'py>,
+    camera_args: CameraArgs,
+    board: (usize, usize, f64, f64),
+    t_camera_board: PyReadonlyArray2<'py, f64>,
+    lighting_args: LightingArgs,
+    laser_args: Option<(PyReadonlyArray2<'py, f64>, f64, f64, f64, [f64; 3], f64)>,
+    angle: f64,
+    noise_args: NoiseArgs,
+    supersample: usize,
+    seed: u64,
+) -> PyResult<Bound<'py, PyArray3<u8>>> {
+    let cam = camera(camera_args);
+    let (h, w) = (cam.height, cam.width);
+    let b = Checkerboard { cols: board.0, rows: board.1, square: board.2, margin: board.3 };
+    let t = transform(&t_camera_board, "T_camera_board")?;
+    let l = laser_args.map(|a| laser(&a.0, a.1, a.2, a.3, a.4, a.5)).transpose()?;
+    let (light, n) = (lighting(lighting_args), noise(noise_args));
+    let img = run(py, move || render_checkerboard(&cam, &b, &t, &light, l.as_ref().map(|l| (l, angle)), &n, supersample, seed))?;
+    Ok(image_out(py, img, h, w))
+}
+
+/// Registers the simulator's classes and functions.
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PySimPile>()?;
+    m.add_class::<PySimScene>()?;
+    m.add_class::<PySimView>()?;
+    m.add_function(wrap_pyfunction!(sim_convex_decomposition, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_max_interpenetration, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_bin_mesh, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_render_checkerboard, m)?)?;
+    Ok(())
+}
