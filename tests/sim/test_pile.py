@@ -1,0 +1,105 @@
+"""Physics piles: settled piles do not interpenetrate, rest inside the bin, repeat for a seed."""
+
+import numpy as np
+import pytest
+
+import binpick
+from binpick import sim
+
+
+@pytest.fixture(scope="module")
+def tee():
+    return binpick.parts.tee(resolution=1.0)
+
+
+@pytest.fixture(scope="module")
+def pile(tee):
+    return sim.Pile(tee, 10, seed=3)
+
+
+def _world_vertices(model, T):
+    return model.vertices @ T[:3, :3].T + T[:3, 3]
+
+
+def test_settled_pile_does_not_interpenetrate(pile):
+    assert pile.last_settle.settled, pile.last_settle
+    assert len(pile) == 10
+    depth = pile.max_interpenetration(spacing=1.0)
+    assert depth <= 0.5, f"parts overlap by {depth:.3f} mm"
+
+
+def test_every_part_rests_inside_the_bin(pile, tee):
+    (lo, hi) = pile.bin.bounds
+    for T in pile.poses:
+        v = _world_vertices(tee, T)
+        assert (v[:, 0] >= lo[0] - 0.5).all() and (v[:, 0] <= hi[0] + 0.5).all()
+        assert (v[:, 1] >= lo[1] - 0.5).all() and (v[:, 1] <= hi[1] + 0.5).all()
+        assert (v[:, 2] >= lo[2] - 0.5).all(), v[:, 2].min()
+        # Resting: nothing floats above the floor unsupported, the lowest part touches it.
+    lowest = min(_world_vertices(tee, T)[:, 2].min() for T in pile.poses)
+    assert lowest < lo[2] + 1.0
+
+
+def test_interpenetration_check_sees_an_overlap(tee):
+    T = np.eye(4)
+    U = np.eye(4)
+    U[0, 3] = 3.0  # 3 mm shift along the run: deep overlap
+    assert sim.max_interpenetration(tee, np.stack([T, U])) > 2.0
+    U[0, 3] = 200.0
+    assert sim.max_interpenetration(tee, np.stack([T, U])) == 0.0
+
+
+def test_same_seed_same_pile_other_seed_other_pile(tee):
+    a = sim.Pile(tee, 4, seed=11)
+    b = sim.Pile(tee, 4, seed=11)
+    c = sim.Pile(tee, 4, seed=12)
+    np.testing.assert_array_equal(a.poses, b.poses)
+    assert np.abs(a.poses - c.poses).max() > 1.0
+
+
+def test_picking_a_part_resettles_the_rest(tee):
+    p = sim.Pile(tee, 5, seed=5)
+    top = int(p.ids[np.argmax(p.poses[:, 2, 3])])
+    report = p.remove(top)
+    assert report.settled
+    assert len(p) == 4 and top not in p.ids.tolist()
+    assert p.max_interpenetration() <= 0.5
+    with pytest.raises(binpick.InvalidInputError):
+        p.remove(top)
+    with pytest.raises(binpick.InvalidInputError):
+        p.pose(top)
+
+
+def test_collision_hulls_enclose_the_mesh(tee):
+    hulls = sim.convex_decomposition(tee)
+    assert len(hulls) >= 2
+    # Outside distance of every mesh vertex from the nearest piece; the pile rounds pieces by a
+    # 0.3 mm skin, so contacts stay off the real surface where the pieces fall short by less.
+    outside = np.full(len(tee.vertices), np.inf)
+    for v, f in hulls:
+        a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+        n = np.cross(b - a, c - a)
+        area = np.linalg.norm(n, axis=1)
+        keep = area > 1e-2  # sliver faces have no reliable normal
+        n, a = n[keep] / area[keep, None], a[keep]
+        n *= np.sign(np.einsum("ij,ij->i", n, a - v.mean(axis=0)))[:, None]
+        d = np.einsum("ij,ij->i", n, a)
+        outside = np.minimum(outside, (tee.vertices @ n.T - d).max(axis=1))
+    assert (outside <= 0.3).mean() > 0.99, np.percentile(outside, [50, 99, 100])
+    assert outside.max() < 1.0
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [dict(count_=0), dict(seed=-1), dict(friction=-1.0), dict(bin="big"), dict(time_step=0.0)],
+)
+def test_bad_input_is_rejected(tee, kwargs):
+    args = dict(count_=3)
+    args.update(kwargs)
+    with pytest.raises(binpick.InvalidInputError):
+        sim.Pile(tee, **args)
+
+
+def test_bin_must_have_positive_size():
+    with pytest.raises(binpick.InvalidInputError):
+        sim.Bin(size=(100, -1, 50))
