@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import binpick
-from conftest import apply, pose_error, random_rigid
+from _geometry import apply, pose_error, random_rigid
 
 
 @pytest.mark.parametrize("method", ["point_to_point", "point_to_plane"])

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import binpick
-from conftest import box_mesh, write_obj, write_ply_mesh, write_stl_ascii, write_stl_binary
+from _geometry import box_mesh, write_obj, write_ply_mesh, write_stl_ascii, write_stl_binary
 
 WRITERS = {
     "bin.stl": write_stl_binary,
