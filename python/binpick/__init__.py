@@ -29,7 +29,7 @@ from .errors import (
     UnknownUnitError,
 )
 from .models import Branch, Model, estimate_normals, read_ply, voxel_downsample, write_ply
-from .poses import IcpResult, icp
+from .poses import IcpResult, PoseResult, estimate_pose, grasp_pose, icp
 
 __version__ = _core.__version__
 
@@ -56,6 +56,9 @@ __all__ = [
     "TooFewPointsError",
     "UnknownUnitError",
     "estimate_normals",
+    "estimate_pose",
+    "grasp_pose",
+    "PoseResult",
     "icp",
     "parts",
     "read_ply",

@@ -44,6 +44,7 @@ class Model:
         area: surface area, mm².
         name: a label for reports.
         branches: cylindrical branches for CCP, or empty when the part has none declared.
+        special_direction: direction of a distinguishing feature (the tee's boss) for CCP, or None.
         grasps: named gripper poses ``T_gripper_object`` declared with :meth:`add_grasp`.
     """
 
@@ -59,6 +60,7 @@ class Model:
         area: float,
         name: str,
         branches: Sequence[Branch] = (),
+        special_direction: Optional[Sequence[float]] = None,
     ) -> None:
         self.vertices = vertices
         self.faces = faces
@@ -69,7 +71,9 @@ class Model:
         self.area = float(area)
         self.name = name
         self.branches: tuple[Branch, ...] = tuple(branches)
+        self.special_direction = None if special_direction is None else tuple(float(v) for v in special_direction)
         self.grasps: dict[str, np.ndarray] = {}
+        self._prepared = None
         for arr in (self.vertices, self.faces, self.points, self.normals):
             arr.setflags(write=False)
 
@@ -106,6 +110,7 @@ class Model:
         seed: int = 0,
         name: str = "part",
         branches: Sequence[Branch] = (),
+        special_direction: Optional[Sequence[float]] = None,
     ) -> "Model":
         """A model from a vertex array (V, 3) in ``unit`` and a face index array (F, 3)."""
         v = as_points(vertices, "vertices", min_points=3)
@@ -124,7 +129,27 @@ class Model:
         if count is not None:
             count = _count(count)
         pts, nrm, diameter, area = _core.sample_mesh(v, f, spacing, count, int(seed))
-        return cls(v, f, pts, nrm, spacing=spacing, diameter=diameter, area=area, name=name, branches=branches)
+        return cls(v, f, pts, nrm, spacing=spacing, diameter=diameter, area=area, name=name, branches=branches,
+                   special_direction=special_direction)
+
+    def declare_branches(self, branches: Sequence[Branch], special_direction: Optional[Sequence[float]] = None) -> None:
+        """Declares the part's cylindrical branches (and special feature) so that CCP can be used.
+
+        CCP needs: the branch axes meeting at the model origin, each as a unit direction from
+        the origin to the open end with its length and outer radius (mm); optionally the
+        direction of one feature that breaks the branches' symmetry (the tee's boss).
+        """
+        self.branches = tuple(branches)
+        self.special_direction = None if special_direction is None else tuple(float(v) for v in special_direction)
+        self._prepared = None
+
+    def prepared(self):
+        """The native pose-estimation structure of this model (built once, then cached)."""
+        if self._prepared is None:
+            rows = np.array([[*b.direction, b.length, b.radius] for b in self.branches], dtype=np.float64).reshape(-1, 5)
+            special = None if self.special_direction is None else np.asarray(self.special_direction, dtype=np.float64)
+            self._prepared = _core.PreparedModel(self.points, self.normals, self.diameter, self.area, rows if len(rows) else None, special)
+        return self._prepared
 
     def add_grasp(self, name: str, T_gripper_object: Any) -> None:
         """Declares a grasp: the object's pose in the gripper frame when the gripper holds it."""

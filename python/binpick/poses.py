@@ -8,11 +8,11 @@ from typing import Any, Optional
 import numpy as np
 
 from . import _core
-from ._validate import as_points, as_transform, count, non_negative, positive
-from .errors import InvalidInputError
-from .models import estimate_normals
+from ._validate import as_float_array, as_points, as_transform, as_vector, check_finite, count, non_negative, positive
+from .errors import InvalidInputError, NoObjectFound
+from .models import Model, estimate_normals
 
-__all__ = ["IcpResult", "icp"]
+__all__ = ["IcpResult", "icp", "PoseResult", "estimate_pose", "grasp_pose"]
 
 _KERNELS = ("none", "huber", "tukey", "cauchy")
 
@@ -115,3 +115,120 @@ def icp(
         count(num_threads, "num_threads"),
     )
     return IcpResult(**raw)
+
+
+@dataclass(frozen=True, repr=False)
+class PoseResult:
+    """A verified pose of the top object (see :func:`estimate_pose`).
+
+    Attributes:
+        T_scene_model: (4, 4) model (mesh file) frame → scene frame.
+        T_scene_model_coarse: the coarse pose (CCP or centroid) before ICP.
+        score: fraction in [0, 1] of the object's points within the inlier distance of the posed model.
+        rmse: RMS distance of those points, mm.
+        indices: scene indices of the points on the posed model.
+        timings: milliseconds per stage (bin_removal, normals, segmentation, coarse, icp, verification).
+        method: the coarse method used.
+        iterations: ICP iterations of the refinement.
+    """
+
+    T_scene_model: np.ndarray
+    T_scene_model_coarse: np.ndarray
+    score: float
+    rmse: float
+    indices: np.ndarray
+    timings: dict
+    method: str
+    iterations: int
+
+    def __repr__(self) -> str:
+        t = self.T_scene_model[:3, 3]
+        return (
+            f"PoseResult(method={self.method!r}, score={self.score:.3f}, rmse={self.rmse:.3f} mm, points={len(self.indices)}, "
+            f"t=[{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] mm, total={sum(self.timings.values()):.1f} ms)"
+        )
+
+
+def estimate_pose(
+    scene: Any,
+    model: Model,
+    bin: Any = None,
+    *,
+    method: str = "auto",
+    up: Any = (0.0, 0.0, 1.0),
+    d_star: Optional[float] = None,
+    min_points: Optional[int] = None,
+    max_normal_angle: float = np.radians(70.0),
+    inlier_distance: Optional[float] = None,
+    min_fitness: float = 0.6,
+    ccp_closer_radius: Optional[float] = None,
+    ccp_tau: Optional[float] = None,
+    num_threads: int = 0,
+) -> PoseResult:
+    """The pose of the top pickable object of ``scene`` against ``model``.
+
+    ``scene`` is an (N, 3) cloud in mm with ``up`` (default +z) pointing out of the bin toward the
+    sensor. ``bin`` is an axis-aligned box ``((xmin, ymin, zmin), (xmax, ymax, zmax))`` in the
+    scene frame; without it, support planes much larger than the part (floor, walls) are found
+    and removed. Stages: bin removal → top-object segmentation (Table 2; d* defaults to 3× the
+    scan's point spacing) → coarse pose → point-to-plane ICP of the object's points onto the
+    dense model → verification.
+
+    ``method``: ``"ccp"`` (the paper's computed closer point; needs the model's branches),
+    ``"centroid"`` (the paper's baseline: ICP from the centroids) or ``"auto"`` (CCP when the model
+    declares branches). Raises :class:`binpick.NoObjectFound` when no object is explained well
+    enough (``min_fitness`` of its points within ``inlier_distance``); it never returns a guess.
+    """
+    if not isinstance(model, Model):
+        raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}; build one with binpick.Model.from_mesh")
+    pts = as_points(scene, "scene", min_points=10)
+    m = str(method).lower()
+    if m == "auto":
+        if not model.branches:
+            raise InvalidInputError(
+                "method: 'auto' needs a coarse method for this model: it declares no cylindrical branches for CCP "
+                "(Model.declare_branches) — pass method='centroid' for ICP from the centroids"
+            )
+        m = "ccp"
+    if m not in ("ccp", "centroid"):
+        raise InvalidInputError(f"method: unknown method {method!r}; use 'auto', 'ccp' or 'centroid'")
+    if m == "ccp" and not model.branches:
+        raise InvalidInputError("method: 'ccp' needs the model's cylindrical branches; declare them with Model.declare_branches")
+    box = None
+    if bin is not None:
+        box = as_float_array(bin, "bin")
+        if box.shape != (2, 3):
+            raise InvalidInputError(f"bin: expected ((xmin, ymin, zmin), (xmax, ymax, zmax)), got shape {box.shape}")
+        check_finite(box, "bin")
+        if not (box[1] > box[0]).all():
+            raise InvalidInputError(f"bin: max corner {box[1].tolist()} must exceed min corner {box[0].tolist()} on every axis")
+    up_v = as_vector(up, "up")
+    if np.linalg.norm(up_v) == 0:
+        raise InvalidInputError("up: must be a non-zero direction")
+    raw = _core.estimate_pose(
+        pts,
+        model.prepared(),
+        box,
+        up_v,
+        m,
+        None if d_star is None else positive(d_star, "d_star"),
+        None if min_points is None else count(min_points, "min_points", minimum=1),
+        positive(max_normal_angle, "max_normal_angle", "rad"),
+        None if inlier_distance is None else positive(inlier_distance, "inlier_distance"),
+        non_negative(min_fitness, "min_fitness"),
+        None if ccp_closer_radius is None else positive(ccp_closer_radius, "ccp_closer_radius"),
+        None if ccp_tau is None else positive(ccp_tau, "ccp_tau"),
+        count(num_threads, "num_threads"),
+    )
+    return PoseResult(method=m, **raw)
+
+
+def grasp_pose(T_base_object: Any, T_gripper_object: Any) -> np.ndarray:
+    """The gripper pose that grips the object as declared (paper Eq. 30):
+    ``T_base_gripper = T_base_object · T_gripper_object⁻¹``."""
+    a = as_transform(T_base_object, "T_base_object")
+    b = as_transform(T_gripper_object, "T_gripper_object")
+    inv = np.eye(4)
+    inv[:3, :3] = b[:3, :3].T
+    inv[:3, 3] = -b[:3, :3].T @ b[:3, 3]
+    return a @ inv

@@ -21,3 +21,5 @@ pub mod sdf;
 pub mod parts;
 pub mod triangulate;
 pub mod sim;
+pub mod segment;
+pub mod pose;

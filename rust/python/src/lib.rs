@@ -4,6 +4,7 @@
 mod convert;
 mod errors;
 mod geometry;
+mod pose;
 mod registration;
 mod triangulate;
 mod sim;
@@ -22,6 +23,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(_panic_for_test, m)?)?;
     geometry::register(m)?;
     registration::register(m)?;
+    pose::register(m)?;
     triangulate::register(m)?;
     sim::register(m)?;
     Ok(())

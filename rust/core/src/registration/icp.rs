@@ -53,6 +53,11 @@ impl IcpTarget {
         &self.points
     }
 
+    /// The exact bounded nearest-neighbour search over the target.
+    pub fn search(&self) -> &CorrespondenceTree {
+        &self.search
+    }
+
     /// The target's normals, if it has them.
     pub fn normals(&self) -> Option<&[Vector3<f64>]> {
         self.normals.as_deref()

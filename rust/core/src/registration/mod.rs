@@ -1,5 +1,6 @@
 //! Registration: ICP (point-to-point and point-to-plane) and its configuration.
 
+pub mod ccp;
 pub mod corr_tree;
 pub mod criteria;
 pub mod icp;

@@ -1,0 +1,292 @@
+//! The pose pipeline: bin removal → top-object segmentation → coarse pose (CCP or the paper's
+//! centroid baseline) → ICP of the scene points onto the dense model → verification.
+//!
+//! Frames: ICP registers the object's scene points onto the model (as the paper does, Eq. 6),
+//! giving `T_model_scene`; the result reports its inverse `T_scene_model` (model → scene). A
+//! result is returned only when enough of the object's points lie on the posed model;
+//! otherwise the pipeline answers `NoObjectFound` rather than a guess.
+
+use crate::cloud::{check_finite, Point};
+use crate::error::{Error, Result};
+use crate::knn::KdIndex;
+use crate::normals::{estimate_normals, Orientation};
+use crate::registration::ccp::{ccp, BranchLayout, CcpConfig};
+use crate::registration::corr_tree::CorrespondenceTree;
+use crate::registration::{icp, IcpConfig, IcpMethod, IcpTarget, RobustKernel};
+use crate::segment::{crop_to_bin, point_spacing, remove_support_planes, segment_top, BinBox, SegmentConfig};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use std::time::Instant;
+
+/// How the coarse pose is found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CoarseMethod {
+    /// The paper's CCP (needs a branch layout).
+    Ccp,
+    /// The paper's baseline: ICP started from the centroids with the model's own orientation.
+    Centroid,
+}
+
+/// A model prepared for pose estimation: dense points with normals and their search structure.
+pub struct PoseModel {
+    target: IcpTarget,
+    /// Largest extent of the part, mm.
+    pub diameter: f64,
+    /// Surface area, mm².
+    pub area: f64,
+    /// Branch layout for CCP, if the part has one.
+    pub layout: Option<BranchLayout>,
+}
+
+impl PoseModel {
+    /// Prepares a model from its surface samples (mm) and outward unit normals.
+    pub fn new(points: Vec<Point>, normals: Vec<Vector3<f64>>, diameter: f64, area: f64, layout: Option<BranchLayout>) -> Result<Self> {
+        if !(diameter.is_finite() && diameter > 0.0) {
+            return Err(Error::invalid("model", "the model's diameter must be positive"));
+        }
+        Ok(PoseModel { target: IcpTarget::new(points, Some(normals))?, diameter, area, layout })
+    }
+}
+
+/// Parameters of [`estimate_pose`]; `None` fields take defaults derived from the scan's point
+/// spacing and the model's size.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseConfig {
+    /// The bin box in the scene frame; without it, support planes are found and removed.
+    pub bin: Option<BinBox>,
+    /// Direction toward the sensor (scene +z by default).
+    pub up: Vector3<f64>,
+    /// Coarse-pose method.
+    pub method: CoarseMethod,
+    /// d* of segmentation, mm (default 3 × the scan's point spacing).
+    pub d_star: Option<f64>,
+    /// Smallest object region, points (default: a tenth of the points the model's visible half
+    /// would give at the scan's spacing, at least 15).
+    pub min_points: Option<usize>,
+    /// Largest angle between neighbouring normals inside one object, radians.
+    pub max_normal_angle: f64,
+    /// Inlier distance for verification, mm (default max(3 × spacing, 1 mm)).
+    pub inlier_distance: Option<f64>,
+    /// Smallest fraction of the object's points that must lie on the posed model.
+    pub min_fitness: f64,
+    /// CCP tuning.
+    pub ccp: CcpConfig,
+    /// Worker threads; 0 = all cores.
+    pub num_threads: usize,
+}
+
+impl Default for PoseConfig {
+    fn default() -> Self {
+        PoseConfig {
+            bin: None,
+            up: Vector3::z(),
+            method: CoarseMethod::Ccp,
+            d_star: None,
+            min_points: None,
+            max_normal_angle: 70f64.to_radians(),
+            inlier_distance: None,
+            min_fitness: 0.6,
+            ccp: CcpConfig::default(),
+            num_threads: 0,
+        }
+    }
+}
+
+/// A verified pose.
+#[derive(Debug, Clone)]
+pub struct PoseEstimate {
+    /// Model (mesh) frame → scene frame.
+    pub t_scene_model: Isometry3<f64>,
+    /// The coarse pose before ICP, model → scene.
+    pub t_scene_model_coarse: Isometry3<f64>,
+    /// Fraction of the object's points within the inlier distance of the posed model, in [0, 1].
+    pub score: f64,
+    /// RMS distance of those inliers, mm.
+    pub rmse: f64,
+    /// Scene indices of the points on the posed model.
+    pub indices: Vec<usize>,
+    /// Milliseconds per stage, in order.
+    pub timings: Vec<(&'static str, f64)>,
+    /// ICP iterations of the refinement.
+    pub iterations: usize,
+}
+
+/// Estimates the pose of the top object of `scene` (N×3, mm) against `model`.
+pub fn estimate_pose(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstimate> {
+    crate::parallel::with_threads(cfg.num_threads, || run(scene, model, cfg))
+}
+
+fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstimate> {
+    let mut timings = Vec::new();
+    let mut clock = Instant::now();
+    let mut lap = |name: &'static str, timings: &mut Vec<(&'static str, f64)>| {
+        timings.push((name, clock.elapsed().as_secs_f64() * 1e3));
+        clock = Instant::now();
+    };
+    check_finite("scene", scene)?;
+    if scene.len() < 10 {
+        return Err(Error::TooFewPoints { arg: "scene".into(), got: scene.len(), needed: 10, hint: "; pass the scan's points".into() });
+    }
+    if !(cfg.up.norm() > 0.0) {
+        return Err(Error::invalid("up", "must be a non-zero direction"));
+    }
+    let up = cfg.up.normalize();
+    let (lo, hi) = scene.iter().fold((scene[0], scene[0]), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
+    let extent = (hi - lo).norm();
+    if extent < 0.2 * model.diameter {
+        return Err(Error::invalid(
+            "scene",
+            format!(
+                "the scene is {extent:.3} mm across but the model is {:.1} mm: is the scene in metres? Pass millimetres (multiply by 1000) or load the model with the scene's unit",
+                model.diameter
+            ),
+        ));
+    }
+    // Bin removal.
+    let kept: Vec<usize> = match &cfg.bin {
+        Some(bin) => crop_to_bin(scene, bin, 1.0)?,
+        None => {
+            let idx = KdIndex::new(scene);
+            let tol = (2.0 * point_spacing(scene, &idx)).max(0.5);
+            remove_support_planes(scene, model.diameter, tol, 1).0
+        }
+    };
+    lap("bin_removal", &mut timings);
+    if kept.len() < 10 {
+        return Err(Error::NoObjectFound { reason: format!("only {} points remain after removing the bin; the bin is empty", kept.len()) });
+    }
+    let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
+    let index = KdIndex::new(&pts);
+    let spacing = point_spacing(&pts, &index).max(1e-3);
+    let normals = estimate_normals(&pts, &index, 12.min(pts.len()), Orientation::TowardDirection(up))?;
+    lap("normals", &mut timings);
+    let visible_points = (0.5 * model.area / (spacing * spacing)).max(1.0);
+    let seg_cfg = SegmentConfig {
+        d_star: cfg.d_star.unwrap_or(3.0 * spacing),
+        min_points: cfg.min_points.unwrap_or(((0.1 * visible_points) as usize).max(15)),
+        max_normal_angle: cfg.max_normal_angle,
+        max_extent: 1.1 * model.diameter,
+        up,
+    };
+    let region = segment_top(&pts, Some(&normals), &index, &seg_cfg)?;
+    let object: Vec<Point> = region.iter().map(|&i| pts[i]).collect();
+    lap("segmentation", &mut timings);
+
+    // Coarse pose candidates, model → scene.
+    let candidates: Vec<Isometry3<f64>> = match (cfg.method, &model.layout) {
+        (CoarseMethod::Ccp, Some(layout)) => ccp(&object, layout, model.target.points(), model.target.normals().unwrap_or(&[]), Some(up), &cfg.ccp)?.candidates,
+        (CoarseMethod::Ccp, None) => {
+            return Err(Error::invalid("model", "CCP needs the model's branch layout (cylindrical branches from a junction); declare branches on the Model or use method=\"centroid\""));
+        }
+        (CoarseMethod::Centroid, _) => {
+            let c_obj = crate::cloud::centroid(&object);
+            let c_model = crate::cloud::centroid(model.target.points());
+            vec![Isometry3::from_parts(Translation3::from(c_obj - c_model), UnitQuaternion::identity())]
+        }
+    };
+    lap("coarse", &mut timings);
+
+    // Score every candidate cheaply (object points on the model × expected-visible model points
+    // on the scene), check the best few with a short ICP, and refine the winner on all points.
+    let tol = cfg.inlier_distance.unwrap_or((3.0 * spacing).max(1.0));
+    let step = (object.len() / 600).max(1);
+    let sample: Vec<Point> = object.iter().step_by(step).copied().collect();
+    let scene_search = CorrespondenceTree::new(&pts);
+    let model_step = (model.target.points().len() / 400).max(1);
+    let score_of = |t_model_scene: &Isometry3<f64>, probe: &[Point], tol: f64| -> f64 {
+        let on_model = inlier_fraction(probe, &model.target, t_model_scene, tol);
+        on_model * coverage(model, &scene_search, &t_model_scene.inverse(), &up, model_step, tol)
+    };
+    let coarse_tol = (0.08 * model.diameter).max(2.0 * tol);
+    let prescore_step = (object.len() / 150).max(1);
+    let probe: Vec<Point> = object.iter().step_by(prescore_step).copied().collect();
+    let mut ranked: Vec<(f64, Isometry3<f64>)> = candidates.iter().map(|c| (score_of(&c.inverse(), &probe, coarse_tol), *c)).collect();
+    ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let short = IcpConfig {
+        method: IcpMethod::PointToPlane,
+        max_correspondence_distance: (0.25 * model.diameter).max(3.0 * tol),
+        max_iterations: 20,
+        rotation_tolerance: 1e-4,
+        translation_tolerance: 1e-2,
+        kernel: RobustKernel::Tukey((0.1 * model.diameter).max(3.0 * tol)),
+        num_threads: 0,
+        ..Default::default()
+    };
+    let mut best: Option<(f64, Isometry3<f64>, Isometry3<f64>)> = None;
+    for (_, cand) in ranked.iter().take(4) {
+        let r = icp(&sample, &model.target, &cand.inverse(), &short)?;
+        let s = score_of(&r.t_target_source, &sample, tol);
+        if best.as_ref().map_or(true, |b| s > b.0) {
+            best = Some((s, r.t_target_source, *cand));
+        }
+    }
+    let (_, t_model_scene0, coarse) = best.expect("at least one candidate");
+    let fine = IcpConfig {
+        method: IcpMethod::PointToPlane,
+        max_correspondence_distance: 3.0 * tol,
+        max_iterations: 60,
+        rotation_tolerance: 1e-7,
+        translation_tolerance: 1e-5,
+        kernel: RobustKernel::Tukey(3.0 * tol),
+        num_threads: 0,
+        ..Default::default()
+    };
+    let refined = icp(&object, &model.target, &t_model_scene0, &fine)?;
+    let t_model_scene = refined.t_target_source;
+    lap("icp", &mut timings);
+
+    let (score, rmse) = inlier_stats(&object, &model.target, &t_model_scene, tol);
+    if score < cfg.min_fitness {
+        return Err(Error::NoObjectFound {
+            reason: format!("the best pose explains only {:.0} % of the top object's {} points within {tol:.2} mm (need {:.0} %)", 100.0 * score, object.len(), 100.0 * cfg.min_fitness),
+        });
+    }
+    let t_scene_model = t_model_scene.inverse();
+    let indices: Vec<usize> = kept
+        .iter()
+        .copied()
+        .filter(|&i| {
+            let q = t_model_scene * scene[i];
+            model.target.search().nearest_within(&[q.x, q.y, q.z], tol * tol).is_some()
+        })
+        .collect();
+    lap("verification", &mut timings);
+    Ok(PoseEstimate { t_scene_model, t_scene_model_coarse: coarse, score, rmse, indices, timings, iterations: refined.iterations })
+}
+
+fn inlier_stats(points: &[Point], target: &IcpTarget, t: &Isometry3<f64>, tol: f64) -> (f64, f64) {
+    let mut n = 0usize;
+    let mut sq = 0.0;
+    for p in points {
+        let q = t * p;
+        if let Some((_, d)) = target.search().nearest_within(&[q.x, q.y, q.z], tol * tol) {
+            n += 1;
+            sq += d;
+        }
+    }
+    let rmse = if n > 0 { (sq / n as f64).sqrt() } else { f64::INFINITY };
+    (n as f64 / points.len().max(1) as f64, rmse)
+}
+
+fn inlier_fraction(points: &[Point], target: &IcpTarget, t: &Isometry3<f64>, tol: f64) -> f64 {
+    inlier_stats(points, target, t, tol).0
+}
+
+/// Fraction of the model points the sensor should see (facing `up` under the pose) that have a
+/// scene point within `tol`: a flipped or half-matched pose predicts surface where the scan saw
+/// none, and loses here.
+fn coverage(model: &PoseModel, scene: &CorrespondenceTree, t_scene_model: &Isometry3<f64>, up: &Vector3<f64>, step: usize, tol: f64) -> f64 {
+    let up_model = t_scene_model.rotation.inverse() * up;
+    let normals = model.target.normals().unwrap_or(&[]);
+    let (mut seen, mut expected) = (0usize, 0usize);
+    for (p, n) in model.target.points().iter().zip(normals).step_by(step) {
+        if n.dot(&up_model) < 0.3 {
+            continue;
+        }
+        expected += 1;
+        let q = t_scene_model * p;
+        if scene.nearest_within(&[q.x, q.y, q.z], tol * tol).is_some() {
+            seen += 1;
+        }
+    }
+    if expected == 0 { 0.0 } else { seen as f64 / expected as f64 }
+}

@@ -1,0 +1,243 @@
+//! The computed closer point (CCP) coarse pose of the paper (§4.1, Eq. 20–29), generalised from
+//! the tee to any part made of cylindrical branches that meet at a junction.
+//!
+//! Steps, as in the paper: the centre of mass p_c (Eq. 20); the closer centre p'_c, the mean of
+//! the points within `s` of p_c (Eq. 21); the endpoints, the points farthest from p'_c in
+//! different directions (Eq. 22); for parts with a special feature (the tee's boss), the special
+//! endpoint, the endpoint farthest from the plane fitted to the points around p'_c; the groups,
+//! points within τ of an endpoint and nearest its line (Eq. 25–27); and the axes from p'_c to each
+//! group's mean (Eq. 28). The paper then names x_D and y_D by the tee's layout; here every
+//! assignment of the observed axes to the model's branches that the layout allows gives a
+//! candidate rotation (Kabsch on the axis directions), so that any branch layout works. The
+//! candidates are returned best first by a short ICP check against the model in the caller.
+//!
+//! What a model needs for CCP: its branches (unit direction from the junction at the model
+//! origin, length, radius) and, if it has one, the direction of its special feature.
+
+use crate::cloud::{centroid, covariance, principal_axes, Point};
+use crate::error::{Error, Result};
+use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+
+/// The branch layout of a model, in the model frame (junction at the origin).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BranchLayout {
+    /// Unit directions of the branches.
+    pub directions: Vec<Vector3<f64>>,
+    /// Branch lengths from the junction, mm.
+    pub lengths: Vec<f64>,
+    /// Largest branch radius, mm.
+    pub radius: f64,
+    /// Direction of the special feature (the tee's boss), if any.
+    pub special: Option<Vector3<f64>>,
+}
+
+/// Tuning of CCP; `None` fields take defaults derived from the layout.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct CcpConfig {
+    /// s of Eq. 21, mm (default: 1.5 × the branch radius).
+    pub closer_radius: Option<f64>,
+    /// τ of Eq. 25, mm (default: 0.8 × the shortest branch length).
+    pub tau: Option<f64>,
+}
+
+/// What CCP found in the data, and the candidate poses.
+#[derive(Debug, Clone)]
+pub struct CcpResult {
+    /// p_c, the centre of mass (Eq. 20).
+    pub center: Point,
+    /// p'_c, the closer centre (Eq. 21).
+    pub closer_center: Point,
+    /// The endpoints found (Eq. 22).
+    pub endpoints: Vec<Point>,
+    /// The special endpoint, when the layout has a special feature.
+    pub special_endpoint: Option<Point>,
+    /// Unit axes from p'_c to each group's mean, one per non-special endpoint.
+    pub axes: Vec<Vector3<f64>>,
+    /// Number of points in each group.
+    pub group_sizes: Vec<usize>,
+    /// Candidate poses `T_data_model` (model frame → data frame), the paper's reading first.
+    pub candidates: Vec<Isometry3<f64>>,
+}
+
+/// Runs CCP on a data cloud (one object's points). `view` is the direction toward the sensor in
+/// the data frame if known; it places the translation on the visible half of the model.
+pub fn ccp(data: &[Point], layout: &BranchLayout, model_points: &[Point], model_normals: &[Vector3<f64>], view: Option<Vector3<f64>>, cfg: &CcpConfig) -> Result<CcpResult> {
+    if layout.directions.len() < 2 {
+        return Err(Error::invalid("model", "CCP needs a model with at least two cylindrical branches; declare them (Model branches) or use method=\"ppf\""));
+    }
+    if data.len() < 10 {
+        return Err(Error::TooFewPoints { arg: "data".into(), got: data.len(), needed: 10, hint: "; CCP needs the object's points".into() });
+    }
+    let s = cfg.closer_radius.unwrap_or(1.5 * layout.radius);
+    let tau = cfg.tau.unwrap_or(0.8 * layout.lengths.iter().cloned().fold(f64::INFINITY, f64::min));
+    // Eq. 20–21.
+    let pc = centroid(data);
+    let near: Vec<Point> = data.iter().copied().filter(|p| (p - pc).norm() <= s).collect();
+    let pcc = if near.len() >= 3 { centroid(&near) } else { pc };
+    // Eq. 22: endpoints by farthest-point sampling from p'_c.
+    let n_end = layout.directions.len() + usize::from(layout.special.is_some());
+    let mut endpoints: Vec<Point> = Vec::with_capacity(n_end);
+    let mut dist: Vec<f64> = data.iter().map(|p| (p - pcc).norm()).collect();
+    let min_reach = 0.5 * layout.radius;
+    for _ in 0..n_end {
+        let (i, d) = dist.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map(|(i, d)| (i, *d)).unwrap();
+        if d < min_reach {
+            break;
+        }
+        let e = data[i];
+        endpoints.push(e);
+        for (k, p) in data.iter().enumerate() {
+            dist[k] = dist[k].min((p - e).norm());
+        }
+    }
+    // The special endpoint: farthest from the plane of the points around p'_c.
+    let mut special_endpoint = None;
+    if layout.special.is_some() && endpoints.len() >= 3 {
+        let ring: Vec<Point> = data.iter().copied().filter(|p| (p - pcc).norm() <= 2.0 * layout.radius).collect();
+        if ring.len() >= 3 {
+            let (c, cov) = covariance(&ring);
+            let (_, axes) = principal_axes(&cov);
+            let n = axes[2];
+            let k = (0..endpoints.len()).max_by(|&a, &b| (endpoints[a] - c).dot(&n).abs().total_cmp(&(endpoints[b] - c).dot(&n).abs())).unwrap();
+            special_endpoint = Some(endpoints.remove(k));
+        }
+    }
+    if endpoints.len() < 2 {
+        return Err(Error::NoObjectFound { reason: format!("CCP found {} branch endpoint(s); it needs two visible branches", endpoints.len()) });
+    }
+    // Eq. 25–27: groups along the lines p'_c → endpoint.
+    let mut sums = vec![Vector3::zeros(); endpoints.len()];
+    let mut counts = vec![0usize; endpoints.len()];
+    for p in data {
+        let mut best: Option<(usize, f64)> = None;
+        for (g, e) in endpoints.iter().enumerate() {
+            if (p - e).norm() >= tau {
+                continue;
+            }
+            let axis = e - pcc;
+            let rel = e - p;
+            let lambda = (rel - axis * (rel.dot(&axis) / axis.norm_squared())).norm();
+            if best.map_or(true, |b| lambda < b.1) {
+                best = Some((g, lambda));
+            }
+        }
+        if let Some((g, _)) = best {
+            sums[g] += p.coords;
+            counts[g] += 1;
+        }
+    }
+    let mut axes = Vec::new();
+    let mut group_sizes = Vec::new();
+    for (g, e) in endpoints.iter().enumerate() {
+        let mean = if counts[g] > 0 { Point::from(sums[g] / counts[g] as f64) } else { *e };
+        let u = mean - pcc;
+        if u.norm() > 1e-9 {
+            axes.push(u.normalize());
+            group_sizes.push(counts[g].max(1));
+        }
+    }
+    // Candidate rotations. First the paper's reading (the special endpoint is the feature, the
+    // others are branches); then, because a partial view may hide the feature or show an end
+    // face as the farthest point, every subset of two or more endpoints read as branches. Each
+    // reading is tried with every injective assignment to the model's branches; the caller
+    // scores them against the scene.
+    let mut all_axes: Vec<(Vector3<f64>, usize)> = axes.iter().copied().zip(group_sizes.iter().copied()).collect();
+    let special_dir = special_endpoint.map(|e| (e - pcc).normalize());
+    if let Some(d) = special_dir {
+        all_axes.push((d, group_sizes.iter().sum::<usize>() / group_sizes.len().max(1)));
+    }
+    let mut candidates = Vec::new();
+    let mut add = |obs: &[(Vector3<f64>, usize)], special: Option<Vector3<f64>>| {
+        let k = obs.len().min(layout.directions.len());
+        for assignment in injective_maps(k, layout.directions.len()) {
+            let mut h = Matrix3::zeros();
+            for (o, &m) in assignment.iter().enumerate() {
+                h += (obs[o].1 as f64) * layout.directions[m] * obs[o].0.transpose();
+            }
+            if let (Some(ms), Some(ds)) = (layout.special, special) {
+                let w = obs.iter().map(|x| x.1).sum::<usize>() as f64 / obs.len() as f64;
+                h += w * ms * ds.transpose();
+            }
+            let Some(r) = kabsch(&h) else { continue };
+            // Drop readings whose fitted branches miss what was seen by more than 50°.
+            let worst = assignment.iter().enumerate().map(|(o, &m)| (r * layout.directions[m]).dot(&obs[o].0)).fold(1.0, f64::min);
+            if worst < 50f64.to_radians().cos() {
+                continue;
+            }
+            let rot = UnitQuaternion::from_rotation_matrix(&r);
+            let model_ref = visible_centroid(model_points, model_normals, &rot, view);
+            candidates.push(Isometry3::from_parts(Translation3::from(pc.coords - rot * model_ref.coords), rot));
+        }
+    };
+    if special_dir.is_some() && axes.len() >= 2 {
+        let obs: Vec<(Vector3<f64>, usize)> = axes.iter().copied().zip(group_sizes.iter().copied()).collect();
+        add(&obs, special_dir);
+    }
+    let n = all_axes.len();
+    for mask in 1u32..(1 << n) {
+        if mask.count_ones() < 2 || mask.count_ones() as usize > layout.directions.len() {
+            continue;
+        }
+        let obs: Vec<(Vector3<f64>, usize)> = (0..n).filter(|i| mask & (1 << i) != 0).map(|i| all_axes[i]).collect();
+        add(&obs, None);
+    }
+    if candidates.is_empty() {
+        return Err(Error::NoObjectFound { reason: "CCP found no branch assignment consistent with the model's layout".into() });
+    }
+    Ok(CcpResult { center: pc, closer_center: pcc, endpoints, special_endpoint, axes, group_sizes, candidates })
+}
+
+/// Centroid of the model points that face the sensor under rotation `rot` (all points if no view).
+fn visible_centroid(points: &[Point], normals: &[Vector3<f64>], rot: &UnitQuaternion<f64>, view: Option<Vector3<f64>>) -> Point {
+    match view {
+        Some(v) => {
+            let v_model = rot.inverse() * v;
+            let vis: Vec<Point> = points.iter().zip(normals).filter(|(_, n)| n.dot(&v_model) > 0.0).map(|(p, _)| *p).collect();
+            if vis.is_empty() { centroid(points) } else { centroid(&vis) }
+        }
+        None => centroid(points),
+    }
+}
+
+/// Rotation R maximising Σ w b_iᵀ R a_i for H = Σ w a_i b_iᵀ (R maps model to data).
+fn kabsch(h: &Matrix3<f64>) -> Option<Rotation3<f64>> {
+    let svd = h.svd(true, true);
+    let (u, vt) = (svd.u?, svd.v_t?);
+    let mut d = Matrix3::identity();
+    if (vt.transpose() * u.transpose()).determinant() < 0.0 {
+        d[(2, 2)] = -1.0;
+    }
+    Some(Rotation3::from_matrix_unchecked(vt.transpose() * d * u.transpose()))
+}
+
+/// All injective maps from `k` observed items into `n` model items.
+fn injective_maps(k: usize, n: usize) -> Vec<Vec<usize>> {
+    let mut out = Vec::new();
+    let mut cur = Vec::with_capacity(k);
+    fn rec(k: usize, n: usize, cur: &mut Vec<usize>, out: &mut Vec<Vec<usize>>) {
+        if cur.len() == k {
+            out.push(cur.clone());
+            return;
+        }
+        for j in 0..n {
+            if !cur.contains(&j) {
+                cur.push(j);
+                rec(k, n, cur, out);
+                cur.pop();
+            }
+        }
+    }
+    rec(k, n, &mut cur, &mut out);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn injective_maps_count() {
+        assert_eq!(injective_maps(3, 3).len(), 6);
+        assert_eq!(injective_maps(2, 4).len(), 12);
+    }
+}

@@ -1,0 +1,222 @@
+//! Scene clean-up and top-object segmentation (paper §3.3, Table 2).
+//!
+//! Bin removal keeps the points inside a given bin box above its floor and away from its walls,
+//! or, with no box, finds support planes by RANSAC and removes those that are much larger than
+//! the part (a part's own flat faces are never that large). Segmentation grows a region from
+//! the highest point through neighbours closer than d*, as Table 2 does, with two additions
+//! that keep touching parts apart: neighbours must have similar normals, and the region may not
+//! reach farther from its seed than the part's diameter.
+
+use crate::cloud::{covariance, principal_axes, Point};
+use crate::error::{Error, Result};
+use crate::knn::KdIndex;
+use crate::rng::Rng;
+use nalgebra::Vector3;
+use std::collections::VecDeque;
+
+/// An axis-aligned bin box in the scene frame, mm.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BinBox {
+    /// Minimum corner (the floor is at `min.z`).
+    pub min: Point,
+    /// Maximum corner.
+    pub max: Point,
+}
+
+/// Median distance from a sample of points to their nearest other point (0 for < 2 points).
+pub fn point_spacing(points: &[Point], index: &KdIndex) -> f64 {
+    if points.len() < 2 {
+        return 0.0;
+    }
+    let step = (points.len() / 512).max(1);
+    let mut d: Vec<f64> = (0..points.len())
+        .step_by(step)
+        .filter_map(|i| index.knn(&points[i], 2).get(1).map(|n| n.distance_squared.sqrt()))
+        .filter(|d| *d > 0.0)
+        .collect();
+    if d.is_empty() {
+        return 0.0;
+    }
+    let mid = d.len() / 2;
+    *d.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
+}
+
+/// Indices of the points inside `bin`, at least `margin` mm above its floor and inside its walls.
+pub fn crop_to_bin(points: &[Point], bin: &BinBox, margin: f64) -> Result<Vec<usize>> {
+    if (0..3).any(|k| !(bin.max[k] > bin.min[k])) {
+        return Err(Error::invalid("bin", format!("the box must have max > min on every axis, got min {:?} max {:?}", bin.min.coords.as_slice(), bin.max.coords.as_slice())));
+    }
+    Ok(points
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| {
+            p.x > bin.min.x + margin && p.x < bin.max.x - margin && p.y > bin.min.y + margin && p.y < bin.max.y - margin && p.z > bin.min.z + margin && p.z < bin.max.z + 10.0 * margin.max(1.0) + (bin.max.z - bin.min.z)
+        })
+        .map(|(i, _)| i)
+        .collect())
+}
+
+/// A plane `n · x = d` with unit `n`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Plane {
+    /// Unit normal.
+    pub normal: Vector3<f64>,
+    /// Offset along the normal, mm.
+    pub offset: f64,
+}
+
+/// Removes support planes (floor, walls) found by RANSAC: a plane is removed only when its
+/// inliers span more than `1.5 × model_diameter` in both in-plane directions, so that the flat
+/// faces of parts stay. Returns the kept indices and the removed planes.
+pub fn remove_support_planes(points: &[Point], model_diameter: f64, tolerance: f64, seed: u64) -> (Vec<usize>, Vec<Plane>) {
+    let mut keep: Vec<usize> = (0..points.len()).collect();
+    let mut planes = Vec::new();
+    let mut rng = Rng::new(seed);
+    for _ in 0..5 {
+        if keep.len() < 50 {
+            break;
+        }
+        let Some((plane, inliers)) = ransac_plane(points, &keep, tolerance, 300, &mut rng) else { break };
+        let pts: Vec<Point> = inliers.iter().map(|&i| points[i]).collect();
+        let (_, cov) = covariance(&pts);
+        let (_, axes) = principal_axes(&cov);
+        let span = |axis: &Vector3<f64>| {
+            let proj: Vec<f64> = pts.iter().map(|p| p.coords.dot(axis)).collect();
+            // Robust span: 2nd to 98th percentile, so stray inliers on parts do not count.
+            let mut s = proj.clone();
+            s.sort_by(|a, b| a.total_cmp(b));
+            s[(s.len() * 98) / 100] - s[(s.len() * 2) / 100]
+        };
+        if span(&axes[0]) < 1.5 * model_diameter || span(&axes[1]) < 1.5 * model_diameter {
+            break;
+        }
+        let removed: std::collections::HashSet<usize> = inliers.into_iter().collect();
+        keep.retain(|i| !removed.contains(i));
+        planes.push(plane);
+    }
+    (keep, planes)
+}
+
+fn ransac_plane(points: &[Point], subset: &[usize], tol: f64, trials: usize, rng: &mut Rng) -> Option<(Plane, Vec<usize>)> {
+    let mut best: Option<(Plane, usize)> = None;
+    let step = (subset.len() / 4000).max(1);
+    for _ in 0..trials {
+        let (a, b, c) = (points[subset[rng.below(subset.len())]], points[subset[rng.below(subset.len())]], points[subset[rng.below(subset.len())]]);
+        let n = (b - a).cross(&(c - a));
+        if n.norm() < 1e-9 {
+            continue;
+        }
+        let n = n.normalize();
+        let d = n.dot(&a.coords);
+        let count = subset.iter().step_by(step).filter(|&&i| (n.dot(&points[i].coords) - d).abs() < tol).count();
+        if best.as_ref().map_or(true, |b| count > b.1) {
+            best = Some((Plane { normal: n, offset: d }, count));
+        }
+    }
+    let (plane, _) = best?;
+    // Refit on the inliers for an unbiased plane, then collect them.
+    let inl: Vec<Point> = subset.iter().map(|&i| points[i]).filter(|p| (plane.normal.dot(&p.coords) - plane.offset).abs() < tol).collect();
+    if inl.len() < 3 {
+        return None;
+    }
+    let (c, cov) = covariance(&inl);
+    let (_, axes) = principal_axes(&cov);
+    let n = axes[2];
+    let refit = Plane { normal: n, offset: n.dot(&c.coords) };
+    let inliers = subset.iter().copied().filter(|&i| (refit.normal.dot(&points[i].coords) - refit.offset).abs() < tol).collect();
+    Some((refit, inliers))
+}
+
+/// Parameters of top-object segmentation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SegmentConfig {
+    /// d*: neighbours closer than this (mm) join the region.
+    pub d_star: f64,
+    /// Regions with fewer points are dropped and the next top point tried.
+    pub min_points: usize,
+    /// Neighbours join only if their normals differ by less than this (radians); π disables it.
+    pub max_normal_angle: f64,
+    /// The region may not reach farther than this from its seed (mm); infinity disables it.
+    pub max_extent: f64,
+    /// The "up" direction of the scene (toward the camera).
+    pub up: Vector3<f64>,
+}
+
+/// Table 2: the region of the highest point that makes a whole object. Returns indices into
+/// `points` (of the first region with at least `min_points`), or `NoObjectFound`.
+pub fn segment_top(points: &[Point], normals: Option<&[Vector3<f64>]>, index: &KdIndex, cfg: &SegmentConfig) -> Result<Vec<usize>> {
+    if !(cfg.d_star.is_finite() && cfg.d_star > 0.0) {
+        return Err(Error::invalid("d_star", format!("must be a positive distance in mm, got {}", cfg.d_star)));
+    }
+    let cos_limit = cfg.max_normal_angle.cos();
+    let up = cfg.up.normalize();
+    let mut order: Vec<usize> = (0..points.len()).collect();
+    order.sort_by(|&a, &b| points[b].coords.dot(&up).total_cmp(&points[a].coords.dot(&up)));
+    let mut label = vec![false; points.len()];
+    for &seed in &order {
+        if label[seed] {
+            continue;
+        }
+        let mut region = vec![seed];
+        let mut queue = VecDeque::from([seed]);
+        label[seed] = true;
+        while let Some(g) = queue.pop_front() {
+            for nb in index.within(&points[g], cfg.d_star) {
+                let i = nb.index;
+                if label[i] || (points[i] - points[seed]).norm() > cfg.max_extent {
+                    continue;
+                }
+                if let Some(ns) = normals {
+                    if ns[i].dot(&ns[g]).abs() < cos_limit {
+                        continue;
+                    }
+                }
+                label[i] = true;
+                region.push(i);
+                queue.push_back(i);
+            }
+        }
+        if region.len() >= cfg.min_points {
+            return Ok(region);
+        }
+        // Too few points: noise or a sliver; they stay labelled and the next top point is tried.
+    }
+    Err(Error::NoObjectFound { reason: format!("no region of at least {} points (d* = {:.2} mm) in {} points", cfg.min_points, cfg.d_star, points.len()) })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn floor_is_removed_but_a_box_top_is_kept() {
+        let mut rng = Rng::new(1);
+        let mut pts: Vec<Point> = (0..20000).map(|_| Point::new(rng.range(0.0, 400.0), rng.range(0.0, 300.0), 0.05 * rng.normal())).collect();
+        // A 40 mm cube standing on the floor: its flat top must stay.
+        let cube_top: Vec<Point> = (0..1600).map(|i| Point::new(100.0 + (i % 40) as f64, 100.0 + (i / 40) as f64, 40.0)).collect();
+        pts.extend(&cube_top);
+        let (keep, planes) = remove_support_planes(&pts, 70.0, 0.5, 3);
+        assert_eq!(planes.len(), 1);
+        assert!(planes[0].normal.z.abs() > 0.999);
+        assert_eq!(keep.len(), 1600);
+        assert!(keep.iter().all(|&i| i >= 20000));
+    }
+
+    #[test]
+    fn top_region_stops_at_gaps_and_drops_slivers() {
+        // Two patches 5 mm apart plus a 3-point sliver above them.
+        let mut pts: Vec<Point> = Vec::new();
+        for i in 0..400 {
+            pts.push(Point::new((i % 20) as f64, (i / 20) as f64, 10.0));
+            pts.push(Point::new(25.0 + (i % 20) as f64, (i / 20) as f64, 5.0));
+        }
+        pts.extend([Point::new(60.0, 60.0, 50.0), Point::new(60.5, 60.0, 50.0), Point::new(61.0, 60.0, 50.0)]);
+        let idx = KdIndex::new(&pts);
+        let cfg = SegmentConfig { d_star: 1.5, min_points: 50, max_normal_angle: std::f64::consts::PI, max_extent: f64::INFINITY, up: Vector3::z() };
+        let region = segment_top(&pts, None, &idx, &cfg).unwrap();
+        assert_eq!(region.len(), 400);
+        assert!(region.iter().all(|&i| pts[i].z == 10.0));
+        let cfg_big = SegmentConfig { min_points: 1000, ..cfg };
+        assert!(matches!(segment_top(&pts, None, &idx, &cfg_big), Err(Error::NoObjectFound { .. })));
+    }
+}
