@@ -201,6 +201,27 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
     let probe: Vec<Point> = object.iter().step_by(prescore_step).copied().collect();
     let mut ranked: Vec<(f64, Isometry3<f64>)> = candidates.iter().map(|c| (score_of(&c.inverse(), &probe, coarse_tol), *c)).collect();
     ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
+    // Views of a part on its side leave the coarse pose ambiguous up to a quarter or half turn
+    // about one of the part's axes; add those turns of the best two candidates before the ICP check.
+    let c_model = crate::cloud::centroid(model.target.points()).coords;
+    let with_turns = if cfg.method == CoarseMethod::Ccp { 2 } else { 0 };
+    let flips: Vec<Isometry3<f64>> = ranked
+        .iter()
+        .take(with_turns)
+        .flat_map(|(_, c)| {
+            let turns = [1.0, 0.5, -0.5].map(|k| k * std::f64::consts::PI);
+            [Vector3::x(), Vector3::y(), Vector3::z()].into_iter().flat_map(move |axis| {
+                turns.map(|angle| {
+                    let r = UnitQuaternion::from_scaled_axis(axis * angle);
+                    c * Isometry3::from_parts(Translation3::from(c_model - r * c_model), r)
+                })
+            })
+        })
+        .collect();
+    for f in flips {
+        ranked.push((score_of(&f.inverse(), &probe, coarse_tol), f));
+    }
+    ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
     let short = IcpConfig {
         method: IcpMethod::PointToPlane,
         max_correspondence_distance: (0.25 * model.diameter).max(3.0 * tol),
@@ -212,7 +233,7 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
         ..Default::default()
     };
     let mut best: Option<(f64, Isometry3<f64>, Isometry3<f64>)> = None;
-    for (_, cand) in ranked.iter().take(4) {
+    for (_, cand) in ranked.iter().take(8) {
         let r = icp(&sample, &model.target, &cand.inverse(), &short)?;
         let s = score_of(&r.t_target_source, &sample, tol);
         if best.as_ref().map_or(true, |b| s > b.0) {

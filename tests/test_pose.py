@@ -1,0 +1,173 @@
+"""The paper's pose pipeline: segmentation, CCP + ICP, estimate_pose on views and on a physics
+pile the test builds, grasp poses, and the bad inputs of a pose request."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import binpick
+from _geometry import pose_error
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    q = rng.normal(size=4)
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def rot_about(axis, angle) -> np.ndarray:
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+SYMMETRIES = {
+    "tee": [np.eye(3)],
+    "elbow": [np.eye(3), rot_about([1, 1, 0], np.pi)],
+    "cross": [rot_about([0, 0, 1], k * np.pi / 2) for k in range(4)]
+    + [rot_about(a, np.pi) for a in ([1, 0, 0], [0, 1, 0], [1, 1, 0], [1, -1, 0])],
+}
+
+
+def symmetric_error(t_est, t_true, part) -> tuple[float, float]:
+    errs = []
+    for s in SYMMETRIES[part]:
+        t = t_true.copy()
+        t[:3, :3] = t_true[:3, :3] @ s
+        errs.append(pose_error(t_est, t))
+    return min(errs)
+
+
+def partial_view(model, sampled, T, rng, noise=0.1):
+    """What a sensor above (+z) sees of ``sampled`` (a second sampling of the part) posed at T."""
+    pts = sampled.points @ T[:3, :3].T + T[:3, 3]
+    nrm = sampled.normals @ T[:3, :3].T
+    vis = nrm[:, 2] > 0.1
+    return pts[vis] + rng.normal(0, noise, (int(vis.sum()), 3))
+
+
+@pytest.mark.parametrize("part", ["tee", "elbow", "cross"])
+def test_ccp_icp_recovers_random_poses_from_partial_noisy_views(part):
+    rng = np.random.default_rng({"tee": 1, "elbow": 2, "cross": 3}[part])
+    model = getattr(binpick.parts, part)(resolution=1.0)
+    other = getattr(binpick.parts, part)(resolution=1.0, spacing=0.8, seed=9)
+    ok = 0
+    trials = 12
+    for _ in range(trials):
+        T = np.eye(4)
+        T[:3, :3] = random_rotation(rng)
+        T[:3, 3] = rng.uniform(-200, 200, 3)
+        scene = partial_view(model, other, T, rng)
+        try:
+            res = binpick.estimate_pose(scene, model, method="ccp")
+        except binpick.NoObjectFound:
+            continue
+        rot, trans = symmetric_error(res.T_scene_model, T, part)
+        ok += rot < 5 and trans < 3
+        assert res.score >= 0.6 and res.rmse < 1.0
+    # Edge-on views (the branches' plane seen side-on) are the known weak case of CCP: allow
+    # one miss per six views; a miss must still be a wrong pose flagged by a low score or
+    # NoObjectFound, which the score assertion above checks for what is returned.
+    assert ok >= trials - 2, f"{part}: {ok}/{trials} pick-grade"
+
+
+def test_icp_alone_fails_where_ccp_succeeds():
+    rng = np.random.default_rng(5)
+    model = binpick.parts.tee(resolution=1.0)
+    other = binpick.parts.tee(resolution=1.0, spacing=0.8, seed=4)
+    T = np.eye(4)
+    T[:3, :3] = rot_about([0.3, 1, 0.2], np.radians(150))
+    T[:3, 3] = [50, -20, 100]
+    scene = partial_view(model, other, T, rng)
+    good = binpick.estimate_pose(scene, model, method="ccp")
+    assert max(pose_error(good.T_scene_model, T)) < 3
+    try:
+        bad = binpick.estimate_pose(scene, model, method="centroid")
+    except binpick.NoObjectFound:
+        return  # the baseline fails and says so
+    assert pose_error(bad.T_scene_model, T)[0] > 20
+
+
+@pytest.fixture(scope="module")
+def pile_scene():
+    """A physics pile of five tees, seen by the simulated camera from the scan pose."""
+    from binpick import sim
+
+    tee = binpick.parts.tee(resolution=1.0)
+    cell = sim.Cell()
+    pile = sim.Pile(tee, 5, bin=cell.bin, seed=11)
+    view = sim.World.of_pile(pile, bin=cell.bin).view(cell)
+    pts = view.points.reshape(-1, 3).astype(np.float64)
+    ids = view.ids.reshape(-1)
+    keep = np.isfinite(pts).all(axis=1)
+    pts, ids = pts[keep][::3], ids[keep][::3]
+    T = cell.T_base_camera
+    rng = np.random.default_rng(0)
+    scene = pts @ T[:3, :3].T + T[:3, 3] + rng.normal(0, 0.15, pts.shape)
+    return tee, cell, pile, scene, ids
+
+
+def test_segmentation_separates_touching_parts_in_a_pile(pile_scene):
+    tee, cell, pile, scene, ids = pile_scene
+    # Parts in this pile touch (the physics leaves no gap between resting parts).
+    res = binpick.estimate_pose(scene, tee, bin=cell.bin.bounds)
+    found = ids[res.indices]
+    labels, counts = np.unique(found[found >= 0], return_counts=True)
+    top = labels[np.argmax(counts)]
+    # Where parts touch, a few points of the neighbour lie within the inlier distance of the posed
+    # part; everything else belongs to one instance.
+    assert counts.max() / len(found) > 0.95, dict(zip(labels.tolist(), counts.tolist()))
+    # The object is one of the highest, and its pose is pick-grade against its ground truth.
+    rot, trans = pose_error(res.T_scene_model, pile.pose(int(top)))
+    assert rot < 5 and trans < 3, (rot, trans)
+    assert (found == top).sum() >= 0.6 * (ids == top).sum()
+
+
+def test_without_a_bin_box_the_support_planes_go_but_the_part_stays(pile_scene):
+    tee, cell, pile, scene, ids = pile_scene
+    res = binpick.estimate_pose(scene, tee)
+    found = ids[res.indices]
+    assert (found < 0).mean() < 0.02  # almost no floor or wall points in the object
+    top = np.bincount(found[found >= 0]).argmax()
+    assert max(pose_error(res.T_scene_model, pile.pose(int(top)))) < 3
+
+
+def test_empty_bin_and_wrong_units_never_give_a_pose(pile_scene):
+    tee, cell, pile, scene, ids = pile_scene
+    bin_only = scene[ids < 0]
+    with pytest.raises(binpick.NoObjectFound):
+        binpick.estimate_pose(bin_only, tee, bin=cell.bin.bounds)
+    with pytest.raises(binpick.NoObjectFound):
+        binpick.estimate_pose(bin_only, tee)
+    with pytest.raises(binpick.InvalidInputError, match="metres"):
+        binpick.estimate_pose(scene / 1000.0, tee)
+    with pytest.raises(binpick.InvalidInputError, match="bin"):
+        binpick.estimate_pose(scene, tee, bin=[[0, 0, 0], [-1, 1, 1]])
+    with pytest.raises(binpick.InvalidInputError, match="branches"):
+        binpick.estimate_pose(scene, binpick.Model.from_arrays(tee.vertices, tee.faces, spacing=2.0), method="ccp")
+    with pytest.raises(binpick.NonFiniteError):
+        binpick.estimate_pose(np.full((100, 3), np.nan), tee)
+    with pytest.raises(binpick.TooFewPointsError):
+        binpick.estimate_pose(np.zeros((3, 3)), tee)
+
+
+def test_grasp_pose_is_eq_30():
+    rng = np.random.default_rng(2)
+    T_base_object = np.eye(4)
+    T_base_object[:3, :3] = random_rotation(rng)
+    T_base_object[:3, 3] = [400, 20, 30]
+    T_gripper_object = np.eye(4)
+    T_gripper_object[:3, :3] = rot_about([1, 0, 0], np.pi)
+    T_gripper_object[:3, 3] = [0, 0, 120]
+    T_base_gripper = binpick.grasp_pose(T_base_object, T_gripper_object)
+    np.testing.assert_allclose(T_base_gripper @ T_gripper_object, T_base_object, atol=1e-12)
+    tee = binpick.parts.tee(resolution=1.0)
+    tee.add_grasp("top", T_gripper_object)
+    np.testing.assert_array_equal(tee.grasps["top"], T_gripper_object)
+    with pytest.raises(binpick.InvalidInputError):
+        binpick.grasp_pose(T_base_object, np.eye(3))
