@@ -10,12 +10,13 @@ laser line, rendered as the real camera would grab them, with depth and instance
 from __future__ import annotations
 
 from .cell import Bin, Camera, Cell, Laser, Lighting, SensorNoise, look_down, rot_y
-from .dataset import SimulatedScan, contact_sheet, simulate_scan, write_scan
+from .dataset import GLOSSY_PART_SPECULAR, SimulatedScan, contact_sheet, simulate_scan, write_scan
 from .pile import Pile, SettleReport, convex_decomposition, max_interpenetration
 from .render import BIN_ID, NO_SURFACE, TABLE_ID, View, World, render_checkerboard
 
 __all__ = [
     "BIN_ID",
+    "GLOSSY_PART_SPECULAR",
     "Bin",
     "Camera",
     "Cell",

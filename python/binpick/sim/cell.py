@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import _core
 from .._validate import as_transform, as_vector, count, non_negative, positive
 from ..errors import InvalidInputError
 
@@ -64,10 +65,13 @@ class Camera:
         return (int(self.width), int(self.height), float(self.fx), float(self.fy), float(self.cx), float(self.cy), list(self.dist))
 
 
+# The default projector is defined once, in the Rust core (``Laser::default``); its pose and
+# parameters are read from there so the two layers cannot drift apart.
+_DEFAULT_LASER = _core.sim_default_laser()
+
+
 def _default_laser_pose() -> np.ndarray:
-    T = rot_y(float(np.arctan2(-130.0, 520.0)))
-    T[0, 3] = 130.0
-    return T
+    return np.array(_DEFAULT_LASER[0], dtype=np.float64)
 
 
 @dataclass(frozen=True)
@@ -76,14 +80,15 @@ class Laser:
     (sheet = plane x_L = 0, light along +z_L; the motor turns it about y_L); ``sheet_sigma`` the
     Gaussian σ of the sheet's thickness (mm); ``power`` the peak DN on white at
     ``reference_distance`` (mm); ``fan_angle`` the fan's full opening (rad); ``color`` the R, G, B
-    response to its light."""
+    response to its light. The defaults are the core's ``Laser::default()`` (the one definition):
+    130 mm to the camera's +x, the sheet at angle 0 crossing the optical axis 520 mm out."""
 
     T_camera_laser0: np.ndarray = field(default_factory=_default_laser_pose)
-    sheet_sigma: float = 0.35
-    power: float = 400.0
-    fan_angle: float = float(np.radians(60.0))
-    color: tuple[float, float, float] = (1.0, 0.12, 0.05)
-    reference_distance: float = 500.0
+    sheet_sigma: float = float(_DEFAULT_LASER[1])
+    power: float = float(_DEFAULT_LASER[2])
+    fan_angle: float = float(_DEFAULT_LASER[3])
+    color: tuple[float, float, float] = tuple(float(c) for c in _DEFAULT_LASER[4])  # type: ignore[assignment]
+    reference_distance: float = float(_DEFAULT_LASER[5])
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "T_camera_laser0", as_transform(self.T_camera_laser0, "T_camera_laser0"))

@@ -9,20 +9,24 @@ from typing import Optional
 
 import numpy as np
 
-from .._validate import count
+from .._validate import count, non_negative
 from ..errors import FileWriteError, InvalidInputError
 from ..models import Model
 from .cell import Cell
 from .pile import Pile
 from .render import View, World
 
-__all__ = ["SimulatedScan", "simulate_scan", "write_scan", "contact_sheet"]
+__all__ = ["GLOSSY_PART_SPECULAR", "SimulatedScan", "simulate_scan", "write_scan", "contact_sheet"]
+
+#: The parts' specular strength in scans rendered with reflections (machined brass or chrome-like).
+GLOSSY_PART_SPECULAR = 0.5
 
 
 @dataclass(frozen=True, eq=False)
 class SimulatedScan:
     """A rendered scan in memory: RGB ``frames`` (K, H, W, 3) uint8, motor ``angles`` (rad), the
-    robot pose, the cell, the pile, the ``view`` (depth / id ground truth)."""
+    robot pose, the cell, the pile, the ``view`` (depth / id ground truth) and the ``world`` it was
+    rendered from (exact distances to its surfaces: :meth:`World.nearest_surface`)."""
 
     frames: np.ndarray
     angles: np.ndarray
@@ -30,6 +34,7 @@ class SimulatedScan:
     cell: Cell
     pile: Pile
     view: View
+    world: Optional[World] = None
 
     def ground_truth(self) -> dict:
         """The ground_truth.json document."""
@@ -42,16 +47,32 @@ class SimulatedScan:
         }
 
 
-def simulate_scan(model: Model, count_: int = 12, *, seed: int = 0, frames: int = 90, cell: Optional[Cell] = None, num_threads: int = 0) -> SimulatedScan:
+def simulate_scan(
+    model: Model,
+    count_: int = 12,
+    *,
+    seed: int = 0,
+    frames: int = 90,
+    cell: Optional[Cell] = None,
+    part_specular: Optional[float] = None,
+    num_threads: int = 0,
+) -> SimulatedScan:
     """Drops ``count_`` parts into the cell's bin (seeded), casts the view from the scan pose once,
-    and renders ``frames`` laser frames sweeping the bin."""
+    and renders ``frames`` laser frames sweeping the bin.
+
+    ``part_specular`` is the parts' gloss (the laser's mirror highlight and what
+    ``cell.noise.reflections`` bounces off them); None makes them glossy
+    (:data:`GLOSSY_PART_SPECULAR`) when the cell's noise has reflections and matte otherwise, so
+    that ``binpick simulate --reflections`` shows them."""
     cell = cell or Cell()
+    if part_specular is None:
+        part_specular = GLOSSY_PART_SPECULAR if cell.noise.reflections > 0 else 0.0
     pile = Pile(model, count_, bin=cell.bin, seed=seed)
-    world = World.of_pile(pile)
+    world = World.of_pile(pile, part_specular=non_negative(part_specular, "part_specular"))
     view = world.view(cell, num_threads=num_threads)
     angles = cell.sweep(count(frames, "frames", 1))
     imgs = view.frames(angles, seed=seed, num_threads=num_threads)
-    return SimulatedScan(frames=imgs, angles=angles, T_base_flange=cell.T_base_flange, cell=cell, pile=pile, view=view)
+    return SimulatedScan(frames=imgs, angles=angles, T_base_flange=cell.T_base_flange, cell=cell, pile=pile, view=view, world=world)
 
 
 def contact_sheet(frames: np.ndarray, *, picks: int = 6, columns: int = 3, width: int = 1200) -> np.ndarray:

@@ -14,7 +14,7 @@ from typing import Any, Optional, Sequence
 import numpy as np
 
 from .. import _core
-from .._validate import as_transform, count, positive
+from .._validate import as_points, as_transform, count, positive
 from ..errors import InvalidInputError
 from ..models import Model
 from .cell import Bin, Camera, Cell, Laser, Lighting, SensorNoise
@@ -100,6 +100,13 @@ class World:
     def ids(self) -> list[int]:
         """Ids of the placed instances."""
         return list(self._scene.instance_ids())
+
+    def nearest_surface(self, points: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Exact distance (mm, float64 (N,)) from each point (N, 3) of the base frame to the
+        nearest mesh surface of the world, and that surface's instance id (int32 (N,)): the
+        ground truth a reconstructed cloud is measured against. (inf, −1) in an empty world."""
+        pts = as_points(points, "points", min_points=0)
+        return self._scene.nearest_surface(np.ascontiguousarray(pts, dtype=np.float64))
 
     def view(self, cell: Cell, T_base_flange: Optional[Any] = None, *, num_threads: int = 0) -> "View":
         """Casts the camera's rays at robot pose ``T_base_flange`` (default: the cell's scan pose)."""

@@ -251,6 +251,16 @@ impl PySimScene {
         self.inner.instance_ids()
     }
 
+    /// (distances (N,) mm, ids (N,) int32): each point's (base frame) exact distance to the
+    /// nearest surface and that surface's instance id; (inf, −1) in an empty scene.
+    fn nearest_surface<'py>(&self, py: Python<'py>, points_base: PyReadonlyArray2<'py, f64>) -> PyResult<(Bound<'py, numpy::PyArray1<f64>>, Bound<'py, numpy::PyArray1<i32>>)> {
+        let pts = points(&points_base, "points")?;
+        let scene = self.inner.clone();
+        let found = run(py, move || Ok::<_, Error>(scene.nearest_surface(&pts)))?;
+        let (d, ids): (Vec<f64>, Vec<i32>) = found.into_iter().unzip();
+        Ok((numpy::PyArray1::from_vec(py, d), numpy::PyArray1::from_vec(py, ids)))
+    }
+
     /// Casts the camera's rays from `T_base_camera`.
     #[pyo3(signature = (camera_args, t_base_camera, lighting_args, num_threads))]
     fn view(&self, py: Python<'_>, camera_args: CameraArgs, t_base_camera: PyReadonlyArray2<'_, f64>, lighting_args: LightingArgs, num_threads: usize) -> PyResult<PySimView> {
@@ -342,6 +352,15 @@ impl PySimView {
     }
 }
 
+/// The core's default laser projector, the one definition `binpick.sim.Laser` takes its defaults
+/// from: (T_camera_laser0 4×4, sheet_sigma mm, power DN, fan_angle rad, color [R, G, B],
+/// reference_distance mm).
+#[pyfunction]
+fn sim_default_laser(py: Python<'_>) -> PyResult<(Arr<'_>, f64, f64, f64, [f64; 3], f64)> {
+    let l = run(py, || Ok::<_, Error>(Laser::default()))?;
+    Ok((crate::convert::isometry_to_py(py, &l.t_camera_laser0), l.sheet_sigma, l.power, l.fan_angle, l.color, l.reference_distance))
+}
+
 /// (H, W, 3) uint8 image of a checkerboard at `T_camera_board`, optionally with the laser line.
 #[pyfunction]
 #[pyo3(signature = (camera_args, board, t_camera_board, lighting_args, laser_args, angle, noise_args, supersample, seed))]
@@ -377,5 +396,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sim_max_interpenetration, m)?)?;
     m.add_function(wrap_pyfunction!(sim_bin_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(sim_render_checkerboard, m)?)?;
+    m.add_function(wrap_pyfunction!(sim_default_laser, m)?)?;
     Ok(())
 }
