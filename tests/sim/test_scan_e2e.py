@@ -50,7 +50,7 @@ def test_reconstruction_is_within_0_2_mm_rms_of_the_true_surfaces(pile_scan):
     scan, _, loaded, cloud = pile_scan
     dist, ids = scan.world.nearest_surface(cloud.points)
     rms = float(np.sqrt(np.mean(dist**2)))
-    # Measured: 0.12 mm RMS, median 0.05 mm over ~15 600 points (seed 1). The larger errors sit
+    # Measured: 0.124 mm RMS, median 0.060 mm over 15 635 points (seed 1). The larger errors sit
     # where the line crosses an edge (bin rim, a part's silhouette or its laser shadow).
     assert rms <= TARGET_RMS, f"RMS {rms:.3f} mm over {len(dist)} points (median {np.median(dist):.3f}, p99 {np.percentile(dist, 99):.3f})"
     assert np.median(dist) < 0.08
@@ -135,7 +135,10 @@ def test_a_plane_and_cylinder_scan_reconstructs_within_0_2_mm_rms(tmp_path):
     d = scene.distance(cloud.points)
     on_cylinder = np.abs(cloud.points[:, 2]) > 1.0
     rms = float(np.sqrt(np.mean(d**2)))
-    # Measured: about 0.05 mm RMS over the plane and the cylinder alike.
-    assert rms <= TARGET_RMS / 2, f"RMS {rms:.3f} mm over {len(d)} points"
+    # Measured (seed 1): 0.072 mm RMS over 14 700 points, median 0.045 mm; 0.099 mm RMS on the
+    # cylinder alone (its silhouette and laser-shadow edges hold the largest errors).
+    assert rms <= TARGET_RMS, f"RMS {rms:.3f} mm over {len(d)} points"
+    assert np.median(d) < 0.08
     assert on_cylinder.sum() > 1000
-    assert float(np.sqrt(np.mean(d[on_cylinder] ** 2))) <= TARGET_RMS / 2
+    cylinder_rms = float(np.sqrt(np.mean(d[on_cylinder] ** 2)))
+    assert cylinder_rms <= TARGET_RMS, f"cylinder RMS {cylinder_rms:.3f} mm"
