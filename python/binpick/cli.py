@@ -1,0 +1,372 @@
+"""The ``binpick`` command.
+
+    binpick demo       the whole simulated cell: a pile of parts, emulated robot, laser motor and
+                       gripper on ptys, scan, locate, pick; pictures into --out
+    binpick pick       the real cell from a cell file (TOML); --dry-run scans and locates only
+    binpick simulate   render a simulated scan to a scan folder
+    binpick emulate    serve one emulated device on a pty
+    binpick estimate   a scene cloud (PLY/NPY) and a part model → pose as JSON and a picture
+    binpick calibrate  camera intrinsics from a folder of checkerboard images
+    binpick bench      run the benchmarks of a source checkout
+
+Exit codes: 0 done, 1 failed (the message says why), 2 bad usage or input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any, List, Optional, Sequence
+
+from .errors import BinpickError, InvalidInputError
+
+__all__ = ["main"]
+
+PARTS = ("tee", "elbow", "cross")
+
+
+class _Usage(Exception):
+    """A usage error found after parsing (exit code 2)."""
+
+
+def _model(part: str, unit: str = "mm") -> Any:
+    from . import parts
+    from .models import Model
+
+    if part in PARTS:
+        return getattr(parts, part)()
+    if not os.path.exists(part):
+        raise _Usage(f"--part: {part!r} is neither a built-in part ({', '.join(PARTS)}) nor a mesh file")
+    return Model.from_mesh(part, unit=unit)
+
+
+def _print_table(records: Sequence[Any], out: Any = None) -> None:
+    out = out or sys.stdout
+    rows = [("pick", "result", "score", "rmse mm", "rot err °", "pos err mm", "grasp", "time s")]
+    for r in records:
+        rows.append((
+            str(r.index), "picked" if r.success else "failed",
+            "-" if r.score is None else f"{r.score:.2f}", "-" if r.rmse is None else f"{r.rmse:.2f}",
+            "-" if r.truth is None else f"{r.truth.rotation_error_deg:.2f}",
+            "-" if r.truth is None else f"{r.truth.translation_error_mm:.2f}",
+            r.grasp or "-", f"{r.timings.get('total', 0.0) / 1e3:.1f}",
+        ))
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    for k, row in enumerate(rows):
+        print("  ".join(c.ljust(w) for c, w in zip(row, widths)), file=out)
+        if k == 0:
+            print("  ".join("-" * w for w in widths), file=out)
+    for r in records:
+        if r.error:
+            print(f"pick {r.index}: {r.error}", file=out)
+
+
+def _pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> List[Path]:
+    from . import viz
+
+    written: List[Path] = []
+    scan = report.last_scan
+    if scan is not None and scan.frames:
+        written.append(viz.save_contact_sheet(out / "scan_contact_sheet.png", [scan.frames[k] for k in sorted(scan.frames)]))
+    if scan is not None and len(scan.points):
+        loc = report.last_located
+        if loc is not None and loc.scan is scan:
+            title = f"{len(scan.points)} points; {model.name} found with score {loc.result.score:.2f}"
+            if loc.truth is not None:
+                title += f", {loc.truth.rotation_error_deg:.2f}° / {loc.truth.translation_error_mm:.2f} mm from the truth"
+            written.append(viz.save_cloud(out / "cloud.png", scan.points, model=model, T_base_object=loc.T_base_object,
+                                          highlight=loc.indices, bin_bounds=bin_bounds, title=title))
+        else:
+            written.append(viz.save_cloud(out / "cloud.png", scan.points, bin_bounds=bin_bounds, title=f"{len(scan.points)} points"))
+    if report.records:
+        written.append(viz.save_pick_summary(out / "summary.png", report.records))
+    (out / "picks.json").write_text(json.dumps({"picks": [r.as_dict() for r in report.records], "stopped": report.stopped}, indent=1))
+    written.append(out / "picks.json")
+    return written
+
+
+# --------------------------------------------------------------------------- demo
+
+def _demo(args: argparse.Namespace) -> int:
+    from .cell import ProgressPrinter, SimulatedCell
+
+    if args.picks < 1 or args.count < 1 or args.frames < 2:
+        raise _Usage("--picks and --count must be at least 1, --frames at least 2")
+    out = Path(args.out)
+    t0 = time.perf_counter()
+    model = _model(args.part, args.unit)
+    progress = ProgressPrinter()
+    progress("demo", f"{args.count} {model.name} parts, {args.picks} picks, {args.frames} frames per scan, seed {args.seed}, pictures into {out}")
+    with SimulatedCell(model, count=args.count, seed=args.seed, frames=args.frames, progress=progress,
+                       estimate_options=_estimate_options(args)) as sim:
+        report = sim.cell.run(args.picks)
+        bin_bounds = sim.cell.config.bin_bounds
+        failures = sim.emulator_failures
+    written = _pictures(out, report, model, bin_bounds)
+    print()
+    _print_table(report.records)
+    print()
+    for p in written:
+        print(f"wrote {p}")
+    if failures:
+        print("emulator failures (a bug): " + "; ".join(failures), file=sys.stderr)
+    picked = report.successes
+    print(f"{picked} of {len(report.records)} picks succeeded in {time.perf_counter() - t0:.1f} s"
+          + (f"; stopped: {report.stopped}" if report.stopped else ""))
+    if picked == 0:
+        print("binpick demo: no part was picked — " + (report.stopped or "every pick failed (see the table)"), file=sys.stderr)
+        return 1
+    return 0
+
+
+def _estimate_options(args: argparse.Namespace) -> dict:
+    opts = {}
+    if getattr(args, "d_star", None) is not None:
+        opts["d_star"] = args.d_star
+    if getattr(args, "min_points", None) is not None:
+        opts["min_points"] = args.min_points
+    return opts
+
+
+# --------------------------------------------------------------------------- pick
+
+def _pick(args: argparse.Namespace) -> int:
+    from .cell import CELL_FILE_EXAMPLE, ProgressPrinter, RunReport, cell_from_file, load_cell_file
+
+    if args.example:
+        print(CELL_FILE_EXAMPLE, end="")
+        return 0
+    if not args.config:
+        raise _Usage("give the cell file: binpick pick CELL.toml (binpick pick --example prints one)")
+    if args.picks < 1:
+        raise _Usage("--picks must be at least 1")
+    progress = ProgressPrinter()
+    cell = cell_from_file(load_cell_file(args.config), progress=progress)
+    out = Path(args.out)
+    with cell:
+        if args.dry_run:
+            scan = cell.scan()
+            try:
+                located = cell.locate(scan)
+            except BinpickError as exc:
+                report = RunReport(records=(), stopped=str(exc), last_scan=scan)
+                _pictures(out, report, cell.config.model, cell.config.bin_bounds)
+                print(f"binpick pick --dry-run: {exc}", file=sys.stderr)
+                return 1
+            report = RunReport(records=(), stopped="dry run", last_scan=scan, last_located=located)
+            written = _pictures(out, report, cell.config.model, cell.config.bin_bounds)
+            pose = located.T_base_object
+            print(json.dumps({"T_base_object": pose.round(4).tolist(), "score": located.result.score, "rmse_mm": located.result.rmse,
+                              "points": len(scan.points)}, indent=1))
+            for p in written:
+                print(f"wrote {p}")
+            return 0
+        report = cell.run(args.picks)
+    written = _pictures(out, report, cell.config.model, cell.config.bin_bounds)
+    _print_table(report.records)
+    for p in written:
+        print(f"wrote {p}")
+    if report.successes == 0:
+        print("binpick pick: no part was picked — " + (report.stopped or "see the table"), file=sys.stderr)
+        return 1
+    return 0
+
+
+# --------------------------------------------------------------------------- estimate
+
+def _read_scene(path: str) -> Any:
+    import numpy as np
+
+    from .models import read_ply
+
+    if not os.path.exists(path):
+        raise _Usage(f"scene: {path} does not exist")
+    if path.lower().endswith(".npy"):
+        try:
+            return np.load(path)
+        except (OSError, ValueError) as exc:
+            raise InvalidInputError(f"{path}: cannot be read as a NumPy array ({exc})") from None
+    return read_ply(path)[0]
+
+
+def _estimate(args: argparse.Namespace) -> int:
+    from . import viz
+    from .poses import estimate_pose
+
+    scene = _read_scene(args.scene)
+    model = _model(args.model, args.unit)
+    bin_box = None if args.bin is None else (tuple(args.bin[:3]), tuple(args.bin[3:]))
+    res = estimate_pose(scene, model, bin=bin_box, method=args.method, **_estimate_options(args))
+    doc = {"T_scene_model": res.T_scene_model.tolist(), "score": res.score, "rmse_mm": res.rmse, "points": int(len(res.indices)),
+           "method": res.method, "timings_ms": {k: float(v) for k, v in res.timings.items()}}
+    print(json.dumps(doc, indent=1))
+    png = Path(args.png)
+    viz.save_cloud(png, scene, model=model, T_base_object=res.T_scene_model, highlight=res.indices, bin_bounds=bin_box,
+                   title=f"{model.name}: score {res.score:.2f}, rmse {res.rmse:.2f} mm")
+    print(f"wrote {png}", file=sys.stderr)
+    return 0
+
+
+# --------------------------------------------------------------------------- calibrate
+
+def _calibrate(args: argparse.Namespace) -> int:
+    import cv2
+
+    from .calibration import calibrate_camera
+
+    folder = Path(args.folder)
+    if not folder.is_dir():
+        raise _Usage(f"folder: {folder} is not a folder of checkerboard images")
+    try:
+        cols, rows = (int(v) for v in args.pattern.lower().split("x"))
+    except ValueError:
+        raise _Usage(f"--pattern: {args.pattern!r} is not COLSxROWS of inner corners, e.g. 9x6") from None
+    paths = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"))
+    images = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in paths]
+    res = calibrate_camera([im for im in images if im is not None], (cols, rows), args.square)
+    cam = res.camera
+    doc = {"width": cam.width, "height": cam.height, "K": cam.K.tolist(), "dist": cam.dist.tolist(), "rms_px": res.rms,
+           "views": [paths[i].name for i in res.views], "per_view_rms_px": res.per_view_rms.tolist()}
+    print(json.dumps(doc, indent=1))
+    print(f"{len(res.views)} of {len(paths)} images used, reprojection RMS {res.rms:.3f} px", file=sys.stderr)
+    return 0
+
+
+# --------------------------------------------------------------------------- bench
+
+def _bench(args: argparse.Namespace) -> int:
+    root = Path(__file__).resolve().parents[2] / "benches"
+    scripts = sorted(root.glob("*.py")) if root.is_dir() else []
+    if not scripts:
+        print("binpick bench: the benchmarks live in the source repository's benches/ folder (criterion benches: "
+              "`cargo bench -p binpick-core`; Python benches: `python benches/<name>.py`); this installation has none.")
+        return 0
+    if args.list:
+        for s in scripts:
+            print(s.stem)
+        return 0
+    chosen = [s for s in scripts if not args.names or s.stem in args.names]
+    unknown = set(args.names) - {s.stem for s in scripts}
+    if unknown:
+        raise _Usage(f"bench: unknown bench {', '.join(sorted(unknown))}; available: {', '.join(s.stem for s in scripts)}")
+    status = 0
+    for s in chosen:
+        print(f"== {s.stem}", flush=True)
+        status |= subprocess.call([sys.executable, str(s)])
+    return 1 if status else 0
+
+
+# --------------------------------------------------------------------------- parser
+
+def _parser() -> argparse.ArgumentParser:
+    from . import __version__
+
+    p = argparse.ArgumentParser(prog="binpick", description="Eye-in-hand laser-line bin picking.")
+    p.add_argument("--version", action="version", version=f"binpick {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+
+    def pose_options(q: argparse.ArgumentParser) -> None:
+        q.add_argument("--d-star", type=float, default=None, help="segmentation distance d* (mm); default: the estimator's")
+        q.add_argument("--min-points", type=int, default=None, help="fewest points of a part region; default: the estimator's")
+
+    d = sub.add_parser("demo", help="the whole simulated cell picking parts over emulated serial devices",
+                       description="Drops a pile of parts into the simulated bin, then scans, locates and picks them with the "
+                                   "real drivers talking to emulated devices on ptys; writes pictures into --out.")
+    d.add_argument("--part", default="tee", help="built-in part (tee, elbow, cross) or a mesh file (default tee)")
+    d.add_argument("--unit", default="mm", help="unit of a mesh file (mm, cm, m, in)")
+    d.add_argument("--count", type=int, default=12, help="parts in the pile (default 12)")
+    d.add_argument("--picks", type=int, default=3, help="picks to attempt (default 3)")
+    d.add_argument("--seed", type=int, default=0, help="seed of the pile and the sensor noise (default 0)")
+    d.add_argument("--frames", type=int, default=90, help="laser frames per scan (default 90)")
+    d.add_argument("--out", default="binpick-demo", help="folder for the pictures (default ./binpick-demo)")
+    pose_options(d)
+    d.set_defaults(run=_demo)
+
+    k = sub.add_parser("pick", help="pick parts in the real cell described by a cell file",
+                       description="Connects to the robot, laser motor, gripper and camera of a cell file (TOML) and picks parts.")
+    k.add_argument("config", nargs="?", help="the cell file (TOML); `binpick pick --example` prints one")
+    k.add_argument("--picks", type=int, default=1, help="picks to attempt (default 1)")
+    k.add_argument("--dry-run", action="store_true", help="only scan and locate: the arm goes to the scan pose, the gripper stays open")
+    k.add_argument("--out", default="binpick-pick", help="folder for the pictures (default ./binpick-pick)")
+    k.add_argument("--example", action="store_true", help="print an example cell file and exit")
+    k.set_defaults(run=_pick)
+
+    s = sub.add_parser("simulate", help="render a simulated scan to a scan folder (see `binpick simulate --help`)", add_help=False)
+    s.set_defaults(forward="simulate")
+    e = sub.add_parser("emulate", help="serve an emulated robot, motor or gripper on a pty (see `binpick emulate --help`)", add_help=False)
+    e.set_defaults(forward="emulate")
+
+    t = sub.add_parser("estimate", help="estimate a part's pose in a scene cloud",
+                       description="Reads a scene (PLY, or NPY of shape (N, 3), mm) and a part, prints the pose as JSON and writes a picture.")
+    t.add_argument("scene", help="scene cloud: .ply or .npy (N, 3), mm")
+    t.add_argument("model", help="built-in part (tee, elbow, cross) or a mesh file")
+    t.add_argument("--unit", default="mm", help="unit of a mesh file (mm, cm, m, in)")
+    t.add_argument("--method", default="auto", choices=("auto", "ccp", "centroid"), help="coarse pose method (default auto)")
+    t.add_argument("--bin", type=float, nargs=6, metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"), help="bin box in the scene frame, mm")
+    t.add_argument("--png", default="estimate.png", help="picture to write (default estimate.png)")
+    pose_options(t)
+    t.set_defaults(run=_estimate)
+
+    c = sub.add_parser("calibrate", help="camera intrinsics from checkerboard images",
+                       description="Finds the checkerboard in every image of FOLDER and prints the intrinsics as JSON.")
+    c.add_argument("folder", help="folder of checkerboard images")
+    c.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS (default 9x6)")
+    c.add_argument("--square", type=float, default=20.0, help="square size, mm (default 20)")
+    c.set_defaults(run=_calibrate)
+
+    b = sub.add_parser("bench", help="run the benchmarks of a source checkout")
+    b.add_argument("names", nargs="*", help="benches to run (default all)")
+    b.add_argument("--list", action="store_true", help="list the benches")
+    b.set_defaults(run=_bench)
+    return p
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Runs ``binpick`` with ``argv`` (without the program name; default ``sys.argv[1:]``); returns the exit code."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "simulate":
+        from .sim.cli import simulate_main
+
+        return _forward(simulate_main, argv[1:])
+    if argv and argv[0] == "emulate":
+        from .devices.cli import emulate_main
+
+        return _forward(emulate_main, argv[1:])
+    parser = _parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse printed the usage and the problem
+        return int(exc.code or 0)
+    if not getattr(args, "command", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.run(args))
+    except _Usage as exc:
+        print(f"binpick {args.command}: {exc}", file=sys.stderr)
+        return 2
+    except InvalidInputError as exc:
+        print(f"binpick {args.command}: {exc}", file=sys.stderr)
+        return 2
+    except BinpickError as exc:
+        print(f"binpick {args.command}: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print(f"binpick {args.command}: interrupted", file=sys.stderr)
+        return 1
+
+
+def _forward(entry: Any, argv: List[str]) -> int:
+    try:
+        return int(entry(argv) or 0)
+    except SystemExit as exc:
+        return int(exc.code or 0) if not isinstance(exc.code, str) else 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
