@@ -1,0 +1,73 @@
+//! The simulated cell on one core: dropping and settling a pile of 20 tees (parts per second),
+//! casting the camera's view of that pile at 1032 × 778 (pixels per second), and lighting one
+//! laser frame from the view (pixels per second). The layout is the default cell of
+//! `binpick.sim`: the bin centred at (400, 0), the camera 580 mm above its floor looking down.
+
+use binpick_core::parallel::with_threads;
+use binpick_core::parts::{tee, TeeParams};
+use binpick_core::sim::{BinSpec, Camera, Laser, Lighting, Material, Pile, PileParams, Scene, SensorNoise};
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use std::f64::consts::PI;
+use std::hint::black_box;
+
+const PARTS: usize = 20;
+const SEED: u64 = 3;
+
+/// The default cell's camera: the paper's 1032 × 778 sensor with mild barrel distortion.
+fn camera() -> Camera {
+    Camera { dist: [-0.04, 0.01, 0.0, 0.0, 0.0], ..Camera::default() }
+}
+
+/// The camera 580 mm above the bin's floor at (400, 0), looking straight down (z down, x along +x).
+fn t_base_camera() -> Isometry3<f64> {
+    Isometry3::from_parts(Translation3::new(400.0, 0.0, 580.0), UnitQuaternion::from_axis_angle(&Vector3::x_axis(), PI))
+}
+
+/// The bin and the settled pile as a render scene (parts are the mesh the pile was dropped with).
+fn scene(pile: &Pile, mesh: &binpick_core::mesh::TriMesh) -> Scene {
+    let mut s = Scene::new();
+    let bin = s.add_mesh(&pile.bin().mesh(), Material { albedo: [0.30, 0.34, 0.40], ..Default::default() }).unwrap();
+    s.add_instance(bin, Isometry3::identity(), -2).unwrap();
+    let part = s.add_mesh(mesh, Material { albedo: [0.72, 0.72, 0.70], ..Default::default() }).unwrap();
+    for (id, t) in pile.poses() {
+        s.add_instance(part, t, id as i32).unwrap();
+    }
+    s
+}
+
+fn bench_sim(c: &mut Criterion) {
+    let part = tee(&TeeParams::default()).unwrap();
+    let bin = BinSpec::default();
+    let params = PileParams { seed: SEED, ..Default::default() };
+
+    let mut group = c.benchmark_group("sim_pile");
+    group.sample_size(10);
+    group.throughput(Throughput::Elements(PARTS as u64));
+    group.bench_with_input(BenchmarkId::new("drop_and_settle_tees", PARTS), &PARTS, |b, &n| {
+        b.iter(|| with_threads(1, || black_box(Pile::drop(&part.mesh, n, &bin, &params).unwrap())))
+    });
+    group.finish();
+
+    let pile = Pile::drop(&part.mesh, PARTS, &bin, &params).unwrap();
+    let scene = scene(&pile, &part.mesh);
+    let cam = camera();
+    let pixels = (cam.width * cam.height) as u64;
+    let (pose, light) = (t_base_camera(), Lighting::default());
+
+    let mut group = c.benchmark_group("sim_render");
+    group.sample_size(10);
+    group.throughput(Throughput::Elements(pixels));
+    group.bench_function(BenchmarkId::new("view_1032x778", format!("{PARTS}_tees")), |b| {
+        b.iter(|| with_threads(1, || black_box(scene.view(&cam, &pose, &light).unwrap())))
+    });
+    let view = with_threads(1, || scene.view(&cam, &pose, &light).unwrap());
+    let (laser, noise) = (Laser::default(), SensorNoise::default());
+    group.bench_function(BenchmarkId::new("laser_frame_1032x778", format!("{PARTS}_tees")), |b| {
+        b.iter(|| with_threads(1, || black_box(view.frame(&laser, 0.0, &noise, SEED).unwrap())))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench_sim);
+criterion_main!(benches);
