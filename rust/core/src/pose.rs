@@ -11,7 +11,6 @@ use crate::error::{Error, Result};
 use crate::knn::KdIndex;
 use crate::normals::{estimate_normals, Orientation};
 use crate::registration::ccp::{ccp, BranchLayout, CcpConfig};
-use crate::registration::corr_tree::CorrespondenceTree;
 use crate::registration::{icp, IcpConfig, IcpMethod, IcpTarget, RobustKernel};
 use crate::segment::{crop_to_bin, point_spacing, remove_support_planes, segment_top, BinBox, SegmentConfig};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -190,11 +189,11 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
     let tol = cfg.inlier_distance.unwrap_or((3.0 * spacing).max(1.0));
     let step = (object.len() / 600).max(1);
     let sample: Vec<Point> = object.iter().step_by(step).copied().collect();
-    let scene_search = CorrespondenceTree::new(&pts);
+    let heights = HeightMap::new(scene, &up, (1.5 * spacing).max(0.5));
     let model_step = (model.target.points().len() / 400).max(1);
     let score_of = |t_model_scene: &Isometry3<f64>, probe: &[Point], tol: f64| -> f64 {
         let on_model = inlier_fraction(probe, &model.target, t_model_scene, tol);
-        on_model * coverage(model, &scene_search, &t_model_scene.inverse(), &up, model_step, tol)
+        on_model * coverage(model, &heights, &t_model_scene.inverse(), model_step, tol)
     };
     let coarse_tol = (0.08 * model.diameter).max(2.0 * tol);
     let prescore_step = (object.len() / 150).max(1);
@@ -232,9 +231,27 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
         num_threads: 0,
         ..Default::default()
     };
+    // Many readings give nearly the same rotation; keep the best-ranked of each 15° cluster.
+    let mut distinct: Vec<(f64, Isometry3<f64>)> = Vec::with_capacity(ranked.len());
+    for (sc, c) in ranked {
+        if !distinct.iter().any(|(_, d)| d.rotation.angle_to(&c.rotation) < 15f64.to_radians()) {
+            distinct.push((sc, c));
+        }
+    }
+    let ranked = distinct;
+    // Stage one: every hypothesis gets a few ICP steps on a small probe (a coarse pose tens of
+    // degrees off still lands in the right basin, but cannot be judged before moving it).
+    let quick = IcpConfig { max_iterations: 8, ..short.clone() };
+    let mut tried: Vec<(f64, Isometry3<f64>, Isometry3<f64>)> = Vec::with_capacity(ranked.len());
+    for (_, cand) in &ranked {
+        let r = icp(&probe, &model.target, &cand.inverse(), &quick)?;
+        tried.push((score_of(&r.t_target_source, &probe, coarse_tol), r.t_target_source, *cand));
+    }
+    tried.sort_by(|a, b| b.0.total_cmp(&a.0));
+    // Stage two: the best three converge on a larger sample and are judged at the inlier distance.
     let mut best: Option<(f64, Isometry3<f64>, Isometry3<f64>)> = None;
-    for (_, cand) in ranked.iter().take(8) {
-        let r = icp(&sample, &model.target, &cand.inverse(), &short)?;
+    for (_, t0, cand) in tried.iter().take(3) {
+        let r = icp(&sample, &model.target, t0, &short)?;
         let s = score_of(&r.t_target_source, &sample, tol);
         if best.as_ref().map_or(true, |b| s > b.0) {
             best = Some((s, r.t_target_source, *cand));
@@ -292,22 +309,54 @@ fn inlier_fraction(points: &[Point], target: &IcpTarget, t: &Isometry3<f64>, tol
     inlier_stats(points, target, t, tol).0
 }
 
-/// Fraction of the model points the sensor should see (facing `up` under the pose) that have a
-/// scene point within `tol`: a flipped or half-matched pose predicts surface where the scan saw
-/// none, and loses here.
-fn coverage(model: &PoseModel, scene: &CorrespondenceTree, t_scene_model: &Isometry3<f64>, up: &Vector3<f64>, step: usize, tol: f64) -> f64 {
-    let up_model = t_scene_model.rotation.inverse() * up;
+/// The scan seen from the sensor's side: per cell of a grid across `up`, the height (along `up`)
+/// of the highest scan point. Judging a predicted surface point against it is a depth test.
+struct HeightMap {
+    e1: Vector3<f64>,
+    e2: Vector3<f64>,
+    up: Vector3<f64>,
+    inv_cell: f64,
+    cells: std::collections::HashMap<(i64, i64), f64>,
+}
+
+impl HeightMap {
+    fn new(points: &[Point], up: &Vector3<f64>, cell: f64) -> Self {
+        let e1 = up.cross(&if up.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() }).normalize();
+        let e2 = up.cross(&e1);
+        let mut map = HeightMap { e1, e2, up: *up, inv_cell: 1.0 / cell, cells: std::collections::HashMap::with_capacity(points.len() / 2) };
+        for p in points {
+            let (k, h) = map.key(p);
+            let e = map.cells.entry(k).or_insert(f64::NEG_INFINITY);
+            *e = e.max(h);
+        }
+        map
+    }
+
+    fn key(&self, p: &Point) -> ((i64, i64), f64) {
+        let v = p.coords;
+        (((v.dot(&self.e1) * self.inv_cell).floor() as i64, (v.dot(&self.e2) * self.inv_cell).floor() as i64), v.dot(&self.up))
+    }
+}
+
+/// How well the scan confirms the surface a pose predicts: of the model points the sensor should
+/// see (facing `up`), those where the scan's surface is at the predicted height count as seen,
+/// those where the scan saw deeper (through the predicted surface) as violations; occluded
+/// (the scan is higher) or unscanned places do not count. Flipped and half-matched poses predict
+/// surface where the scan saw free space, and lose here.
+fn coverage(model: &PoseModel, heights: &HeightMap, t_scene_model: &Isometry3<f64>, step: usize, tol: f64) -> f64 {
+    let up_model = t_scene_model.rotation.inverse() * heights.up;
     let normals = model.target.normals().unwrap_or(&[]);
-    let (mut seen, mut expected) = (0usize, 0usize);
+    let (mut seen, mut violated) = (0usize, 0usize);
     for (p, n) in model.target.points().iter().zip(normals).step_by(step) {
         if n.dot(&up_model) < 0.3 {
             continue;
         }
-        expected += 1;
-        let q = t_scene_model * p;
-        if scene.nearest_within(&[q.x, q.y, q.z], tol * tol).is_some() {
-            seen += 1;
+        let (k, h) = heights.key(&(t_scene_model * p));
+        match heights.cells.get(&k) {
+            Some(&top) if (top - h).abs() <= tol => seen += 1,
+            Some(&top) if top < h - tol => violated += 1,
+            _ => {}
         }
     }
-    if expected == 0 { 0.0 } else { seen as f64 / expected as f64 }
+    if seen + violated == 0 { 0.0 } else { seen as f64 / (seen + violated) as f64 }
 }

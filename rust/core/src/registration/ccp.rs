@@ -174,12 +174,17 @@ pub fn ccp(data: &[Point], layout: &BranchLayout, model_points: &[Point], model_
         add(&obs, special_dir);
     }
     let n = all_axes.len();
-    for mask in 1u32..(1 << n) {
-        if mask.count_ones() < 2 || mask.count_ones() as usize > layout.directions.len() {
-            continue;
+    // Each observed axis may also be the special feature (the paper's plane test misses it when
+    // the part lies on its side), the rest read as branches.
+    let special_choices: Vec<Option<usize>> = if layout.special.is_some() { std::iter::once(None).chain((0..n).map(Some)).collect() } else { vec![None] };
+    for special in special_choices {
+        for mask in 1u32..(1 << n) {
+            if special.is_some_and(|s| mask & (1 << s) != 0) || mask.count_ones() < 2 || mask.count_ones() as usize > layout.directions.len() {
+                continue;
+            }
+            let obs: Vec<(Vector3<f64>, usize)> = (0..n).filter(|i| mask & (1 << i) != 0).map(|i| all_axes[i]).collect();
+            add(&obs, special.map(|s| all_axes[s].0));
         }
-        let obs: Vec<(Vector3<f64>, usize)> = (0..n).filter(|i| mask & (1 << i) != 0).map(|i| all_axes[i]).collect();
-        add(&obs, None);
     }
     if candidates.is_empty() {
         return Err(Error::NoObjectFound { reason: "CCP found no branch assignment consistent with the model's layout".into() });
