@@ -1279,6 +1279,10 @@ drop_pose = [400.0, -250.0, 350.0, 180.0, 0.0, 0.0]
 frames = 90
 tool = [0.0, 0.0, 150.0, 0.0, 0.0, 0.0]   # the gripper's TCP in the flange frame
 
+[estimate]                   # optional: keyword arguments of binpick.estimate_pose
+# d_star = 12.0
+# min_points = 500
+
 [limits]
 workspace_min_mm = [100.0, -350.0, 60.0]
 workspace_max_mm = [650.0, 350.0, 700.0]
@@ -1374,6 +1378,7 @@ def cell_from_file(cell_file: CellFile, *, progress: Optional[Callable[[str, str
         scan_poses=(_pose_deg(f.get("cell", "scan_pose"), f"{f.path}: [cell] scan_pose"),),
         drop_pose=_pose_deg(f.get("cell", "drop_pose"), f"{f.path}: [cell] drop_pose"),
         frames=int(f.get("cell", "frames", 90)), gripper=gripper_geometry, limits=limits, num_threads=num_threads,
+        estimate_options=dict(f.doc.get("estimate", {})),
     )
     check_static_poses(config)  # before any port is opened
     robot = MelfaRobot(str(f.get("robot", "port")), limits=limits, config=MelfaConfig(

@@ -1,0 +1,64 @@
+"""The pick loop end to end on the simulated cell: a physics pile, the robot, laser motor and
+gripper emulators on real ptys, the real drivers, the renderer, extraction and pose estimation."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import binpick
+from binpick.cell import CellConfig, SimulatedCell, check_static_poses, sim_limits
+from binpick.errors import SafetyError
+
+# The estimator's default segmentation distance follows the along-line spacing; with 60 frames the
+# lines lie ~5 mm apart, so the tests give d* and the smallest region explicitly.
+ESTIMATE = {"d_star": 12.0, "min_points": 500}
+
+
+@pytest.fixture(scope="module")
+def tee():
+    return binpick.parts.tee()
+
+
+def test_simulated_pick_removes_the_located_part(tee):
+    with SimulatedCell(tee, count=4, seed=1, frames=60, estimate_options=ESTIMATE) as sim:
+        before = set(int(i) for i in sim.pile.ids)
+        report = sim.cell.run(3)
+        assert sim.emulator_failures == []
+        after = set(int(i) for i in sim.pile.ids)
+    picked = [r for r in report.records if r.success]
+    assert picked, f"no pick succeeded: {[r.error for r in report.records]}"
+    for r in picked:
+        assert r.truth is not None and r.truth.pick_grade
+        assert r.truth.rotation_error_deg < 5.0 and r.truth.translation_error_mm < 3.0
+        assert r.picked_instance == r.truth.instance
+        assert r.picked_instance in before and r.picked_instance not in after
+        assert r.held is True
+    assert len(before) - len(after) >= len(picked)
+
+
+def test_a_drop_pose_outside_the_workspace_is_refused_before_any_byte_is_sent(tee):
+    sim = SimulatedCell(tee, count=1, seed=0, frames=4)
+    limits = sim_limits(sim.layout)
+    outside = np.eye(4)
+    outside[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    outside[:3, 3] = (limits.workspace_max_mm[0] + 200.0, 0.0, 400.0)
+    bad = SimulatedCell(tee, count=1, seed=0, frames=4, drop_pose=outside)
+    try:
+        with pytest.raises(SafetyError, match="drop_pose"):
+            bad.start()
+        for emu in (bad.robot_emulator, bad.motor_emulator, bad.gripper_emulator):
+            assert emu is not None and emu.requests == [], f"{emu.device} received {emu.requests[:3]}"
+    finally:
+        bad.close()
+
+
+def test_config_checks_scan_pose_below_the_approach_height(tee):
+    sim = SimulatedCell(tee, count=1, seed=0, frames=4)
+    limits = sim_limits(sim.layout)
+    low = sim.layout.T_base_flange.copy()
+    low[2, 3] = limits.approach_height_mm - 10.0
+    config = CellConfig(calibration=sim.layout.calibration(), model=tee, bin_bounds=sim.layout.bin.bounds, scan_poses=(low,),
+                        drop_pose=sim.drop_pose, limits=limits)
+    with pytest.raises(SafetyError, match="approach height"):
+        check_static_poses(config)

@@ -1,0 +1,120 @@
+"""The ``binpick`` command: demo end to end, usage errors, ``pick --dry-run`` against emulators."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from binpick.cli import main
+
+ESTIMATE_FLAGS = ["--d-star", "12", "--min-points", "500"]
+
+
+def test_demo_picks_one_part_and_writes_the_pictures(tmp_path, capsys):
+    out = tmp_path / "demo"
+    code = main(["demo", "--picks", "1", "--count", "4", "--frames", "60", "--seed", "1", "--out", str(out), *ESTIMATE_FLAGS])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    for name in ("scan_contact_sheet.png", "cloud.png", "summary.png"):
+        png = out / name
+        assert png.exists() and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", name
+    assert "picked" in text and "1 of 1 picks succeeded" in text
+
+
+@pytest.mark.parametrize("argv", [
+    ["demo", "--picks", "many"],
+    ["demo", "--picks", "0"],
+    ["demo", "--part", "no-such-part.stl"],
+    ["frobnicate"],
+    [],
+    ["pick"],
+    ["estimate", "missing.ply", "tee"],
+    ["calibrate", "/no/such/folder"],
+])
+def test_bad_arguments_exit_2(argv, capsys):
+    assert main(argv) == 2
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_pick_example_prints_a_cell_file(capsys):
+    assert main(["pick", "--example"]) == 0
+    assert "[robot]" in capsys.readouterr().out
+
+
+def test_pick_dry_run_against_emulators(tmp_path, capsys):
+    from binpick.cell import SIM_ARM, sim_limits
+    from binpick.devices.emulators import DynamixelEmulator, GripperEmulator, RobotEmulator, RobotEmulatorConfig
+    from binpick.sim import Cell as Layout
+
+    layout = Layout()
+    layout.calibration().save(tmp_path / "calibration.toml")
+    limits = sim_limits(layout)
+    lo, hi = layout.bin.bounds
+    with RobotEmulator(config=RobotEmulatorConfig(arm=SIM_ARM, speed_scale=20.0)) as robot, DynamixelEmulator() as motor, GripperEmulator() as gripper:
+        cfg = tmp_path / "cell.toml"
+        cfg.write_text(f"""
+[robot]
+port = "{robot.slave_path}"
+override_percent = 50
+linear_speed_mm_s = 250
+[motor]
+port = "{motor.slave_path}"
+[gripper]
+port = "{gripper.slave_path}"
+[camera]
+source = "simulated"
+count = 4
+seed = 1
+[part]
+model = "tee"
+[cell]
+calibration = "calibration.toml"
+bin_min_mm = {lo.tolist()}
+bin_max_mm = {hi.tolist()}
+scan_pose = [400.0, 0.0, 620.0, 180.0, 0.0, 0.0]
+drop_pose = [400.0, -250.0, 350.0, 180.0, 0.0, 0.0]
+frames = 60
+[estimate]
+d_star = 12.0
+min_points = 500
+[limits]
+workspace_min_mm = {list(limits.workspace_min_mm)}
+workspace_max_mm = {list(limits.workspace_max_mm)}
+approach_height_mm = {limits.approach_height_mm}
+""")
+        code = main(["pick", str(cfg), "--dry-run", "--out", str(tmp_path / "out")])
+        captured = capsys.readouterr()
+        assert code == 0, captured.err
+        assert (tmp_path / "out" / "cloud.png").exists()
+        assert np.allclose(robot.pose()[:3, 3], (400.0, 0.0, 620.0), atol=1.0)  # it went to the scan pose
+        assert gripper.axis.position() == 0.0  # a dry run leaves the fingers open
+        assert robot.failures == motor.failures == gripper.failures == []
+    assert '"T_base_object"' in captured.out
+
+
+def test_pick_with_a_drop_pose_outside_the_workspace_exits_1_before_sending(tmp_path, capsys):
+    from binpick.devices.emulators import RobotEmulator
+    from binpick.sim import Cell as Layout
+
+    Layout().calibration().save(tmp_path / "calibration.toml")
+    with RobotEmulator() as robot:
+        cfg = tmp_path / "cell.toml"
+        cfg.write_text(f"""
+[robot]
+port = "{robot.slave_path}"
+[motor]
+port = "{robot.slave_path}"
+[gripper]
+port = "{robot.slave_path}"
+[part]
+model = "tee"
+[cell]
+calibration = "calibration.toml"
+bin_min_mm = [250.0, -100.0, 0.0]
+bin_max_mm = [550.0, 100.0, 80.0]
+scan_pose = [300.0, 0.0, 400.0, 180.0, 0.0, 0.0]
+drop_pose = [2000.0, 0.0, 400.0, 180.0, 0.0, 0.0]
+""")
+        assert main(["pick", str(cfg)]) == 1
+        assert "drop_pose" in capsys.readouterr().err
+        assert robot.requests == []
