@@ -34,6 +34,8 @@ pub struct PoseModel {
     pub area: f64,
     /// Branch layout for CCP, if the part has one.
     pub layout: Option<BranchLayout>,
+    /// Median spacing of the model's samples, mm.
+    pub spacing: f64,
 }
 
 impl PoseModel {
@@ -42,7 +44,8 @@ impl PoseModel {
         if !(diameter.is_finite() && diameter > 0.0) {
             return Err(Error::invalid("model", "the model's diameter must be positive"));
         }
-        Ok(PoseModel { target: IcpTarget::new(points, Some(normals))?, diameter, area, layout })
+        let spacing = point_spacing(&points, &KdIndex::new(&points));
+        Ok(PoseModel { target: IcpTarget::new(points, Some(normals))?, diameter, area, layout, spacing })
     }
 }
 
@@ -63,7 +66,8 @@ pub struct PoseConfig {
     pub min_points: Option<usize>,
     /// Largest angle between neighbouring normals inside one object, radians.
     pub max_normal_angle: f64,
-    /// Inlier distance for verification, mm (default max(3 × spacing, 1 mm)).
+    /// Inlier distance for verification, mm (default: 2 × the model's sample spacing plus
+    /// 1.5 × the scan's, at least 1 mm — it judges scan points against the dense model).
     pub inlier_distance: Option<f64>,
     /// Smallest fraction of the object's points that must lie on the posed model.
     pub min_fitness: f64,
@@ -186,7 +190,7 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
 
     // Score every candidate cheaply (object points on the model × expected-visible model points
     // on the scene), check the best few with a short ICP, and refine the winner on all points.
-    let tol = cfg.inlier_distance.unwrap_or((3.0 * spacing).max(1.0));
+    let tol = cfg.inlier_distance.unwrap_or((2.0 * model.spacing + 1.5 * spacing.min(2.0 * model.spacing)).max(1.0));
     let step = (object.len() / 600).max(1);
     let sample: Vec<Point> = object.iter().step_by(step).copied().collect();
     let heights = HeightMap::new(scene, &up, (1.5 * spacing).max(0.5));
