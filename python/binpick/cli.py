@@ -73,9 +73,11 @@ def _pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> List[Path]
     scan = report.last_scan
     if scan is not None and scan.frames:
         written.append(viz.save_contact_sheet(out / "scan_contact_sheet.png", [scan.frames[k] for k in sorted(scan.frames)]))
+    loc = report.last_located
+    if loc is not None:
+        scan = loc.scan  # the picture shows the last part found, over the scan it was found in
     if scan is not None and len(scan.points):
-        loc = report.last_located
-        if loc is not None and loc.scan is scan:
+        if loc is not None:
             title = f"{len(scan.points)} points; {model.name} found with score {loc.result.score:.2f}"
             if loc.truth is not None:
                 title += f", {loc.truth.rotation_error_deg:.2f}° / {loc.truth.translation_error_mm:.2f} mm from the truth"
