@@ -138,6 +138,8 @@ pub struct Laser {
 
 impl Default for Laser {
     /// A red line laser 130 mm to the camera's right (+x), aimed at the optical axis 520 mm out.
+    /// The single definition of the default projector: `binpick.sim.Laser` reads it through
+    /// `binpick._core.sim_default_laser`.
     fn default() -> Self {
         let aim = (-130.0f64).atan2(520.0);
         Laser {
