@@ -87,20 +87,14 @@ def triangulate(
     if on_singular not in ("drop", "raise"):
         raise InvalidInputError(f"on_singular: {on_singular!r} is not 'drop' or 'raise'")
     threads = count(num_threads, "num_threads")
-    px = as_points(pixels, "pixels", columns=2, min_points=0)
-    idx = as_float_array(frame_index, "frame_index")
-    if idx.shape != (len(px),):
-        raise ShapeError(f"frame_index: expected {len(px)} frame indices (one per pixel), got shape {idx.shape}")
-    check_finite(idx, "frame_index")
-    if (idx != np.round(idx)).any():
-        raise InvalidInputError("frame_index: frame indices must be whole numbers")
-    idx = idx.astype(np.int64)
+    # NaN and pixels outside the image are named by the core's checks (NonFiniteError, InvalidInputError).
+    px = as_float_array(pixels, "pixels")
+    if px.ndim != 2 or px.shape[1] != 2:
+        raise ShapeError(f"pixels: expected an (N, 2) array of (u, v), got shape {px.shape}")
+    idx = _frame_indices(frame_index, len(px))
     ang = as_angles(angles, "angles")
-    poses = np.asarray(T_base_flanges, dtype=np.float64) if not isinstance(T_base_flanges, np.ndarray) else T_base_flanges
-    if poses.ndim != 3 or poses.shape[1:] != (4, 4) or len(poses) != len(ang):
-        raise ShapeError(f"T_base_flanges: expected shape ({len(ang)}, 4, 4), one pose per angle, got {poses.shape}")
-    poses = np.ascontiguousarray(np.stack([as_transform(p, f"T_base_flanges[{i}]") for i, p in enumerate(poses)]) if len(poses) else poses.astype(np.float64))
-    pts, status = _core.triangulate_scan(
+    poses = _poses(T_base_flanges, len(ang))
+    pts, status, px = _core.triangulate_scan(
         *_camera_args(calibration.camera),
         np.ascontiguousarray(calibration.T_camera_laser),
         np.ascontiguousarray(calibration.T_flange_camera),
@@ -110,11 +104,56 @@ def triangulate(
         idx,
         threads,
     )
-    valid = status == 0
-    if not valid.all() and on_singular == "raise":
-        i = int(np.argmax(~valid))
+    if not status.any():
+        # Every pixel gave a point (the usual case): no masking; ``px`` is the core's own copy.
+        return Cloud(points=pts, frame=idx.copy() if idx is frame_index else idx, pixels=px, angle=ang[idx])
+    if on_singular == "raise":
+        i = int(np.argmax(status != 0))
         raise SingularGeometryError(
             f"pixels: row {i} {px[i].tolist()} in frame {idx[i]}: {STATUS_REASONS[int(status[i])]}; "
             "check the laser calibration and the motor angle, or pass on_singular='drop'"
         )
-    return Cloud(points=pts[valid], frame=idx[valid], pixels=px[valid], angle=ang[idx[valid]] if len(ang) else np.zeros(0))
+    valid = status == 0
+    idx = idx[valid]
+    return Cloud(points=np.compress(valid, pts, axis=0), frame=idx, pixels=np.compress(valid, px, axis=0), angle=ang[idx])
+
+
+def _frame_indices(frame_index: np.ndarray | Sequence[int], n: int) -> np.ndarray:
+    """The frame indices as int64 (whole numbers given as floats accepted); their range is
+    checked by the core."""
+    raw = np.asarray(frame_index)
+    if raw.dtype.kind in "iu" and raw.dtype.itemsize <= 8 and raw.dtype != np.uint64:
+        idx = np.ascontiguousarray(raw, dtype=np.int64)
+        if idx.shape != (n,):
+            raise ShapeError(f"frame_index: expected {n} frame indices (one per pixel), got shape {idx.shape}")
+        return idx
+    idx = as_float_array(frame_index, "frame_index")
+    if idx.shape != (n,):
+        raise ShapeError(f"frame_index: expected {n} frame indices (one per pixel), got shape {idx.shape}")
+    check_finite(idx, "frame_index")
+    if (idx != np.round(idx)).any():
+        raise InvalidInputError("frame_index: frame indices must be whole numbers")
+    huge = np.abs(idx) > 2**62
+    if huge.any():
+        i = int(np.argmax(huge))
+        raise InvalidInputError(f"frame_index: entry {i} is {idx[i]}, beyond any frame of the scan")
+    return idx.astype(np.int64)
+
+
+def _poses(T_base_flanges: np.ndarray | Sequence[np.ndarray], frames: int) -> np.ndarray:
+    """The flange poses as a C-contiguous (frames, 4, 4) float64 stack of rigid transforms,
+    checked all at once; a bad one is named by :func:`as_transform`."""
+    poses = as_float_array(T_base_flanges, "T_base_flanges")
+    if poses.ndim != 3 or poses.shape[1:] != (4, 4) or len(poses) != frames:
+        raise ShapeError(f"T_base_flanges: expected shape ({frames}, 4, 4), one pose per angle, got {poses.shape}")
+    rot = poses[:, :3, :3]
+    gram = np.einsum("fji,fjk->fik", rot, rot) - np.eye(3)
+    good = (
+        np.isfinite(poses).all(axis=(1, 2))
+        & (np.abs(poses[:, 3] - [0.0, 0.0, 0.0, 1.0]) <= 1e-9).all(axis=1)
+        & (np.abs(gram).max(axis=(1, 2), initial=0.0) <= 1e-6)
+        & (np.linalg.det(rot) >= 0 if frames else True)
+    )
+    for i in np.flatnonzero(~good):
+        as_transform(poses[i], f"T_base_flanges[{i}]")
+    return poses

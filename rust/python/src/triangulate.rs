@@ -1,12 +1,13 @@
 //! Laser-line triangulation bindings.
 
-use crate::convert::{matrix4, points_to_py, vectors_to_py};
+use crate::convert::{matrix4, vectors_to_py};
 use crate::errors::{invalid, run};
 use binpick_core::cloud::isometry_from_matrix;
 use binpick_core::parallel;
-use binpick_core::triangulate::{pixel_rays, triangulate, Camera, FramePose, PointStatus, Sensor};
+use binpick_core::triangulate::{pixel_rays, triangulate_into, Camera, FramePose, PointStatus, Sensor};
 use nalgebra::{Matrix3, Matrix4, Vector3};
-use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use numpy::ndarray::Array2;
+use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
 
 fn camera(width: u32, height: u32, k: &PyReadonlyArray2<'_, f64>, dist: &PyReadonlyArray1<'_, f64>) -> PyResult<Camera> {
@@ -27,11 +28,11 @@ fn pixel_list(arr: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 2]>> {
     if a.ncols() != 2 {
         return Err(invalid("pixels", &format!("must have shape (N, 2) holding (u, v), got {:?}", a.shape())));
     }
+    // A C-contiguous array (what the Python layer passes) is copied in one pass.
+    if let Some(flat) = a.as_slice() {
+        return Ok(flat.chunks_exact(2).map(|r| [r[0], r[1]]).collect());
+    }
     Ok(a.rows().into_iter().map(|r| [r[0], r[1]]).collect())
-}
-
-fn statuses<'py>(py: Python<'py>, s: &[PointStatus]) -> Bound<'py, PyArray1<u8>> {
-    PyArray1::from_vec(py, s.iter().map(|&x| x as u8).collect())
 }
 
 /// Undistorted normalised rays (x, y, 1) of pixels; rows that cannot be undistorted are NaN.
@@ -53,7 +54,11 @@ fn pixel_rays_py<'py>(
     Ok(vectors_to_py(py, &v).into_any())
 }
 
-/// Triangulates a scan's laser pixels: (points in the base frame (N, 3), status (N,) uint8).
+/// Points (N, 3), status (N,), pixels (N, 2) of a triangulated scan.
+type ScanArrays<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<u8>>, Bound<'py, PyArray2<f64>>);
+
+/// Triangulates a scan's laser pixels: (points in the base frame (N, 3), status (N,) uint8,
+/// the pixels as copied in (N, 2), for the caller to keep without another copy).
 #[pyfunction]
 #[pyo3(signature = (width, height, k, dist, t_camera_laser0, t_flange_camera, angles, t_base_flanges, pixels, frame_index, num_threads))]
 #[allow(clippy::too_many_arguments)]
@@ -70,7 +75,7 @@ fn triangulate_scan<'py>(
     pixels: PyReadonlyArray2<'py, f64>,
     frame_index: PyReadonlyArray1<'py, i64>,
     num_threads: usize,
-) -> PyResult<(Bound<'py, pyo3::PyAny>, Bound<'py, PyArray1<u8>>)> {
+) -> PyResult<ScanArrays<'py>> {
     let cam = camera(width, height, &k, &dist)?;
     let laser = matrix4(&t_camera_laser0, "T_camera_laser")?;
     let hand_eye = matrix4(&t_flange_camera, "T_flange_camera")?;
@@ -85,11 +90,13 @@ fn triangulate_scan<'py>(
     let pose_mats: Vec<Matrix4<f64>> = (0..angles.len()).map(|f| Matrix4::from_fn(|r, c| poses[[f, r, c]])).collect();
     let px = pixel_list(&pixels)?;
     let idx = frame_index.as_array();
-    if let Some((i, &f)) = idx.iter().enumerate().find(|(_, &f)| f < 0 || f > u32::MAX as i64) {
+    let in_range = |f: i64| (0..=u32::MAX as i64).contains(&f);
+    if !idx.iter().fold(true, |ok, &f| ok & in_range(f)) {
+        let (i, f) = idx.iter().enumerate().find(|(_, &f)| !in_range(f)).expect("an entry out of range");
         return Err(invalid("frame_index", &format!("entry {i} is {f}; frame indices are ≥ 0")));
     }
     let idx: Vec<u32> = idx.iter().map(|&f| f as u32).collect();
-    let out = run(py, move || {
+    let (points, status, px) = run(py, move || {
         let sensor = Sensor {
             camera: cam,
             t_camera_laser0: isometry_from_matrix("T_camera_laser", &laser)?,
@@ -101,9 +108,17 @@ fn triangulate_scan<'py>(
             .enumerate()
             .map(|(i, (&angle, m))| Ok(FramePose { angle, t_base_flange: isometry_from_matrix(&format!("T_base_flanges[{i}]"), m)? }))
             .collect::<binpick_core::Result<Vec<_>>>()?;
-        parallel::with_threads(num_threads, || triangulate(&sensor, &frames, &px, &idx))
+        let mut points = vec![[0.0; 3]; px.len()];
+        let mut status = vec![PointStatus::Valid; px.len()];
+        parallel::with_threads(num_threads, || triangulate_into(&sensor, &frames, &px, &idx, &mut points, &mut status))?;
+        let status: Vec<u8> = status.into_iter().map(|s| s as u8).collect();
+        Ok((points, status, px))
     })?;
-    Ok((points_to_py(py, &out.points).into_any(), statuses(py, &out.status)))
+    // The buffers become the numpy arrays' storage without a copy.
+    let n = points.len();
+    let points = Array2::from_shape_vec((n, 3), points.into_flattened()).expect("n×3");
+    let px = Array2::from_shape_vec((n, 2), px.into_flattened()).expect("n×2");
+    Ok((PyArray2::from_owned_array(py, points), PyArray1::from_vec(py, status), PyArray2::from_owned_array(py, px)))
 }
 
 /// Adds the triangulation functions to the module.
