@@ -12,7 +12,7 @@ use crate::knn::KdIndex;
 use crate::normals::{estimate_normals, Orientation};
 use crate::registration::ccp::{ccp, BranchLayout, CcpConfig};
 use crate::registration::{icp, IcpConfig, IcpMethod, IcpTarget, RobustKernel};
-use crate::segment::{crop_to_bin, point_spacing, remove_support_planes, segment_top, BinBox, SegmentConfig};
+use crate::segment::{crop_to_bin, point_spacing, remove_support_planes, scan_spacing, segment_top, BinBox, SegmentConfig};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::time::Instant;
 
@@ -59,10 +59,11 @@ pub struct PoseConfig {
     pub up: Vector3<f64>,
     /// Coarse-pose method.
     pub method: CoarseMethod,
-    /// d* of segmentation, mm (default 3 × the scan's point spacing).
+    /// d* of segmentation, mm (default: 3 × the scan's point spacing, at least 1.6 × the spacing
+    /// across scan lines).
     pub d_star: Option<f64>,
     /// Smallest object region, points (default: a tenth of the points the model's visible half
-    /// would give at the scan's spacing, at least 15).
+    /// would give at the scan's sampling, at least 15).
     pub min_points: Option<usize>,
     /// Largest angle between neighbouring normals inside one object, radians.
     pub max_normal_angle: f64,
@@ -159,12 +160,16 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
     }
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
     let index = KdIndex::new(&pts);
-    let spacing = point_spacing(&pts, &index).max(1e-3);
-    let normals = estimate_normals(&pts, &index, 12.min(pts.len()), Orientation::TowardDirection(up))?;
+    let sampling = scan_spacing(&pts, &index);
+    let spacing = sampling.along.max(1e-3);
+    let across = sampling.across.max(spacing);
+    // Normals need neighbours from more than one scan line.
+    let k = ((12.0 * across / spacing).round() as usize).clamp(12, 64).min(pts.len());
+    let normals = estimate_normals(&pts, &index, k, Orientation::TowardDirection(up))?;
     lap("normals", &mut timings);
-    let visible_points = (0.5 * model.area / (spacing * spacing)).max(1.0);
+    let visible_points = (0.5 * model.area / (spacing * across)).max(1.0);
     let seg_cfg = SegmentConfig {
-        d_star: cfg.d_star.unwrap_or(3.0 * spacing),
+        d_star: cfg.d_star.unwrap_or((3.0 * spacing).max(1.6 * across)),
         min_points: cfg.min_points.unwrap_or(((0.1 * visible_points) as usize).max(15)),
         max_normal_angle: cfg.max_normal_angle,
         max_extent: 1.1 * model.diameter,
@@ -193,12 +198,14 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
     let tol = cfg.inlier_distance.unwrap_or((2.0 * model.spacing + 1.5 * spacing.min(2.0 * model.spacing)).max(1.0));
     let step = (object.len() / 600).max(1);
     let sample: Vec<Point> = object.iter().step_by(step).copied().collect();
-    let heights = HeightMap::new(scene, &up, (1.5 * spacing).max(0.5));
+    let heights = HeightMap::new(scene, &up, (1.5 * across).max(0.5));
     let model_step = (model.target.points().len() / 400).max(1);
-    let score_of = |t_model_scene: &Isometry3<f64>, probe: &[Point], tol: f64| -> f64 {
+    let fine_step = (model.target.points().len() / 4000).max(1);
+    let score_with = |t_model_scene: &Isometry3<f64>, probe: &[Point], tol: f64, model_step: usize| -> f64 {
         let on_model = inlier_fraction(probe, &model.target, t_model_scene, tol);
         on_model * coverage(model, &heights, &t_model_scene.inverse(), model_step, tol)
     };
+    let score_of = |t: &Isometry3<f64>, probe: &[Point], tol: f64| score_with(t, probe, tol, model_step);
     let coarse_tol = (0.08 * model.diameter).max(2.0 * tol);
     let prescore_step = (object.len() / 150).max(1);
     let probe: Vec<Point> = object.iter().step_by(prescore_step).copied().collect();
@@ -256,10 +263,28 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
     let mut best: Option<(f64, Isometry3<f64>, Isometry3<f64>)> = None;
     for (_, t0, cand) in tried.iter().take(3) {
         let r = icp(&sample, &model.target, t0, &short)?;
-        let s = score_of(&r.t_target_source, &sample, tol);
+        let s = score_with(&r.t_target_source, &sample, tol, fine_step);
         if best.as_ref().map_or(true, |b| s > b.0) {
             best = Some((s, r.t_target_source, *cand));
         }
+    }
+    // A half turn about one of the part's axes can fit the seen surface almost as well (a tee
+    // whose boss is hidden); judge the winner against its three half turns with the dense
+    // depth test, which sees the surface each would put where the scan saw free space.
+    if cfg.method == CoarseMethod::Ccp {
+        let (s0, t0, cand) = best.expect("at least one candidate");
+        let t_scene_model0 = t0.inverse();
+        let mut winner = (s0, t0, cand);
+        for axis in [Vector3::x(), Vector3::y(), Vector3::z()] {
+            let r = UnitQuaternion::from_scaled_axis(axis * std::f64::consts::PI);
+            let turned = t_scene_model0 * Isometry3::from_parts(Translation3::from(c_model - r * c_model), r);
+            let fit = icp(&sample, &model.target, &turned.inverse(), &short)?;
+            let s = score_with(&fit.t_target_source, &sample, tol, fine_step);
+            if s > winner.0 + 0.01 {
+                winner = (s, fit.t_target_source, turned);
+            }
+        }
+        best = Some(winner);
     }
     let (_, t_model_scene0, coarse) = best.expect("at least one candidate");
     let fine = IcpConfig {

@@ -41,6 +41,51 @@ pub fn point_spacing(points: &[Point], index: &KdIndex) -> f64 {
     *d.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1
 }
 
+/// Sampling of a scan, which is often anisotropic: a laser-line scan is dense along each line
+/// and sparse across lines.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScanSpacing {
+    /// Median distance to the nearest other point, mm (along a scan line).
+    pub along: f64,
+    /// Median distance to the nearest point off the local line direction, mm (across lines);
+    /// equals `along` for an even sampling.
+    pub across: f64,
+}
+
+/// Measures [`ScanSpacing`] on a sample of up to 256 points from their 32 nearest neighbours.
+pub fn scan_spacing(points: &[Point], index: &KdIndex) -> ScanSpacing {
+    let along = point_spacing(points, index);
+    if points.len() < 8 {
+        return ScanSpacing { along, across: along };
+    }
+    let step = (points.len() / 256).max(1);
+    let mut across: Vec<f64> = (0..points.len())
+        .step_by(step)
+        .filter_map(|i| {
+            let nb = index.knn(&points[i], 32);
+            // The local line direction from the nearest few; "across" is the nearest neighbour
+            // off it (for an even sampling that is close to the nearest neighbour anyway).
+            let local: Vec<Point> = nb.iter().take(6).map(|n| points[n.index]).collect();
+            let (_, cov) = covariance(&local);
+            let (_, axes) = principal_axes(&cov);
+            nb.iter()
+                .skip(1)
+                .map(|n| points[n.index] - points[i])
+                .filter(|d| d.dot(&axes[0]).abs() < 0.5 * d.norm())
+                .map(|d| d.norm())
+                .fold(None, |m: Option<f64>, d| Some(m.map_or(d, |m| m.min(d))))
+                .or_else(|| nb.last().map(|n| n.distance_squared.sqrt()))
+        })
+        .filter(|d| *d > 0.0)
+        .collect();
+    if across.is_empty() {
+        return ScanSpacing { along, across: along };
+    }
+    let mid = across.len() / 2;
+    let a = *across.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1;
+    ScanSpacing { along, across: a.max(along) }
+}
+
 /// Indices of the points inside `bin`, at least `margin` mm above its floor and inside its walls.
 pub fn crop_to_bin(points: &[Point], bin: &BinBox, margin: f64) -> Result<Vec<usize>> {
     if (0..3).any(|k| !(bin.max[k] > bin.min[k])) {
