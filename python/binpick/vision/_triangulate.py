@@ -94,7 +94,7 @@ def triangulate(
     idx = _frame_indices(frame_index, len(px))
     ang = as_angles(angles, "angles")
     poses = _poses(T_base_flanges, len(ang))
-    pts, status, px = _core.triangulate_scan(
+    pts, status, kept_pixels, kept = _core.triangulate_scan(
         *_camera_args(calibration.camera),
         np.ascontiguousarray(calibration.T_camera_laser),
         np.ascontiguousarray(calibration.T_flange_camera),
@@ -104,18 +104,17 @@ def triangulate(
         idx,
         threads,
     )
-    if not status.any():
-        # Every pixel gave a point (the usual case): no masking; ``px`` is the core's own copy.
-        return Cloud(points=pts, frame=idx.copy() if idx is frame_index else idx, pixels=px, angle=ang[idx])
+    # The core moved the pixels that gave a point, and their points, to the front, in order.
+    if kept == len(px):
+        return Cloud(points=pts, frame=idx.copy() if idx is frame_index else idx, pixels=kept_pixels, angle=ang[idx])
     if on_singular == "raise":
         i = int(np.argmax(status != 0))
         raise SingularGeometryError(
             f"pixels: row {i} {px[i].tolist()} in frame {idx[i]}: {STATUS_REASONS[int(status[i])]}; "
             "check the laser calibration and the motor angle, or pass on_singular='drop'"
         )
-    valid = status == 0
-    idx = idx[valid]
-    return Cloud(points=np.compress(valid, pts, axis=0), frame=idx, pixels=np.compress(valid, px, axis=0), angle=ang[idx])
+    idx = idx[status == 0]
+    return Cloud(points=pts[:kept], frame=idx, pixels=kept_pixels[:kept], angle=ang[idx])
 
 
 def _frame_indices(frame_index: np.ndarray | Sequence[int], n: int) -> np.ndarray:
