@@ -5,5 +5,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 cargo build --profile fast -p binpick-python --message-format=short "$@"
 suffix=$(python3 -c 'import sysconfig; print(sysconfig.get_config_var("EXT_SUFFIX"))')
-cp target/fast/lib_core.so "python/binpick/_core${suffix}"
+# Copy then rename: replacing the file in place would corrupt it under running processes.
+cp target/fast/lib_core.so "python/binpick/.core.tmp${suffix}"
+mv -f "python/binpick/.core.tmp${suffix}" "python/binpick/_core${suffix}"
 echo "binpick._core rebuilt (profile fast)"

@@ -16,6 +16,9 @@ use crate::segment::{crop_to_bin, point_spacing, remove_support_planes, scan_spa
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::time::Instant;
 
+/// Regions tried, top first, before the pipeline gives up.
+const MAX_REGIONS: usize = 8;
+
 /// How the coarse pose is found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CoarseMethod {
@@ -175,149 +178,178 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
         max_extent: 1.1 * model.diameter,
         up,
     };
-    let region = segment_top(&pts, Some(&normals), &index, &seg_cfg)?;
-    let object: Vec<Point> = region.iter().map(|&i| pts[i]).collect();
-    lap("segmentation", &mut timings);
-
-    // Coarse pose candidates, model → scene.
-    let candidates: Vec<Isometry3<f64>> = match (cfg.method, &model.layout) {
-        (CoarseMethod::Ccp, Some(layout)) => ccp(&object, layout, model.target.points(), model.target.normals().unwrap_or(&[]), Some(up), &cfg.ccp)?.candidates,
-        (CoarseMethod::Ccp, None) => {
-            return Err(Error::invalid("model", "CCP needs the model's branch layout (cylindrical branches from a junction); declare branches on the Model or use method=\"centroid\""));
+    // Table 2 with one addition: a region that no pose explains (a bin rim, a sliver of a part
+    // deep below others) is set aside and the next top region tried.
+    let mut excluded = vec![false; pts.len()];
+    let mut last_failure: Option<Error> = None;
+    for _ in 0..MAX_REGIONS {
+        let region = match segment_top(&pts, Some(&normals), &index, &seg_cfg, Some(&excluded)) {
+            Ok(r) => r,
+            Err(e) => return Err(last_failure.unwrap_or(e)),
+        };
+        let mut fit = |timings: &mut Vec<(&'static str, f64)>| -> Result<PoseEstimate> {
+        let object: Vec<Point> = region.iter().map(|&i| pts[i]).collect();
+        lap("segmentation", timings);
+        // A flat region wider than the part (a bin rim, a wall left in the scan) is not the part.
+        let (_, cov) = crate::cloud::covariance(&object);
+        let (vals, axes) = crate::cloud::principal_axes(&cov);
+        let along: Vec<f64> = object.iter().map(|p| p.coords.dot(&axes[0])).collect();
+        let span = along.iter().cloned().fold(f64::NEG_INFINITY, f64::max) - along.iter().cloned().fold(f64::INFINITY, f64::min);
+        if span > 1.05 * model.diameter && vals[2].sqrt() < 0.02 * model.diameter {
+            return Err(Error::NoObjectFound { reason: format!("the top region is flat and {span:.0} mm wide, wider than the part ({:.0} mm)", model.diameter) });
         }
-        (CoarseMethod::Centroid, _) => {
-            let c_obj = crate::cloud::centroid(&object);
-            let c_model = crate::cloud::centroid(model.target.points());
-            vec![Isometry3::from_parts(Translation3::from(c_obj - c_model), UnitQuaternion::identity())]
-        }
-    };
-    lap("coarse", &mut timings);
 
-    // Score every candidate cheaply (object points on the model × expected-visible model points
-    // on the scene), check the best few with a short ICP, and refine the winner on all points.
-    let tol = cfg.inlier_distance.unwrap_or((2.0 * model.spacing + 1.5 * spacing.min(2.0 * model.spacing)).max(1.0));
-    let step = (object.len() / 600).max(1);
-    let sample: Vec<Point> = object.iter().step_by(step).copied().collect();
-    let heights = HeightMap::new(scene, &up, (1.5 * across).max(0.5));
-    let model_step = (model.target.points().len() / 400).max(1);
-    let fine_step = (model.target.points().len() / 4000).max(1);
-    let score_with = |t_model_scene: &Isometry3<f64>, probe: &[Point], tol: f64, model_step: usize| -> f64 {
-        let on_model = inlier_fraction(probe, &model.target, t_model_scene, tol);
-        on_model * coverage(model, &heights, &t_model_scene.inverse(), model_step, tol)
-    };
-    let score_of = |t: &Isometry3<f64>, probe: &[Point], tol: f64| score_with(t, probe, tol, model_step);
-    let coarse_tol = (0.08 * model.diameter).max(2.0 * tol);
-    let prescore_step = (object.len() / 150).max(1);
-    let probe: Vec<Point> = object.iter().step_by(prescore_step).copied().collect();
-    let mut ranked: Vec<(f64, Isometry3<f64>)> = candidates.iter().map(|c| (score_of(&c.inverse(), &probe, coarse_tol), *c)).collect();
-    ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
-    // Views of a part on its side leave the coarse pose ambiguous up to a quarter or half turn
-    // about one of the part's axes; add those turns of the best two candidates before the ICP check.
-    let c_model = crate::cloud::centroid(model.target.points()).coords;
-    let with_turns = if cfg.method == CoarseMethod::Ccp { 2 } else { 0 };
-    let flips: Vec<Isometry3<f64>> = ranked
-        .iter()
-        .take(with_turns)
-        .flat_map(|(_, c)| {
-            let turns = [1.0, 0.5, -0.5].map(|k| k * std::f64::consts::PI);
-            [Vector3::x(), Vector3::y(), Vector3::z()].into_iter().flat_map(move |axis| {
-                turns.map(|angle| {
-                    let r = UnitQuaternion::from_scaled_axis(axis * angle);
-                    c * Isometry3::from_parts(Translation3::from(c_model - r * c_model), r)
+        // Coarse pose candidates, model → scene.
+        let candidates: Vec<Isometry3<f64>> = match (cfg.method, &model.layout) {
+            (CoarseMethod::Ccp, Some(layout)) => ccp(&object, layout, model.target.points(), model.target.normals().unwrap_or(&[]), Some(up), &cfg.ccp)?.candidates,
+            (CoarseMethod::Ccp, None) => {
+                return Err(Error::invalid("model", "CCP needs the model's branch layout (cylindrical branches from a junction); declare branches on the Model or use method=\"centroid\""));
+            }
+            (CoarseMethod::Centroid, _) => {
+                let c_obj = crate::cloud::centroid(&object);
+                let c_model = crate::cloud::centroid(model.target.points());
+                vec![Isometry3::from_parts(Translation3::from(c_obj - c_model), UnitQuaternion::identity())]
+            }
+        };
+        lap("coarse", timings);
+
+        // Score every candidate cheaply (object points on the model × expected-visible model points
+        // on the scene), check the best few with a short ICP, and refine the winner on all points.
+        let tol = cfg.inlier_distance.unwrap_or((2.0 * model.spacing + 1.5 * spacing.min(2.0 * model.spacing)).max(1.0));
+        let step = (object.len() / 600).max(1);
+        let sample: Vec<Point> = object.iter().step_by(step).copied().collect();
+        let heights = HeightMap::new(scene, &up, (1.5 * across).max(0.5));
+        let model_step = (model.target.points().len() / 400).max(1);
+        let fine_step = (model.target.points().len() / 4000).max(1);
+        let score_with = |t_model_scene: &Isometry3<f64>, probe: &[Point], tol: f64, model_step: usize| -> f64 {
+            let on_model = inlier_fraction(probe, &model.target, t_model_scene, tol);
+            on_model * coverage(model, &heights, &t_model_scene.inverse(), model_step, tol)
+        };
+        let score_of = |t: &Isometry3<f64>, probe: &[Point], tol: f64| score_with(t, probe, tol, model_step);
+        let coarse_tol = (0.08 * model.diameter).max(2.0 * tol);
+        let prescore_step = (object.len() / 150).max(1);
+        let probe: Vec<Point> = object.iter().step_by(prescore_step).copied().collect();
+        let mut ranked: Vec<(f64, Isometry3<f64>)> = candidates.iter().map(|c| (score_of(&c.inverse(), &probe, coarse_tol), *c)).collect();
+        ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
+        // Views of a part on its side leave the coarse pose ambiguous up to a quarter or half turn
+        // about one of the part's axes; add those turns of the best two candidates before the ICP check.
+        let c_model = crate::cloud::centroid(model.target.points()).coords;
+        let with_turns = if cfg.method == CoarseMethod::Ccp { 2 } else { 0 };
+        let flips: Vec<Isometry3<f64>> = ranked
+            .iter()
+            .take(with_turns)
+            .flat_map(|(_, c)| {
+                let turns = [1.0, 0.5, -0.5].map(|k| k * std::f64::consts::PI);
+                [Vector3::x(), Vector3::y(), Vector3::z()].into_iter().flat_map(move |axis| {
+                    turns.map(|angle| {
+                        let r = UnitQuaternion::from_scaled_axis(axis * angle);
+                        c * Isometry3::from_parts(Translation3::from(c_model - r * c_model), r)
+                    })
                 })
             })
-        })
-        .collect();
-    for f in flips {
-        ranked.push((score_of(&f.inverse(), &probe, coarse_tol), f));
-    }
-    ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
-    let short = IcpConfig {
-        method: IcpMethod::PointToPlane,
-        max_correspondence_distance: (0.25 * model.diameter).max(3.0 * tol),
-        max_iterations: 20,
-        rotation_tolerance: 1e-4,
-        translation_tolerance: 1e-2,
-        kernel: RobustKernel::Tukey((0.1 * model.diameter).max(3.0 * tol)),
-        num_threads: 0,
-        ..Default::default()
-    };
-    // Many readings give nearly the same rotation; keep the best-ranked of each 15° cluster.
-    let mut distinct: Vec<(f64, Isometry3<f64>)> = Vec::with_capacity(ranked.len());
-    for (sc, c) in ranked {
-        if !distinct.iter().any(|(_, d)| d.rotation.angle_to(&c.rotation) < 15f64.to_radians()) {
-            distinct.push((sc, c));
+            .collect();
+        for f in flips {
+            ranked.push((score_of(&f.inverse(), &probe, coarse_tol), f));
         }
-    }
-    let ranked = distinct;
-    // Stage one: every hypothesis gets a few ICP steps on a small probe (a coarse pose tens of
-    // degrees off still lands in the right basin, but cannot be judged before moving it).
-    let quick = IcpConfig { max_iterations: 8, ..short.clone() };
-    let mut tried: Vec<(f64, Isometry3<f64>, Isometry3<f64>)> = Vec::with_capacity(ranked.len());
-    for (_, cand) in &ranked {
-        let r = icp(&probe, &model.target, &cand.inverse(), &quick)?;
-        tried.push((score_of(&r.t_target_source, &probe, coarse_tol), r.t_target_source, *cand));
-    }
-    tried.sort_by(|a, b| b.0.total_cmp(&a.0));
-    // Stage two: the best three converge on a larger sample and are judged at the inlier distance.
-    let mut best: Option<(f64, Isometry3<f64>, Isometry3<f64>)> = None;
-    for (_, t0, cand) in tried.iter().take(3) {
-        let r = icp(&sample, &model.target, t0, &short)?;
-        let s = score_with(&r.t_target_source, &sample, tol, fine_step);
-        if best.as_ref().map_or(true, |b| s > b.0) {
-            best = Some((s, r.t_target_source, *cand));
-        }
-    }
-    // A half turn about one of the part's axes can fit the seen surface almost as well (a tee
-    // whose boss is hidden); judge the winner against its three half turns with the dense
-    // depth test, which sees the surface each would put where the scan saw free space.
-    if cfg.method == CoarseMethod::Ccp {
-        let (s0, t0, cand) = best.expect("at least one candidate");
-        let t_scene_model0 = t0.inverse();
-        let mut winner = (s0, t0, cand);
-        for axis in [Vector3::x(), Vector3::y(), Vector3::z()] {
-            let r = UnitQuaternion::from_scaled_axis(axis * std::f64::consts::PI);
-            let turned = t_scene_model0 * Isometry3::from_parts(Translation3::from(c_model - r * c_model), r);
-            let fit = icp(&sample, &model.target, &turned.inverse(), &short)?;
-            let s = score_with(&fit.t_target_source, &sample, tol, fine_step);
-            if s > winner.0 + 0.01 {
-                winner = (s, fit.t_target_source, turned);
+        ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let short = IcpConfig {
+            method: IcpMethod::PointToPlane,
+            max_correspondence_distance: (0.25 * model.diameter).max(3.0 * tol),
+            max_iterations: 20,
+            rotation_tolerance: 1e-4,
+            translation_tolerance: 1e-2,
+            kernel: RobustKernel::Tukey((0.1 * model.diameter).max(3.0 * tol)),
+            num_threads: 0,
+            ..Default::default()
+        };
+        // Many readings give nearly the same rotation; keep the best-ranked of each 15° cluster.
+        let mut distinct: Vec<(f64, Isometry3<f64>)> = Vec::with_capacity(ranked.len());
+        for (sc, c) in ranked {
+            if !distinct.iter().any(|(_, d)| d.rotation.angle_to(&c.rotation) < 15f64.to_radians()) {
+                distinct.push((sc, c));
             }
         }
-        best = Some(winner);
-    }
-    let (_, t_model_scene0, coarse) = best.expect("at least one candidate");
-    let fine = IcpConfig {
-        method: IcpMethod::PointToPlane,
-        max_correspondence_distance: 3.0 * tol,
-        max_iterations: 60,
-        rotation_tolerance: 1e-7,
-        translation_tolerance: 1e-5,
-        kernel: RobustKernel::Tukey(3.0 * tol),
-        num_threads: 0,
-        ..Default::default()
-    };
-    let refined = icp(&object, &model.target, &t_model_scene0, &fine)?;
-    let t_model_scene = refined.t_target_source;
-    lap("icp", &mut timings);
+        let ranked = distinct;
+        // Stage one: every hypothesis gets a few ICP steps on a small probe (a coarse pose tens of
+        // degrees off still lands in the right basin, but cannot be judged before moving it).
+        let quick = IcpConfig { max_iterations: 8, ..short.clone() };
+        let mut tried: Vec<(f64, Isometry3<f64>, Isometry3<f64>)> = Vec::with_capacity(ranked.len());
+        for (_, cand) in &ranked {
+            let r = icp(&probe, &model.target, &cand.inverse(), &quick)?;
+            tried.push((score_of(&r.t_target_source, &probe, coarse_tol), r.t_target_source, *cand));
+        }
+        tried.sort_by(|a, b| b.0.total_cmp(&a.0));
+        // Stage two: the best three converge on a larger sample and are judged at the inlier distance.
+        let mut best: Option<(f64, Isometry3<f64>, Isometry3<f64>)> = None;
+        for (_, t0, cand) in tried.iter().take(3) {
+            let r = icp(&sample, &model.target, t0, &short)?;
+            let s = score_with(&r.t_target_source, &sample, tol, fine_step);
+            if best.as_ref().map_or(true, |b| s > b.0) {
+                best = Some((s, r.t_target_source, *cand));
+            }
+        }
+        // A half turn about one of the part's axes can fit the seen surface almost as well (a tee
+        // whose boss is hidden); judge the winner against its three half turns with the dense
+        // depth test, which sees the surface each would put where the scan saw free space.
+        if cfg.method == CoarseMethod::Ccp {
+            let (s0, t0, cand) = best.expect("at least one candidate");
+            let t_scene_model0 = t0.inverse();
+            let mut winner = (s0, t0, cand);
+            for axis in [Vector3::x(), Vector3::y(), Vector3::z()] {
+                let r = UnitQuaternion::from_scaled_axis(axis * std::f64::consts::PI);
+                let turned = t_scene_model0 * Isometry3::from_parts(Translation3::from(c_model - r * c_model), r);
+                let fit = icp(&sample, &model.target, &turned.inverse(), &short)?;
+                let s = score_with(&fit.t_target_source, &sample, tol, fine_step);
+                if s > winner.0 + 0.01 {
+                    winner = (s, fit.t_target_source, turned);
+                }
+            }
+            best = Some(winner);
+        }
+        let (_, t_model_scene0, coarse) = best.expect("at least one candidate");
+        let fine = IcpConfig {
+            method: IcpMethod::PointToPlane,
+            max_correspondence_distance: 3.0 * tol,
+            max_iterations: 60,
+            rotation_tolerance: 1e-7,
+            translation_tolerance: 1e-5,
+            kernel: RobustKernel::Tukey(3.0 * tol),
+            num_threads: 0,
+            ..Default::default()
+        };
+        let refined = icp(&object, &model.target, &t_model_scene0, &fine)?;
+        let t_model_scene = refined.t_target_source;
+        lap("icp", timings);
 
-    let (score, rmse) = inlier_stats(&object, &model.target, &t_model_scene, tol);
-    if score < cfg.min_fitness {
-        return Err(Error::NoObjectFound {
-            reason: format!("the best pose explains only {:.0} % of the top object's {} points within {tol:.2} mm (need {:.0} %)", 100.0 * score, object.len(), 100.0 * cfg.min_fitness),
-        });
+        let (score, rmse) = inlier_stats(&object, &model.target, &t_model_scene, tol);
+        if score < cfg.min_fitness {
+            return Err(Error::NoObjectFound {
+                reason: format!("the best pose explains only {:.0} % of the top object's {} points within {tol:.2} mm (need {:.0} %)", 100.0 * score, object.len(), 100.0 * cfg.min_fitness),
+            });
+        }
+        let t_scene_model = t_model_scene.inverse();
+        let indices: Vec<usize> = kept
+            .iter()
+            .copied()
+            .filter(|&i| {
+                let q = t_model_scene * scene[i];
+                model.target.search().nearest_within(&[q.x, q.y, q.z], tol * tol).is_some()
+            })
+            .collect();
+        lap("verification", timings);
+        Ok(PoseEstimate { t_scene_model, t_scene_model_coarse: coarse, score, rmse, indices, timings: timings.clone(), iterations: refined.iterations })
+        };
+        match fit(&mut timings) {
+            Err(Error::NoObjectFound { reason }) => {
+                for &i in &region {
+                    excluded[i] = true;
+                }
+                last_failure = Some(Error::NoObjectFound { reason });
+            }
+            other => return other,
+        }
     }
-    let t_scene_model = t_model_scene.inverse();
-    let indices: Vec<usize> = kept
-        .iter()
-        .copied()
-        .filter(|&i| {
-            let q = t_model_scene * scene[i];
-            model.target.search().nearest_within(&[q.x, q.y, q.z], tol * tol).is_some()
-        })
-        .collect();
-    lap("verification", &mut timings);
-    Ok(PoseEstimate { t_scene_model, t_scene_model_coarse: coarse, score, rmse, indices, timings, iterations: refined.iterations })
+    Err(last_failure.unwrap_or(Error::NoObjectFound { reason: "no region could be matched".into() }))
 }
 
 fn inlier_stats(points: &[Point], target: &IcpTarget, t: &Isometry3<f64>, tol: f64) -> (f64, f64) {

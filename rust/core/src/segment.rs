@@ -110,14 +110,14 @@ pub struct Plane {
     pub offset: f64,
 }
 
-/// Removes support planes (floor, walls) found by RANSAC: a plane is removed only when its
-/// inliers span more than `1.5 × model_diameter` in both in-plane directions, so that the flat
-/// faces of parts stay. Returns the kept indices and the removed planes.
+/// Removes support planes (floor, walls, rims) found by RANSAC, largest first: a plane is
+/// removed only when its inliers span more than `1.2 × model_diameter`, which no face of the
+/// part can, so that the flat faces of parts stay. Returns the kept indices and the removed planes.
 pub fn remove_support_planes(points: &[Point], model_diameter: f64, tolerance: f64, seed: u64) -> (Vec<usize>, Vec<Plane>) {
     let mut keep: Vec<usize> = (0..points.len()).collect();
     let mut planes = Vec::new();
     let mut rng = Rng::new(seed);
-    for _ in 0..5 {
+    for _ in 0..10 {
         if keep.len() < 50 {
             break;
         }
@@ -132,7 +132,7 @@ pub fn remove_support_planes(points: &[Point], model_diameter: f64, tolerance: f
             s.sort_by(|a, b| a.total_cmp(b));
             s[(s.len() * 98) / 100] - s[(s.len() * 2) / 100]
         };
-        if span(&axes[0]) < 1.5 * model_diameter || span(&axes[1]) < 1.5 * model_diameter {
+        if span(&axes[0]) < 1.2 * model_diameter {
             break;
         }
         let removed: std::collections::HashSet<usize> = inliers.into_iter().collect();
@@ -188,8 +188,9 @@ pub struct SegmentConfig {
 }
 
 /// Table 2: the region of the highest point that makes a whole object. Returns indices into
-/// `points` (of the first region with at least `min_points`), or `NoObjectFound`.
-pub fn segment_top(points: &[Point], normals: Option<&[Vector3<f64>]>, index: &KdIndex, cfg: &SegmentConfig) -> Result<Vec<usize>> {
+/// `points` (of the first region with at least `min_points`), or `NoObjectFound`. Points marked
+/// in `excluded` (regions already tried) are neither seeds nor members.
+pub fn segment_top(points: &[Point], normals: Option<&[Vector3<f64>]>, index: &KdIndex, cfg: &SegmentConfig, excluded: Option<&[bool]>) -> Result<Vec<usize>> {
     if !(cfg.d_star.is_finite() && cfg.d_star > 0.0) {
         return Err(Error::invalid("d_star", format!("must be a positive distance in mm, got {}", cfg.d_star)));
     }
@@ -197,7 +198,10 @@ pub fn segment_top(points: &[Point], normals: Option<&[Vector3<f64>]>, index: &K
     let up = cfg.up.normalize();
     let mut order: Vec<usize> = (0..points.len()).collect();
     order.sort_by(|&a, &b| points[b].coords.dot(&up).total_cmp(&points[a].coords.dot(&up)));
-    let mut label = vec![false; points.len()];
+    let mut label = excluded.map_or_else(|| vec![false; points.len()], |e| e.to_vec());
+    if label.len() != points.len() {
+        return Err(Error::invalid("excluded", "must mark every point"));
+    }
     for &seed in &order {
         if label[seed] {
             continue;
@@ -258,10 +262,10 @@ mod tests {
         pts.extend([Point::new(60.0, 60.0, 50.0), Point::new(60.5, 60.0, 50.0), Point::new(61.0, 60.0, 50.0)]);
         let idx = KdIndex::new(&pts);
         let cfg = SegmentConfig { d_star: 1.5, min_points: 50, max_normal_angle: std::f64::consts::PI, max_extent: f64::INFINITY, up: Vector3::z() };
-        let region = segment_top(&pts, None, &idx, &cfg).unwrap();
+        let region = segment_top(&pts, None, &idx, &cfg, None).unwrap();
         assert_eq!(region.len(), 400);
         assert!(region.iter().all(|&i| pts[i].z == 10.0));
         let cfg_big = SegmentConfig { min_points: 1000, ..cfg };
-        assert!(matches!(segment_top(&pts, None, &idx, &cfg_big), Err(Error::NoObjectFound { .. })));
+        assert!(matches!(segment_top(&pts, None, &idx, &cfg_big, None), Err(Error::NoObjectFound { .. })));
     }
 }
