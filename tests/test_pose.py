@@ -134,7 +134,7 @@ def test_without_a_bin_box_the_support_planes_go_but_the_part_stays(pile_scene):
     found = ids[res.indices]
     assert (found < 0).mean() < 0.02  # almost no floor or wall points in the object
     top = np.bincount(found[found >= 0]).argmax()
-    assert (found == top).mean() > 0.95
+    assert (found == top).mean() > 0.9  # the rest: the touching neighbour
     # This top part stands on its run with the branch up; its position is found, while the turn
     # about the upright branch is only weakly seen (a known limit, checked in the bin-box test).
     assert pose_error(res.T_scene_model, pile.pose(int(top)))[1] < 3
