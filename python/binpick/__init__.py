@@ -9,59 +9,61 @@ from __future__ import annotations
 
 from . import _core
 from . import parts
-from .errors import (
-    BinpickError,
-    CalibrationError,
-    DegenerateCloudError,
-    DeviceError,
-    DeviceTimeout,
-    DTypeError,
-    InternalError,
-    InvalidInputError,
-    MeshFileError,
-    MeshFileNotFoundError,
-    NoObjectFound,
-    NonFiniteError,
-    ProtocolError,
-    SafetyError,
-    ShapeError,
-    TooFewPointsError,
-    UnknownUnitError,
-)
+from .errors import *  # noqa: F401,F403 - the exception classes are public API
+from .errors import __all__ as _error_names
 from .models import Branch, Model, estimate_normals, read_ply, voxel_downsample, write_ply
 from .poses import IcpResult, PoseResult, estimate_pose, grasp_pose, icp
 
 __version__ = _core.__version__
 
+# Subpackages and names that pull in OpenCV, serial I/O or the simulator load on first use.
+_LAZY_MODULES = ("calibration", "cell", "devices", "scan", "sim", "vision", "viz")
+_LAZY_NAMES = {
+    "Cloud": "vision",
+    "extract_line": "vision",
+    "triangulate": "vision",
+    "reconstruct": "vision",
+    "CameraIntrinsics": "calibration",
+    "CellCalibration": "calibration",
+    "Scan": "scan",
+    "load_scan": "scan",
+    "save_scan": "scan",
+    "Cell": "cell",
+    "CellConfig": "cell",
+    "PickRecord": "cell",
+    "simulated_cell": "cell",
+}
+
+
+def __getattr__(name: str):
+    import importlib
+
+    if name in _LAZY_MODULES:
+        return importlib.import_module(f".{name}", __name__)
+    if name in _LAZY_NAMES:
+        return getattr(importlib.import_module(f".{_LAZY_NAMES[name]}", __name__), name)
+    raise AttributeError(f"module 'binpick' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_LAZY_MODULES) | set(_LAZY_NAMES))
+
+
 __all__ = [
     "__version__",
-    "BinpickError",
     "Branch",
-    "CalibrationError",
-    "DegenerateCloudError",
-    "DeviceError",
-    "DeviceTimeout",
-    "DTypeError",
     "IcpResult",
-    "InternalError",
-    "InvalidInputError",
-    "MeshFileError",
-    "MeshFileNotFoundError",
     "Model",
-    "NoObjectFound",
-    "NonFiniteError",
-    "ProtocolError",
-    "SafetyError",
-    "ShapeError",
-    "TooFewPointsError",
-    "UnknownUnitError",
+    "PoseResult",
     "estimate_normals",
     "estimate_pose",
     "grasp_pose",
-    "PoseResult",
     "icp",
     "parts",
     "read_ply",
     "voxel_downsample",
     "write_ply",
+    *_error_names,
+    *_LAZY_MODULES,
+    *_LAZY_NAMES,
 ]
