@@ -206,14 +206,16 @@ impl Camera {
 }
 
 /// One node of a [`RayTable`]: the undistorted ray `(x, y)` at the node's pixel and the inverse
-/// `[[a, b], [b, c]]` of the distortion's Jacobian there.
+/// `[[a, b], [b, c]]` of the distortion's Jacobian there. The Jacobian only scales a correction
+/// of about 1e-6, so single precision is plenty, and a node fills half a cache line.
 #[derive(Debug, Clone, Copy)]
+#[repr(C, align(32))]
 struct Node {
     x: f64,
     y: f64,
-    a: f64,
-    b: f64,
-    c: f64,
+    a: f32,
+    b: f32,
+    c: f32,
 }
 
 /// Undistorted rays of one camera on a grid of nodes every 4 pixels over the image, for fast
@@ -250,11 +252,11 @@ impl RayTable {
                 let u = -0.5 + (k % cols) as f64 * TABLE_STEP;
                 let v = -0.5 + (k / cols) as f64 * TABLE_STEP;
                 let Some(r) = camera.ray(u, v) else {
-                    return Node { x: f64::NAN, y: f64::NAN, a: f64::NAN, b: f64::NAN, c: f64::NAN };
+                    return Node { x: f64::NAN, y: f64::NAN, a: f32::NAN, b: f32::NAN, c: f32::NAN };
                 };
                 let (jxx, cross, jyy) = camera.jacobian(r.x, r.y);
                 let det = jxx * jyy - cross * cross;
-                Node { x: r.x, y: r.y, a: jyy / det, b: -cross / det, c: jxx / det }
+                Node { x: r.x, y: r.y, a: (jyy / det) as f32, b: (-cross / det) as f32, c: (jxx / det) as f32 }
             })
             .collect();
         RayTable { camera: *camera, inv_fx, inv_fy, cols, rows, nodes }
@@ -319,7 +321,7 @@ impl RayTable {
         let (ex, ey) = cam.residual(x, y, xd, yd);
         // NaN (a failed node) fails the test too.
         if ex * ex + ey * ey < TABLE_ACCEPT * TABLE_ACCEPT {
-            let (a, b, c) = (lerp(|n| n.a), lerp(|n| n.b), lerp(|n| n.c));
+            let (a, b, c) = (lerp(|n| n.a as f64), lerp(|n| n.b as f64), lerp(|n| n.c as f64));
             return Some((x - (a * ex + b * ey), y - (b * ex + c * ey)));
         }
         // A poor guess (a failed node nearby, or a pixel off the grid): the full iteration.
@@ -419,11 +421,12 @@ pub fn triangulate_into(
     if let Some((i, f)) = frames.iter().enumerate().find(|(_, f)| !f.angle.is_finite()) {
         return Err(Error::NonFinite { arg: "angles".into(), index: i, value: f.angle.to_string() });
     }
-    let per_frame: Vec<(Plane, Matrix3<f64>, Vector3<f64>)> = frames
+    let per_frame: Vec<FrameGeometry> = frames
         .iter()
         .map(|f| {
             let t_base_camera = f.t_base_flange * sensor.t_flange_camera;
-            (laser_plane(&sensor.t_camera_laser0, f.angle), t_base_camera.rotation.to_rotation_matrix().into_inner(), t_base_camera.translation.vector)
+            let plane = laser_plane(&sensor.t_camera_laser0, f.angle);
+            FrameGeometry { plane, rotation: t_base_camera.rotation.to_rotation_matrix().into_inner(), translation: t_base_camera.translation.vector }
         })
         .collect();
     let table = RayTable::shared(&sensor.camera);
@@ -433,21 +436,48 @@ pub fn triangulate_into(
         .zip(pixels.par_chunks(CHUNK).zip(frame_index.par_chunks(CHUNK)))
         .for_each(|((points, status), (pixels, frame_index))| {
             for (((out, st), &[u, v]), &f) in points.iter_mut().zip(status.iter_mut()).zip(pixels).zip(frame_index) {
-                let (plane, rotation, translation) = &per_frame[f as usize];
-                let hit = table
-                    .ray_xy(u, v)
-                    .ok_or(PointStatus::NotUndistortable)
-                    .and_then(|(x, y)| intersect_ray_plane(&Vector3::new(x, y, 1.0), plane));
-                (*out, *st) = match hit {
-                    Ok(p) => {
-                        let q = rotation * p.coords + translation;
-                        ([q.x, q.y, q.z], PointStatus::Valid)
-                    }
-                    Err(s) => ([f64::NAN; 3], s),
+                (*out, *st) = match table.ray_xy(u, v) {
+                    Some((x, y)) => per_frame[f as usize].point(x, y),
+                    None => ([f64::NAN; 3], PointStatus::NotUndistortable),
                 };
             }
         });
     Ok(())
+}
+
+/// The laser plane and the camera pose in the base frame of one frame.
+struct FrameGeometry {
+    plane: Plane,
+    rotation: Matrix3<f64>,
+    translation: Vector3<f64>,
+}
+
+impl FrameGeometry {
+    /// The base-frame point where the ray `(x, y, 1)` meets the plane, as
+    /// [`intersect_ray_plane`] decides, written with selects instead of branches: singular
+    /// rays among valid ones then cost no mispredicted jumps.
+    #[inline(always)]
+    fn point(&self, x: f64, y: f64) -> ([f64; 3], PointStatus) {
+        let n = &self.plane.normal;
+        let denom = n.x * x + n.y * y + n.z;
+        let s = self.plane.offset / denom;
+        let parallel = denom * denom <= PARALLEL_SINE * PARALLEL_SINE * (x * x + y * y + 1.0);
+        let status = if parallel {
+            PointStatus::Parallel
+        } else if s <= 0.0 {
+            PointStatus::Behind
+        } else {
+            PointStatus::Valid
+        };
+        let r = &self.rotation;
+        let scale = if status == PointStatus::Valid { s } else { f64::NAN };
+        let point = [
+            self.translation.x + scale * (r[(0, 0)] * x + r[(0, 1)] * y + r[(0, 2)]),
+            self.translation.y + scale * (r[(1, 0)] * x + r[(1, 1)] * y + r[(1, 2)]),
+            self.translation.z + scale * (r[(2, 0)] * x + r[(2, 1)] * y + r[(2, 2)]),
+        ];
+        (point, status)
+    }
 }
 
 #[cfg(test)]
