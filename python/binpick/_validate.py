@@ -60,12 +60,18 @@ def as_transform(value: Any, name: str) -> np.ndarray:
     if arr.shape != (4, 4):
         raise ShapeError(f"{name}: expected a (4, 4) homogeneous transform, got shape {arr.shape}")
     check_finite(arr, name)
+    return check_rigid(arr, name)
+
+
+def check_rigid(arr: np.ndarray, name: str, error: type = InvalidInputError) -> np.ndarray:
+    """Raises ``error`` unless the 4×4 ``arr`` is rigid: last row 0 0 0 1, rotation block
+    orthonormal with determinant +1 (to 1e-6)."""
     if not np.allclose(arr[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
-        raise InvalidInputError(f"{name}: the last row must be [0, 0, 0, 1], got {arr[3].tolist()}")
+        raise error(f"{name}: the last row must be [0, 0, 0, 1], got {arr[3].tolist()}")
     rot = arr[:3, :3]
     err = float(np.abs(rot.T @ rot - np.eye(3)).max())
     if err > 1e-6 or np.linalg.det(rot) < 0:
-        raise InvalidInputError(
+        raise error(
             f"{name}: the 3×3 block is not a rotation (|RᵀR − I| = {err:.2e}, det = {np.linalg.det(rot):.4f}); "
             "pass a rigid transform without scale or reflection"
         )

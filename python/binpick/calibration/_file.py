@@ -15,6 +15,7 @@ try:
 except ModuleNotFoundError:  # Python < 3.11
     import tomli as tomllib  # type: ignore[no-redef]
 
+from .._validate import check_rigid
 from ..errors import CalibrationError, FileWriteError
 from ._checks import calibration_matrix
 
@@ -23,17 +24,7 @@ FORMAT_VERSION = 1
 
 
 def _rigid(value: Any, field: str) -> np.ndarray:
-    arr = calibration_matrix(value, field, (4, 4))
-    if not np.allclose(arr[3], [0, 0, 0, 1], atol=1e-9):
-        raise CalibrationError(f"{field}: the last row must be [0, 0, 0, 1], got {arr[3].tolist()}")
-    rot = arr[:3, :3]
-    err = float(np.abs(rot.T @ rot - np.eye(3)).max())
-    if err > 1e-6 or np.linalg.det(rot) < 0:
-        raise CalibrationError(
-            f"{field}: the 3×3 block is not a rotation (|RᵀR − I| = {err:.1e}); "
-            "store a rigid transform (orthonormal rotation, det +1)"
-        )
-    return arr
+    return check_rigid(calibration_matrix(value, field, (4, 4)), field, CalibrationError)
 
 
 def _frozen(arr: np.ndarray) -> np.ndarray:
