@@ -130,9 +130,10 @@ def triangulate_scan(
     pixels: _F64,
     frame_index: _I64,
     num_threads: int,
-) -> tuple[_F64, _U8]:
+) -> tuple[_F64, _U8, _F64, int]:
     """Laser pixels of a scan to base-frame points: (points (N, 3), status (N,): 0 valid,
-    1 ray parallel to the sheet, 2 behind the camera, 3 not undistortable)."""
+    1 ray parallel to the sheet, 2 behind the camera, 3 not undistortable; pixels (N, 2);
+    kept). The first ``kept`` rows of points and pixels are those that triangulated."""
 
 # --- simulated cell -------------------------------------------------------------------------
 
