@@ -7,7 +7,9 @@ line of standard output and serves until Ctrl-C.
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+import threading
 import time
 from typing import List, Optional
 
@@ -66,6 +68,11 @@ def emulate_main(argv: Optional[List[str]] = None) -> int:
     except BinpickError as exc:
         print(f"binpick emulate: {exc}", file=sys.stderr)
         return 2
+    # A process started in the background by a shell inherits SIGINT ignored, and Python then
+    # never raises KeyboardInterrupt: take Ctrl-C (and SIGTERM) explicitly so it always stops.
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, signal.default_int_handler)
     with emulator:
         print(emulator.slave_path, flush=True)
         print(f"binpick emulate: {args.device} emulator serving on {emulator.slave_path}; press Ctrl-C to stop",
