@@ -126,20 +126,16 @@ def peers():
     return out
 
 
-def o3d_iterations(o3d, reg, source, target, t_final) -> int:
-    """Open3D does not report its iteration count: find the smallest count that reproduces its result."""
+def o3d_seconds_per_iteration(o3d, reg, source, target, estimation, with_normals, normals, iterations=10) -> float:
+    """Open3D does not report how many iterations it ran: time a fixed number instead."""
     ps = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(source))
     pt = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(target))
-    lo, hi = 1, MAX_ITERS
-    while lo < hi:
-        mid = (lo + hi) // 2
-        crit = reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7, max_iteration=mid)
-        r = reg.registration_icp(ps, pt, MAX_DIST, np.eye(4), reg.TransformationEstimationPointToPoint(), crit)
-        if np.abs(np.asarray(r.transformation) - t_final).max() < 1e-12:
-            hi = mid
-        else:
-            lo = mid + 1
-    return lo
+    if with_normals:
+        pt.normals = o3d.utility.Vector3dVector(np.array(normals))
+    crit = reg.ICPConvergenceCriteria(relative_fitness=0.0, relative_rmse=0.0, max_iteration=iterations)
+    start = time.perf_counter()
+    reg.registration_icp(ps, pt, MAX_DIST, np.eye(4), estimation, crit)
+    return (time.perf_counter() - start) / iterations
 
 
 def main(argv=None) -> int:
@@ -152,7 +148,7 @@ def main(argv=None) -> int:
     extra = peers()
     fixed = extra.pop("_o3d_fixed", None)
     methods.update(extra)
-    rows = {name: {"time": [], "its": [], "rot": [], "trans": []} for name in methods}
+    rows = {name: {"time": [], "its": [], "rot": [], "trans": [], "per_it": []} for name in methods}
     rng = np.random.default_rng(7)
     for part, model_fn in surfaces(args.parts, args.points):
         for trial in range(args.trials):
@@ -161,8 +157,13 @@ def main(argv=None) -> int:
                 start = time.perf_counter()
                 t_est, its = run(source, target, normals)
                 elapsed = time.perf_counter() - start
-                if its is None and fixed is not None and name == "Open3D point_to_point":
-                    its = o3d_iterations(*fixed, source, target, t_est)
+                per_it = None
+                if its is None and fixed is not None:
+                    o3d, reg = fixed
+                    plane = name.endswith("plane")
+                    est = reg.TransformationEstimationPointToPlane() if plane else reg.TransformationEstimationPointToPoint()
+                    per_it = o3d_seconds_per_iteration(o3d, reg, source, target, est, plane, normals)
+                rows[name]["per_it"].append(per_it if per_it is not None else elapsed / max(its or 1, 1))
                 rot, trans = errors(t_est, truth)
                 r = rows[name]
                 r["time"].append(elapsed)
@@ -179,10 +180,9 @@ def main(argv=None) -> int:
         t = statistics.median(r["time"])
         its = [i for i in r["its"] if i]
         it = statistics.median(its) if its else None
-        per = statistics.median([tt / n / i * 1e6 for tt, i in zip(r["time"], r["its"]) if i]) if its else None
+        per = statistics.median([p / n * 1e6 for p in r["per_it"]])
         per_pt[name] = per
-        print(f"| {name} | {t * 1e3:.0f} | {it if it is not None else 'n/a'} | {per:.3f} | {statistics.median(r['rot']):.4f} / {max(r['rot']):.4f} | {statistics.median(r['trans']):.4f} / {max(r['trans']):.4f} |" if per is not None else
-              f"| {name} | {t * 1e3:.0f} | n/a | n/a | {statistics.median(r['rot']):.4f} / {max(r['rot']):.4f} | {statistics.median(r['trans']):.4f} / {max(r['trans']):.4f} |")
+        print(f"| {name} | {t * 1e3:.0f} | {it if it is not None else 'n/a'} | {per:.3f} | {statistics.median(r['rot']):.4f} / {max(r['rot']):.4f} | {statistics.median(r['trans']):.4f} / {max(r['trans']):.4f} |")
     ours = per_pt["binpick point_to_point"]
     for peer in ("small_gicp ICP", "Open3D point_to_point"):
         if per_pt.get(peer):
