@@ -113,11 +113,15 @@ def _rot_about(axis: np.ndarray, angle: float) -> np.ndarray:
     return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
 
 
-def branch_grasps(model: Model, *, finger_width_mm: float = 20.0, steps: int = 12) -> Dict[str, np.ndarray]:
+def branch_grasps(model: Model, *, finger_width_mm: float = 20.0, steps: int = 72) -> Dict[str, np.ndarray]:
     """Grasps across every cylindrical branch of ``model`` (``model.branches``): the TCP on the
     branch axis, ``finger_width_mm / 2 + 7`` mm in from the end face, the fingers closing across
     the axis, approached from ``steps`` directions around it (and each turned half a turn about
     the approach axis, the same grip with the wrist the other way round).
+
+    The steps are fine (5° by default) because a part in a pile usually has a branch tilted and
+    neighbours close by: the approaches within the tool-tilt limit and clear of the neighbours are
+    often a narrow range about the branch (12 steps of 30° routinely missed all of them).
 
     The gripper frame: z is the approach direction (into the part), x the fingers' closing
     direction, the origin the TCP between the fingertips. Returns name → ``T_gripper_object``.
@@ -245,7 +249,8 @@ class CellConfig:
         limits: the cell's motion limits (also given to the robot driver).
         approach_distance_mm: the straight approach along the gripper axis before the grasp, mm.
         clearance_z_mm: flange height for travelling over the bin, mm; None = the approach height + 20 mm.
-        max_collision_points: a grasp is refused when more scene points than this lie inside the open gripper.
+        max_collision_points: a grasp is refused when more scene points than this lie inside the open gripper
+            (fingers or body), or more points of the located part's own model (at the located pose).
         max_candidates: parts tried per scan when the top part has no usable grasp.
         reachable: optional test ``T_base_flange → bool`` from the arm's kinematics; None = trust
             the controller (it refuses unreachable targets, and the cell then stops).
@@ -269,7 +274,7 @@ class CellConfig:
     approach_distance_mm: float = 40.0
     clearance_z_mm: Optional[float] = None
     max_collision_points: int = 15
-    max_candidates: int = 3
+    max_candidates: int = 5
     reachable: Optional[Callable[[np.ndarray], bool]] = None
     symmetries: Sequence[Any] = ()
     min_score: float = 0.0
@@ -572,6 +577,7 @@ class Cell:
         self.camera = camera
         self.progress = progress or _quiet
         self.truth = truth
+        self._empty_grips: List[np.ndarray] = []
         check_static_poses(config)
 
     # -- life cycle
@@ -702,14 +708,28 @@ class Cell:
         idx = np.asarray(result.indices, dtype=np.int64)
         return Located(scan=scan, result=result, T_base_object=T, indices=keep[idx[(idx >= 0) & (idx < len(keep))]], truth=truth)
 
+    EMPTY_GRIP_RADIUS_MM = 15.0
+    """A part located within this distance of where the gripper closed on nothing earlier in the
+    run is passed over: the same (wrong) pose would most likely be found and tried again."""
+
     def locate_and_plan(self, scan: ScanResult) -> Tuple[Located, PickPlan]:
-        """Locates the top part and plans its pick; when no grasp of it can be used, leaves its
-        points out and tries the next part, up to ``config.max_candidates`` parts."""
+        """Locates the top part and plans its pick; when no grasp of it can be used (or the gripper
+        already closed on nothing there earlier in the run), leaves its points out and tries the
+        next part, up to ``config.max_candidates`` parts."""
         excluded = np.zeros(len(scan.points), dtype=bool)
         last: Optional[NoGraspError] = None
         for _ in range(self.config.max_candidates):
-            located = self.locate(scan, exclude=excluded)
             try:
+                located = self.locate(scan, exclude=excluded)
+            except NoObjectFound:
+                if last is None:
+                    raise
+                break  # the parts found had no usable grasp: that is the reason to report
+            try:
+                t = located.T_base_object[:3, 3]
+                if any(np.linalg.norm(t - spot) < self.EMPTY_GRIP_RADIUS_MM for spot in self._empty_grips):
+                    raise NoGraspError(f"the gripper closed on nothing at this located {self.config.model.name} "
+                                       f"({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm in an earlier pick of this run")
                 return located, self.plan(located)
             except NoGraspError as exc:
                 last = exc
@@ -722,7 +742,8 @@ class Cell:
 
     def plan(self, located: Located) -> PickPlan:
         """The most vertical declared grasp that is within the tilt limit, reachable, clear of the
-        scene and whose whole motion passes the safety rules; NoGraspError when none is."""
+        scene and of the located part's own other branches, and whose whole motion passes the safety
+        rules; NoGraspError when none is."""
         from .poses import grasp_pose
 
         cfg = self.config
@@ -732,8 +753,12 @@ class Cell:
         others = np.ones(len(pts), dtype=bool)
         others[located.indices] = False
         scene = pts[others]
+        # The located part's own points are left out of the scene (they lie between the fingers), but
+        # the gripper must not run into the part's other branches either: those are checked against
+        # the model at the located pose, which also covers the part's unseen underside.
+        part = np.asarray(cfg.model.points) @ located.T_base_object[:3, :3].T + located.T_base_object[:3, 3]
         here = self.robot.read_pose()
-        rejected = {"tilt": 0, "reach": 0, "collision": 0, "safety": 0}
+        rejected = {"tilt": 0, "reach": 0, "collision": 0, "self-collision": 0, "safety": 0}
         candidates = []
         for name, T_go in cfg.grasps.items():
             T_bg = grasp_pose(located.T_base_object, T_go)
@@ -753,6 +778,10 @@ class Cell:
             hits = int(cfg.gripper.occupied(local).sum())
             if hits > cfg.max_collision_points:
                 rejected["collision"] += 1
+                continue
+            own = int(cfg.gripper.occupied(part @ T_bg[:3, :3] - T_bg[:3, 3] @ T_bg[:3, :3]).sum())
+            if own > cfg.max_collision_points:
+                rejected["self-collision"] += 1
                 continue
             try:
                 safety.check_sequence(here, [T for _, T, _ in waypoints], [lin for _, _, lin in waypoints], lim)
@@ -808,6 +837,7 @@ class Cell:
         picked = self.truth.take_picked() if self.truth is not None else None
         if held is False:
             ok, error = False, "the gripper closed on nothing (no part between the fingers)"
+            self._empty_grips.append(located.T_base_object[:3, 3].copy())
         elif self.truth is not None:
             ok = picked is not None and located.truth is not None and picked == located.truth.instance and located.truth.pick_grade
             error = None if ok else (
@@ -854,6 +884,7 @@ class Cell:
     def run(self, n_picks: int) -> RunReport:
         """Up to ``n_picks`` picks; stops early when nothing is found, no grasp fits, or a device faults (the arm is stopped)."""
         n = count(n_picks, "n_picks", 1)
+        self._empty_grips = []
         records: List[PickRecord] = []
         stopped: Optional[str] = None
         last_scan: Optional[ScanResult] = None
@@ -1055,6 +1086,7 @@ class SimulatedCell:
         self._release_pending: Optional[int] = None
         self._picked: Optional[int] = None
         self.cell: Optional[Cell] = None
+        self._grasp_stack: Optional[np.ndarray] = None
         self.robot_emulator = self.motor_emulator = self.gripper_emulator = None
 
     # -- life cycle
@@ -1121,9 +1153,25 @@ class SimulatedCell:
         return self.robot_emulator.pose() @ self.gripper_geometry.T_flange_gripper
 
     def _grasp_error(self, T_gripper_object: np.ndarray) -> Tuple[float, float]:
+        """:func:`pose_error` of ``T_gripper_object`` against the nearest declared grasp, for all
+        grasps at once (the gripper emulator answers within its serial timeout even with hundreds)."""
         assert self.cell is not None
-        errors = [pose_error(T_gripper_object, T_go, self.cell.config.symmetries) for T_go in self.cell.config.grasps.values()]
-        return min(errors, key=lambda e: e[0] / self.grip_tolerance_deg + e[1] / self.grip_tolerance_mm)
+        if self._grasp_stack is None:
+            cfg = self.cell.config
+            grasps = np.stack([np.asarray(T, dtype=np.float64) for T in cfg.grasps.values()])
+            syms = np.stack([np.eye(4), *[np.asarray(S, dtype=np.float64) for S in cfg.symmetries]])
+            self._grasp_stack = np.einsum("gij,sjk->gsik", grasps, syms)  # T_go · S for every grasp and symmetry
+        B = self._grasp_stack
+        A = np.asarray(T_gripper_object, dtype=np.float64)
+        # trace(B_Rᵀ A_R) per grasp and symmetry, then the angle as in _rotation_deg
+        trace = np.einsum("gsji,ji->gs", B[:, :, :3, :3], A[:3, :3])
+        deg = np.degrees(np.arccos(np.clip((trace - 1.0) / 2.0, -1.0, 1.0)))
+        mm = np.linalg.norm(B[:, :, :3, 3] - A[:3, 3], axis=-1)
+        s = np.argmin(deg / 5.0 + mm / 3.0, axis=1)  # pose_error's choice of symmetry, per grasp
+        g_idx = np.arange(len(B))
+        deg, mm = deg[g_idx, s], mm[g_idx, s]
+        g = int(np.argmin(deg / self.grip_tolerance_deg + mm / self.grip_tolerance_mm))
+        return float(deg[g]), float(mm[g])
 
     def grip_check(self) -> Optional[Tuple[int, float]]:
         """The part between the fingers now, if any, and its width across them (mm): the part
