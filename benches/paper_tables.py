@@ -70,10 +70,11 @@ def tee_clouds(n_m: int, n_d: int, seed: int):
     di = np.flatnonzero(half(dense_d))[:n_d]
     # Both methods register onto the paper's model cloud: n_m points of the visible half, with
     # their mesh normals (binpick.estimate_pose on a Model whose samples are those points).
-    model = binpick.Model.from_arrays(mesh.vertices, mesh.faces, count=n_m, seed=seed, name="tee-300", branches=mesh.branches,
-                                      special_direction=mesh.special_direction)
-    model.points, model.normals = dense_m.points[mi], dense_m.normals[mi]
-    model._prepared = None
+    model = binpick.Model(
+        mesh.vertices.copy(), mesh.faces.copy(), dense_m.points[mi], dense_m.normals[mi], spacing=None,
+        diameter=mesh.diameter, area=mesh.area, name="tee-300", branches=mesh.branches,
+        special_direction=mesh.special_direction,
+    )
     data = dense_d.points[di] + rng.normal(0, 0.3, (len(di), 3))
     return model, model.points, data
 

@@ -121,11 +121,6 @@ pub fn isometry_from_matrix(arg: &str, m: &Matrix4<f64>) -> Result<Isometry3<f64
     Ok(Isometry3::from_parts(t, UnitQuaternion::from_rotation_matrix(&rot)))
 }
 
-/// Rotation angle (radians, in [0, π]) between two rotations.
-pub fn rotation_angle_between(a: &UnitQuaternion<f64>, b: &UnitQuaternion<f64>) -> f64 {
-    a.angle_to(b)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -222,7 +222,7 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
         let model_step = (model.target.points().len() / 400).max(1);
         let fine_step = (model.target.points().len() / 4000).max(1);
         let score_with = |t_model_scene: &Isometry3<f64>, probe: &[Point], tol: f64, model_step: usize| -> f64 {
-            let on_model = inlier_fraction(probe, &model.target, t_model_scene, tol);
+            let on_model = inlier_stats(probe, &model.target, t_model_scene, tol).0;
             on_model * coverage(model, &heights, &t_model_scene.inverse(), model_step, tol)
         };
         let score_of = |t: &Isometry3<f64>, probe: &[Point], tol: f64| score_with(t, probe, tol, model_step);
@@ -364,10 +364,6 @@ fn inlier_stats(points: &[Point], target: &IcpTarget, t: &Isometry3<f64>, tol: f
     }
     let rmse = if n > 0 { (sq / n as f64).sqrt() } else { f64::INFINITY };
     (n as f64 / points.len().max(1) as f64, rmse)
-}
-
-fn inlier_fraction(points: &[Point], target: &IcpTarget, t: &Isometry3<f64>, tol: f64) -> f64 {
-    inlier_stats(points, target, t, tol).0
 }
 
 /// The scan seen from the sensor's side: per cell of a grid across `up`, the height (along `up`)
