@@ -90,3 +90,117 @@ def pose_error(t_est: np.ndarray, t_true: np.ndarray) -> tuple[float, float]:
     d = t_true[:3, :3].T @ t_est[:3, :3]
     ang = np.degrees(np.arccos(np.clip((np.trace(d) - 1) / 2, -1, 1)))
     return float(ang), float(np.linalg.norm(t_est[:3, 3] - t_true[:3, 3]))
+
+
+def _ear_clip(poly: np.ndarray) -> list[tuple[int, int, int]]:
+    """Triangles of a simple counter-clockwise polygon (N, 2) by ear clipping."""
+    idx = list(range(len(poly)))
+    tris = []
+
+    def cross(o, a, b):
+        return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+
+    while len(idx) > 3:
+        for k in range(len(idx)):
+            i, j, l = idx[k - 1], idx[k], idx[(k + 1) % len(idx)]
+            a, b, c = poly[i], poly[j], poly[l]
+            if cross(a, b, c) <= 0:
+                continue
+            inside = any(
+                cross(a, b, poly[m]) >= 0 and cross(b, c, poly[m]) >= 0 and cross(c, a, poly[m]) >= 0
+                for m in idx if m not in (i, j, l)
+            )
+            if not inside:
+                tris.append((i, j, l))
+                idx.pop(k)
+                break
+        else:
+            raise ValueError("polygon is not simple and counter-clockwise")
+    tris.append(tuple(idx))
+    return tris
+
+
+def extruded_mesh(polygon, height: float) -> tuple[np.ndarray, np.ndarray]:
+    """A closed prism: the simple counter-clockwise ``polygon`` (N, 2) in the xy plane, extruded
+    from z = 0 to ``height``, outward-wound."""
+    poly = np.asarray(polygon, dtype=float)
+    n = len(poly)
+    v = np.vstack([np.c_[poly, np.zeros(n)], np.c_[poly, np.full(n, height)]])
+    tris = _ear_clip(poly)
+    faces = [(c, b, a) for a, b, c in tris] + [(a + n, b + n, c + n) for a, b, c in tris]
+    for i in range(n):
+        j = (i + 1) % n
+        faces += [(i, j, j + n), (i, j + n, i + n)]
+    return v, np.array(faces, dtype=np.int64)
+
+
+def revolved_mesh(profile, segments: int = 96) -> tuple[np.ndarray, np.ndarray]:
+    """A closed solid of revolution about z: ``profile`` is a list of (radius, z) from the bottom
+    axis point to the top axis point (first and last radius 0), outward-wound."""
+    prof = np.asarray(profile, dtype=float)
+    ring = [k for k in range(len(prof)) if prof[k, 0] > 0]
+    ang = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+    v = [[0.0, 0.0, prof[0, 1]]]
+    for k in ring:
+        r, z = prof[k]
+        v += [[r * np.cos(a), r * np.sin(a), z] for a in ang]
+    v.append([0.0, 0.0, prof[-1, 1]])
+    top = len(v) - 1
+    faces = []
+    s = segments
+    for i in range(s):
+        j = (i + 1) % s
+        faces.append((0, 1 + j, 1 + i))
+        for r in range(len(ring) - 1):
+            a, b = 1 + r * s, 1 + (r + 1) * s
+            faces += [(a + i, a + j, b + j), (a + i, b + j, b + i)]
+        last = 1 + (len(ring) - 1) * s
+        faces.append((last + i, last + j, top))
+    return np.array(v), np.array(faces, dtype=np.int64)
+
+
+def rot(axis, angle) -> np.ndarray:
+    """3×3 rotation about ``axis`` by ``angle`` rad."""
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A uniformly random 3×3 rotation."""
+    q = rng.normal(size=4)
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def symmetric_pose_error(t_est: np.ndarray, t_true: np.ndarray, rotations, center=(0.0, 0.0, 0.0), continuous_axis=None) -> tuple[float, float]:
+    """(rotation deg, translation mm) of ``t_est`` against ``t_true`` minimised over symmetry
+    rotations about ``center`` (model frame), a continuous axis sampled at 1°."""
+    c = np.asarray(center, float)
+    group = [np.asarray(r, float) for r in rotations]
+    if continuous_axis is not None:
+        group = [g @ rot(continuous_axis, np.radians(d)) for g in group for d in range(360)]
+    best = (np.inf, np.inf)
+    for s in group:
+        t = np.eye(4)
+        t[:3, :3] = s
+        t[:3, 3] = c - s @ c
+        e = pose_error(t_est, t_true @ t)
+        if e[0] + e[1] < best[0] + best[1]:
+            best = e
+    return best
+
+
+def camera_cloud(view, cell, step: int, seed: int = 0, noise: float = 0.15) -> tuple[np.ndarray, np.ndarray]:
+    """The points a simulated camera view sees (every ``step``-th pixel with a surface), in the
+    base frame with Gaussian ``noise`` (mm), and the instance id of each."""
+    pts = view.points.reshape(-1, 3).astype(np.float64)
+    ids = view.ids.reshape(-1)
+    keep = np.isfinite(pts).all(axis=1)
+    pts, ids = pts[keep][::step], ids[keep][::step]
+    T = cell.T_base_camera
+    return pts @ T[:3, :3].T + T[:3, 3] + np.random.default_rng(seed).normal(0, noise, pts.shape), ids

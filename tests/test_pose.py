@@ -7,17 +7,7 @@ import numpy as np
 import pytest
 
 import binpick
-from _geometry import pose_error
-
-
-def random_rotation(rng: np.random.Generator) -> np.ndarray:
-    q = rng.normal(size=4)
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+from _geometry import camera_cloud, pose_error, random_rotation
 
 
 def rot_about(axis, angle) -> np.ndarray:
@@ -102,13 +92,7 @@ def pile_scene():
     cell = sim.Cell()
     pile = sim.Pile(tee, 5, bin=cell.bin, seed=11)
     view = sim.World.of_pile(pile, bin=cell.bin).view(cell)
-    pts = view.points.reshape(-1, 3).astype(np.float64)
-    ids = view.ids.reshape(-1)
-    keep = np.isfinite(pts).all(axis=1)
-    pts, ids = pts[keep][::3], ids[keep][::3]
-    T = cell.T_base_camera
-    rng = np.random.default_rng(0)
-    scene = pts @ T[:3, :3].T + T[:3, 3] + rng.normal(0, 0.15, pts.shape)
+    scene, ids = camera_cloud(view, cell, step=3)
     return tee, cell, pile, scene, ids
 
 

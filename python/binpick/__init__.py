@@ -11,8 +11,8 @@ from . import _core
 from . import parts
 from .errors import *  # noqa: F401,F403 - the exception classes are public API
 from .errors import __all__ as _error_names
-from .models import Branch, Model, estimate_normals, read_ply, voxel_downsample, write_ply
-from .poses import IcpResult, PoseResult, estimate_pose, grasp_pose, icp
+from .models import Branch, Model, PpfParams, Symmetries, estimate_normals, read_ply, voxel_downsample, write_ply
+from .poses import IcpResult, PoseResult, estimate_pose, estimate_poses, grasp_pose, icp
 
 __version__ = _core.__version__
 
@@ -55,8 +55,11 @@ __all__ = [
     "IcpResult",
     "Model",
     "PoseResult",
+    "PpfParams",
+    "Symmetries",
     "estimate_normals",
     "estimate_pose",
+    "estimate_poses",
     "grasp_pose",
     "icp",
     "parts",

@@ -86,16 +86,38 @@ def icp(
     iterations, fitness, rmse, num_inliers."""
 
 class PreparedModel:
-    """A model prepared for pose estimation, its search structures built once."""
+    """A model prepared for pose estimation: search structures, symmetries and the
+    point-pair-feature table, built once."""
 
     def __new__(
-        cls, points_in: _F64, normals: _F64, diameter: float, area: float, branches: Optional[_F64], special: Optional[_F64]
+        cls,
+        points_in: _F64,
+        normals: _F64,
+        diameter: float,
+        area: float,
+        branches: Optional[_F64],
+        special: Optional[_F64],
+        ppf: Optional[tuple[float, int, int]] = None,
+        ppf_cache: Optional[bytes] = None,
     ) -> "PreparedModel":
         """From surface samples (N, 3), their normals, diameter and area; ``branches`` rows
         [dx, dy, dz, length, radius] (None or empty: no branch layout), ``special`` the special
-        feature's direction or None."""
+        feature's direction or None; ``ppf`` = (sampling_ratio, angle_bins, rotation_bins) builds
+        the PPF table, or loads it from ``ppf_cache`` when that is valid for it."""
+    def ppf_from_cache(self) -> bool:
+        """Whether the PPF table came from ``ppf_cache``."""
+    def ppf_pairs(self) -> int:
+        """Model pairs in the PPF table (0 without one)."""
+    def ppf_bytes(self) -> Optional[bytes]:
+        """The PPF table serialised for the cache, or None without one."""
+    def symmetries(self) -> dict[str, Any]:
+        """Dict with center (3,), continuous_axis (3,) or None, rotations (K, 3, 3), identity first."""
+    def canonical(self, t_scene_model: _F64) -> _F64:
+        """The canonical form of a (4, 4) pose under the symmetries."""
+    def pose_error(self, estimate: _F64, truth: _F64) -> tuple[float, float]:
+        """(rotation error rad, translation error mm), minimised over the symmetries."""
 
-def estimate_pose(
+def estimate_poses(
     scene: _F64,
     model: PreparedModel,
     bin_box: Optional[_F64],
@@ -109,9 +131,15 @@ def estimate_pose(
     closer_radius: Optional[float],
     tau: Optional[float],
     num_threads: int,
-) -> dict[str, Any]:
-    """The top object's pose in ``scene`` (coarse ``method`` ``"ccp"``|``"centroid"``, then ICP): dict
-    with T_scene_model, T_scene_model_coarse, score, rmse, indices, timings, iterations."""
+    max_instances: int = 1,
+    viewpoint: Optional[_F64] = None,
+    reference_fraction: Optional[float] = None,
+    max_hypotheses: Optional[int] = None,
+) -> list[dict[str, Any]]:
+    """Up to ``max_instances`` verified instances, most pickable first (coarse ``method``
+    ``"auto"``|``"ppf"``|``"ccp"``|``"centroid"``, then ICP): dicts with T_scene_model,
+    T_scene_model_coarse, score, rmse, indices, timings, iterations, method, visible_fraction,
+    occluded_fraction, pickability."""
 
 # --- triangulation --------------------------------------------------------------------------
 

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import hashlib
 import os
+import warnings
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Optional, Sequence
 
 import numpy as np
@@ -12,7 +15,7 @@ from . import _core
 from ._validate import as_points, as_transform, as_vector, count, positive
 from .errors import InvalidInputError
 
-__all__ = ["Model", "Branch", "read_ply", "write_ply", "estimate_normals", "voxel_downsample"]
+__all__ = ["Model", "Branch", "PpfParams", "Symmetries", "read_ply", "write_ply", "estimate_normals", "voxel_downsample"]
 
 
 @dataclass(frozen=True)
@@ -26,6 +29,55 @@ class Branch:
     direction: tuple[float, float, float]
     length: float
     radius: float
+
+
+@dataclass(frozen=True)
+class PpfParams:
+    """Parameters of a model's point-pair-feature table (Drost et al. 2010).
+
+    ``sampling_ratio``: model and scene sampling distance, and the distance quantisation step, as
+    a fraction of the model's diameter. ``angle_bins``: bins of each of the three angle features
+    over [0, π]. ``rotation_bins``: bins of the rotation about the reference normal over a turn.
+    """
+
+    sampling_ratio: float = 0.04
+    angle_bins: int = 30
+    rotation_bins: int = 30
+
+
+@dataclass(frozen=True)
+class Symmetries:
+    """A part's proper symmetries, detected from its surface (rotations that map it onto itself).
+
+    Attributes:
+        center: (3,) the point the symmetry axes pass through (the surface centroid), mm.
+        continuous_axis: (3,) unit axis of a continuous rotational symmetry, or None.
+        rotations: (K, 3, 3) the discrete symmetry rotations about ``center``, identity first
+            (with a continuous axis: those beyond the turns about it, e.g. a shaft's end-for-end flip).
+    """
+
+    center: np.ndarray
+    continuous_axis: Optional[np.ndarray]
+    rotations: np.ndarray
+
+    @property
+    def is_trivial(self) -> bool:
+        """True for a part without symmetry."""
+        return self.continuous_axis is None and len(self.rotations) == 1
+
+    def __repr__(self) -> str:
+        axis = "none" if self.continuous_axis is None else np.array2string(self.continuous_axis, precision=3)
+        return f"Symmetries(discrete={len(self.rotations)}, continuous_axis={axis})"
+
+
+def cache_dir() -> Optional[Path]:
+    """Where prepared PPF tables are cached: ``$BINPICK_CACHE_DIR``, else ``~/.cache/binpick``
+    (``$XDG_CACHE_HOME/binpick``). Setting ``BINPICK_CACHE_DIR`` to an empty string disables it."""
+    env = os.environ.get("BINPICK_CACHE_DIR")
+    if env is not None:
+        return Path(env) if env else None
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "binpick"
 
 
 class Model:
@@ -143,13 +195,62 @@ class Model:
         self.special_direction = None if special_direction is None else tuple(float(v) for v in special_direction)
         self._prepared = None
 
-    def prepared(self):
-        """The native pose-estimation structure of this model (built once, then cached)."""
-        if self._prepared is None:
+    def prepared(self, ppf: Optional[PpfParams] = None):
+        """The native pose-estimation structure of this model: search structures, symmetries and
+        the point-pair-feature table (``ppf``, default :class:`PpfParams`), built once and kept.
+        The table is cached on disk (:func:`cache_dir`), keyed by the mesh, its sampling and the
+        parameters; a missing, stale or corrupt cache file is rebuilt."""
+        params = PpfParams() if ppf is None else ppf
+        if not isinstance(params, PpfParams):
+            raise InvalidInputError(f"ppf: expected binpick.PpfParams, got {type(params).__name__}")
+        if self._prepared is None or self._prepared[0] != params:
             rows = np.array([[*b.direction, b.length, b.radius] for b in self.branches], dtype=np.float64).reshape(-1, 5)
             special = None if self.special_direction is None else np.asarray(self.special_direction, dtype=np.float64)
-            self._prepared = _core.PreparedModel(self.points, self.normals, self.diameter, self.area, rows if len(rows) else None, special)
-        return self._prepared
+            key = (float(params.sampling_ratio), int(params.angle_bins), int(params.rotation_bins))
+            path = self._cache_path(key)
+            cached = None
+            if path is not None and path.is_file():
+                try:
+                    cached = path.read_bytes()
+                except OSError:
+                    cached = None
+            native = _core.PreparedModel(self.points, self.normals, self.diameter, self.area, rows if len(rows) else None, special, key, cached)
+            if path is not None and not native.ppf_from_cache():
+                _write_atomically(path, native.ppf_bytes())
+            self._prepared = (params, native)
+        return self._prepared[1]
+
+    def _cache_path(self, key: tuple) -> Optional[Path]:
+        root = cache_dir()
+        if root is None:
+            return None
+        h = hashlib.sha256()
+        for arr in (self.vertices, self.faces, self.points, self.normals):
+            h.update(np.ascontiguousarray(arr).tobytes())
+        h.update(repr(key).encode())
+        return root / "ppf" / f"{h.hexdigest()[:32]}.bin"
+
+    @property
+    def symmetries(self) -> Symmetries:
+        """The part's proper symmetries, detected from its surface samples."""
+        raw = self.prepared().symmetries()
+        axis = raw["continuous_axis"]
+        return Symmetries(
+            center=np.asarray(raw["center"], dtype=np.float64),
+            continuous_axis=None if axis is None else np.asarray(axis, dtype=np.float64),
+            rotations=np.asarray(raw["rotations"], dtype=np.float64).reshape(-1, 3, 3),
+        )
+
+    def canonical_pose(self, T_scene_model: Any) -> np.ndarray:
+        """The canonical form of a pose under the part's symmetries: the same (4, 4) for any two
+        poses that differ only by a symmetry (the one whose rotation is nearest the identity)."""
+        return self.prepared().canonical(as_transform(T_scene_model, "T_scene_model"))
+
+    def pose_error(self, T_estimate: Any, T_truth: Any) -> tuple[float, float]:
+        """Rotation (degrees) and translation (mm) error of a pose against the truth, minimised
+        over the part's symmetries (as the BOP benchmark judges)."""
+        rot, trans = self.prepared().pose_error(as_transform(T_estimate, "T_estimate"), as_transform(T_truth, "T_truth"))
+        return float(np.degrees(rot)), float(trans)
 
     def add_grasp(self, name: str, T_gripper_object: Any) -> None:
         """Declares a grasp: the object's pose in the gripper frame when the gripper holds it."""
@@ -160,6 +261,19 @@ class Model:
             f"Model(name={self.name!r}, vertices={len(self.vertices)}, faces={len(self.faces)}, "
             f"points={len(self.points)}, diameter={self.diameter:.2f} mm, branches={len(self.branches)})"
         )
+
+
+def _write_atomically(path: Path, data: Optional[bytes]) -> None:
+    """Writes a cache file through a temporary name; a cache that cannot be written is skipped."""
+    if data is None:
+        return
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(f".{os.getpid()}.tmp")
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    except OSError as exc:
+        warnings.warn(f"binpick: cannot write the PPF cache {path} ({exc}); set BINPICK_CACHE_DIR to a writable folder", RuntimeWarning, stacklevel=3)
 
 
 def _count(value: Any) -> int:

@@ -12,7 +12,7 @@ from ._validate import as_float_array, as_points, as_transform, as_vector, check
 from .errors import InvalidInputError, NoObjectFound
 from .models import Model, estimate_normals
 
-__all__ = ["IcpResult", "icp", "PoseResult", "estimate_pose", "grasp_pose"]
+__all__ = ["IcpResult", "icp", "PoseResult", "estimate_pose", "estimate_poses", "grasp_pose"]
 
 _KERNELS = ("none", "huber", "tukey", "cauchy")
 
@@ -119,17 +119,27 @@ def icp(
 
 @dataclass(frozen=True, repr=False)
 class PoseResult:
-    """A verified pose of the top object (see :func:`estimate_pose`).
+    """A verified pose of one object (see :func:`estimate_pose` and :func:`estimate_poses`).
 
     Attributes:
-        T_scene_model: (4, 4) model (mesh file) frame → scene frame.
-        T_scene_model_coarse: the coarse pose (CCP or centroid) before ICP.
-        score: fraction in [0, 1] of the object's points within the inlier distance of the posed model.
-        rmse: RMS distance of those points, mm.
+        T_scene_model: (4, 4) model (mesh file) frame → scene frame, in the canonical form of the
+            model's symmetries (:attr:`Model.symmetries`): any two poses that differ only by a
+            symmetry are reported alike.
+        T_scene_model_coarse: the coarse pose (CCP, PPF cluster or centroid) before ICP.
+        score: quality in [0, 1]. CCP and centroid: the fraction of the object's points within
+            the inlier distance of the posed model. PPF: the fraction of the posed model's
+            sensor-facing surface, where the scan can judge it, that the scan confirms (the rest
+            lies where the sensor saw through it).
+        rmse: RMS distance of the inlier points, mm.
         indices: scene indices of the points on the posed model.
-        timings: milliseconds per stage (bin_removal, normals, segmentation, coarse, icp, verification).
-        method: the coarse method used.
+        timings: milliseconds per stage (bin_removal, normals, ... as the method runs them).
+        method: the coarse method that found it: ``"ccp"``, ``"ppf"`` or ``"centroid"``.
         iterations: ICP iterations of the refinement.
+        visible_fraction: share of the model's sensor-facing surface that the scan confirms
+            (NaN where not judged).
+        occluded_fraction: share of that surface lying under other objects (NaN where not judged).
+        pickability: rank score in [0, 1] among the instances found: height in the pile (half),
+            visible share (a third), nothing on top (a sixth).
     """
 
     T_scene_model: np.ndarray
@@ -140,22 +150,30 @@ class PoseResult:
     timings: dict
     method: str
     iterations: int
+    visible_fraction: float = float("nan")
+    occluded_fraction: float = float("nan")
+    pickability: float = 1.0
 
     def __repr__(self) -> str:
         t = self.T_scene_model[:3, 3]
         return (
             f"PoseResult(method={self.method!r}, score={self.score:.3f}, rmse={self.rmse:.3f} mm, points={len(self.indices)}, "
-            f"t=[{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] mm, total={sum(self.timings.values()):.1f} ms)"
+            f"t=[{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] mm, pickability={self.pickability:.2f}, total={sum(self.timings.values()):.1f} ms)"
         )
 
 
-def estimate_pose(
+_METHODS = ("auto", "ppf", "ccp", "centroid")
+
+
+def estimate_poses(
     scene: Any,
     model: Model,
     bin: Any = None,
     *,
+    max_instances: int = 5,
     method: str = "auto",
     up: Any = (0.0, 0.0, 1.0),
+    viewpoint: Any = None,
     d_star: Optional[float] = None,
     min_points: Optional[int] = None,
     max_normal_angle: float = np.radians(70.0),
@@ -163,37 +181,44 @@ def estimate_pose(
     min_fitness: float = 0.6,
     ccp_closer_radius: Optional[float] = None,
     ccp_tau: Optional[float] = None,
+    reference_fraction: Optional[float] = None,
+    max_hypotheses: Optional[int] = None,
     num_threads: int = 0,
-) -> PoseResult:
-    """The pose of the top pickable object of ``scene`` against ``model``.
+) -> list[PoseResult]:
+    """Up to ``max_instances`` verified instances of ``model`` in ``scene``, most pickable first.
 
     ``scene`` is an (N, 3) cloud in mm with ``up`` (default +z) pointing out of the bin toward the
-    sensor. ``bin`` is an axis-aligned box ``((xmin, ymin, zmin), (xmax, ymax, zmax))`` in the
-    scene frame; without it, support planes much larger than the part (floor, walls) are found
-    and removed. Stages: bin removal → top-object segmentation (Table 2; d* defaults to 3× the
-    scan's point spacing) → coarse pose → point-to-plane ICP of the object's points onto the
-    dense model → verification.
+    sensor; ``viewpoint`` (optional) is the sensor's position in the scene frame, which orients
+    the scan's normals better than ``up`` on steep faces. ``bin`` is an axis-aligned box
+    ``((xmin, ymin, zmin), (xmax, ymax, zmax))`` in the scene frame; without it, support planes
+    much larger than the part (floor, walls) are found and removed.
 
-    ``method``: ``"ccp"`` (the paper's computed closer point; needs the model's branches),
-    ``"centroid"`` (the paper's baseline: ICP from the centroids) or ``"auto"`` (CCP when the model
-    declares branches). Raises :class:`binpick.NoObjectFound` when no object is explained well
-    enough (``min_fitness`` of its points within ``inlier_distance``); it never returns a guess.
+    ``method``:
+
+    - ``"ppf"``: point-pair-feature detection for any rigid part: votes of scene point pairs
+      against the model's feature table, pose clustering modulo the part's symmetries, ICP of
+      every hypothesis, verification against the scan (a depth test of the surface each pose
+      predicts), one pose per instance, ranked by pickability (height, visible share, nothing on
+      top). ``reference_fraction`` of the scene samples vote (default 0.2); ``max_hypotheses``
+      clusters are refined (default 32, at least 8 per requested instance).
+    - ``"ccp"``: the paper's computed closer point on the top object (needs the model's branches,
+      :meth:`Model.declare_branches`); top-object segmentation (Table 2) → CCP → ICP. One instance.
+    - ``"centroid"``: the paper's baseline, ICP from the centroids. One instance.
+    - ``"auto"`` (default): PPF; for a model with declared branches, CCP too, and the pose the scan
+      confirms better leads.
+
+    Raises :class:`binpick.NoObjectFound` when no instance is confirmed (``min_fitness``: the
+    share of the object's points on the model for CCP, of the predicted visible surface that the
+    scan confirms for PPF); it never returns a guess.
     """
     if not isinstance(model, Model):
         raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}; build one with binpick.Model.from_mesh")
     pts = as_points(scene, "scene", min_points=10)
     m = str(method).lower()
-    if m == "auto":
-        if not model.branches:
-            raise InvalidInputError(
-                "method: 'auto' needs a coarse method for this model: it declares no cylindrical branches for CCP "
-                "(Model.declare_branches) — pass method='centroid' for ICP from the centroids"
-            )
-        m = "ccp"
-    if m not in ("ccp", "centroid"):
-        raise InvalidInputError(f"method: unknown method {method!r}; use 'auto', 'ccp' or 'centroid'")
+    if m not in _METHODS:
+        raise InvalidInputError(f"method: unknown method {method!r}; use 'auto', 'ppf', 'ccp' or 'centroid'")
     if m == "ccp" and not model.branches:
-        raise InvalidInputError("method: 'ccp' needs the model's cylindrical branches; declare them with Model.declare_branches")
+        raise InvalidInputError("method: 'ccp' needs the model's cylindrical branches; declare them with Model.declare_branches, or use method='ppf'")
     box = None
     if bin is not None:
         box = as_float_array(bin, "bin")
@@ -205,7 +230,12 @@ def estimate_pose(
     up_v = as_vector(up, "up")
     if np.linalg.norm(up_v) == 0:
         raise InvalidInputError("up: must be a non-zero direction")
-    raw = _core.estimate_pose(
+    vp = None if viewpoint is None else as_vector(viewpoint, "viewpoint")
+    if reference_fraction is not None:
+        reference_fraction = positive(reference_fraction, "reference_fraction")
+        if reference_fraction > 1:
+            raise InvalidInputError(f"reference_fraction: must be in (0, 1], got {reference_fraction}")
+    raw = _core.estimate_poses(
         pts,
         model.prepared(),
         box,
@@ -219,8 +249,20 @@ def estimate_pose(
         None if ccp_closer_radius is None else positive(ccp_closer_radius, "ccp_closer_radius"),
         None if ccp_tau is None else positive(ccp_tau, "ccp_tau"),
         count(num_threads, "num_threads"),
+        count(max_instances, "max_instances", minimum=1),
+        vp,
+        reference_fraction,
+        None if max_hypotheses is None else count(max_hypotheses, "max_hypotheses", minimum=1),
     )
-    return PoseResult(method=m, **raw)
+    return [PoseResult(**r) for r in raw]
+
+
+def estimate_pose(scene: Any, model: Model, bin: Any = None, **options: Any) -> PoseResult:
+    """The pose of the top pickable object of ``scene`` against ``model``: the first of
+    :func:`estimate_poses` (same arguments, ``max_instances`` aside)."""
+    if "max_instances" in options:
+        raise InvalidInputError("max_instances: estimate_pose returns one pose; use estimate_poses for several")
+    return estimate_poses(scene, model, bin, max_instances=1, **options)[0]
 
 
 def grasp_pose(T_base_object: Any, T_gripper_object: Any) -> np.ndarray:

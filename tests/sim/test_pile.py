@@ -103,3 +103,21 @@ def test_bad_input_is_rejected(tee, kwargs):
 def test_bin_must_have_positive_size():
     with pytest.raises(binpick.InvalidInputError):
         sim.Bin(size=(100, -1, 50))
+
+
+def test_a_low_poly_cad_part_falls_and_settles():
+    """A box-like part whose mesh has only its 8 corners (as CAD exports flat parts) still gets
+    solid collision pieces: the parts fall into the bin instead of hanging where they were dropped."""
+    v = np.array([[x, y, z] for z in (0, 12.0) for y in (0, 40.0) for x in (0, 70.0)])
+    f = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+                  [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]])
+    plate = binpick.Model.from_arrays(v, f, spacing=2.0)
+    cell = sim.Cell()
+    pile = sim.Pile(plate, 6, bin=cell.bin, seed=2)
+    assert pile.last_settle.settled, pile.last_settle
+    lo, hi = pile.bin.bounds
+    tops = [_world_vertices(plate, T)[:, 2].max() for T in pile.poses]
+    # Six 12 mm plates in a 300 × 200 mm bin lie at most a few deep, all below the rim.
+    assert max(tops) < hi[2], tops
+    assert min(_world_vertices(plate, T)[:, 2].min() for T in pile.poses) < lo[2] + 1.0
+    assert pile.max_interpenetration(spacing=1.0) <= 0.5

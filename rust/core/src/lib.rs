@@ -23,3 +23,5 @@ pub mod triangulate;
 pub mod sim;
 pub mod segment;
 pub mod pose;
+pub mod symmetry;
+pub mod detect;

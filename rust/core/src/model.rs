@@ -5,7 +5,7 @@ use crate::error::{Error, Result};
 use crate::mesh::TriMesh;
 use crate::rng::Rng;
 use nalgebra::Vector3;
-use std::collections::HashMap;
+use crate::voxel::DiskGrid;
 
 /// How densely to sample a surface.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -80,27 +80,11 @@ pub fn sample_surface(mesh: &TriMesh, density: Density, seed: u64) -> Result<Sur
             }
             let r = DISK_RATIO * s;
             let candidates = (expected * 8.0).ceil() as usize + 64;
-            let inv = 1.0 / r;
-            let mut grid: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
+            let mut grid = DiskGrid::new(r);
             let mut out = SurfaceSamples::default();
             for _ in 0..candidates {
                 let (p, n) = draw(&mut rng);
-                let key = [(p.x * inv).floor() as i64, (p.y * inv).floor() as i64, (p.z * inv).floor() as i64];
-                let mut free = true;
-                'outer: for dx in -1..=1 {
-                    for dy in -1..=1 {
-                        for dz in -1..=1 {
-                            if let Some(ids) = grid.get(&[key[0] + dx, key[1] + dy, key[2] + dz]) {
-                                if ids.iter().any(|&i| (out.points[i as usize] - p).norm_squared() < r * r) {
-                                    free = false;
-                                    break 'outer;
-                                }
-                            }
-                        }
-                    }
-                }
-                if free {
-                    grid.entry(key).or_default().push(out.points.len() as u32);
+                if grid.try_insert(p) {
                     out.points.push(p);
                     out.normals.push(n);
                 }

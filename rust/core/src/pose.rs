@@ -11,6 +11,11 @@ use crate::error::{Error, Result};
 use crate::knn::KdIndex;
 use crate::normals::{estimate_normals, Orientation};
 use crate::registration::ccp::{ccp, BranchLayout, CcpConfig};
+use crate::detect::detect;
+use crate::registration::ppf::{DetectConfig, PpfConfig, PpfModel};
+use crate::voxel::subsample;
+use crate::registration::verify::{depth_evidence, inlier_stats, HeightMap};
+use crate::symmetry::{detect_symmetries, SymmetryConfig, Symmetries};
 use crate::registration::{icp, IcpConfig, IcpMethod, IcpTarget, RobustKernel};
 use crate::segment::{crop_to_bin, point_spacing, remove_support_planes, scan_spacing, segment_top, BinBox, SegmentConfig};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -26,9 +31,26 @@ pub enum CoarseMethod {
     Ccp,
     /// The paper's baseline: ICP started from the centroids with the model's own orientation.
     Centroid,
+    /// Point-pair-feature detection: any rigid part, every instance of a pile.
+    Ppf,
+    /// PPF, and CCP too where the model has a branch layout; the verified winner is kept.
+    Auto,
 }
 
-/// A model prepared for pose estimation: dense points with normals and their search structure.
+impl CoarseMethod {
+    /// The method's name as the Python API spells it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            CoarseMethod::Ccp => "ccp",
+            CoarseMethod::Centroid => "centroid",
+            CoarseMethod::Ppf => "ppf",
+            CoarseMethod::Auto => "auto",
+        }
+    }
+}
+
+/// A model prepared for pose estimation: dense points with normals and their search structure,
+/// its symmetries and (once built) its point-pair-feature table.
 pub struct PoseModel {
     target: IcpTarget,
     /// Largest extent of the part, mm.
@@ -39,16 +61,65 @@ pub struct PoseModel {
     pub layout: Option<BranchLayout>,
     /// Median spacing of the model's samples, mm.
     pub spacing: f64,
+    /// The part's proper symmetries (about its surface centroid).
+    pub symmetries: Symmetries,
+    /// Largest distance of a surface point from the symmetry centre, mm.
+    pub radius: f64,
+    /// Smallest extent of the part along its principal axes, mm.
+    pub thickness: f64,
+    /// The point-pair-feature table, once built or loaded.
+    pub ppf: Option<PpfModel>,
 }
 
 impl PoseModel {
-    /// Prepares a model from its surface samples (mm) and outward unit normals.
+    /// Prepares a model from its surface samples (mm) and outward unit normals, and detects its
+    /// symmetries.
     pub fn new(points: Vec<Point>, normals: Vec<Vector3<f64>>, diameter: f64, area: f64, layout: Option<BranchLayout>) -> Result<Self> {
         if !(diameter.is_finite() && diameter > 0.0) {
             return Err(Error::invalid("model", "the model's diameter must be positive"));
         }
         let spacing = point_spacing(&points, &KdIndex::new(&points));
-        Ok(PoseModel { target: IcpTarget::new(points, Some(normals))?, diameter, area, layout, spacing })
+        let symmetries = detect_symmetries(&points, &normals, &SymmetryConfig::default())?;
+        let c = symmetries.center;
+        let radius = points.iter().map(|p| (p - c).norm()).fold(0.0, f64::max);
+        let (_, cov) = crate::cloud::covariance(&points);
+        let (_, axes) = crate::cloud::principal_axes(&cov);
+        let thickness = axes
+            .iter()
+            .map(|a| {
+                let (lo, hi) = points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), p| {
+                    let v = p.coords.dot(a);
+                    (l.min(v), h.max(v))
+                });
+                hi - lo
+            })
+            .fold(f64::INFINITY, f64::min);
+        Ok(PoseModel { target: IcpTarget::new(points, Some(normals))?, diameter, area, layout, spacing, symmetries, radius, thickness, ppf: None })
+    }
+
+    /// The dense model as an ICP target.
+    pub fn target(&self) -> &IcpTarget {
+        &self.target
+    }
+
+    /// Builds the point-pair-feature table from an even subsample of the dense points.
+    pub fn build_ppf(&mut self, config: PpfConfig) -> Result<()> {
+        config.validate()?;
+        let pts = self.target.points();
+        let normals = self.target.normals().unwrap_or(&[]);
+        let keep = subsample(pts, config.sampling_ratio * self.diameter);
+        let ppf = PpfModel::new(keep.iter().map(|&i| pts[i]).collect(), keep.iter().map(|&i| normals[i]).collect(), self.diameter, config)?;
+        self.ppf = Some(ppf);
+        Ok(())
+    }
+
+    /// Installs a table read from a cache; it must have been built for this model's diameter.
+    pub fn set_ppf(&mut self, ppf: PpfModel) -> Result<()> {
+        if (ppf.step() / ppf.config().sampling_ratio - self.diameter).abs() > 1e-6 * self.diameter {
+            return Err(Error::invalid("ppf_cache", "the cached table was built for another model; it will be rebuilt"));
+        }
+        self.ppf = Some(ppf);
+        Ok(())
     }
 }
 
@@ -73,10 +144,18 @@ pub struct PoseConfig {
     /// Inlier distance for verification, mm (default: 2 × the model's sample spacing plus
     /// 1.5 × the scan's, at least 1 mm — it judges scan points against the dense model).
     pub inlier_distance: Option<f64>,
-    /// Smallest fraction of the object's points that must lie on the posed model.
+    /// Smallest fraction of the object's points that must lie on the posed model (CCP,
+    /// centroid), or of the predicted visible surface that the scan must confirm (PPF).
     pub min_fitness: f64,
     /// CCP tuning.
     pub ccp: CcpConfig,
+    /// PPF detection tuning.
+    pub detect: DetectConfig,
+    /// The sensor's position in the scene frame, mm, when known (orients the scan's normals;
+    /// otherwise they face `up`).
+    pub viewpoint: Option<Point>,
+    /// Instances returned by [`estimate_poses`].
+    pub max_instances: usize,
     /// Worker threads; 0 = all cores.
     pub num_threads: usize,
 }
@@ -86,13 +165,16 @@ impl Default for PoseConfig {
         PoseConfig {
             bin: None,
             up: Vector3::z(),
-            method: CoarseMethod::Ccp,
+            method: CoarseMethod::Auto,
             d_star: None,
             min_points: None,
             max_normal_angle: 70f64.to_radians(),
             inlier_distance: None,
             min_fitness: 0.6,
             ccp: CcpConfig::default(),
+            detect: DetectConfig::default(),
+            viewpoint: None,
+            max_instances: 1,
             num_threads: 0,
         }
     }
@@ -115,20 +197,30 @@ pub struct PoseEstimate {
     pub timings: Vec<(&'static str, f64)>,
     /// ICP iterations of the refinement.
     pub iterations: usize,
+    /// The coarse method that found it.
+    pub method: CoarseMethod,
+    /// Fraction of the model's sensor-facing surface that the scan confirms (NaN where not judged).
+    pub visible_fraction: f64,
+    /// Fraction of the model's sensor-facing surface under other objects (NaN where not judged).
+    pub occluded_fraction: f64,
+    /// Pickability in [0, 1] among the instances found (height, visible share, nothing on top).
+    pub pickability: f64,
 }
 
-/// Estimates the pose of the top object of `scene` (N×3, mm) against `model`.
+/// Estimates the pose of the top pickable object of `scene` (N×3, mm) against `model`.
 pub fn estimate_pose(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstimate> {
-    crate::parallel::with_threads(cfg.num_threads, || run(scene, model, cfg))
+    let one = PoseConfig { max_instances: 1, ..cfg.clone() };
+    let mut all = estimate_poses(scene, model, &one)?;
+    Ok(all.swap_remove(0))
 }
 
-fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstimate> {
-    let mut timings = Vec::new();
-    let mut clock = Instant::now();
-    let mut lap = |name: &'static str, timings: &mut Vec<(&'static str, f64)>| {
-        timings.push((name, clock.elapsed().as_secs_f64() * 1e3));
-        clock = Instant::now();
-    };
+/// Estimates up to `cfg.max_instances` instances, most pickable first. CCP and the centroid
+/// baseline find the top object only; PPF finds every instance it can confirm.
+pub fn estimate_poses(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<PoseEstimate>> {
+    crate::parallel::with_threads(cfg.num_threads, || dispatch(scene, model, cfg))
+}
+
+fn check_scene(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vector3<f64>> {
     check_finite("scene", scene)?;
     if scene.len() < 10 {
         return Err(Error::TooFewPoints { arg: "scene".into(), got: scene.len(), needed: 10, hint: "; pass the scan's points".into() });
@@ -136,7 +228,6 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
     if !(cfg.up.norm() > 0.0) {
         return Err(Error::invalid("up", "must be a non-zero direction"));
     }
-    let up = cfg.up.normalize();
     let (lo, hi) = scene.iter().fold((scene[0], scene[0]), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
     let extent = (hi - lo).norm();
     if extent < 0.2 * model.diameter {
@@ -148,28 +239,117 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
             ),
         ));
     }
-    // Bin removal.
+    Ok(cfg.up.normalize())
+}
+
+/// Scene indices inside the bin box (all without one), and — with `planes` and no box — without
+/// the support planes wider than the part.
+fn remove_bin(scene: &[Point], model: &PoseModel, cfg: &PoseConfig, planes: bool) -> Result<Vec<usize>> {
     let kept: Vec<usize> = match &cfg.bin {
         Some(bin) => crop_to_bin(scene, bin, 1.0)?,
-        None => {
+        None if planes => {
             let idx = KdIndex::new(scene);
             let tol = (2.0 * point_spacing(scene, &idx)).max(0.5);
             remove_support_planes(scene, model.diameter, tol, 1).0
         }
+        None => (0..scene.len()).collect(),
     };
-    lap("bin_removal", &mut timings);
     if kept.len() < 10 {
         return Err(Error::NoObjectFound { reason: format!("only {} points remain after removing the bin; the bin is empty", kept.len()) });
     }
+    Ok(kept)
+}
+
+fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<PoseEstimate>> {
+    check_scene(scene, model, cfg)?;
+    let method = match (cfg.method, &model.layout, &model.ppf) {
+        (CoarseMethod::Auto, None, _) => CoarseMethod::Ppf,
+        (CoarseMethod::Auto, Some(_), None) => CoarseMethod::Ccp,
+        (m, _, _) => m,
+    };
+    // Bin removal: PPF removes support planes itself, on its voxel grid.
+    let clock = Instant::now();
+    let kept = remove_bin(scene, model, cfg, matches!(method, CoarseMethod::Ccp | CoarseMethod::Centroid))?;
+    let bin_ms = clock.elapsed().as_secs_f64() * 1e3;
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
-    let index = KdIndex::new(&pts);
-    let sampling = scan_spacing(&pts, &index);
+    let to_scene = |mut e: PoseEstimate, kept: &[usize], mut timings: Vec<(&'static str, f64)>| {
+        e.indices = e.indices.iter().map(|&i| kept[i]).collect();
+        timings.insert(0, ("bin_removal", bin_ms));
+        e.timings = timings;
+        e
+    };
+    match method {
+        CoarseMethod::Ccp | CoarseMethod::Centroid => {
+            let mut timings = Vec::new();
+            let e = run(scene, &pts, model, cfg, method, &mut timings)?;
+            Ok(vec![to_scene(e, &kept, timings)])
+        }
+        CoarseMethod::Ppf | CoarseMethod::Auto => {
+            let ppf = model.ppf.as_ref().ok_or_else(|| Error::invalid("model", "PPF needs the model's feature table; prepare the model with PPF (binpick builds it on first use)"))?;
+            let mut timings = Vec::new();
+            let detected = detect(scene, &pts, model, ppf, cfg, &mut timings);
+            if method == CoarseMethod::Ppf {
+                let (found, _) = detected?;
+                return Ok(found.into_iter().map(|e| to_scene(e, &kept, timings.clone())).collect());
+            }
+            // Auto with a branch layout: CCP on the top object too; the verified winner leads.
+            let clock = Instant::now();
+            let ccp_kept = if cfg.bin.is_some() { kept.clone() } else { remove_bin(scene, model, cfg, true)? };
+            timings.push(("ccp_bin_removal", clock.elapsed().as_secs_f64() * 1e3));
+            let ccp_pts: Vec<Point> = ccp_kept.iter().map(|&i| scene[i]).collect();
+            let mut ccp_timings = Vec::new();
+            let by_ccp = run(scene, &ccp_pts, model, cfg, CoarseMethod::Ccp, &mut ccp_timings).map(|mut e| {
+                e.indices = e.indices.iter().map(|&i| ccp_kept[i]).collect();
+                e
+            });
+            for (name, ms) in ccp_timings {
+                timings.push((match name { "icp" => "ccp_icp", "coarse" => "ccp_coarse", "normals" => "ccp_normals", "segmentation" => "ccp_segmentation", "verification" => "ccp_verification", other => other }, ms));
+            }
+            let identity: Vec<usize> = (0..scene.len()).collect();
+            let finish = |found: Vec<PoseEstimate>, timings: &Vec<(&'static str, f64)>| -> Vec<PoseEstimate> {
+                found.into_iter().map(|e| if e.method == CoarseMethod::Ccp { to_scene(e, &identity, timings.clone()) } else { to_scene(e, &kept, timings.clone()) }).collect()
+            };
+            match (detected, by_ccp) {
+                (Ok((mut found, prepared)), Ok(mut c)) => {
+                    let e = prepared.judge(model, &c.t_scene_model);
+                    let first = prepared.judge(model, &found[0].t_scene_model);
+                    c.visible_fraction = e.visible_fraction();
+                    c.occluded_fraction = e.occluded_fraction();
+                    if e.quality() > first.quality() {
+                        let gap = 0.5 * model.thickness;
+                        let cc = c.t_scene_model * model.symmetries.center;
+                        found.retain(|f| (f.t_scene_model * model.symmetries.center - cc).norm() > gap);
+                        c.pickability = found.first().map_or(1.0, |f| f.pickability);
+                        found.insert(0, c);
+                        found.truncate(cfg.max_instances.max(1));
+                    }
+                    Ok(finish(found, &timings))
+                }
+                (Ok((found, _)), Err(_)) => Ok(finish(found, &timings)),
+                (Err(_), Ok(c)) => Ok(finish(vec![c], &timings)),
+                (Err(e), Err(_)) => Err(e),
+            }
+        }
+    }
+}
+
+/// The paper's path on the points left after bin removal: top-object segmentation → CCP (or
+/// the centroid baseline) → ICP → verification. Indices in the result refer to `pts`.
+fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, method: CoarseMethod, timings: &mut Vec<(&'static str, f64)>) -> Result<PoseEstimate> {
+    let mut clock = Instant::now();
+    let mut lap = |name: &'static str, timings: &mut Vec<(&'static str, f64)>| {
+        timings.push((name, clock.elapsed().as_secs_f64() * 1e3));
+        clock = Instant::now();
+    };
+    let up = cfg.up.normalize();
+    let index = KdIndex::new(pts);
+    let sampling = scan_spacing(pts, &index);
     let spacing = sampling.along.max(1e-3);
     let across = sampling.across.max(spacing);
     // Normals need neighbours from more than one scan line.
     let k = ((12.0 * across / spacing).round() as usize).clamp(12, 64).min(pts.len());
-    let normals = estimate_normals(&pts, &index, k, Orientation::TowardDirection(up))?;
-    lap("normals", &mut timings);
+    let normals = estimate_normals(pts, &index, k, Orientation::TowardDirection(up))?;
+    lap("normals", timings);
     let visible_points = (0.5 * model.area / (spacing * across)).max(1.0);
     let seg_cfg = SegmentConfig {
         d_star: cfg.d_star.unwrap_or((3.0 * spacing).max(1.6 * across)),
@@ -200,12 +380,12 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
         }
 
         // Coarse pose candidates, model → scene.
-        let candidates: Vec<Isometry3<f64>> = match (cfg.method, &model.layout) {
+        let candidates: Vec<Isometry3<f64>> = match (method, &model.layout) {
             (CoarseMethod::Ccp, Some(layout)) => ccp(&object, layout, model.target.points(), model.target.normals().unwrap_or(&[]), Some(up), &cfg.ccp)?.candidates,
             (CoarseMethod::Ccp, None) => {
                 return Err(Error::invalid("model", "CCP needs the model's branch layout (cylindrical branches from a junction); declare branches on the Model or use method=\"centroid\""));
             }
-            (CoarseMethod::Centroid, _) => {
+            _ => {
                 let c_obj = crate::cloud::centroid(&object);
                 let c_model = crate::cloud::centroid(model.target.points());
                 vec![Isometry3::from_parts(Translation3::from(c_obj - c_model), UnitQuaternion::identity())]
@@ -223,7 +403,7 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
         let fine_step = (model.target.points().len() / 4000).max(1);
         let score_with = |t_model_scene: &Isometry3<f64>, probe: &[Point], tol: f64, model_step: usize| -> f64 {
             let on_model = inlier_stats(probe, &model.target, t_model_scene, tol).0;
-            on_model * coverage(model, &heights, &t_model_scene.inverse(), model_step, tol)
+            on_model * depth_evidence(&model.target, &heights, &t_model_scene.inverse(), model_step, tol, false).coverage()
         };
         let score_of = |t: &Isometry3<f64>, probe: &[Point], tol: f64| score_with(t, probe, tol, model_step);
         let coarse_tol = (0.08 * model.diameter).max(2.0 * tol);
@@ -234,7 +414,7 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
         // Views of a part on its side leave the coarse pose ambiguous up to a quarter or half turn
         // about one of the part's axes; add those turns of the best two candidates before the ICP check.
         let c_model = crate::cloud::centroid(model.target.points()).coords;
-        let with_turns = if cfg.method == CoarseMethod::Ccp { 2 } else { 0 };
+        let with_turns = if method == CoarseMethod::Ccp { 2 } else { 0 };
         let flips: Vec<Isometry3<f64>> = ranked
             .iter()
             .take(with_turns)
@@ -291,7 +471,7 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
         // A half turn about one of the part's axes can fit the seen surface almost as well (a tee
         // whose boss is hidden); judge the winner against its three half turns with the dense
         // depth test, which sees the surface each would put where the scan saw free space.
-        if cfg.method == CoarseMethod::Ccp {
+        if method == CoarseMethod::Ccp {
             let (s0, t0, cand) = best.expect("at least one candidate");
             let t_scene_model0 = t0.inverse();
             let mut winner = (s0, t0, cand);
@@ -328,18 +508,23 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
             });
         }
         let t_scene_model = t_model_scene.inverse();
-        let indices: Vec<usize> = kept
-            .iter()
-            .copied()
-            .filter(|&i| {
-                let q = t_model_scene * scene[i];
-                model.target.search().nearest_within(&[q.x, q.y, q.z], tol * tol).is_some()
-            })
-            .collect();
+        let indices = crate::detect::scene_indices(pts, model, &t_scene_model, tol);
         lap("verification", timings);
-        Ok(PoseEstimate { t_scene_model, t_scene_model_coarse: coarse, score, rmse, indices, timings: timings.clone(), iterations: refined.iterations })
+        Ok(PoseEstimate {
+            t_scene_model: model.symmetries.canonical(&t_scene_model),
+            t_scene_model_coarse: coarse,
+            score,
+            rmse,
+            indices,
+            timings: Vec::new(),
+            iterations: refined.iterations,
+            method,
+            visible_fraction: f64::NAN,
+            occluded_fraction: f64::NAN,
+            pickability: 1.0,
+        })
         };
-        match fit(&mut timings) {
+        match fit(timings) {
             Err(Error::NoObjectFound { reason }) => {
                 for &i in &region {
                     excluded[i] = true;
@@ -350,70 +535,4 @@ fn run(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstim
         }
     }
     Err(last_failure.unwrap_or(Error::NoObjectFound { reason: "no region could be matched".into() }))
-}
-
-fn inlier_stats(points: &[Point], target: &IcpTarget, t: &Isometry3<f64>, tol: f64) -> (f64, f64) {
-    let mut n = 0usize;
-    let mut sq = 0.0;
-    for p in points {
-        let q = t * p;
-        if let Some((_, d)) = target.search().nearest_within(&[q.x, q.y, q.z], tol * tol) {
-            n += 1;
-            sq += d;
-        }
-    }
-    let rmse = if n > 0 { (sq / n as f64).sqrt() } else { f64::INFINITY };
-    (n as f64 / points.len().max(1) as f64, rmse)
-}
-
-/// The scan seen from the sensor's side: per cell of a grid across `up`, the height (along `up`)
-/// of the highest scan point. Judging a predicted surface point against it is a depth test.
-struct HeightMap {
-    e1: Vector3<f64>,
-    e2: Vector3<f64>,
-    up: Vector3<f64>,
-    inv_cell: f64,
-    cells: std::collections::HashMap<(i64, i64), f64>,
-}
-
-impl HeightMap {
-    fn new(points: &[Point], up: &Vector3<f64>, cell: f64) -> Self {
-        let e1 = up.cross(&if up.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() }).normalize();
-        let e2 = up.cross(&e1);
-        let mut map = HeightMap { e1, e2, up: *up, inv_cell: 1.0 / cell, cells: std::collections::HashMap::with_capacity(points.len() / 2) };
-        for p in points {
-            let (k, h) = map.key(p);
-            let e = map.cells.entry(k).or_insert(f64::NEG_INFINITY);
-            *e = e.max(h);
-        }
-        map
-    }
-
-    fn key(&self, p: &Point) -> ((i64, i64), f64) {
-        let v = p.coords;
-        (((v.dot(&self.e1) * self.inv_cell).floor() as i64, (v.dot(&self.e2) * self.inv_cell).floor() as i64), v.dot(&self.up))
-    }
-}
-
-/// How well the scan confirms the surface a pose predicts: of the model points the sensor should
-/// see (facing `up`), those where the scan's surface is at the predicted height count as seen,
-/// those where the scan saw deeper (through the predicted surface) as violations; occluded
-/// (the scan is higher) or unscanned places do not count. Flipped and half-matched poses predict
-/// surface where the scan saw free space, and lose here.
-fn coverage(model: &PoseModel, heights: &HeightMap, t_scene_model: &Isometry3<f64>, step: usize, tol: f64) -> f64 {
-    let up_model = t_scene_model.rotation.inverse() * heights.up;
-    let normals = model.target.normals().unwrap_or(&[]);
-    let (mut seen, mut violated) = (0usize, 0usize);
-    for (p, n) in model.target.points().iter().zip(normals).step_by(step) {
-        if n.dot(&up_model) < 0.3 {
-            continue;
-        }
-        let (k, h) = heights.key(&(t_scene_model * p));
-        match heights.cells.get(&k) {
-            Some(&top) if (top - h).abs() <= tol => seen += 1,
-            Some(&top) if top < h - tol => violated += 1,
-            _ => {}
-        }
-    }
-    if seen + violated == 0 { 0.0 } else { seen as f64 / (seen + violated) as f64 }
 }

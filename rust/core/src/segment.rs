@@ -87,6 +87,8 @@ pub fn scan_spacing(points: &[Point], index: &KdIndex) -> ScanSpacing {
 }
 
 /// Indices of the points inside `bin`, at least `margin` mm above its floor and inside its walls.
+/// The bin is open at the top: parts of a full pile stick out above its rim, so nothing is cut
+/// above `max.z`.
 pub fn crop_to_bin(points: &[Point], bin: &BinBox, margin: f64) -> Result<Vec<usize>> {
     if (0..3).any(|k| !(bin.max[k] > bin.min[k])) {
         return Err(Error::invalid("bin", format!("the box must have max > min on every axis, got min {:?} max {:?}", bin.min.coords.as_slice(), bin.max.coords.as_slice())));
@@ -95,7 +97,7 @@ pub fn crop_to_bin(points: &[Point], bin: &BinBox, margin: f64) -> Result<Vec<us
         .iter()
         .enumerate()
         .filter(|(_, p)| {
-            p.x > bin.min.x + margin && p.x < bin.max.x - margin && p.y > bin.min.y + margin && p.y < bin.max.y - margin && p.z > bin.min.z + margin && p.z < bin.max.z + 10.0 * margin.max(1.0) + (bin.max.z - bin.min.z)
+            p.x > bin.min.x + margin && p.x < bin.max.x - margin && p.y > bin.min.y + margin && p.y < bin.max.y - margin && p.z > bin.min.z + margin
         })
         .map(|(i, _)| i)
         .collect())

@@ -1,4 +1,5 @@
-//! Voxel-grid downsampling: one point per occupied voxel, the mean of the points inside it.
+//! Downsampling: one point per occupied voxel (the mean of the points inside it), and even
+//! Poisson-disk subsets (no two kept points closer than a radius).
 
 use crate::cloud::Point;
 use crate::error::{Error, Result};
@@ -58,6 +59,48 @@ pub fn voxel_downsample(points: &[Point], normals: Option<&[Vector3<f64>]>, voxe
         Vec::new()
     };
     Ok(Downsampled { points: points_out, normals: normals_out, first_index })
+}
+
+/// Points kept at least `radius` apart: each candidate is accepted unless an accepted point lies
+/// closer, looked up on a hash grid of `radius` cells.
+pub struct DiskGrid {
+    inv: f64,
+    r2: f64,
+    cells: HashMap<[i64; 3], Vec<u32>>,
+    points: Vec<Point>,
+}
+
+impl DiskGrid {
+    /// An empty selection with disk radius `radius` (mm, positive).
+    pub fn new(radius: f64) -> Self {
+        DiskGrid { inv: 1.0 / radius, r2: radius * radius, cells: HashMap::new(), points: Vec::new() }
+    }
+
+    /// Accepts `p` when no accepted point lies within the radius; returns whether it did.
+    pub fn try_insert(&mut self, p: Point) -> bool {
+        let key = [(p.x * self.inv).floor() as i64, (p.y * self.inv).floor() as i64, (p.z * self.inv).floor() as i64];
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    if let Some(ids) = self.cells.get(&[key[0] + dx, key[1] + dy, key[2] + dz]) {
+                        if ids.iter().any(|&k| (self.points[k as usize] - p).norm_squared() < self.r2) {
+                            return false;
+                        }
+                    }
+                }
+            }
+        }
+        self.cells.entry(key).or_default().push(self.points.len() as u32);
+        self.points.push(p);
+        true
+    }
+}
+
+/// Indices of an even subsample: points visited in order, each kept unless a kept point lies
+/// within `radius` (a greedy Poisson-disk selection).
+pub fn subsample(points: &[Point], radius: f64) -> Vec<usize> {
+    let mut grid = DiskGrid::new(radius);
+    (0..points.len()).filter(|&i| grid.try_insert(points[i])).collect()
 }
 
 #[cfg(test)]

@@ -4,6 +4,8 @@ pub mod ccp;
 pub mod corr_tree;
 pub mod criteria;
 pub mod icp;
+pub mod ppf;
+pub mod verify;
 
 pub use criteria::{IcpConfig, IcpMethod, RobustKernel};
 pub use icp::{icp, IcpResult, IcpTarget};

@@ -286,18 +286,35 @@ fn decomposition_shape(mesh: &TriMesh, params: &PileParams) -> Result<SharedShap
     let (lo, hi) = mesh.bounds();
     let margin = (0.5 * (hi - lo).max() / params.decomposition_resolution as f64) as f32;
     let mut points: Vec<Vec<Vector>> = vec![Vec::new(); planes.len()];
+    let outside = |p: Vector| -> Vec<f32> { planes.iter().map(|pl| pl.iter().map(|(n, d)| n.dot(p) - d).fold(f32::NEG_INFINITY, f32::max)).collect() };
     for p in mesh.vertices.iter().map(convert::point_vec) {
-        let outside: Vec<f32> = planes.iter().map(|pl| pl.iter().map(|(n, d)| n.dot(p) - d).fold(f32::NEG_INFINITY, f32::max)).collect();
+        let out = outside(p);
         let mut held = false;
-        for (i, o) in outside.iter().enumerate() {
+        for (i, o) in out.iter().enumerate() {
             if *o <= margin {
                 points[i].push(p);
                 held = true;
             }
         }
         if !held {
-            let best = outside.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i).expect("a piece");
+            let best = out.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i).expect("a piece");
             points[best].push(p);
+        }
+    }
+    // A low-poly CAD mesh (a box-like bracket: a dozen vertices) leaves pieces with too few of
+    // its vertices to span a volume (a flat hull has no mass and never falls); points sampled
+    // over the faces fill those pieces.
+    const FEW: usize = 16;
+    if points.iter().any(|p| p.len() < FEW) {
+        let spacing = (4.0 * margin as f64).max(1e-3 * (hi - lo).max());
+        let surface = crate::model::sample_surface(mesh, crate::model::Density::Spacing(spacing), params.seed)?.points;
+        let sparse: Vec<bool> = points.iter().map(|p| p.len() < FEW).collect();
+        for p in surface.iter().map(convert::point_vec) {
+            for (i, o) in outside(p).iter().enumerate() {
+                if sparse[i] && *o <= margin {
+                    points[i].push(p);
+                }
+            }
         }
     }
     let parts: Vec<(Pose, SharedShape)> = points.iter().filter(|p| p.len() >= 4).filter_map(|pts| SharedShape::round_convex_hull(pts, params.skin as f32).map(|s| (Pose::IDENTITY, s))).collect();

@@ -1,0 +1,318 @@
+//! Detection of the instances of any rigid part in a scene: point-pair-feature voting →
+//! pose clustering → ICP refinement of every hypothesis → verification against the scan →
+//! non-maximum suppression → ranking by pickability.
+//!
+//! The scene is taken at three resolutions: the points left after bin removal (the depth test's
+//! height map and the reported indices), a voxel grid at a third of the PPF step (normals and
+//! ICP), and an even subsample at the PPF step (voting).
+
+use crate::cloud::Point;
+use crate::error::{Error, Result};
+use crate::knn::KdIndex;
+use crate::cloud::{covariance, principal_axes};
+use crate::normals::Orientation;
+use crate::pose::{CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
+use crate::registration::ppf::{DetectConfig, PpfModel};
+use crate::voxel::subsample;
+use crate::registration::verify::{depth_evidence, Evidence, HeightMap};
+use crate::registration::{icp, IcpConfig, IcpMethod, RobustKernel};
+use crate::segment::remove_support_planes;
+use crate::voxel::voxel_downsample;
+use nalgebra::{Isometry3, Vector3};
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// The scene prepared for detection and judging.
+pub(crate) struct DetectionScene {
+    /// Voxel-grid points (mean of each voxel) and their KD-tree.
+    pub fine: Vec<Point>,
+    pub fine_index: KdIndex,
+    /// The height map of the whole scene.
+    pub heights: HeightMap,
+    /// Depth-test and inlier tolerance, mm.
+    pub tol: f64,
+}
+
+/// A refined, judged hypothesis.
+#[derive(Debug, Clone)]
+pub(crate) struct Judged {
+    pub t_scene_model: Isometry3<f64>,
+    pub coarse: Isometry3<f64>,
+    pub evidence: Evidence,
+    pub rmse: f64,
+    pub iterations: usize,
+    /// Voxel points within the tolerance of the posed model (after polishing).
+    pub support: Vec<usize>,
+}
+
+impl Judged {
+    fn center(&self, model: &PoseModel) -> Point {
+        self.t_scene_model * model.symmetries.center
+    }
+}
+
+/// Tolerance of the depth test and of inliers for a PPF step (mm): a tenth of the step, not
+/// below 1 mm (scan noise and the voxel means' bias on curved surfaces).
+fn tolerance(step: f64) -> f64 {
+    (0.12 * step).max(1.0)
+}
+
+impl DetectionScene {
+    /// Voxel grid and normals of `points` (the scene without the bin) for `ppf`, and the height
+    /// map of the whole scene (the bin's floor is evidence too: surface predicted above a
+    /// visible floor is surface where the sensor saw free space). Without a bin box, support
+    /// planes wider than the part are removed from the voxel grid.
+    pub fn new(scene_all: &[Point], points: &[Point], model: &PoseModel, ppf: &PpfModel, cfg: &PoseConfig) -> Result<Self> {
+        let step = ppf.step();
+        let voxel = (step / 3.0).max(0.5);
+        let mut fine = voxel_downsample(points, None, voxel)?.points;
+        if cfg.bin.is_none() && fine.len() >= 50 {
+            let keep = remove_support_planes(&fine, model.diameter, (0.5 * voxel).max(1.0), 1).0;
+            fine = keep.iter().map(|&i| fine[i]).collect();
+        }
+        if fine.len() < 10 {
+            return Err(Error::NoObjectFound { reason: format!("only {} occupied {voxel:.1} mm voxels remain after removing the bin; the bin is empty", fine.len()) });
+        }
+        let fine_index = KdIndex::new(&fine);
+        let up = cfg.up.normalize();
+        let heights = HeightMap::fitted(scene_all, &up, (0.5 * voxel).max(1.0));
+        Ok(DetectionScene { fine, fine_index, heights, tol: tolerance(step) })
+    }
+
+    /// Probe stride over the model's dense points for about `n` probes.
+    fn probe_step(model: &PoseModel, n: usize) -> usize {
+        (model.target().points().len() / n.max(1)).max(1)
+    }
+
+    /// Judges a pose with the dense probe (about 2000 model points).
+    pub fn judge(&self, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> Evidence {
+        depth_evidence(model.target(), &self.heights, t_scene_model, Self::probe_step(model, 2000), self.tol, true)
+    }
+
+    /// Indices of the voxel points within the model's reach around `t_scene_model`, at most
+    /// `limit` of them (evenly thinned).
+    fn local(&self, model: &PoseModel, step: f64, t_scene_model: &Isometry3<f64>, limit: usize) -> Vec<usize> {
+        let c = t_scene_model * model.symmetries.center;
+        let mut idx: Vec<usize> = self.fine_index.within(&c, model.radius + step).iter().map(|n| n.index).collect();
+        idx.sort_unstable();
+        let stride = idx.len().div_ceil(limit.max(1)).max(1);
+        idx.into_iter().step_by(stride).collect()
+    }
+
+    /// A few ICP steps on a thinned neighbourhood and a cheap judgement: the screen every
+    /// hypothesis passes through.
+    fn screen(&self, model: &PoseModel, step: f64, start: &Isometry3<f64>) -> Option<Judged> {
+        let local: Vec<Point> = self.local(model, step, start, 200).iter().map(|&i| self.fine[i]).collect();
+        if local.len() < 12 {
+            return None;
+        }
+        let quick = IcpConfig {
+            method: IcpMethod::PointToPlane,
+            max_correspondence_distance: 1.5 * step,
+            max_iterations: 8,
+            rotation_tolerance: 1e-3,
+            translation_tolerance: 5e-2,
+            kernel: RobustKernel::Tukey(1.5 * step),
+            ..Default::default()
+        };
+        let r = icp(&local, model.target(), &start.inverse(), &quick).ok()?;
+        let t_scene_model = r.t_target_source.inverse();
+        let evidence = depth_evidence(model.target(), &self.heights, &t_scene_model, Self::probe_step(model, 300), self.tol, false);
+        Some(Judged { t_scene_model, coarse: *start, evidence, rmse: f64::NAN, iterations: r.iterations, support: Vec::new() })
+    }
+
+    /// Converges a screened pose on the full neighbourhood, judges it with the dense probe and
+    /// collects the voxel points it explains.
+    fn polish(&self, model: &PoseModel, step: f64, j: &Judged) -> Option<Judged> {
+        let idx = self.local(model, step, &j.t_scene_model, 1200);
+        let local: Vec<Point> = idx.iter().map(|&i| self.fine[i]).collect();
+        if local.len() < 12 {
+            return None;
+        }
+        let fine = IcpConfig {
+            method: IcpMethod::PointToPlane,
+            max_correspondence_distance: (3.0 * self.tol).max(0.5 * step),
+            max_iterations: 20,
+            rotation_tolerance: 1e-6,
+            translation_tolerance: 1e-4,
+            kernel: RobustKernel::Tukey((3.0 * self.tol).max(0.5 * step)),
+            ..Default::default()
+        };
+        let r = icp(&local, model.target(), &j.t_scene_model.inverse(), &fine).ok()?;
+        let t_scene_model = r.t_target_source.inverse();
+        let evidence = self.judge(model, &t_scene_model);
+        let tol2 = self.tol * self.tol;
+        let mut sq = 0.0;
+        // Every voxel point in reach, not the thinned ICP sample: supports are compared as sets.
+        let support: Vec<usize> = self
+            .local(model, step, &t_scene_model, usize::MAX)
+            .into_iter()
+            .filter_map(|i| {
+                let q = r.t_target_source * self.fine[i];
+                model.target().search().nearest_within(&[q.x, q.y, q.z], tol2).map(|(_, d)| {
+                    sq += d;
+                    i
+                })
+            })
+            .collect();
+        let rmse = if support.is_empty() { f64::INFINITY } else { (sq / support.len() as f64).sqrt() };
+        Some(Judged { t_scene_model, coarse: j.coarse, evidence, rmse, iterations: j.iterations + r.iterations, support })
+    }
+}
+
+/// Of the surface nothing else covers, the least share the scan must confirm: a pose that hangs
+/// over cells without data (a part matched onto the faces of another shape) fails here.
+const MIN_SUPPORTED: f64 = 0.7;
+
+/// Whether a judged pose is an instance: the scan confirms it wherever it can judge, it shows
+/// enough of its surface, and not much of it hangs over cells without data.
+fn accepted(e: &Evidence, cfg: &PoseConfig) -> bool {
+    e.coverage() >= cfg.min_fitness && e.seen >= 12 && e.visible_fraction() >= 0.08 && e.supported_fraction() >= MIN_SUPPORTED
+}
+
+/// All instances found by PPF, most pickable first (at most `cfg.max_instances`), and the
+/// prepared scene (for judging other methods' poses on the same terms).
+pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, ppf: &PpfModel, cfg: &PoseConfig, timings: &mut Vec<(&'static str, f64)>) -> Result<(Vec<PoseEstimate>, DetectionScene)> {
+    let mut clock = Instant::now();
+    let mut lap = |name: &'static str, timings: &mut Vec<(&'static str, f64)>| {
+        timings.push((name, clock.elapsed().as_secs_f64() * 1e3));
+        clock = Instant::now();
+    };
+    let scene = DetectionScene::new(scene_all, points, model, ppf, cfg)?;
+    lap("normals", timings);
+    let step = ppf.step();
+    let keep = subsample(&scene.fine, step);
+    let sparse: Vec<Point> = keep.iter().map(|&i| scene.fine[i]).collect();
+    let orientation = match cfg.viewpoint {
+        Some(v) => Orientation::TowardPoint(v),
+        None => Orientation::TowardDirection(cfg.up.normalize()),
+    };
+    // Only the voting samples need normals (ICP uses the model's).
+    let sparse_normals = normals_from(&sparse, &scene.fine, &scene.fine_index, 10, orientation);
+    let sparse_index = KdIndex::new(&sparse);
+    let detect_cfg = DetectConfig { max_hypotheses: cfg.detect.max_hypotheses.max(8 * cfg.max_instances), ..cfg.detect };
+    let votes = ppf.vote(&sparse, &sparse_normals, &sparse_index, &detect_cfg, None);
+    let hypotheses = ppf.cluster(&votes, &model.symmetries, &detect_cfg);
+    lap("voting", timings);
+    if hypotheses.is_empty() {
+        return Err(Error::NoObjectFound { reason: format!("no point pair of the {} scene samples matched the model", sparse.len()) });
+    }
+    // Screen every hypothesis; converge the most promising few.
+    let mut screened: Vec<Judged> = hypotheses.par_iter().filter_map(|h| scene.screen(model, step, &h.t_scene_model)).collect();
+    screened.sort_by(|a, b| b.evidence.quality().total_cmp(&a.evidence.quality()));
+    // The best few, spread over distinct places (a pile's best hypotheses crowd on one part).
+    let polish_count = 2 * cfg.max_instances + 2;
+    let min_gap = 0.5 * model.thickness;
+    let mut chosen: Vec<&Judged> = Vec::with_capacity(polish_count);
+    for j in &screened {
+        if chosen.len() >= polish_count {
+            break;
+        }
+        let crowded = chosen.iter().filter(|k| (k.center(model) - j.center(model)).norm() < min_gap).count();
+        if crowded < 2 {
+            chosen.push(j);
+        }
+    }
+    let mut judged: Vec<Judged> = chosen.par_iter().filter_map(|j| scene.polish(model, step, j)).collect();
+    lap("icp", timings);
+    // The pose that explains most of the scan, discounted for violations and for surface over
+    // cells without data, claims its points first.
+    let claim = |j: &Judged| j.support.len() as f64 * (j.evidence.coverage() * j.evidence.supported_fraction()).powi(2);
+    judged.sort_by(|a, b| claim(b).total_cmp(&claim(a)));
+    // One pose per instance: a pose whose explained points are mostly explained by a better
+    // pose already taken is the same instance (or a ghost made of its points).
+    let mut owner = vec![false; scene.fine.len()];
+    let mut instances: Vec<Judged> = Vec::new();
+    for j in judged.into_iter().filter(|j| accepted(&j.evidence, cfg)) {
+        let shared = j.support.iter().filter(|&&i| owner[i]).count();
+        if j.support.len() < 12 || shared as f64 > 0.3 * j.support.len() as f64 {
+            continue;
+        }
+        for &i in &j.support {
+            owner[i] = true;
+        }
+        instances.push(j);
+    }
+    if instances.is_empty() {
+        return Err(Error::NoObjectFound {
+            reason: format!("none of {} pose hypotheses was confirmed by the scan (need {:.0} % of the predicted visible surface seen)", hypotheses.len(), 100.0 * cfg.min_fitness),
+        });
+    }
+    let mut out: Vec<PoseEstimate> = rank(instances, model, cfg)
+        .into_iter()
+        .take(cfg.max_instances.max(1))
+        .map(|(j, pick)| PoseEstimate {
+            t_scene_model: model.symmetries.canonical(&j.t_scene_model),
+            t_scene_model_coarse: j.coarse,
+            score: j.evidence.coverage(),
+            rmse: j.rmse,
+            indices: Vec::new(),
+            timings: Vec::new(),
+            iterations: j.iterations,
+            method: CoarseMethod::Ppf,
+            visible_fraction: j.evidence.visible_fraction(),
+            occluded_fraction: j.evidence.occluded_fraction(),
+            pickability: pick,
+        })
+        .collect();
+    for est in &mut out {
+        est.indices = scene_indices(points, model, &est.t_scene_model, scene.tol);
+    }
+    lap("verification", timings);
+    Ok((out, scene))
+}
+
+/// Unit normals at `queries` from the PCA of their `k` nearest points of `cloud`, oriented.
+fn normals_from(queries: &[Point], cloud: &[Point], index: &KdIndex, k: usize, orientation: Orientation) -> Vec<Vector3<f64>> {
+    queries
+        .par_iter()
+        .map(|p| {
+            let local: Vec<Point> = index.knn(p, k).iter().map(|n| cloud[n.index]).collect();
+            let (_, cov) = covariance(&local);
+            let n = principal_axes(&cov).1[2];
+            let facing = match orientation {
+                Orientation::TowardPoint(v) => v - p,
+                Orientation::TowardDirection(d) => d,
+            };
+            if n.dot(&facing) < 0.0 { -n } else { n }
+        })
+        .collect()
+}
+
+/// Pickability in [0, 1]: height among the instances (half), the confirmed share of the facing
+/// surface (a third) and freedom from parts on top (a sixth). Returns the instances with their
+/// pickability, most pickable first.
+fn rank(instances: Vec<Judged>, model: &PoseModel, cfg: &PoseConfig) -> Vec<(Judged, f64)> {
+    let up = cfg.up.normalize();
+    let heights: Vec<f64> = instances.iter().map(|j| j.center(model).coords.dot(&up)).collect();
+    let (lo, hi) = heights.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+    let span = (hi - lo).max(0.25 * model.diameter);
+    let mut ranked: Vec<(Judged, f64)> = instances
+        .into_iter()
+        .zip(heights)
+        .map(|(j, h)| {
+            let e = &j.evidence;
+            let pick = 0.5 * (1.0 - (hi - h) / span).max(0.0) + (1.0 / 3.0) * e.visible_fraction().min(1.0) + (1.0 / 6.0) * (1.0 - e.occluded_fraction().min(1.0));
+            (j, pick)
+        })
+        .collect();
+    ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+    ranked
+}
+
+/// Indices of `points` within `tol` of the posed model.
+pub(crate) fn scene_indices(points: &[Point], model: &PoseModel, t_scene_model: &Isometry3<f64>, tol: f64) -> Vec<usize> {
+    let c = t_scene_model * model.symmetries.center;
+    let reach = model.radius + tol;
+    let t_model_scene = t_scene_model.inverse();
+    points
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| (*p - c).norm_squared() <= reach * reach)
+        .filter(|(_, p)| {
+            let q = t_model_scene * *p;
+            model.target().search().nearest_within(&[q.x, q.y, q.z], tol * tol).is_some()
+        })
+        .map(|(i, _)| i)
+        .collect()
+}

@@ -1,0 +1,280 @@
+//! Hypothesis verification: how well the scan explains a posed model, and how much of the
+//! model's predicted visible surface lies where the sensor saw free space.
+//!
+//! The scan seen from the sensor's side is a height map: per cell of a grid across `up`, the
+//! highest scan point. A model point facing the sensor is *seen* where the scan's surface is at
+//! its predicted height, *violated* where the scan saw deeper (through the predicted surface:
+//! the pose puts material where there is free space), *occluded* where the scan is higher and
+//! that higher point is not on the posed model itself (something lies on top of it), *hidden*
+//! where the higher point is on the posed model (its own surface hides it), and *missing* where
+//! the cell holds no scan point. Flipped and half-matched poses predict surface where the scan saw
+//! free space and lose; a pose that hangs over empty cells predicts surface nothing confirms;
+//! buried instances show as occluded.
+
+use super::icp::IcpTarget;
+use crate::cloud::Point;
+use nalgebra::{Isometry3, Vector3};
+
+/// The scan as a height map along `up` on a dense grid.
+pub struct HeightMap {
+    e1: Vector3<f64>,
+    e2: Vector3<f64>,
+    /// Unit direction toward the sensor.
+    pub up: Vector3<f64>,
+    cell: f64,
+    origin: (f64, f64),
+    size: (usize, usize),
+    /// Per cell: the highest scan point (NaN height where empty).
+    top: Vec<[f32; 3]>,
+    height: Vec<f32>,
+}
+
+impl HeightMap {
+    /// The height map of `points` with cells of `cell` mm (enlarged if the grid would exceed
+    /// 4 million cells).
+    pub fn new(points: &[Point], up: &Vector3<f64>, cell: f64) -> Self {
+        let up = up.normalize();
+        let e1 = up.cross(&if up.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() }).normalize();
+        let e2 = up.cross(&e1);
+        let (mut lo, mut hi) = ((f64::INFINITY, f64::INFINITY), (f64::NEG_INFINITY, f64::NEG_INFINITY));
+        for p in points {
+            let (a, b) = (p.coords.dot(&e1), p.coords.dot(&e2));
+            lo = (lo.0.min(a), lo.1.min(b));
+            hi = (hi.0.max(a), hi.1.max(b));
+        }
+        if points.is_empty() {
+            lo = (0.0, 0.0);
+            hi = (0.0, 0.0);
+        }
+        let mut cell = cell.max(1e-3);
+        while ((hi.0 - lo.0) / cell + 1.0) * ((hi.1 - lo.1) / cell + 1.0) > 4e6 {
+            cell *= 1.5;
+        }
+        let size = (((hi.0 - lo.0) / cell) as usize + 1, ((hi.1 - lo.1) / cell) as usize + 1);
+        let mut map = HeightMap { e1, e2, up, cell, origin: lo, size, top: vec![[0.0; 3]; size.0 * size.1], height: vec![f32::NAN; size.0 * size.1] };
+        for p in points {
+            let (Some(k), h) = map.key(p) else { continue };
+            let h = h as f32;
+            if !(map.height[k] >= h) {
+                map.height[k] = h;
+                map.top[k] = [p.x as f32, p.y as f32, p.z as f32];
+            }
+        }
+        map
+    }
+
+    /// The height map with the smallest cell, from `cell` up, at which the scan covers its
+    /// surfaces without holes (a laser-line scan is sparse across its lines): cells grow by 1.5×
+    /// while more than a fifth of the occupied cells have empty cells on both sides along a grid
+    /// axis (a line pattern; the edge of a surface has them on one side only), up to 8 × `cell`.
+    pub fn fitted(points: &[Point], up: &Vector3<f64>, cell: f64) -> Self {
+        let mut c = cell;
+        loop {
+            let map = HeightMap::new(points, up, c);
+            if map.gaps() <= 0.2 || c >= 8.0 * cell {
+                return map;
+            }
+            c *= 1.5;
+        }
+    }
+
+    /// Fraction of the occupied cells whose two neighbours along a grid axis are both empty.
+    fn gaps(&self) -> f64 {
+        let (w, h) = self.size;
+        let empty = |k: usize| self.height[k].is_nan();
+        let (mut gapped, mut occupied) = (0usize, 0usize);
+        for a in 1..w.saturating_sub(1) {
+            for b in 1..h.saturating_sub(1) {
+                if empty(a * h + b) {
+                    continue;
+                }
+                occupied += 1;
+                let across = empty((a - 1) * h + b) && empty((a + 1) * h + b);
+                let along = empty(a * h + b - 1) && empty(a * h + b + 1);
+                gapped += (across || along) as usize;
+            }
+        }
+        if occupied == 0 { 0.0 } else { gapped as f64 / occupied as f64 }
+    }
+
+    /// The cell size, mm.
+    pub fn cell(&self) -> f64 {
+        self.cell
+    }
+
+    #[inline]
+    fn key(&self, p: &Point) -> (Option<usize>, f64) {
+        let v = p.coords;
+        let a = (v.dot(&self.e1) - self.origin.0) / self.cell;
+        let b = (v.dot(&self.e2) - self.origin.1) / self.cell;
+        let h = v.dot(&self.up);
+        if a < 0.0 || b < 0.0 || a >= self.size.0 as f64 || b >= self.size.1 as f64 {
+            return (None, h);
+        }
+        (Some(a as usize * self.size.1 + b as usize), h)
+    }
+
+    /// Height of the scan's top surface over `p`'s cell, or `None` where nothing was scanned.
+    #[inline]
+    pub fn top_at(&self, p: &Point) -> Option<(f64, Point)> {
+        let (Some(k), _) = self.key(p) else { return None };
+        let h = self.height[k];
+        if h.is_nan() {
+            return None;
+        }
+        let t = self.top[k];
+        Some((h as f64, Point::new(t[0] as f64, t[1] as f64, t[2] as f64)))
+    }
+}
+
+/// What the scan says about one posed model.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Evidence {
+    /// Probe points facing the sensor.
+    pub facing: usize,
+    /// ... confirmed by the scan at their predicted height.
+    pub seen: usize,
+    /// ... where the scan saw through them (free space where the pose puts material).
+    pub violated: usize,
+    /// ... under scan points that are not on the posed model (something on top).
+    pub occluded: usize,
+    /// ... under scan points on the posed model itself (its own surface hides them).
+    pub hidden: usize,
+    /// ... over cells where the scan holds nothing.
+    pub missing: usize,
+}
+
+impl Evidence {
+    /// Seen over seen + violated: 1 for a pose the scan confirms wherever it can judge.
+    pub fn coverage(&self) -> f64 {
+        if self.seen + self.violated == 0 {
+            0.0
+        } else {
+            self.seen as f64 / (self.seen + self.violated) as f64
+        }
+    }
+
+    /// Fraction of the surface the sensor should see (facing, not hidden by the part itself)
+    /// that the scan confirms.
+    pub fn visible_fraction(&self) -> f64 {
+        self.seen as f64 / (self.facing - self.hidden).max(1) as f64
+    }
+
+    /// Fraction of the surface the sensor should see that lies under other objects.
+    pub fn occluded_fraction(&self) -> f64 {
+        self.occluded as f64 / (self.facing - self.hidden).max(1) as f64
+    }
+
+    /// Of the surface that nothing else covers, the fraction the scan confirms (the rest is
+    /// seen through, or over cells without data).
+    pub fn supported_fraction(&self) -> f64 {
+        self.seen as f64 / (self.seen + self.violated + self.missing).max(1) as f64
+    }
+
+    /// The ranking quality of a hypothesis: confirmed surface, discounted for violations.
+    pub fn quality(&self) -> f64 {
+        let c = self.coverage();
+        self.seen as f64 * c * c
+    }
+}
+
+/// Judges `t_scene_model` against the scan: every `step`-th point of `target` (the model) with
+/// its normal is a probe; `tol` is the height tolerance, mm, widened on slopes by the cell's
+/// rise. With `check_occluders`, a higher scan point is looked up on the posed model to tell
+/// hidden (under the part's own surface) from occluded (under something else); without, both
+/// count as occluded.
+pub fn depth_evidence(target: &IcpTarget, heights: &HeightMap, t_scene_model: &Isometry3<f64>, step: usize, tol: f64, check_occluders: bool) -> Evidence {
+    let up_model = t_scene_model.rotation.inverse() * heights.up;
+    let normals = target.normals().unwrap_or(&[]);
+    let t_model_scene = t_scene_model.inverse();
+    let mut e = Evidence::default();
+    for (p, n) in target.points().iter().zip(normals).step_by(step.max(1)) {
+        let c = n.dot(&up_model);
+        if c < 0.3 {
+            continue;
+        }
+        e.facing += 1;
+        let q = t_scene_model * p;
+        let h = q.coords.dot(&heights.up);
+        // The top of a cell on a slope lies up to a cell × tan(slope) above the probe.
+        let slack = tol + heights.cell * (1.0 - c * c).sqrt() / c;
+        match heights.top_at(&q) {
+            None => e.missing += 1,
+            Some((top, _)) if (top - h).abs() <= slack => e.seen += 1,
+            Some((top, _)) if top < h - slack => e.violated += 1,
+            Some((_, at)) => {
+                let m = t_model_scene * at;
+                let own = check_occluders && target.search().nearest_within(&[m.x, m.y, m.z], 4.0 * tol * tol).is_some();
+                if own {
+                    e.hidden += 1;
+                } else {
+                    e.occluded += 1;
+                }
+            }
+        }
+    }
+    e
+}
+
+/// Fraction of `points` within `tol` of the posed model (`t_model_scene` maps scene → model)
+/// and the RMS distance of those.
+pub fn inlier_stats(points: &[Point], target: &IcpTarget, t_model_scene: &Isometry3<f64>, tol: f64) -> (f64, f64) {
+    let mut n = 0usize;
+    let mut sq = 0.0;
+    for p in points {
+        let q = t_model_scene * p;
+        if let Some((_, d)) = target.search().nearest_within(&[q.x, q.y, q.z], tol * tol) {
+            n += 1;
+            sq += d;
+        }
+    }
+    let rmse = if n > 0 { (sq / n as f64).sqrt() } else { f64::INFINITY };
+    (n as f64 / points.len().max(1) as f64, rmse)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    /// A 40 × 40 mm plate at z = 10 seen from above, judged as a model of itself.
+    #[test]
+    fn a_true_pose_is_seen_a_lifted_one_violates_and_a_covered_one_is_occluded() {
+        let plate: Vec<Point> = (0..1600).map(|i| Point::new((i % 40) as f64, (i / 40) as f64, 0.0)).collect();
+        let normals = vec![Vector3::z(); plate.len()];
+        let target = IcpTarget::new(plate.clone(), Some(normals)).unwrap();
+        let at = |z: f64| Isometry3::from_parts(Translation3::new(0.0, 0.0, z), UnitQuaternion::identity());
+        let scan: Vec<Point> = plate.iter().map(|p| at(10.0) * p).collect();
+        let map = HeightMap::new(&scan, &Vector3::z(), 1.0);
+        let e = depth_evidence(&target, &map, &at(10.0), 1, 0.5, true);
+        assert_eq!(e.facing, 1600);
+        assert_eq!(e.seen, 1600);
+        assert_eq!(e.coverage(), 1.0);
+        // Below the scanned surface: a pose that would be hidden by it is occluded, not violated.
+        let e = depth_evidence(&target, &map, &at(5.0), 1, 0.5, true);
+        assert_eq!((e.seen, e.violated, e.occluded, e.hidden), (0, 0, 1600, 0));
+        // Above it: the sensor saw through the predicted surface.
+        let e = depth_evidence(&target, &map, &at(15.0), 1, 0.5, true);
+        assert_eq!((e.seen, e.violated), (0, 1600));
+        assert_eq!(e.coverage(), 0.0);
+        // Beside the scan: nothing confirms it.
+        let beside = Isometry3::from_parts(Translation3::new(100.0, 0.0, 10.0), UnitQuaternion::identity());
+        let e = depth_evidence(&target, &map, &beside, 1, 0.5, true);
+        assert_eq!((e.seen, e.missing), (0, 1600));
+        assert_eq!(e.supported_fraction(), 0.0);
+        // Two stacked plates of one part: the lower one is hidden by the upper, not occluded.
+        let mut two = plate.clone();
+        two.extend(plate.iter().map(|p| p + Vector3::new(0.0, 0.0, -5.0)));
+        let stacked = IcpTarget::new(two, Some(vec![Vector3::z(); 3200])).unwrap();
+        let e = depth_evidence(&stacked, &map, &at(10.0), 1, 0.5, true);
+        assert_eq!((e.seen, e.hidden, e.occluded), (1600, 1600, 0));
+        assert_eq!(e.visible_fraction(), 1.0);
+        // A sparse scan (every third row) gets a coarser map without holes.
+        let sparse: Vec<Point> = scan.iter().filter(|p| (p.y as i64) % 3 == 0).copied().collect();
+        let fitted = HeightMap::fitted(&sparse, &Vector3::z(), 1.0);
+        assert!(fitted.cell() > 2.0, "{}", fitted.cell());
+        let (fit, rmse) = inlier_stats(&scan, &target, &at(10.0).inverse(), 0.5);
+        assert_eq!(fit, 1.0);
+        assert!(rmse < 1e-9);
+    }
+}
