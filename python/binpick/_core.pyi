@@ -135,6 +135,7 @@ def estimate_poses(
     viewpoint: Optional[_F64] = None,
     reference_fraction: Optional[float] = None,
     max_hypotheses: Optional[int] = None,
+    min_coverage: float = 0.8,
 ) -> list[dict[str, Any]]:
     """Up to ``max_instances`` verified instances, most pickable first (coarse ``method``
     ``"auto"``|``"ppf"``|``"ccp"``|``"centroid"``, then ICP): dicts with T_scene_model,

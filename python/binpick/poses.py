@@ -179,6 +179,7 @@ def estimate_poses(
     max_normal_angle: float = np.radians(70.0),
     inlier_distance: Optional[float] = None,
     min_fitness: float = 0.6,
+    min_coverage: float = 0.8,
     ccp_closer_radius: Optional[float] = None,
     ccp_tau: Optional[float] = None,
     reference_fraction: Optional[float] = None,
@@ -207,9 +208,10 @@ def estimate_poses(
     - ``"auto"`` (default): PPF; for a model with declared branches, CCP too, and the pose the scan
       confirms better leads.
 
-    Raises :class:`binpick.NoObjectFound` when no instance is confirmed (``min_fitness``: the
-    share of the object's points on the model for CCP, of the predicted visible surface that the
-    scan confirms for PPF); it never returns a guess.
+    Raises :class:`binpick.NoObjectFound` when no instance is confirmed (CCP: ``min_fitness`` of
+    the object's points on the model; PPF: ``min_coverage`` of the predicted sensor-facing
+    surface confirmed where the scan can judge it, enough of it over scanned cells, and no pose
+    through the bin's floor or walls); it never returns a guess.
     """
     if not isinstance(model, Model):
         raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}; build one with binpick.Model.from_mesh")
@@ -253,6 +255,7 @@ def estimate_poses(
         vp,
         reference_fraction,
         None if max_hypotheses is None else count(max_hypotheses, "max_hypotheses", minimum=1),
+        non_negative(min_coverage, "min_coverage"),
     )
     return [PoseResult(**r) for r in raw]
 

@@ -16,7 +16,7 @@ use crate::registration::ppf::{DetectConfig, PpfModel};
 use crate::voxel::subsample;
 use crate::registration::verify::{depth_evidence, Evidence, HeightMap};
 use crate::registration::{icp, IcpConfig, IcpMethod, RobustKernel};
-use crate::segment::remove_support_planes;
+use crate::segment::{remove_support_planes, Plane};
 use crate::voxel::voxel_downsample;
 use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
@@ -31,6 +31,9 @@ pub(crate) struct DetectionScene {
     pub heights: HeightMap,
     /// Depth-test and inlier tolerance, mm.
     pub tol: f64,
+    /// Support surfaces no part can pass through: the bin's floor and walls (from the bin box),
+    /// or the floor-like support planes removed without one; normals point to the free side.
+    pub supports: Vec<Plane>,
 }
 
 /// A refined, judged hypothesis.
@@ -66,17 +69,30 @@ impl DetectionScene {
         let step = ppf.step();
         let voxel = (step / 3.0).max(0.5);
         let mut fine = voxel_downsample(points, None, voxel)?.points;
-        if cfg.bin.is_none() && fine.len() >= 50 {
-            let keep = remove_support_planes(&fine, model.diameter, (0.5 * voxel).max(1.0), 1).0;
+        let up = cfg.up.normalize();
+        let mut supports = Vec::new();
+        if let Some(bin) = &cfg.bin {
+            let (lo, hi) = (bin.min.coords, bin.max.coords);
+            supports.push(Plane { normal: Vector3::z(), offset: lo.z });
+            for k in 0..2 {
+                let e = Vector3::ith(k, 1.0);
+                supports.push(Plane { normal: e, offset: lo[k] });
+                supports.push(Plane { normal: -e, offset: -hi[k] });
+            }
+        } else if fine.len() >= 50 {
+            let (keep, planes) = remove_support_planes(&fine, model.diameter, (0.5 * voxel).max(1.0), 1);
             fine = keep.iter().map(|&i| fine[i]).collect();
+            // Floors only: which side of a wall is free is not known without the bin.
+            supports.extend(planes.into_iter().filter(|p| p.normal.dot(&up).abs() > 0.8).map(|p| {
+                if p.normal.dot(&up) > 0.0 { p } else { Plane { normal: -p.normal, offset: -p.offset } }
+            }));
         }
         if fine.len() < 10 {
             return Err(Error::NoObjectFound { reason: format!("only {} occupied {voxel:.1} mm voxels remain after removing the bin; the bin is empty", fine.len()) });
         }
         let fine_index = KdIndex::new(&fine);
-        let up = cfg.up.normalize();
         let heights = HeightMap::fitted(scene_all, &up, (0.5 * voxel).max(1.0));
-        Ok(DetectionScene { fine, fine_index, heights, tol: tolerance(step) })
+        Ok(DetectionScene { fine, fine_index, heights, tol: tolerance(step), supports })
     }
 
     /// Probe stride over the model's dense points for about `n` probes.
@@ -162,12 +178,33 @@ impl DetectionScene {
 
 /// Of the surface nothing else covers, the least share the scan must confirm: a pose that hangs
 /// over cells without data (a part matched onto the faces of another shape) fails here.
-const MIN_SUPPORTED: f64 = 0.7;
+const MIN_SUPPORTED: f64 = 0.5;
 
 /// Whether a judged pose is an instance: the scan confirms it wherever it can judge, it shows
 /// enough of its surface, and not much of it hangs over cells without data.
 fn accepted(e: &Evidence, cfg: &PoseConfig) -> bool {
-    e.coverage() >= cfg.min_fitness && e.seen >= 12 && e.visible_fraction() >= 0.08 && e.supported_fraction() >= MIN_SUPPORTED
+    e.coverage() >= cfg.min_coverage && e.seen >= 12 && e.visible_fraction() >= 0.08 && e.supported_fraction() >= MIN_SUPPORTED
+}
+
+impl DetectionScene {
+    /// Whether the posed part stays on the free side of every support surface (a pose through
+    /// the bin's floor or walls is no pose), within twice the tolerance for 2 % of its surface.
+    fn physically_possible(&self, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> bool {
+        if self.supports.is_empty() {
+            return true;
+        }
+        let pts = model.target().points();
+        let step = (pts.len() / 500).max(1);
+        let inside = pts
+            .iter()
+            .step_by(step)
+            .filter(|p| {
+                let q = t_scene_model * *p;
+                self.supports.iter().any(|s| s.normal.dot(&q.coords) < s.offset - 2.0 * self.tol)
+            })
+            .count();
+        (inside as f64) < 0.02 * pts.len().div_ceil(step) as f64
+    }
 }
 
 /// All instances found by PPF, most pickable first (at most `cfg.max_instances`), and the
@@ -223,7 +260,7 @@ pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, p
     // pose already taken is the same instance (or a ghost made of its points).
     let mut owner = vec![false; scene.fine.len()];
     let mut instances: Vec<Judged> = Vec::new();
-    for j in judged.into_iter().filter(|j| accepted(&j.evidence, cfg)) {
+    for j in judged.into_iter().filter(|j| accepted(&j.evidence, cfg) && scene.physically_possible(model, &j.t_scene_model)) {
         let shared = j.support.iter().filter(|&&i| owner[i]).count();
         if j.support.len() < 12 || shared as f64 > 0.3 * j.support.len() as f64 {
             continue;
@@ -235,7 +272,7 @@ pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, p
     }
     if instances.is_empty() {
         return Err(Error::NoObjectFound {
-            reason: format!("none of {} pose hypotheses was confirmed by the scan (need {:.0} % of the predicted visible surface seen)", hypotheses.len(), 100.0 * cfg.min_fitness),
+            reason: format!("none of {} pose hypotheses was confirmed by the scan (need {:.0} % of the predicted visible surface seen)", hypotheses.len(), 100.0 * cfg.min_coverage),
         });
     }
     let mut out: Vec<PoseEstimate> = rank(instances, model, cfg)

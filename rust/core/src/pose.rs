@@ -144,9 +144,11 @@ pub struct PoseConfig {
     /// Inlier distance for verification, mm (default: 2 × the model's sample spacing plus
     /// 1.5 × the scan's, at least 1 mm — it judges scan points against the dense model).
     pub inlier_distance: Option<f64>,
-    /// Smallest fraction of the object's points that must lie on the posed model (CCP,
-    /// centroid), or of the predicted visible surface that the scan must confirm (PPF).
+    /// Smallest fraction of the object's points that must lie on the posed model (CCP, centroid).
     pub min_fitness: f64,
+    /// PPF: smallest fraction of the posed model's sensor-facing surface, where the scan can judge
+    /// it, that the scan confirms (the rest it sees through).
+    pub min_coverage: f64,
     /// CCP tuning.
     pub ccp: CcpConfig,
     /// PPF detection tuning.
@@ -171,6 +173,7 @@ impl Default for PoseConfig {
             max_normal_angle: 70f64.to_radians(),
             inlier_distance: None,
             min_fitness: 0.6,
+            min_coverage: 0.8,
             ccp: CcpConfig::default(),
             detect: DetectConfig::default(),
             viewpoint: None,

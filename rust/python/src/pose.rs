@@ -160,7 +160,7 @@ fn estimate_to_py<'py>(py: Python<'py>, est: &PoseEstimate) -> PyResult<Bound<'p
 /// Estimates up to `max_instances` instances, most pickable first; returns a list of dicts of
 /// the PoseResult fields.
 #[pyfunction]
-#[pyo3(signature = (scene, model, bin_box, up, method, d_star, min_points, max_normal_angle, inlier_distance, min_fitness, closer_radius, tau, num_threads, max_instances=1, viewpoint=None, reference_fraction=None, max_hypotheses=None))]
+#[pyo3(signature = (scene, model, bin_box, up, method, d_star, min_points, max_normal_angle, inlier_distance, min_fitness, closer_radius, tau, num_threads, max_instances=1, viewpoint=None, reference_fraction=None, max_hypotheses=None, min_coverage=0.8))]
 #[allow(clippy::too_many_arguments)]
 fn estimate_poses<'py>(
     py: Python<'py>,
@@ -181,6 +181,7 @@ fn estimate_poses<'py>(
     viewpoint: Option<PyReadonlyArray1<'py, f64>>,
     reference_fraction: Option<f64>,
     max_hypotheses: Option<usize>,
+    min_coverage: f64,
 ) -> PyResult<Bound<'py, PyList>> {
     let pts = points(&scene, "scene")?;
     let bin = match bin_box {
@@ -223,6 +224,7 @@ fn estimate_poses<'py>(
         max_normal_angle,
         inlier_distance,
         min_fitness,
+        min_coverage,
         ccp: CcpConfig { closer_radius, tau },
         detect,
         viewpoint,

@@ -140,7 +140,7 @@ pub struct Evidence {
     pub occluded: usize,
     /// ... under scan points on the posed model itself (its own surface hides them).
     pub hidden: usize,
-    /// ... over cells where the scan holds nothing.
+    /// ... within 45° of facing the sensor, over cells where the scan holds nothing.
     pub missing: usize,
 }
 
@@ -199,7 +199,10 @@ pub fn depth_evidence(target: &IcpTarget, heights: &HeightMap, t_scene_model: &I
         // The top of a cell on a slope lies up to a cell × tan(slope) above the probe.
         let slack = tol + heights.cell * (1.0 - c * c).sqrt() / c;
         match heights.top_at(&q) {
-            None => e.missing += 1,
+            // Steep faces go unscanned for many reasons (perspective, laser shadows); only
+            // surface within 45° of facing the sensor is expected to be in the scan.
+            None if c >= 0.7 => e.missing += 1,
+            None => {}
             Some((top, _)) if (top - h).abs() <= slack => e.seen += 1,
             Some((top, _)) if top < h - slack => e.violated += 1,
             Some((_, at)) => {
