@@ -40,7 +40,7 @@ class PpfParams:
     over [0, π]. ``rotation_bins``: bins of the rotation about the reference normal over a turn.
     """
 
-    sampling_ratio: float = 0.04
+    sampling_ratio: float = 0.05
     angle_bins: int = 30
     rotation_bins: int = 30
 
@@ -197,9 +197,12 @@ class Model:
 
     def prepared(self, ppf: Optional[PpfParams] = None):
         """The native pose-estimation structure of this model: search structures, symmetries and
-        the point-pair-feature table (``ppf``, default :class:`PpfParams`), built once and kept.
+        the point-pair-feature table (``ppf``; default: the parameters last used, else
+        :class:`PpfParams`), built once and kept until other parameters are asked for.
         The table is cached on disk (:func:`cache_dir`), keyed by the mesh, its sampling and the
         parameters; a missing, stale or corrupt cache file is rebuilt."""
+        if ppf is None and self._prepared is not None:
+            return self._prepared[1]
         params = PpfParams() if ppf is None else ppf
         if not isinstance(params, PpfParams):
             raise InvalidInputError(f"ppf: expected binpick.PpfParams, got {type(params).__name__}")

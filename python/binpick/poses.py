@@ -200,8 +200,8 @@ def estimate_poses(
       against the model's feature table, pose clustering modulo the part's symmetries, ICP of
       every hypothesis, verification against the scan (a depth test of the surface each pose
       predicts), one pose per instance, ranked by pickability (height, visible share, nothing on
-      top). ``reference_fraction`` of the scene samples vote (default 0.2); ``max_hypotheses``
-      clusters are refined (default 32, at least 8 per requested instance).
+      top). ``reference_fraction`` of the scene samples vote (default 0.1, at least 60 samples);
+      ``max_hypotheses`` clusters are refined (default 16, at least 8 per requested instance).
     - ``"ccp"``: the paper's computed closer point on the top object (needs the model's branches,
       :meth:`Model.declare_branches`); top-object segmentation (Table 2) → CCP → ICP. One instance.
     - ``"centroid"``: the paper's baseline, ICP from the centroids. One instance.

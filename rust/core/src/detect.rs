@@ -82,10 +82,16 @@ impl DetectionScene {
         } else if fine.len() >= 50 {
             let (keep, planes) = remove_support_planes(&fine, model.diameter, (0.5 * voxel).max(1.0), 1);
             fine = keep.iter().map(|&i| fine[i]).collect();
-            // Floors only: which side of a wall is free is not known without the bin.
-            supports.extend(planes.into_iter().filter(|p| p.normal.dot(&up).abs() > 0.8).map(|p| {
-                if p.normal.dot(&up) > 0.0 { p } else { Plane { normal: -p.normal, offset: -p.offset } }
-            }));
+            // Floors only (which side of a wall is free is not known without the bin), and only
+            // those with the scene above them: a bin's rim is a wide plane too, with parts below.
+            let tol = tolerance(step);
+            supports.extend(
+                planes
+                    .into_iter()
+                    .filter(|p| p.normal.dot(&up).abs() > 0.8)
+                    .map(|p| if p.normal.dot(&up) > 0.0 { p } else { Plane { normal: -p.normal, offset: -p.offset } })
+                    .filter(|p| fine.iter().filter(|q| p.normal.dot(&q.coords) < p.offset - 2.0 * tol).count() * 50 < fine.len()),
+            );
         }
         if fine.len() < 10 {
             return Err(Error::NoObjectFound { reason: format!("only {} occupied {voxel:.1} mm voxels remain after removing the bin; the bin is empty", fine.len()) });
@@ -216,7 +222,7 @@ pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, p
         clock = Instant::now();
     };
     let scene = DetectionScene::new(scene_all, points, model, ppf, cfg)?;
-    lap("normals", timings);
+    lap("voxels", timings);
     let step = ppf.step();
     let keep = subsample(&scene.fine, step);
     let sparse: Vec<Point> = keep.iter().map(|&i| scene.fine[i]).collect();
@@ -227,10 +233,12 @@ pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, p
     // Only the voting samples need normals (ICP uses the model's).
     let sparse_normals = normals_from(&sparse, &scene.fine, &scene.fine_index, 10, orientation);
     let sparse_index = KdIndex::new(&sparse);
+    lap("normals", timings);
     let detect_cfg = DetectConfig { max_hypotheses: cfg.detect.max_hypotheses.max(8 * cfg.max_instances), ..cfg.detect };
     let votes = ppf.vote(&sparse, &sparse_normals, &sparse_index, &detect_cfg, None);
-    let hypotheses = ppf.cluster(&votes, &model.symmetries, &detect_cfg);
     lap("voting", timings);
+    let hypotheses = ppf.cluster(&votes, &model.symmetries, &detect_cfg);
+    lap("clustering", timings);
     if hypotheses.is_empty() {
         return Err(Error::NoObjectFound { reason: format!("no point pair of the {} scene samples matched the model", sparse.len()) });
     }
@@ -238,7 +246,7 @@ pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, p
     let mut screened: Vec<Judged> = hypotheses.par_iter().filter_map(|h| scene.screen(model, step, &h.t_scene_model)).collect();
     screened.sort_by(|a, b| b.evidence.quality().total_cmp(&a.evidence.quality()));
     // The best few, spread over distinct places (a pile's best hypotheses crowd on one part).
-    let polish_count = 2 * cfg.max_instances + 2;
+    let polish_count = 2 * cfg.max_instances + 1;
     let min_gap = 0.5 * model.thickness;
     let mut chosen: Vec<&Judged> = Vec::with_capacity(polish_count);
     for j in &screened {
@@ -250,6 +258,7 @@ pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, p
             chosen.push(j);
         }
     }
+    lap("screening", timings);
     let mut judged: Vec<Judged> = chosen.par_iter().filter_map(|j| scene.polish(model, step, j)).collect();
     lap("icp", timings);
     // The pose that explains most of the scan, discounted for violations and for surface over

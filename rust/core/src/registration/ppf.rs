@@ -13,7 +13,7 @@
 //! The best local poses of all reference points are clustered (poses that differ by less than
 //! the clustering thresholds, modulo the part's symmetry) and the clusters ranked by their votes.
 //!
-//! Beyond the original: a scene feature in the outer quarter of a bin also looks up the
+//! Beyond the original: a scene feature near the edge of a bin also looks up the
 //! neighbouring bin of that dimension (noise in the normals moves features across boundaries);
 //! a peak's votes include half of its two rotation neighbours, and its rotation is refined
 //! between them (parabolic), so a pose straddling two rotation bins keeps its strength.
@@ -40,7 +40,7 @@ pub struct PpfConfig {
 
 impl Default for PpfConfig {
     fn default() -> Self {
-        PpfConfig { sampling_ratio: 0.04, angle_bins: 30, rotation_bins: 30 }
+        PpfConfig { sampling_ratio: 0.05, angle_bins: 30, rotation_bins: 30 }
     }
 }
 
@@ -155,12 +155,16 @@ impl Default for DetectConfig {
             peak_ratio: 0.8,
             cluster_distance_ratio: 0.1,
             cluster_angle: 24f64.to_radians(),
-            max_hypotheses: 32,
+            max_hypotheses: 16,
         }
     }
 }
 
 const MAGIC: &[u8; 8] = b"BPPPF\x00\x00\x01";
+
+/// A scene feature this close to a bin boundary (fraction of the bin) also looks up the
+/// neighbouring bin.
+const SPREAD: f32 = 0.15;
 
 /// Fewest reference points a detection uses.
 const MIN_REFERENCES: usize = 60;
@@ -417,14 +421,14 @@ impl PpfModel {
             let Some(q) = self.quantise(sr, nr, &points[j], &normals[j]) else { continue };
             let alpha_s = frame.alpha(&points[j]);
             // The feature's own bin plus, per dimension, the neighbouring bin when the feature
-            // lies in the outer quarter next to it.
+            // lies within SPREAD of it.
             let mut nkeys = 1usize;
             keys[0] = self.key(&q.bins);
             for k in 0..4 {
                 let max = if k == 0 { self.distance_bins - 2 } else { self.config.angle_bins - 1 };
-                let other = if q.frac[k] < 0.25 && q.bins[k] > 0 {
+                let other = if q.frac[k] < SPREAD && q.bins[k] > 0 {
                     Some(q.bins[k] - 1)
-                } else if q.frac[k] > 0.75 && q.bins[k] < max {
+                } else if q.frac[k] > 1.0 - SPREAD && q.bins[k] < max {
                     Some(q.bins[k] + 1)
                 } else {
                     None
