@@ -9,15 +9,13 @@
 use crate::cloud::Point;
 use crate::error::{Error, Result};
 use crate::knn::KdIndex;
-use crate::cloud::{covariance, principal_axes};
-use crate::normals::Orientation;
+use crate::normals::{normals_at, Orientation};
 use crate::pose::{CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
 use crate::registration::ppf::{DetectConfig, PpfModel};
-use crate::voxel::subsample;
 use crate::registration::verify::{depth_evidence, Evidence, HeightMap};
 use crate::registration::{icp, IcpConfig, IcpMethod, RobustKernel};
 use crate::segment::{remove_support_planes, Plane};
-use crate::voxel::voxel_downsample;
+use crate::voxel::{subsample, voxel_downsample};
 use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
 use std::time::Instant;
@@ -54,8 +52,8 @@ impl Judged {
     }
 }
 
-/// Tolerance of the depth test and of inliers for a PPF step (mm): a tenth of the step, not
-/// below 1 mm (scan noise and the voxel means' bias on curved surfaces).
+/// Tolerance of the depth test and of inliers for a PPF step (mm): 0.12 of the step, not below
+/// 1 mm (scan noise and the voxel means' bias on curved surfaces).
 fn tolerance(step: f64) -> f64 {
     (0.12 * step).max(1.0)
 }
@@ -231,7 +229,7 @@ pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, p
         None => Orientation::TowardDirection(cfg.up.normalize()),
     };
     // Only the voting samples need normals (ICP uses the model's).
-    let sparse_normals = normals_from(&sparse, &scene.fine, &scene.fine_index, 10, orientation);
+    let sparse_normals = normals_at(&sparse, &scene.fine, &scene.fine_index, 10, orientation);
     let sparse_index = KdIndex::new(&sparse);
     lap("normals", timings);
     let detect_cfg = DetectConfig { max_hypotheses: cfg.detect.max_hypotheses.max(8 * cfg.max_instances), ..cfg.detect };
@@ -281,7 +279,11 @@ pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, p
     }
     if instances.is_empty() {
         return Err(Error::NoObjectFound {
-            reason: format!("none of {} pose hypotheses was confirmed by the scan (need {:.0} % of the predicted visible surface seen)", hypotheses.len(), 100.0 * cfg.min_coverage),
+            reason: format!(
+                "none of {} pose hypotheses was confirmed by the scan (need {:.0} % of the predicted visible surface seen, most of it over scanned cells, and no pose through the bin)",
+                hypotheses.len(),
+                100.0 * cfg.min_coverage
+            ),
         });
     }
     let mut out: Vec<PoseEstimate> = rank(instances, model, cfg)
@@ -306,23 +308,6 @@ pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, p
     }
     lap("verification", timings);
     Ok((out, scene))
-}
-
-/// Unit normals at `queries` from the PCA of their `k` nearest points of `cloud`, oriented.
-fn normals_from(queries: &[Point], cloud: &[Point], index: &KdIndex, k: usize, orientation: Orientation) -> Vec<Vector3<f64>> {
-    queries
-        .par_iter()
-        .map(|p| {
-            let local: Vec<Point> = index.knn(p, k).iter().map(|n| cloud[n.index]).collect();
-            let (_, cov) = covariance(&local);
-            let n = principal_axes(&cov).1[2];
-            let facing = match orientation {
-                Orientation::TowardPoint(v) => v - p,
-                Orientation::TowardDirection(d) => d,
-            };
-            if n.dot(&facing) < 0.0 { -n } else { n }
-        })
-        .collect()
 }
 
 /// Pickability in [0, 1]: height among the instances (half), the confirmed share of the facing

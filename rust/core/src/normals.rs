@@ -28,25 +28,25 @@ pub fn estimate_normals(points: &[Point], index: &KdIndex, k: usize, orientation
             return Err(Error::invalid("orientation", "the direction must be finite and non-zero"));
         }
     }
-    let normals = points
+    Ok(normals_at(points, points, index, k, orientation))
+}
+
+/// Unit normals at `queries` from the PCA of their `k` nearest points of `cloud` (`index` built
+/// over `cloud`), flipped to face `orientation`. Inputs are not checked (see [`estimate_normals`]).
+pub fn normals_at(queries: &[Point], cloud: &[Point], index: &KdIndex, k: usize, orientation: Orientation) -> Vec<Vector3<f64>> {
+    queries
         .par_iter()
         .map(|p| {
-            let neigh = index.knn(p, k);
-            let local: Vec<Point> = neigh.iter().map(|n| points[n.index]).collect();
+            let local: Vec<Point> = index.knn(p, k).iter().map(|n| cloud[n.index]).collect();
             let (_, cov) = covariance(&local);
-            let (_, axes) = principal_axes(&cov);
-            let mut n = axes[2];
+            let n = principal_axes(&cov).1[2];
             let facing = match orientation {
                 Orientation::TowardPoint(v) => v - p,
                 Orientation::TowardDirection(d) => d,
             };
-            if n.dot(&facing) < 0.0 {
-                n = -n;
-            }
-            n
+            if n.dot(&facing) < 0.0 { -n } else { n }
         })
-        .collect();
-    Ok(normals)
+        .collect()
 }
 
 #[cfg(test)]
