@@ -211,3 +211,24 @@ def test_bad_requests_raise_clear_errors(parts):
         binpick.estimate_poses(scene, model, viewpoint=(0, 0))
     with pytest.raises(binpick.InvalidInputError, match="sampling_ratio"):
         model.prepared(ppf=binpick.PpfParams(sampling_ratio=0.9))
+
+
+def test_estimate_command_reads_a_mesh_file_and_reports_instances(parts, tmp_path, capsys):
+    import json
+
+    from binpick.cli import main
+    from _geometry import write_stl_binary
+
+    v, f = extruded_mesh(L_BRACKET, 30.0)
+    write_stl_binary(tmp_path / "bracket.stl", v, f)
+    rng = np.random.default_rng(8)
+    T = random_pose(rng)
+    np.save(tmp_path / "scene.npy", rendered_view(parts["bracket"], T, rng))
+    png = tmp_path / "estimate.png"
+    code = main(["estimate", str(tmp_path / "scene.npy"), str(tmp_path / "bracket.stl"), "--method", "ppf", "--instances", "2", "--png", str(png)])
+    assert code == 0
+    docs = json.loads(capsys.readouterr().out)
+    assert isinstance(docs, list) and 1 <= len(docs) <= 2 and docs[0]["method"] == "ppf"
+    rot_err, trans_err = symmetric_pose_error(np.array(docs[0]["T_scene_model"]), T, rotations=[np.eye(3)])
+    assert rot_err < 5 and trans_err < 3
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

@@ -198,15 +198,16 @@ def _read_scene(path: str) -> Any:
 
 def _estimate(args: argparse.Namespace) -> int:
     from . import viz
-    from .poses import estimate_pose
+    from .poses import estimate_poses
 
     scene = _read_scene(args.scene)
     model = _model(args.model, args.unit)
     bin_box = None if args.bin is None else (tuple(args.bin[:3]), tuple(args.bin[3:]))
-    res = estimate_pose(scene, model, bin=bin_box, method=args.method, **_estimate_options(args))
-    doc = {"T_scene_model": res.T_scene_model.tolist(), "score": res.score, "rmse_mm": res.rmse, "points": int(len(res.indices)),
-           "method": res.method, "timings_ms": {k: float(v) for k, v in res.timings.items()}}
-    print(json.dumps(doc, indent=1))
+    found = estimate_poses(scene, model, bin=bin_box, method=args.method, max_instances=args.instances, **_estimate_options(args))
+    docs = [{"T_scene_model": r.T_scene_model.tolist(), "score": r.score, "rmse_mm": r.rmse, "points": int(len(r.indices)),
+             "method": r.method, "pickability": r.pickability, "timings_ms": {k: float(v) for k, v in r.timings.items()}} for r in found]
+    print(json.dumps(docs[0] if args.instances == 1 else docs, indent=1))
+    res = found[0]
     png = Path(args.png)
     viz.save_cloud(png, scene, model=model, T_base_object=res.T_scene_model, highlight=res.indices, bin_bounds=bin_box,
                    title=f"{model.name}: score {res.score:.2f}, rmse {res.rmse:.2f} mm")
@@ -308,7 +309,8 @@ def _parser() -> argparse.ArgumentParser:
     t.add_argument("scene", help="scene cloud: .ply or .npy (N, 3), mm")
     t.add_argument("model", help="built-in part (tee, elbow, cross) or a mesh file")
     t.add_argument("--unit", default="mm", help="unit of a mesh file (mm, cm, m, in)")
-    t.add_argument("--method", default="auto", choices=("auto", "ccp", "centroid"), help="coarse pose method (default auto)")
+    t.add_argument("--method", default="auto", choices=("auto", "ppf", "ccp", "centroid"), help="coarse pose method (default auto)")
+    t.add_argument("--instances", type=int, default=1, help="instances to report, most pickable first (default 1: one JSON object; more: a list)")
     t.add_argument("--bin", type=float, nargs=6, metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"), help="bin box in the scene frame, mm")
     t.add_argument("--png", default="estimate.png", help="picture to write (default estimate.png)")
     pose_options(t)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 from typing import Any, Optional
 
@@ -262,10 +263,20 @@ def estimate_poses(
 
 def estimate_pose(scene: Any, model: Model, bin: Any = None, **options: Any) -> PoseResult:
     """The pose of the top pickable object of ``scene`` against ``model``: the first of
-    :func:`estimate_poses` (same arguments, ``max_instances`` aside)."""
+    :func:`estimate_poses` (the same keyword arguments, ``max_instances`` aside)."""
     if "max_instances" in options:
         raise InvalidInputError("max_instances: estimate_pose returns one pose; use estimate_poses for several")
     return estimate_poses(scene, model, bin, max_instances=1, **options)[0]
+
+
+def _one_instance_signature() -> inspect.Signature:
+    sig = inspect.signature(estimate_poses)
+    params = [p for name, p in sig.parameters.items() if name != "max_instances"]
+    return sig.replace(parameters=params, return_annotation="PoseResult")
+
+
+# help() and IDEs show estimate_pose's real keyword arguments (those of estimate_poses).
+estimate_pose.__signature__ = _one_instance_signature()  # type: ignore[attr-defined]
 
 
 def grasp_pose(T_base_object: Any, T_gripper_object: Any) -> np.ndarray:
