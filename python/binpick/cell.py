@@ -695,6 +695,8 @@ class Cell:
             raise NoObjectFound(f"the scan holds {len(keep)} usable points; is the laser on and the bin in view?")
         options = dict(cfg.estimate_options)
         options.setdefault("num_threads", cfg.num_threads)
+        # The camera's position at the first scan pose orients the scan's normals (PPF).
+        options.setdefault("viewpoint", (np.asarray(scan.T_base_flanges[0]) @ cfg.calibration.T_flange_camera)[:3, 3])
         result = estimate_pose(scan.points[keep], cfg.model, bin=cfg.bin_bounds, **options)
         if result.score < cfg.min_score:
             raise NoObjectFound(f"the best pose scores {result.score:.2f}, below the cell's min_score {cfg.min_score:.2f}")
