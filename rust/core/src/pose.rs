@@ -21,6 +21,9 @@ use crate::segment::{crop_to_bin, point_spacing, remove_support_planes, scan_spa
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::time::Instant;
 
+/// CCP candidates (the best-prescored of distinct rotations) that get the stage-one ICP check.
+const STAGE_ONE: usize = 12;
+
 /// Regions tried, top first, before the pipeline gives up.
 const MAX_REGIONS: usize = 8;
 
@@ -453,11 +456,11 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
             }
         }
         let ranked = distinct;
-        // Stage one: every hypothesis gets a few ICP steps on a small probe (a coarse pose tens of
-        // degrees off still lands in the right basin, but cannot be judged before moving it).
+        // Stage one: the best-prescored hypotheses get a few ICP steps on a small probe (a coarse
+        // pose tens of degrees off still lands in the right basin, but cannot be judged before moving it).
         let quick = IcpConfig { max_iterations: 8, ..short.clone() };
         let mut tried: Vec<(f64, Isometry3<f64>, Isometry3<f64>)> = Vec::with_capacity(ranked.len());
-        for (_, cand) in &ranked {
+        for (_, cand) in ranked.iter().take(STAGE_ONE) {
             let r = icp(&probe, &model.target, &cand.inverse(), &quick)?;
             tried.push((score_of(&r.t_target_source, &probe, coarse_tol), r.t_target_source, *cand));
         }
