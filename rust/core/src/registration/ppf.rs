@@ -104,8 +104,9 @@ pub struct PpfModel {
     distance_bins: u32,
     /// `offsets[k]..offsets[k + 1]` are the entries of key `k`.
     offsets: Vec<u32>,
-    /// (model reference point, α_m) of every model pair, grouped by key.
-    entries: Vec<(u32, f32)>,
+    /// (model reference point, α_m) of every model pair, grouped by key; α_m as a fraction of a
+    /// turn from −π in 1/65536 steps (4 bytes a pair, integer arithmetic in the vote).
+    entries: Vec<(u16, u16)>,
 }
 
 /// One local pose from the vote of one scene reference point.
@@ -160,11 +161,17 @@ impl Default for DetectConfig {
     }
 }
 
-const MAGIC: &[u8; 8] = b"BPPPF\x00\x00\x01";
+const MAGIC: &[u8; 8] = b"BPPPF\x00\x00\x02";
 
 /// A scene feature this close to a bin boundary (fraction of the bin) also looks up the
 /// neighbouring bin.
 const SPREAD: f32 = 0.15;
+
+/// α in [−π, π) as a fraction of a turn from −π, in 1/65536 steps.
+#[inline]
+fn turn_fraction(alpha: f64) -> u16 {
+    (((alpha + PI) * (65536.0 / (2.0 * PI))) as i64).rem_euclid(65536) as u16
+}
 
 /// Fewest reference points a detection uses.
 const MIN_REFERENCES: usize = 60;
@@ -181,6 +188,7 @@ impl PpfModel {
             return Err(Error::TooFewPoints { arg: "model".into(), got: points.len(), needed: 4, hint: "; sample the model more densely".into() });
         }
         if points.len() > 60_000 {
+            // (and model indices fit the table's 16 bits)
             return Err(Error::invalid("model", format!("{} sampled points would make a table of {} pairs; use a larger sampling_ratio", points.len(), points.len() * points.len())));
         }
         if !(diameter.is_finite() && diameter > 0.0) {
@@ -208,14 +216,14 @@ impl PpfModel {
     fn build_table(&mut self) {
         let n = self.points.len();
         // Per reference point, the keys and α of its pairs; then a counting sort by key.
-        let rows: Vec<Vec<(u32, f32)>> = (0..n)
+        let rows: Vec<Vec<(u32, u16)>> = (0..n)
             .into_par_iter()
             .map(|i| {
                 (0..n)
                     .filter(|&j| j != i)
                     .filter_map(|j| {
                         let q = self.quantise(&self.points[i], &self.normals[i], &self.points[j], &self.normals[j])?;
-                        Some((self.key(&q.bins) as u32, self.frames[i].alpha(&self.points[j]) as f32))
+                        Some((self.key(&q.bins) as u32, turn_fraction(self.frames[i].alpha(&self.points[j]))))
                     })
                     .collect()
             })
@@ -231,11 +239,11 @@ impl PpfModel {
             counts[k + 1] += counts[k];
         }
         let mut fill = counts.clone();
-        let mut entries = vec![(0u32, 0f32); counts[keys] as usize];
+        let mut entries = vec![(0u16, 0u16); counts[keys] as usize];
         for (i, row) in rows.iter().enumerate() {
             for &(k, alpha) in row {
                 let slot = &mut fill[k as usize];
-                entries[*slot as usize] = (i as u32, alpha);
+                entries[*slot as usize] = (i as u16, alpha);
                 *slot += 1;
             }
         }
@@ -291,7 +299,7 @@ impl PpfModel {
 
     /// Serialises the model (for a cache on disk): a versioned little-endian byte layout.
     pub fn to_bytes(&self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(64 + self.points.len() * 48 + self.entries.len() * 8 + self.offsets.len() * 4);
+        let mut out = Vec::with_capacity(64 + self.points.len() * 48 + self.entries.len() * 4 + self.offsets.len() * 4);
         out.extend_from_slice(MAGIC);
         for v in [self.config.sampling_ratio, self.diameter] {
             out.extend_from_slice(&v.to_le_bytes());
@@ -354,12 +362,12 @@ impl PpfModel {
         }
         let mut entries = Vec::with_capacity(m);
         for _ in 0..m {
-            let s = take(8)?;
-            let i = u32_at(&s[..4]);
+            let s = take(4)?;
+            let i = u16::from_le_bytes([s[0], s[1]]);
             if i as usize >= n {
                 return Err(bad("pair index out of range"));
             }
-            entries.push((i, f32::from_le_bytes(s[4..].try_into().expect("4 bytes"))));
+            entries.push((i, u16::from_le_bytes([s[2], s[3]])));
         }
         let step = sampling_ratio * diameter;
         let distance_bins = (diameter / step).ceil() as u32 + 2;
@@ -409,9 +417,7 @@ impl PpfModel {
     fn vote_one(&self, points: &[Point], normals: &[Vector3<f64>], index: &KdIndex, r: usize, acc: &mut [u32], touched: &mut Vec<u32>) {
         let (sr, nr) = (&points[r], &normals[r]);
         let frame = Frame::new(sr, nr);
-        let rot_bins = self.config.rotation_bins as f64;
         let rb = self.config.rotation_bins as usize;
-        let scale = rot_bins / (2.0 * PI);
         let mut keys = [0usize; 16];
         for nb in index.within(sr, self.diameter) {
             let j = nb.index;
@@ -419,7 +425,7 @@ impl PpfModel {
                 continue;
             }
             let Some(q) = self.quantise(sr, nr, &points[j], &normals[j]) else { continue };
-            let alpha_s = frame.alpha(&points[j]);
+            let alpha_s = turn_fraction(frame.alpha(&points[j]));
             // The feature's own bin plus, per dimension, the neighbouring bin when the feature
             // lies within SPREAD of it.
             let mut nkeys = 1usize;
@@ -445,13 +451,9 @@ impl PpfModel {
             for &key in &keys[..nkeys] {
                 let (lo, hi) = (self.offsets[key] as usize, self.offsets[key + 1] as usize);
                 for &(m, alpha_m) in &self.entries[lo..hi] {
-                    let mut a = alpha_m as f64 - alpha_s;
-                    if a < -PI {
-                        a += 2.0 * PI;
-                    } else if a >= PI {
-                        a -= 2.0 * PI;
-                    }
-                    let bin = (((a + PI) * scale) as usize).min(rb - 1);
+                    // (α_m − α_s + π) mod 2π, as a fraction of a turn, to a rotation bin.
+                    let a = alpha_m.wrapping_sub(alpha_s).wrapping_add(1 << 15);
+                    let bin = (a as usize * rb) >> 16;
                     let cell = m as usize * rb + bin;
                     if acc[cell] == 0 {
                         touched.push(cell as u32);
