@@ -161,7 +161,7 @@ impl Default for DetectConfig {
     }
 }
 
-const MAGIC: &[u8; 8] = b"BPPPF\x00\x00\x02";
+const MAGIC: &[u8; 8] = b"BPPPF\x00\x00\x03";
 
 /// A scene feature this close to a bin boundary (fraction of the bin) also looks up the
 /// neighbouring bin.
@@ -299,7 +299,7 @@ impl PpfModel {
 
     /// Serialises the model (for a cache on disk): a versioned little-endian byte layout.
     pub fn to_bytes(&self) -> Vec<u8> {
-        let mut out = Vec::with_capacity(64 + self.points.len() * 48 + self.entries.len() * 4 + self.offsets.len() * 4);
+        let mut out = Vec::with_capacity(64 + self.points.len() * 48 + self.entries.len() * 4);
         out.extend_from_slice(MAGIC);
         for v in [self.config.sampling_ratio, self.diameter] {
             out.extend_from_slice(&v.to_le_bytes());
@@ -316,10 +316,12 @@ impl PpfModel {
             out.extend_from_slice(&i.to_le_bytes());
             out.extend_from_slice(&a.to_le_bytes());
         }
-        // The offsets follow from the entries' keys, but recomputing keys would need the pairs;
-        // store the per-key counts' prefix sums compactly as u32.
-        for &o in &self.offsets {
-            out.extend_from_slice(&o.to_le_bytes());
+        // The key table is mostly empty: store (key, count) of the keys that hold pairs.
+        let used: Vec<(u32, u32)> = self.offsets.windows(2).enumerate().filter(|(_, w)| w[1] > w[0]).map(|(k, w)| (k as u32, w[1] - w[0])).collect();
+        out.extend_from_slice(&(used.len() as u32).to_le_bytes());
+        for (k, c) in used {
+            out.extend_from_slice(&k.to_le_bytes());
+            out.extend_from_slice(&c.to_le_bytes());
         }
         out
     }
@@ -374,14 +376,27 @@ impl PpfModel {
         let frames = points.iter().zip(&normals).map(|(p, n)| Frame::new(p, n)).collect();
         let mut model = PpfModel { config, step, diameter, points, normals, frames, distance_bins, offsets: Vec::new(), entries };
         let keys = model.key_count();
-        let mut offsets = Vec::with_capacity(keys + 1);
-        for _ in 0..=keys {
-            offsets.push(u32_at(take(4)?));
-        }
-        if at != bytes.len() || offsets[0] != 0 || offsets[keys] as usize != m || offsets.windows(2).any(|w| w[0] > w[1]) {
+        let used = u32_at(take(4)?) as usize;
+        if used > m.min(keys) {
             return Err(bad("inconsistent table"));
         }
-        model.offsets = offsets;
+        let mut counts = vec![0u32; keys + 1];
+        let mut previous: Option<u32> = None;
+        for _ in 0..used {
+            let (k, c) = (u32_at(take(4)?), u32_at(take(4)?));
+            if k as usize >= keys || c == 0 || previous.is_some_and(|p| k <= p) {
+                return Err(bad("inconsistent table"));
+            }
+            counts[k as usize + 1] = c;
+            previous = Some(k);
+        }
+        for k in 0..keys {
+            counts[k + 1] = counts[k].checked_add(counts[k + 1]).ok_or_else(|| bad("inconsistent table"))?;
+        }
+        if at != bytes.len() || counts[keys] as usize != m {
+            return Err(bad("inconsistent table"));
+        }
+        model.offsets = counts;
         Ok(model)
     }
 
