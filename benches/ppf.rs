@@ -40,7 +40,7 @@ fn bench_ppf(c: &mut Criterion) {
     group.throughput(Throughput::Elements(sp.len() as u64));
     group.bench_function("vote_and_cluster_view", |b| {
         b.iter(|| {
-            let votes = model.vote(&sp, &sn, &index, &cfg, None);
+            let votes = model.vote(&sp, &sn, &index, &cfg);
             black_box(model.cluster(&votes, &sym, &cfg))
         })
     });

@@ -233,7 +233,7 @@ pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, p
     let sparse_index = KdIndex::new(&sparse);
     lap("normals", timings);
     let detect_cfg = DetectConfig { max_hypotheses: cfg.detect.max_hypotheses.max(8 * cfg.max_instances), ..cfg.detect };
-    let votes = ppf.vote(&sparse, &sparse_normals, &sparse_index, &detect_cfg, None);
+    let votes = ppf.vote(&sparse, &sparse_normals, &sparse_index, &detect_cfg);
     lap("voting", timings);
     let hypotheses = ppf.cluster(&votes, &model.symmetries, &detect_cfg);
     lap("clustering", timings);

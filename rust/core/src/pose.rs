@@ -278,25 +278,28 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
     let kept = remove_bin(scene, model, cfg, matches!(method, CoarseMethod::Ccp | CoarseMethod::Centroid))?;
     let bin_ms = clock.elapsed().as_secs_f64() * 1e3;
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
-    let to_scene = |mut e: PoseEstimate, kept: &[usize], mut timings: Vec<(&'static str, f64)>| {
+    // Indices of the points a method saw (`kept` of the scene) become scene indices.
+    let reindex = |mut e: PoseEstimate, kept: &[usize]| {
         e.indices = e.indices.iter().map(|&i| kept[i]).collect();
-        timings.insert(0, ("bin_removal", bin_ms));
-        e.timings = timings;
         e
+    };
+    let with_timings = |found: Vec<PoseEstimate>, timings: &[(&'static str, f64)]| -> Vec<PoseEstimate> {
+        let mut all = vec![("bin_removal", bin_ms)];
+        all.extend_from_slice(timings);
+        found.into_iter().map(|e| PoseEstimate { timings: all.clone(), ..e }).collect()
     };
     match method {
         CoarseMethod::Ccp | CoarseMethod::Centroid => {
             let mut timings = Vec::new();
             let e = run(scene, &pts, model, cfg, method, &mut timings)?;
-            Ok(vec![to_scene(e, &kept, timings)])
+            Ok(with_timings(vec![reindex(e, &kept)], &timings))
         }
         CoarseMethod::Ppf | CoarseMethod::Auto => {
             let ppf = model.ppf.as_ref().ok_or_else(|| Error::invalid("model", "PPF needs the model's feature table; prepare the model with PPF (binpick builds it on first use)"))?;
             let mut timings = Vec::new();
-            let detected = detect(scene, &pts, model, ppf, cfg, &mut timings);
+            let detected = detect(scene, &pts, model, ppf, cfg, &mut timings).map(|(found, prepared)| (found.into_iter().map(|e| reindex(e, &kept)).collect::<Vec<_>>(), prepared));
             if method == CoarseMethod::Ppf {
-                let (found, _) = detected?;
-                return Ok(found.into_iter().map(|e| to_scene(e, &kept, timings.clone())).collect());
+                return Ok(with_timings(detected?.0, &timings));
             }
             // Auto with a branch layout: CCP on the top object too; the verified winner leads.
             let clock = Instant::now();
@@ -304,17 +307,10 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
             timings.push(("ccp_bin_removal", clock.elapsed().as_secs_f64() * 1e3));
             let ccp_pts: Vec<Point> = ccp_kept.iter().map(|&i| scene[i]).collect();
             let mut ccp_timings = Vec::new();
-            let by_ccp = run(scene, &ccp_pts, model, cfg, CoarseMethod::Ccp, &mut ccp_timings).map(|mut e| {
-                e.indices = e.indices.iter().map(|&i| ccp_kept[i]).collect();
-                e
-            });
+            let by_ccp = run(scene, &ccp_pts, model, cfg, CoarseMethod::Ccp, &mut ccp_timings).map(|e| reindex(e, &ccp_kept));
             for (name, ms) in ccp_timings {
                 timings.push((match name { "icp" => "ccp_icp", "coarse" => "ccp_coarse", "normals" => "ccp_normals", "segmentation" => "ccp_segmentation", "verification" => "ccp_verification", other => other }, ms));
             }
-            let identity: Vec<usize> = (0..scene.len()).collect();
-            let finish = |found: Vec<PoseEstimate>, timings: &Vec<(&'static str, f64)>| -> Vec<PoseEstimate> {
-                found.into_iter().map(|e| if e.method == CoarseMethod::Ccp { to_scene(e, &identity, timings.clone()) } else { to_scene(e, &kept, timings.clone()) }).collect()
-            };
             match (detected, by_ccp) {
                 (Ok((mut found, prepared)), Ok(mut c)) => {
                     let e = prepared.judge(model, &c.t_scene_model);
@@ -329,10 +325,10 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
                         found.insert(0, c);
                         found.truncate(cfg.max_instances.max(1));
                     }
-                    Ok(finish(found, &timings))
+                    Ok(with_timings(found, &timings))
                 }
-                (Ok((found, _)), Err(_)) => Ok(finish(found, &timings)),
-                (Err(_), Ok(c)) => Ok(finish(vec![c], &timings)),
+                (Ok((found, _)), Err(_)) => Ok(with_timings(found, &timings)),
+                (Err(_), Ok(c)) => Ok(with_timings(vec![c], &timings)),
                 (Err(e), Err(_)) => Err(e),
             }
         }

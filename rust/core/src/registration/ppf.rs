@@ -402,12 +402,11 @@ impl PpfModel {
 
     /// Votes with every `1 / reference_fraction`-th scene point as reference and returns the
     /// best local poses of each (model → scene). `points`/`normals` are the scene sampled at
-    /// about [`PpfModel::step`], `index` a KD-tree over them; `reference_mask` (optional)
-    /// restricts which points may be references.
-    pub fn vote(&self, points: &[Point], normals: &[Vector3<f64>], index: &KdIndex, cfg: &DetectConfig, reference_mask: Option<&[bool]>) -> Vec<Vote> {
+    /// about [`PpfModel::step`], `index` a KD-tree over them.
+    pub fn vote(&self, points: &[Point], normals: &[Vector3<f64>], index: &KdIndex, cfg: &DetectConfig) -> Vec<Vote> {
         // At least MIN_REFERENCES reference points however small the scene.
         let stride = ((1.0 / cfg.reference_fraction.clamp(1e-3, 1.0)).round().max(1.0) as usize).min((points.len() / MIN_REFERENCES).max(1));
-        let refs: Vec<usize> = (0..points.len()).step_by(stride).filter(|&i| reference_mask.map_or(true, |m| m[i])).collect();
+        let refs: Vec<usize> = (0..points.len()).step_by(stride).collect();
         let n_model = self.points.len();
         let rot_bins = self.config.rotation_bins as usize;
         let chunk = (refs.len() / (4 * rayon::current_num_threads()).max(1)).max(1);
@@ -645,7 +644,7 @@ mod tests {
             let keep = subsample(&pts, model.step());
             let (sp, sn): (Vec<Point>, Vec<Vector3<f64>>) = keep.iter().map(|&i| (pts[i], nrm[i])).unzip();
             let index = KdIndex::new(&sp);
-            let votes = model.vote(&sp, &sn, &index, &DetectConfig::default(), None);
+            let votes = model.vote(&sp, &sn, &index, &DetectConfig::default());
             let hyps = model.cluster(&votes, &sym, &DetectConfig::default());
             // The box has the symmetries of D2; compare modulo those by checking surface distance.
             let best = &hyps[0];
