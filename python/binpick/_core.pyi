@@ -99,11 +99,13 @@ class PreparedModel:
         special: Optional[_F64],
         ppf: Optional[tuple[float, int, int]] = None,
         ppf_cache: Optional[bytes] = None,
+        mesh: Optional[tuple[_F64, _I64]] = None,
     ) -> "PreparedModel":
         """From surface samples (N, 3), their normals, diameter and area; ``branches`` rows
         [dx, dy, dz, length, radius] (None or empty: no branch layout), ``special`` the special
         feature's direction or None; ``ppf`` = (sampling_ratio, angle_bins, rotation_bins) builds
-        the PPF table, or loads it from ``ppf_cache`` when that is valid for it."""
+        the PPF table, or loads it from ``ppf_cache`` when that is valid for it; ``mesh`` =
+        (vertices, faces), the samples' surface, on which sparse samples are refined."""
     def ppf_from_cache(self) -> bool:
         """Whether the PPF table came from ``ppf_cache``."""
     def ppf_pairs(self) -> int:

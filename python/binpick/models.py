@@ -217,7 +217,7 @@ class Model:
                     cached = path.read_bytes()
                 except OSError:
                     cached = None
-            native = _core.PreparedModel(self.points, self.normals, self.diameter, self.area, rows if len(rows) else None, special, key, cached)
+            native = _core.PreparedModel(self.points, self.normals, self.diameter, self.area, rows if len(rows) else None, special, key, cached, (self.vertices, self.faces))
             if path is not None and not native.ppf_from_cache():
                 _write_atomically(path, native.ppf_bytes())
             self._prepared = (params, native)

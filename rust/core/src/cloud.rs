@@ -60,6 +60,37 @@ pub fn principal_axes(cov: &Matrix3<f64>) -> ([f64; 3], [Vector3<f64>; 3]) {
     (vals, vecs)
 }
 
+/// The unit eigenvector of the smallest (`largest = false`) or largest eigenvalue of a
+/// symmetric 3×3 matrix, in closed form: the eigenvalue by the trigonometric solution of the
+/// characteristic cubic, the vector as the longest cross product of two rows of (A − λI). About
+/// a fifth of the cost of the iterative decomposition; `None` when that eigenvalue is not
+/// separated from the others (the vector is then not defined by the matrix alone), where
+/// callers fall back to [`principal_axes`].
+pub fn extreme_axis(a: &Matrix3<f64>, largest: bool) -> Option<Vector3<f64>> {
+    let p1 = a[(0, 1)] * a[(0, 1)] + a[(0, 2)] * a[(0, 2)] + a[(1, 2)] * a[(1, 2)];
+    let q = (a[(0, 0)] + a[(1, 1)] + a[(2, 2)]) / 3.0;
+    let p2 = (a[(0, 0)] - q).powi(2) + (a[(1, 1)] - q).powi(2) + (a[(2, 2)] - q).powi(2) + 2.0 * p1;
+    let p = (p2 / 6.0).sqrt();
+    if !(p > 0.0) || !p.is_finite() {
+        return None;
+    }
+    let b = (a - Matrix3::identity() * q) / p;
+    let r = (b.determinant() / 2.0).clamp(-1.0, 1.0);
+    let phi = r.acos() / 3.0;
+    let lambda = if largest { q + 2.0 * p * phi.cos() } else { q + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos() };
+    let m = a - Matrix3::identity() * lambda;
+    let (r0, r1, r2) = (m.row(0).transpose(), m.row(1).transpose(), m.row(2).transpose());
+    let candidates = [r0.cross(&r1), r0.cross(&r2), r1.cross(&r2)];
+    let best = candidates.iter().max_by(|x, y| x.norm_squared().total_cmp(&y.norm_squared()))?;
+    // The rows of A − λI span a plane only when λ is a simple eigenvalue; then the longest cross
+    // product is of the order of (spread of the others)². Demand a clear margin over rounding.
+    let scale = p * p;
+    if best.norm() <= 1e-6 * scale {
+        return None;
+    }
+    Some(best.normalize())
+}
+
 /// How many dimensions a cloud spans: 0 all points equal, 1 collinear, 2 coplanar, 3 solid.
 /// A direction counts when its standard deviation exceeds 1e-6 of the largest one (rounding in
 /// the eigen-decomposition reaches about 1e-8), and the largest must exceed 1e-12 mm.
@@ -157,5 +188,26 @@ mod tests {
         let mut refl = Matrix4::identity();
         refl[(2, 2)] = -1.0;
         assert!(isometry_from_matrix("init", &refl).is_err());
+    }
+
+    #[test]
+    fn closed_form_axes_match_the_iterative_decomposition() {
+        let mut rng = crate::rng::Rng::new(5);
+        for trial in 0..2000 {
+            // Random rotations of diagonal spreads, from isotropic-ish to nearly flat and thin.
+            let r = Rotation3::from_scaled_axis(Vector3::new(rng.normal(), rng.normal(), rng.normal()));
+            let flat = 10f64.powf(-rng.range(0.0, 6.0));
+            let d = Matrix3::from_diagonal(&Vector3::new(rng.range(1.0, 3.0) * 100.0, rng.range(0.2, 1.0) * 30.0, flat));
+            let cov = r.matrix() * d * r.matrix().transpose();
+            let (_, axes) = principal_axes(&cov);
+            for (largest, want) in [(false, axes[2]), (true, axes[0])] {
+                let got = extreme_axis(&cov, largest).unwrap_or_else(|| panic!("trial {trial}: no axis"));
+                assert!(got.dot(&want).abs() > 1.0 - 1e-9, "trial {trial}, largest {largest}: {got} vs {want}");
+            }
+        }
+        // A line's smallest axis is not defined; an isotropic spread has none.
+        let line = Matrix3::from_diagonal(&Vector3::new(5.0, 0.0, 0.0));
+        assert!(extreme_axis(&line, false).is_none());
+        assert!(extreme_axis(&Matrix3::identity(), true).is_none());
     }
 }

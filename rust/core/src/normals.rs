@@ -1,6 +1,6 @@
 //! Surface normals from k-nearest-neighbour PCA, oriented toward a viewpoint.
 
-use crate::cloud::{check_count, check_finite, covariance, principal_axes, Point};
+use crate::cloud::{check_count, check_finite, covariance, extreme_axis, principal_axes, Point};
 use crate::error::{Error, Result};
 use crate::knn::KdIndex;
 use nalgebra::Vector3;
@@ -39,7 +39,7 @@ pub fn normals_at(queries: &[Point], cloud: &[Point], index: &KdIndex, k: usize,
         .map(|p| {
             let local: Vec<Point> = index.knn(p, k).iter().map(|n| cloud[n.index]).collect();
             let (_, cov) = covariance(&local);
-            let n = principal_axes(&cov).1[2];
+            let n = extreme_axis(&cov, false).unwrap_or_else(|| principal_axes(&cov).1[2]);
             let facing = match orientation {
                 Orientation::TowardPoint(v) => v - p,
                 Orientation::TowardDirection(d) => d,

@@ -9,20 +9,33 @@
 use crate::cloud::{check_finite, Point};
 use crate::error::{Error, Result};
 use crate::knn::KdIndex;
+use crate::mesh::TriMesh;
+use crate::model::{sample_surface, Density};
 use crate::normals::{estimate_normals, Orientation};
 use crate::registration::ccp::{ccp, BranchLayout, CcpConfig};
 use crate::detect::detect;
 use crate::registration::ppf::{DetectConfig, PpfConfig, PpfModel};
 use crate::voxel::subsample;
-use crate::registration::verify::{depth_evidence, inlier_stats, HeightMap};
+use crate::registration::verify::{coarse_inlier_fraction, depth_evidence, inlier_stats, HeightMap};
 use crate::symmetry::{detect_symmetries, SymmetryConfig, Symmetries};
 use crate::registration::{icp, IcpConfig, IcpMethod, IcpTarget, RobustKernel};
-use crate::segment::{crop_to_bin, point_spacing, remove_support_planes, scan_spacing, segment_top, BinBox, SegmentConfig};
+use crate::segment::{could_hold_support_plane, crop_to_bin, point_spacing, remove_support_planes, scan_spacing, segment_top, BinBox, SegmentConfig};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::time::Instant;
 
 /// CCP candidates (the best-prescored of distinct rotations) that get the stage-one ICP check.
-const STAGE_ONE: usize = 12;
+const STAGE_ONE: usize = 8;
+
+/// Object and model points the coarse checks look at.
+const PROBE_POINTS: usize = 64;
+
+/// Object points the candidates that survive the quick check converge on.
+const SAMPLE_POINTS: usize = 160;
+
+/// The coarse checks' nearest field: cells of 1/64 of the part's diameter, over its box grown by
+/// half the diameter (farther than any coarse correspondence reaches).
+const FIELD_CELLS: f64 = 64.0;
+const FIELD_MARGIN: f64 = 0.5;
 
 /// Regions tried, top first, before the pipeline gives up.
 const MAX_REGIONS: usize = 8;
@@ -72,6 +85,9 @@ pub struct PoseModel {
     pub thickness: f64,
     /// The point-pair-feature table, once built or loaded.
     pub ppf: Option<PpfModel>,
+    /// The mesh surface sampled densely, when the samples are much sparser than that: the final
+    /// refinement and its verification run against it.
+    pub surface: Option<IcpTarget>,
 }
 
 impl PoseModel {
@@ -97,12 +113,41 @@ impl PoseModel {
                 hi - lo
             })
             .fold(f64::INFINITY, f64::min);
-        Ok(PoseModel { target: IcpTarget::new(points, Some(normals))?, diameter, area, layout, spacing, symmetries, radius, thickness, ppf: None })
+        Ok(PoseModel { target: IcpTarget::new(points, Some(normals))?.with_field(diameter / FIELD_CELLS, FIELD_MARGIN * diameter), diameter, area, layout, spacing, symmetries, radius, thickness, ppf: None, surface: None })
     }
 
     /// The dense model as an ICP target.
     pub fn target(&self) -> &IcpTarget {
         &self.target
+    }
+
+    /// What the final refinement registers onto: the dense mesh surface when there is one,
+    /// the samples otherwise.
+    pub fn fine_target(&self) -> &IcpTarget {
+        self.surface.as_ref().unwrap_or(&self.target)
+    }
+
+    /// Gives a model whose samples are sparser than 1.5 × 1/100 of the mesh's bounding-box
+    /// diagonal (a paper-style 300-point model cloud) a dense sampling of the mesh for the final
+    /// refinement, so its accuracy no longer depends on how sparse the samples are. The mesh
+    /// must be the samples' surface, in the same frame; one that is not (samples farther than
+    /// two sample spacings from it) is ignored.
+    pub fn with_surface_of(mut self, mesh: &TriMesh) -> Result<Self> {
+        let (lo, hi) = mesh.bounds();
+        let spacing = (hi - lo).norm() / 100.0;
+        if !(self.spacing > 1.5 * spacing) {
+            return Ok(self);
+        }
+        let s = sample_surface(mesh, Density::Spacing(spacing), 0)?;
+        let surface = IcpTarget::new(s.points, Some(s.normals))?;
+        let pts = self.target.points();
+        let reach = 2.0 * self.spacing;
+        let probes: Vec<&Point> = pts.iter().step_by(pts.len().div_ceil(64)).collect();
+        let on = probes.iter().filter(|p| surface.search().nearest_within(&[p.x, p.y, p.z], reach * reach).is_some()).count();
+        if on * 10 >= 9 * probes.len() {
+            self.surface = Some(surface);
+        }
+        Ok(self)
     }
 
     /// Builds the point-pair-feature table from an even subsample of the dense points.
@@ -253,7 +298,7 @@ fn check_scene(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<V
 fn remove_bin(scene: &[Point], model: &PoseModel, cfg: &PoseConfig, planes: bool) -> Result<Vec<usize>> {
     let kept: Vec<usize> = match &cfg.bin {
         Some(bin) => crop_to_bin(scene, bin, 1.0)?,
-        None if planes => {
+        None if planes && could_hold_support_plane(scene, model.diameter) => {
             let idx = KdIndex::new(scene);
             let tol = (2.0 * point_spacing(scene, &idx)).max(0.5);
             remove_support_planes(scene, model.diameter, tol, 1).0
@@ -398,19 +443,20 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
         // Score every candidate cheaply (object points on the model × expected-visible model points
         // on the scene), check the best few with a short ICP, and refine the winner on all points.
         let tol = cfg.inlier_distance.unwrap_or((2.0 * model.spacing + 1.5 * spacing.min(2.0 * model.spacing)).max(1.0));
-        let step = (object.len() / 600).max(1);
+        let step = object.len().div_ceil(SAMPLE_POINTS);
         let sample: Vec<Point> = object.iter().step_by(step).copied().collect();
         let heights = HeightMap::new(scene, &up, (1.5 * across).max(0.5));
-        let model_step = (model.target.points().len() / 400).max(1);
+        let coarse_model_step = model.target.points().len().div_ceil(PROBE_POINTS);
         let fine_step = (model.target.points().len() / 4000).max(1);
         let score_with = |t_model_scene: &Isometry3<f64>, probe: &[Point], tol: f64, model_step: usize| -> f64 {
             let on_model = inlier_stats(probe, &model.target, t_model_scene, tol).0;
             on_model * depth_evidence(&model.target, &heights, &t_model_scene.inverse(), model_step, tol, false).coverage()
         };
-        let score_of = |t: &Isometry3<f64>, probe: &[Point], tol: f64| score_with(t, probe, tol, model_step);
+        let score_of = |t: &Isometry3<f64>, probe: &[Point], tol: f64| {
+            coarse_inlier_fraction(probe, &model.target, t, tol) * depth_evidence(&model.target, &heights, &t.inverse(), coarse_model_step, tol, false).coverage()
+        };
         let coarse_tol = (0.08 * model.diameter).max(2.0 * tol);
-        let prescore_step = (object.len() / 150).max(1);
-        let probe: Vec<Point> = object.iter().step_by(prescore_step).copied().collect();
+        let probe: Vec<Point> = object.iter().step_by(object.len().div_ceil(PROBE_POINTS)).copied().collect();
         let mut ranked: Vec<(f64, Isometry3<f64>)> = candidates.iter().map(|c| (score_of(&c.inverse(), &probe, coarse_tol), *c)).collect();
         ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
         // Views of a part on its side leave the coarse pose ambiguous up to a quarter or half turn
@@ -442,6 +488,7 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
             translation_tolerance: 1e-2,
             kernel: RobustKernel::Tukey((0.1 * model.diameter).max(3.0 * tol)),
             num_threads: 0,
+            approximate: true,
             ..Default::default()
         };
         // Many readings give nearly the same rotation; keep the best-ranked of each 15° cluster.
@@ -461,9 +508,11 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
             tried.push((score_of(&r.t_target_source, &probe, coarse_tol), r.t_target_source, *cand));
         }
         tried.sort_by(|a, b| b.0.total_cmp(&a.0));
-        // Stage two: the best three converge on a larger sample and are judged at the inlier distance.
         let mut best: Option<(f64, Isometry3<f64>, Isometry3<f64>)> = None;
-        for (_, t0, cand) in tried.iter().take(3) {
+        // Stage two: the best three converge on a larger sample and are judged at the inlier
+        // distance (those far behind the leader after stage one are not worth it).
+        let lead = tried[0].0;
+        for (_, t0, cand) in tried.iter().take(3).filter(|t| t.0 >= 0.7 * lead) {
             let r = icp(&sample, &model.target, t0, &short)?;
             let s = score_with(&r.t_target_source, &sample, tol, fine_step);
             if best.as_ref().map_or(true, |b| s > b.0) {
@@ -477,10 +526,16 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
             let (s0, t0, cand) = best.expect("at least one candidate");
             let t_scene_model0 = t0.inverse();
             let mut winner = (s0, t0, cand);
+            // A turn that the quick check on the probe already puts well behind is dropped.
+            let quick_winner = score_of(&t0, &probe, coarse_tol);
             for axis in [Vector3::x(), Vector3::y(), Vector3::z()] {
                 let r = UnitQuaternion::from_scaled_axis(axis * std::f64::consts::PI);
                 let turned = t_scene_model0 * Isometry3::from_parts(Translation3::from(c_model - r * c_model), r);
-                let fit = icp(&sample, &model.target, &turned.inverse(), &short)?;
+                let rough = icp(&probe, &model.target, &turned.inverse(), &quick)?;
+                if score_of(&rough.t_target_source, &probe, coarse_tol) < 0.8 * quick_winner {
+                    continue;
+                }
+                let fit = icp(&sample, &model.target, &rough.t_target_source, &short)?;
                 let s = score_with(&fit.t_target_source, &sample, tol, fine_step);
                 if s > winner.0 + 0.01 {
                     winner = (s, fit.t_target_source, turned);
@@ -493,17 +548,18 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
             method: IcpMethod::PointToPlane,
             max_correspondence_distance: 3.0 * tol,
             max_iterations: 60,
-            rotation_tolerance: 1e-7,
-            translation_tolerance: 1e-5,
+            // 0.0006° and a micrometre: far below what the scan can resolve.
+            rotation_tolerance: 1e-5,
+            translation_tolerance: 1e-3,
             kernel: RobustKernel::Tukey(3.0 * tol),
             num_threads: 0,
             ..Default::default()
         };
-        let refined = icp(&object, &model.target, &t_model_scene0, &fine)?;
+        let refined = icp(&object, model.fine_target(), &t_model_scene0, &fine)?;
         let t_model_scene = refined.t_target_source;
         lap("icp", timings);
 
-        let (score, rmse) = inlier_stats(&object, &model.target, &t_model_scene, tol);
+        let (score, rmse) = inlier_stats(&object, model.fine_target(), &t_model_scene, tol);
         if score < cfg.min_fitness {
             return Err(Error::NoObjectFound {
                 reason: format!("the best pose explains only {:.0} % of the top object's {} points within {tol:.2} mm (need {:.0} %)", 100.0 * score, object.len(), 100.0 * cfg.min_fitness),

@@ -7,7 +7,7 @@
 //! that keep touching parts apart: neighbours must have similar normals, and the region may not
 //! reach farther from its seed than the part's diameter.
 
-use crate::cloud::{covariance, principal_axes, Point};
+use crate::cloud::{covariance, extreme_axis, principal_axes, Point};
 use crate::error::{Error, Result};
 use crate::knn::KdIndex;
 use crate::rng::Rng;
@@ -31,7 +31,7 @@ pub fn point_spacing(points: &[Point], index: &KdIndex) -> f64 {
     let step = (points.len() / 512).max(1);
     let mut d: Vec<f64> = (0..points.len())
         .step_by(step)
-        .filter_map(|i| index.knn(&points[i], 2).get(1).map(|n| n.distance_squared.sqrt()))
+        .filter_map(|i| index.nearest_other(i).map(|n| n.distance_squared.sqrt()))
         .filter(|d| *d > 0.0)
         .collect();
     if d.is_empty() {
@@ -58,7 +58,7 @@ pub fn scan_spacing(points: &[Point], index: &KdIndex) -> ScanSpacing {
     if points.len() < 8 {
         return ScanSpacing { along, across: along };
     }
-    let step = (points.len() / 256).max(1);
+    let step = points.len().div_ceil(128);
     let mut across: Vec<f64> = (0..points.len())
         .step_by(step)
         .filter_map(|i| {
@@ -67,11 +67,11 @@ pub fn scan_spacing(points: &[Point], index: &KdIndex) -> ScanSpacing {
             // off it (for an even sampling that is close to the nearest neighbour anyway).
             let local: Vec<Point> = nb.iter().take(6).map(|n| points[n.index]).collect();
             let (_, cov) = covariance(&local);
-            let (_, axes) = principal_axes(&cov);
+            let line = extreme_axis(&cov, true).unwrap_or_else(|| principal_axes(&cov).1[0]);
             nb.iter()
                 .skip(1)
                 .map(|n| points[n.index] - points[i])
-                .filter(|d| d.dot(&axes[0]).abs() < 0.5 * d.norm())
+                .filter(|d| d.dot(&line).abs() < 0.5 * d.norm())
                 .map(|d| d.norm())
                 .fold(None, |m: Option<f64>, d| Some(m.map_or(d, |m| m.min(d))))
                 .or_else(|| nb.last().map(|n| n.distance_squared.sqrt()))
@@ -112,12 +112,23 @@ pub struct Plane {
     pub offset: f64,
 }
 
+/// Whether the scene is wide enough to hold a support plane as [`remove_support_planes`] judges
+/// one (inliers spanning more than 1.2 × the part): no plane spans more than the whole scene.
+pub fn could_hold_support_plane(points: &[Point], model_diameter: f64) -> bool {
+    let Some(first) = points.first() else { return false };
+    let (lo, hi) = points.iter().fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
+    (hi - lo).norm() >= 1.2 * model_diameter
+}
+
 /// Removes support planes (floor, walls, rims) found by RANSAC, largest first: a plane is
 /// removed only when its inliers span more than `1.2 × model_diameter`, which no face of the
 /// part can, so that the flat faces of parts stay. Returns the kept indices and the removed planes.
 pub fn remove_support_planes(points: &[Point], model_diameter: f64, tolerance: f64, seed: u64) -> (Vec<usize>, Vec<Plane>) {
     let mut keep: Vec<usize> = (0..points.len()).collect();
     let mut planes = Vec::new();
+    if !could_hold_support_plane(points, model_diameter) {
+        return (keep, planes);
+    }
     let mut rng = Rng::new(seed);
     for _ in 0..10 {
         if keep.len() < 50 {

@@ -2,6 +2,7 @@
 
 use crate::convert::{indices_to_py, isometry_to_py, points, vectors};
 use crate::errors::{invalid, run};
+use crate::geometry::mesh_from_py;
 use binpick_core::pose::{estimate_poses as core_estimate, CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
 use binpick_core::registration::ccp::{BranchLayout, CcpConfig};
 use binpick_core::registration::ppf::{DetectConfig, PpfConfig, PpfModel};
@@ -54,8 +55,10 @@ impl PreparedModel {
     /// [dx, dy, dz, length, radius]; `special` the special feature's direction or None.
     /// `ppf` = (sampling_ratio, angle_bins, rotation_bins) builds the point-pair-feature table,
     /// or loads it from `ppf_cache` (bytes of `ppf_bytes()`) when those are valid for it.
+    /// `mesh` = (vertices, faces) is the samples' surface: a model whose samples are sparse
+    /// refines against a dense sampling of it.
     #[new]
-    #[pyo3(signature = (points_in, normals, diameter, area, branches, special, ppf=None, ppf_cache=None))]
+    #[pyo3(signature = (points_in, normals, diameter, area, branches, special, ppf=None, ppf_cache=None, mesh=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -67,12 +70,17 @@ impl PreparedModel {
         special: Option<PyReadonlyArray1<'_, f64>>,
         ppf: Option<(f64, u32, u32)>,
         ppf_cache: Option<Vec<u8>>,
+        mesh: Option<(PyReadonlyArray2<'_, f64>, PyReadonlyArray2<'_, i64>)>,
     ) -> PyResult<Self> {
         let pts = points(&points_in, "model.points")?;
+        let mesh = mesh.map(|(v, f)| mesh_from_py(&v, &f)).transpose()?;
         let ns = vectors(&normals, "model.normals")?;
         let layout = layout_from(branches, special)?;
         let (inner, from_cache) = run(py, move || {
             let mut m = PoseModel::new(pts, ns, diameter, area, layout)?;
+            if let Some(mesh) = &mesh {
+                m = m.with_surface_of(mesh)?;
+            }
             let mut from_cache = false;
             if let Some((sampling_ratio, angle_bins, rotation_bins)) = ppf {
                 let config = PpfConfig { sampling_ratio, angle_bins, rotation_bins };

@@ -44,7 +44,7 @@ fn icp<'py>(
         "cauchy" => RobustKernel::Cauchy(kernel_scale),
         other => return Err(invalid("kernel", &format!("unknown kernel {other:?}; use \"none\", \"huber\", \"tukey\" or \"cauchy\""))),
     };
-    let config = IcpConfig { method, max_correspondence_distance, max_iterations, rotation_tolerance, translation_tolerance, kernel, trim_fraction, num_threads };
+    let config = IcpConfig { method, max_correspondence_distance, max_iterations, rotation_tolerance, translation_tolerance, kernel, trim_fraction, num_threads, approximate: false };
     let res = run(py, move || {
         let init_t = isometry_from_matrix("init", &init_m)?;
         let target = IcpTarget::new(tgt, normals)?;

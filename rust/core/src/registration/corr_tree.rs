@@ -55,17 +55,28 @@ pub struct CorrespondenceTree {
 impl CorrespondenceTree {
     /// Builds the KD-tree and, when the cloud has a measurable point spacing, the grid.
     pub fn new(points: &[Point]) -> Self {
+        let mut tree = Self::tree_only(points);
+        if let Some(spacing) = tree.median_spacing(points) {
+            tree.grid = Grid::new(points, spacing * CELL_PER_SPACING);
+        }
+        tree
+    }
+
+    /// The KD-tree alone, without the grid: for k-nearest queries, which do not use it.
+    pub fn tree_only(points: &[Point]) -> Self {
         let mut order: Vec<u32> = (0..points.len() as u32).collect();
         let mut nodes = Vec::with_capacity(2 * points.len() / LEAF_SIZE + 1);
         if !points.is_empty() {
             build(points, &mut order, 0, &mut nodes);
         }
         let xyz = order.iter().map(|&i| points[i as usize].coords.into()).collect();
-        let mut tree = CorrespondenceTree { nodes, xyz, original: order, grid: None };
-        if let Some(spacing) = tree.median_spacing(points) {
-            tree.grid = Grid::new(points, spacing * CELL_PER_SPACING);
-        }
-        tree
+        CorrespondenceTree { nodes, xyz, original: order, grid: None }
+    }
+
+    /// The nearest point to `q` other than the one whose input index is `skip`, as (input index,
+    /// squared distance).
+    pub fn nearest_other(&self, q: &[f64; 3], skip: usize) -> Option<(usize, f64)> {
+        self.search::<true>(q, f64::INFINITY, skip)
     }
 
     /// Median distance from a sample of points to their nearest other point, if positive.
@@ -107,6 +118,56 @@ impl CorrespondenceTree {
             }
         }
         self.search::<false>(q, bound_squared, usize::MAX)
+    }
+
+    /// The `k` nearest points within `sqrt(bound_squared)` of `q` (inclusive) into `out`, as
+    /// (squared distance, input index), nearest first; fewer when fewer are that close.
+    pub fn knn_into(&self, q: &[f64; 3], k: usize, bound_squared: f64, out: &mut Vec<(f64, u32)>) {
+        out.clear();
+        if k == 0 || self.nodes.is_empty() || box_dist2(&self.nodes[0], q) > bound_squared {
+            return;
+        }
+        // Candidates pile up in `out`; whenever there are 2k the k-th distance becomes the
+        // bound and the rest are dropped (amortised constant work per candidate).
+        let mut bound = bound_squared;
+        self.knn_descend(0, q, k, &mut bound, out);
+        if out.len() > k {
+            out.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
+            out.truncate(k);
+        }
+        out.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        for e in out.iter_mut() {
+            e.1 = self.original[e.1 as usize];
+        }
+    }
+
+    fn knn_descend(&self, n: u32, q: &[f64; 3], k: usize, bound: &mut f64, out: &mut Vec<(f64, u32)>) {
+        let node = &self.nodes[n as usize];
+        if node.b >= 3 {
+            let start = node.a as usize;
+            let end = start + (node.b - 3) as usize;
+            for (j, p) in self.xyz[start..end].iter().enumerate() {
+                let d = dist2(p, q);
+                if d <= *bound {
+                    out.push((d, (start + j) as u32));
+                }
+            }
+            if out.len() >= 2 * k.max(8) {
+                let (_, kth, _) = out.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
+                *bound = kth.0;
+                out.truncate(k);
+            }
+            return;
+        }
+        let (l, r) = (n + 1, node.a);
+        let (dl, dr) = (box_dist2(&self.nodes[l as usize], q), box_dist2(&self.nodes[r as usize], q));
+        let ((first, d1), (second, d2)) = if dl <= dr { ((l, dl), (r, dr)) } else { ((r, dr), (l, dl)) };
+        if d1 <= *bound {
+            self.knn_descend(first, q, k, bound, out);
+        }
+        if d2 <= *bound {
+            self.knn_descend(second, q, k, bound, out);
+        }
     }
 
     /// Tree search; with `SKIP`, the point whose input index is `skip` is ignored.

@@ -72,6 +72,9 @@ pub struct IcpConfig {
     pub trim_fraction: f64,
     /// Worker threads; 0 = all cores.
     pub num_threads: usize,
+    /// Take correspondences from the target's approximate nearest field when it has one (coarse
+    /// checks of poses still far off; see [`super::field::NearestField`]).
+    pub approximate: bool,
 }
 
 impl Default for IcpConfig {
@@ -85,6 +88,7 @@ impl Default for IcpConfig {
             kernel: RobustKernel::None,
             trim_fraction: 0.0,
             num_threads: 0,
+            approximate: false,
         }
     }
 }

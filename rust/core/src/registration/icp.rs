@@ -12,6 +12,7 @@ use super::criteria::{IcpConfig, IcpMethod};
 use crate::cloud::{centroid, check_count, check_finite, check_spread, Point};
 use crate::error::{Error, Result};
 use super::corr_tree::{spatial_order, CorrespondenceTree};
+use super::field::NearestField;
 use crate::parallel::with_threads;
 use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6};
 use rayon::prelude::*;
@@ -25,6 +26,7 @@ pub struct IcpTarget {
     normals: Option<Vec<Vector3<f64>>>,
     search: CorrespondenceTree,
     center: Point,
+    field: Option<NearestField>,
 }
 
 impl IcpTarget {
@@ -45,7 +47,7 @@ impl IcpTarget {
         }
         let search = CorrespondenceTree::new(&points);
         let center = centroid(&points);
-        Ok(IcpTarget { points, normals, search, center })
+        Ok(IcpTarget { points, normals, search, center, field: None })
     }
 
     /// The target's points.
@@ -56,6 +58,18 @@ impl IcpTarget {
     /// The exact bounded nearest-neighbour search over the target.
     pub fn search(&self) -> &CorrespondenceTree {
         &self.search
+    }
+
+    /// Adds the approximate nearest field that coarse checks use (cells of about `cell` mm over
+    /// the target's box grown by `margin` mm).
+    pub fn with_field(mut self, cell: f64, margin: f64) -> Self {
+        self.field = NearestField::new(&self.points, cell, margin);
+        self
+    }
+
+    /// The approximate nearest field, when built.
+    pub fn field(&self) -> Option<&NearestField> {
+        self.field.as_ref()
     }
 
     /// The target's normals, if it has them.
@@ -210,6 +224,7 @@ fn run<S: Sums>(source_in: &[Point], target: &IcpTarget, init: &Isometry3<f64>, 
     let max_sq = config.max_correspondence_distance * config.max_correspondence_distance;
     let zero_normal = Vector3::zeros();
     let normals = target.normals.as_deref();
+    let approx = if config.approximate { target.field.as_ref() } else { None };
     let source: Vec<Point> = spatial_order(source_in, config.max_correspondence_distance.max(1e-3) * 0.25)
         .into_iter()
         .map(|i| source_in[i as usize])
@@ -235,6 +250,11 @@ fn run<S: Sums>(source_in: &[Point], target: &IcpTarget, init: &Isometry3<f64>, 
         let find = |p: &Point, last: &mut f64, hint: &mut Option<Point>| -> Option<(Vector3<f64>, usize, f64)> {
             let q = rot * p.coords + shift;
             let qw = Point::from(q + c);
+            if let Some(field) = approx {
+                let j = field.nearest(&[qw.x, qw.y, qw.z])?;
+                let d = (target.points[j] - qw).norm_squared();
+                return (d <= max_sq).then_some((q, j, d));
+            }
             let moved = (q - (rot_prev * p.coords + shift_prev)).norm();
             // The previous match is at most `last + moved` away now, so nothing nearer is missed.
             let bound = (*last + moved) * (1.0 + 1e-9) + 1e-12;
@@ -284,24 +304,26 @@ fn run<S: Sums>(source_in: &[Point], target: &IcpTarget, init: &Isometry3<f64>, 
                 .reduce(S::zero, S::merge);
             Pass { sums, inliers, sq_dist }
         } else {
-            source
-                .par_chunks(CHUNK)
-                .zip(last_match.par_chunks_mut(CHUNK))
-                .map(|(chunk, lasts)| {
-                    let mut acc = Pass::<S>::zero();
-                    let mut hint = None;
-                    for (p, l) in chunk.iter().zip(lasts.iter_mut()) {
-                        if let Some((q, j, d)) = find(p, l, &mut hint) {
-                            let tq = target.points[j].coords - c;
-                            let n = normals.map_or(&zero_normal, |ns| &ns[j]);
-                            acc.sums.add(&q, &tq, n, kernel.weight(S::residual(&q, &tq, n)));
-                            acc.inliers += 1;
-                            acc.sq_dist += d;
-                        }
+            let chunk_pass = |chunk: &[Point], lasts: &mut [f64]| {
+                let mut acc = Pass::<S>::zero();
+                let mut hint = None;
+                for (p, l) in chunk.iter().zip(lasts.iter_mut()) {
+                    if let Some((q, j, d)) = find(p, l, &mut hint) {
+                        let tq = target.points[j].coords - c;
+                        let n = normals.map_or(&zero_normal, |ns| &ns[j]);
+                        acc.sums.add(&q, &tq, n, kernel.weight(S::residual(&q, &tq, n)));
+                        acc.inliers += 1;
+                        acc.sq_dist += d;
                     }
-                    acc
-                })
-                .reduce(Pass::zero, Pass::merge)
+                }
+                acc
+            };
+            // One chunk needs no task: a small source (a coarse check) skips rayon's overhead.
+            if source.len() <= CHUNK {
+                chunk_pass(&source, &mut last_match)
+            } else {
+                source.par_chunks(CHUNK).zip(last_match.par_chunks_mut(CHUNK)).map(|(chunk, lasts)| chunk_pass(chunk, lasts)).reduce(Pass::zero, Pass::merge)
+            }
         };
         last = pass;
         if pass.inliers < S::min_pairs() {
@@ -354,6 +376,19 @@ fn point_step(s: &PointSums) -> Option<(Vector3<f64>, Vector3<f64>)> {
 /// normal matrix so that directions the geometry cannot observe (sliding along a plane) get no
 /// motion instead of a huge one.
 fn plane_step(s: &PlaneSums) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    // Well-conditioned systems (the usual case) are solved by Cholesky on the Jacobi-scaled
+    // matrix, a tenth of the eigen-decomposition's cost. A small pivot there means a direction
+    // the geometry barely observes; then the eigen path below decides.
+    let d = s.h.diagonal().map(|x| if x > 0.0 { 1.0 / x.sqrt() } else { 0.0 });
+    if d.iter().all(|x| *x > 0.0 && x.is_finite()) {
+        let scaled = Matrix6::from_fn(|i, j| s.h[(i, j)] * d[i] * d[j]);
+        if let Some(ch) = scaled.cholesky() {
+            if (0..6).all(|i| ch.l_dirty()[(i, i)] * ch.l_dirty()[(i, i)] > 1e-4) {
+                let x = ch.solve(&(-s.g.component_mul(&d))).component_mul(&d);
+                return Some((Vector3::new(x[0], x[1], x[2]), Vector3::new(x[3], x[4], x[5])));
+            }
+        }
+    }
     let eig = SymmetricEigen::new(s.h);
     let max = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
     if max <= 0.0 {

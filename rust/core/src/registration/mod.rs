@@ -3,6 +3,7 @@
 pub mod ccp;
 pub mod corr_tree;
 pub mod criteria;
+pub mod field;
 pub mod icp;
 pub mod ppf;
 pub mod verify;

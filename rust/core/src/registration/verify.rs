@@ -235,6 +235,21 @@ pub fn inlier_stats(points: &[Point], target: &IcpTarget, t_model_scene: &Isomet
     (n as f64 / points.len().max(1) as f64, rmse)
 }
 
+/// Fraction of `points` within about `tol` of the posed model by the target's approximate
+/// nearest field (exact search without one): the cheap score of coarse checks.
+pub fn coarse_inlier_fraction(points: &[Point], target: &IcpTarget, t_model_scene: &Isometry3<f64>, tol: f64) -> f64 {
+    let Some(field) = target.field() else { return inlier_stats(points, target, t_model_scene, tol).0 };
+    let model = target.points();
+    let n = points
+        .iter()
+        .filter(|p| {
+            let q = t_model_scene * *p;
+            field.nearest(&[q.x, q.y, q.z]).is_some_and(|j| (model[j] - q).norm_squared() <= tol * tol)
+        })
+        .count();
+    n as f64 / points.len().max(1) as f64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
