@@ -158,3 +158,32 @@ def test_grasp_pose_is_eq_30():
     np.testing.assert_array_equal(tee.grasps["top"], T_gripper_object)
     with pytest.raises(binpick.InvalidInputError):
         binpick.grasp_pose(T_base_object, np.eye(3))
+
+
+def test_a_sparse_model_cloud_is_refined_on_its_mesh_to_the_paper_table_targets():
+    """Table 3's setting: a 300-point model cloud of the tee's visible half, 100 data points of
+    the same half with 0.3 mm noise, any pose. CCP works on the cloud; the refinement registers
+    onto the tee's mesh surface, so the result meets the issue's 0.5 mm / 0.5° targets, which
+    point-to-plane against 300 samples 5 mm apart does not."""
+    rng = np.random.default_rng(21)
+    mesh = binpick.parts.tee(resolution=1.0)
+    dense_m = binpick.parts.tee(resolution=1.0, count=1200, seed=31)
+    dense_d = binpick.parts.tee(resolution=1.0, count=400, seed=32)
+    mi = np.flatnonzero(dense_m.normals[:, 2] > 0)[:300]
+    di = np.flatnonzero(dense_d.normals[:, 2] > 0)[:100]
+    model = binpick.Model(
+        mesh.vertices.copy(), mesh.faces.copy(), dense_m.points[mi], dense_m.normals[mi], spacing=None,
+        diameter=mesh.diameter, area=mesh.area, name="tee-300", branches=mesh.branches,
+        special_direction=mesh.special_direction,
+    )
+    worst = (0.0, 0.0)
+    for _ in range(6):
+        T = np.eye(4)
+        T[:3, :3] = random_rotation(rng)
+        T[:3, 3] = rng.uniform(-200, 200, 3)
+        data = dense_d.points[di] + rng.normal(0, 0.3, (len(di), 3))
+        scene = data @ T[:3, :3].T + T[:3, 3]
+        res = binpick.estimate_pose(scene, model, method="ccp", up=T[:3, :3] @ [0, 0, 1.0], min_fitness=0.5)
+        rot, trans = pose_error(res.T_scene_model, T)
+        worst = (max(worst[0], rot), max(worst[1], trans))
+    assert worst[0] < 0.5 and worst[1] < 0.5, f"worst {worst[0]:.2f}°, {worst[1]:.2f} mm"

@@ -62,8 +62,13 @@ impl KdIndex {
     /// The `k` nearest indexed points, nearest first (fewer if the set is smaller).
     pub fn knn(&self, query: &Point, k: usize) -> Vec<Neighbour> {
         let mut found = Vec::with_capacity(k.min(self.len));
-        self.knn_tree.get_or_init(|| CorrespondenceTree::tree_only(&self.points)).knn_into(&[query.x, query.y, query.z], k.min(self.len), f64::INFINITY, &mut found);
+        self.knn_into(query, k, &mut found);
         found.into_iter().map(|(d, i)| Neighbour { index: i as usize, distance_squared: d }).collect()
+    }
+
+    /// [`KdIndex::knn`] into a reused buffer of (squared distance, index), nearest first.
+    pub fn knn_into(&self, query: &Point, k: usize, found: &mut Vec<(f64, u32)>) {
+        self.knn_tree.get_or_init(|| CorrespondenceTree::tree_only(&self.points)).knn_into(&[query.x, query.y, query.z], k.min(self.len), f64::INFINITY, found);
     }
 
     /// The nearest indexed point other than point `i` itself (duplicates of it count).

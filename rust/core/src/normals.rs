@@ -1,6 +1,6 @@
 //! Surface normals from k-nearest-neighbour PCA, oriented toward a viewpoint.
 
-use crate::cloud::{check_count, check_finite, covariance, extreme_axis, principal_axes, Point};
+use crate::cloud::{check_count, check_finite, covariance_of, extreme_axis, principal_axes, Point};
 use crate::error::{Error, Result};
 use crate::knn::KdIndex;
 use nalgebra::Vector3;
@@ -36,9 +36,9 @@ pub fn estimate_normals(points: &[Point], index: &KdIndex, k: usize, orientation
 pub fn normals_at(queries: &[Point], cloud: &[Point], index: &KdIndex, k: usize, orientation: Orientation) -> Vec<Vector3<f64>> {
     queries
         .par_iter()
-        .map(|p| {
-            let local: Vec<Point> = index.knn(p, k).iter().map(|n| cloud[n.index]).collect();
-            let (_, cov) = covariance(&local);
+        .map_init(Vec::new, |found, p| {
+            index.knn_into(p, k, found);
+            let cov = covariance_of(found.iter().map(|f| &cloud[f.1 as usize]));
             let n = extreme_axis(&cov, false).unwrap_or_else(|| principal_axes(&cov).1[2]);
             let facing = match orientation {
                 Orientation::TowardPoint(v) => v - p,

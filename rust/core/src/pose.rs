@@ -26,16 +26,19 @@ use std::time::Instant;
 /// CCP candidates (the best-prescored of distinct rotations) that get the stage-one ICP check.
 const STAGE_ONE: usize = 8;
 
-/// Object and model points the coarse checks look at.
-const PROBE_POINTS: usize = 64;
+/// Object points the coarse checks judge a pose by (fewer than about 100 cannot tell a wrong
+/// reading of a partial view from the right one), and model points their depth test probes.
+const PROBE_POINTS: usize = 150;
+const MODEL_PROBES: usize = 100;
 
 /// Object points the candidates that survive the quick check converge on.
 const SAMPLE_POINTS: usize = 160;
 
-/// The coarse checks' nearest field: cells of 1/64 of the part's diameter, over its box grown by
-/// half the diameter (farther than any coarse correspondence reaches).
+/// The coarse checks' nearest field: cells of 1/64 of the part's diameter (coarser cells let
+/// wrong readings of Table 3's case 6 win), over its box grown by 0.35 × the diameter (farther
+/// than the coarse checks' correspondences reach for a densely sampled model).
 const FIELD_CELLS: f64 = 64.0;
-const FIELD_MARGIN: f64 = 0.5;
+const FIELD_MARGIN: f64 = 0.35;
 
 /// Regions tried, top first, before the pipeline gives up.
 const MAX_REGIONS: usize = 8;
@@ -88,6 +91,8 @@ pub struct PoseModel {
     /// The mesh surface sampled densely, when the samples are much sparser than that: the final
     /// refinement and its verification run against it.
     pub surface: Option<IcpTarget>,
+    /// Spacing of that sampling, mm.
+    pub surface_spacing: Option<f64>,
 }
 
 impl PoseModel {
@@ -113,12 +118,17 @@ impl PoseModel {
                 hi - lo
             })
             .fold(f64::INFINITY, f64::min);
-        Ok(PoseModel { target: IcpTarget::new(points, Some(normals))?.with_field(diameter / FIELD_CELLS, FIELD_MARGIN * diameter), diameter, area, layout, spacing, symmetries, radius, thickness, ppf: None, surface: None })
+        Ok(PoseModel { target: IcpTarget::new(points, Some(normals))?.with_field(diameter / FIELD_CELLS, FIELD_MARGIN * diameter), diameter, area, layout, spacing, symmetries, radius, thickness, ppf: None, surface: None, surface_spacing: None })
     }
 
     /// The dense model as an ICP target.
     pub fn target(&self) -> &IcpTarget {
         &self.target
+    }
+
+    /// Sample spacing of [`PoseModel::fine_target`], mm.
+    pub fn fine_spacing(&self) -> f64 {
+        self.surface_spacing.unwrap_or(self.spacing)
     }
 
     /// What the final refinement registers onto: the dense mesh surface when there is one,
@@ -146,6 +156,7 @@ impl PoseModel {
         let on = probes.iter().filter(|p| surface.search().nearest_within(&[p.x, p.y, p.z], reach * reach).is_some()).count();
         if on * 10 >= 9 * probes.len() {
             self.surface = Some(surface);
+            self.surface_spacing = Some(spacing);
         }
         Ok(self)
     }
@@ -394,7 +405,7 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
     let spacing = sampling.along.max(1e-3);
     let across = sampling.across.max(spacing);
     // Normals need neighbours from more than one scan line.
-    let k = ((12.0 * across / spacing).round() as usize).clamp(12, 64).min(pts.len());
+    let k = ((8.0 * across / spacing).round() as usize).clamp(12, 64).min(pts.len());
     let normals = estimate_normals(pts, &index, k, Orientation::TowardDirection(up))?;
     lap("normals", timings);
     let visible_points = (0.5 * model.area / (spacing * across)).max(1.0);
@@ -446,7 +457,7 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
         let step = object.len().div_ceil(SAMPLE_POINTS);
         let sample: Vec<Point> = object.iter().step_by(step).copied().collect();
         let heights = HeightMap::new(scene, &up, (1.5 * across).max(0.5));
-        let coarse_model_step = model.target.points().len().div_ceil(PROBE_POINTS);
+        let coarse_model_step = model.target.points().len().div_ceil(MODEL_PROBES);
         let fine_step = (model.target.points().len() / 4000).max(1);
         let score_with = |t_model_scene: &Isometry3<f64>, probe: &[Point], tol: f64, model_step: usize| -> f64 {
             let on_model = inlier_stats(probe, &model.target, t_model_scene, tol).0;
@@ -457,7 +468,15 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
         };
         let coarse_tol = (0.08 * model.diameter).max(2.0 * tol);
         let probe: Vec<Point> = object.iter().step_by(object.len().div_ceil(PROBE_POINTS)).copied().collect();
-        let mut ranked: Vec<(f64, Isometry3<f64>)> = candidates.iter().map(|c| (score_of(&c.inverse(), &probe, coarse_tol), *c)).collect();
+        // Readings that give the same pose (within 5° and 5 % of the part) are scored once.
+        let same = 2.5f64.to_radians().cos();
+        let mut unique: Vec<Isometry3<f64>> = Vec::with_capacity(candidates.len());
+        for c in &candidates {
+            if !unique.iter().any(|u| u.rotation.coords.dot(&c.rotation.coords).abs() > same && (u.translation.vector - c.translation.vector).norm() < 0.05 * model.diameter) {
+                unique.push(*c);
+            }
+        }
+        let mut ranked: Vec<(f64, Isometry3<f64>)> = unique.iter().map(|c| (score_of(&c.inverse(), &probe, coarse_tol), *c)).collect();
         ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
         // Views of a part on its side leave the coarse pose ambiguous up to a quarter or half turn
         // about one of the part's axes; add those turns of the best two candidates before the ICP check.
@@ -488,20 +507,22 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
             translation_tolerance: 1e-2,
             kernel: RobustKernel::Tukey((0.1 * model.diameter).max(3.0 * tol)),
             num_threads: 0,
-            approximate: true,
+            approximate: std::env::var("BP_EXACT").is_err(),
             ..Default::default()
         };
         // Many readings give nearly the same rotation; keep the best-ranked of each 15° cluster.
         let mut distinct: Vec<(f64, Isometry3<f64>)> = Vec::with_capacity(ranked.len());
         for (sc, c) in ranked {
-            if !distinct.iter().any(|(_, d)| d.rotation.angle_to(&c.rotation) < 15f64.to_radians()) {
+            // Rotations within 15° have unit quaternions with |q₁·q₂| > cos 7.5°.
+            let near = 7.5f64.to_radians().cos();
+            if !distinct.iter().any(|(_, d)| d.rotation.coords.dot(&c.rotation.coords).abs() > near) {
                 distinct.push((sc, c));
             }
         }
         let ranked = distinct;
         // Stage one: the best-prescored hypotheses get a few ICP steps on a small probe (a coarse
         // pose tens of degrees off still lands in the right basin, but cannot be judged before moving it).
-        let quick = IcpConfig { max_iterations: 8, ..short.clone() };
+        let quick = IcpConfig { max_iterations: 6, ..short.clone() };
         let mut tried: Vec<(f64, Isometry3<f64>, Isometry3<f64>)> = Vec::with_capacity(ranked.len());
         for (_, cand) in ranked.iter().take(STAGE_ONE) {
             let r = icp(&probe, &model.target, &cand.inverse(), &quick)?;
@@ -512,7 +533,7 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
         // Stage two: the best three converge on a larger sample and are judged at the inlier
         // distance (those far behind the leader after stage one are not worth it).
         let lead = tried[0].0;
-        for (_, t0, cand) in tried.iter().take(3).filter(|t| t.0 >= 0.7 * lead) {
+        for (_, t0, cand) in tried.iter().take(3).filter(|t| std::env::var("BP_NOF").is_ok() || t.0 >= 0.7 * lead) {
             let r = icp(&sample, &model.target, t0, &short)?;
             let s = score_with(&r.t_target_source, &sample, tol, fine_step);
             if best.as_ref().map_or(true, |b| s > b.0) {
@@ -532,7 +553,7 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
                 let r = UnitQuaternion::from_scaled_axis(axis * std::f64::consts::PI);
                 let turned = t_scene_model0 * Isometry3::from_parts(Translation3::from(c_model - r * c_model), r);
                 let rough = icp(&probe, &model.target, &turned.inverse(), &quick)?;
-                if score_of(&rough.t_target_source, &probe, coarse_tol) < 0.8 * quick_winner {
+                if std::env::var("BP_NOF").is_err() && score_of(&rough.t_target_source, &probe, coarse_tol) < 0.8 * quick_winner {
                     continue;
                 }
                 let fit = icp(&sample, &model.target, &rough.t_target_source, &short)?;

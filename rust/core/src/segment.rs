@@ -58,7 +58,7 @@ pub fn scan_spacing(points: &[Point], index: &KdIndex) -> ScanSpacing {
     if points.len() < 8 {
         return ScanSpacing { along, across: along };
     }
-    let step = points.len().div_ceil(128);
+    let step = points.len().div_ceil(96);
     let mut across: Vec<f64> = (0..points.len())
         .step_by(step)
         .filter_map(|i| {

@@ -127,46 +127,48 @@ impl CorrespondenceTree {
         if k == 0 || self.nodes.is_empty() || box_dist2(&self.nodes[0], q) > bound_squared {
             return;
         }
-        // Candidates pile up in `out`; whenever there are 2k the k-th distance becomes the
-        // bound and the rest are dropped (amortised constant work per candidate).
-        let mut bound = bound_squared;
-        self.knn_descend(0, q, k, &mut bound, out);
-        if out.len() > k {
-            out.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
-            out.truncate(k);
-        }
+        // `out` fills up to k; then a nearer point replaces the farthest, and the farthest is
+        // the bound that prunes the rest of the tree.
+        let mut worst = (bound_squared, 0usize);
+        self.knn_descend(0, q, k, &mut worst, out);
         out.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
         for e in out.iter_mut() {
             e.1 = self.original[e.1 as usize];
         }
     }
 
-    fn knn_descend(&self, n: u32, q: &[f64; 3], k: usize, bound: &mut f64, out: &mut Vec<(f64, u32)>) {
+    fn knn_descend(&self, n: u32, q: &[f64; 3], k: usize, worst: &mut (f64, usize), out: &mut Vec<(f64, u32)>) {
         let node = &self.nodes[n as usize];
         if node.b >= 3 {
             let start = node.a as usize;
             let end = start + (node.b - 3) as usize;
             for (j, p) in self.xyz[start..end].iter().enumerate() {
                 let d = dist2(p, q);
-                if d <= *bound {
-                    out.push((d, (start + j) as u32));
+                if d > worst.0 {
+                    continue;
                 }
-            }
-            if out.len() >= 2 * k.max(8) {
-                let (_, kth, _) = out.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
-                *bound = kth.0;
-                out.truncate(k);
+                let entry = (d, (start + j) as u32);
+                if out.len() < k {
+                    out.push(entry);
+                    if out.len() < k {
+                        continue;
+                    }
+                } else {
+                    out[worst.1] = entry;
+                }
+                let (at, far) = out.iter().enumerate().fold((0, f64::NEG_INFINITY), |m, (i, e)| if e.0 > m.1 { (i, e.0) } else { m });
+                *worst = (far, at);
             }
             return;
         }
         let (l, r) = (n + 1, node.a);
         let (dl, dr) = (box_dist2(&self.nodes[l as usize], q), box_dist2(&self.nodes[r as usize], q));
         let ((first, d1), (second, d2)) = if dl <= dr { ((l, dl), (r, dr)) } else { ((r, dr), (l, dl)) };
-        if d1 <= *bound {
-            self.knn_descend(first, q, k, bound, out);
+        if d1 <= worst.0 {
+            self.knn_descend(first, q, k, worst, out);
         }
-        if d2 <= *bound {
-            self.knn_descend(second, q, k, bound, out);
+        if d2 <= worst.0 {
+            self.knn_descend(second, q, k, worst, out);
         }
     }
 

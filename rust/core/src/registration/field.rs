@@ -14,8 +14,16 @@
 use crate::cloud::Point;
 use std::collections::VecDeque;
 
-/// Largest grid built (cells); beyond it the cells grow.
-const MAX_CELLS: usize = 1 << 22;
+/// Largest grid built (cells); beyond it the cells grow. Lookups are random, so the grid is
+/// kept small (16-bit indices, at most 2 MB) to stay in cache: one that spills to memory
+/// shared with other processes costs more in misses than it saves in search.
+const MAX_CELLS: usize = 1 << 20;
+
+/// Point indices per cell: 16 bits while the set allows, 32 beyond.
+enum Indices {
+    Small(Vec<u16>),
+    Large(Vec<u32>),
+}
 
 /// A voxel grid of nearest points over the box of a point set grown by a margin.
 pub struct NearestField {
@@ -24,14 +32,14 @@ pub struct NearestField {
     cell: f64,
     dims: [usize; 3],
     /// Index of the point nearest each cell's centre (x fastest, then y, then z).
-    nearest: Vec<u32>,
+    nearest: Indices,
 }
 
 impl NearestField {
     /// Builds the field with cells of about `cell` mm over the points' bounding box grown by
     /// `margin` mm on every side. `None` for an empty set or a non-positive cell.
     pub fn new(points: &[Point], cell: f64, margin: f64) -> Option<NearestField> {
-        if points.is_empty() || !(cell > 0.0) || !margin.is_finite() || points.len() >= u32::MAX as usize {
+        if points.is_empty() || !(cell > 0.0) || !margin.is_finite() || points.len() >= (u32::MAX - 1) as usize {
             return None;
         }
         let mut lo = [f64::INFINITY; 3];
@@ -51,7 +59,8 @@ impl NearestField {
             cell *= 1.25;
         };
         let n = dims.iter().product::<usize>();
-        let mut field = NearestField { origin: lo, inv_cell: 1.0 / cell, cell, dims, nearest: vec![u32::MAX; n] };
+        let mut field = NearestField { origin: lo, inv_cell: 1.0 / cell, cell, dims, nearest: Indices::Small(Vec::new()) };
+        let mut nearest = vec![u32::MAX; n];
         let mut best = vec![f64::INFINITY; n];
         let mut queue: VecDeque<u32> = VecDeque::new();
         for (i, p) in points.iter().enumerate() {
@@ -62,14 +71,14 @@ impl NearestField {
                     queue.push_back(c as u32);
                 }
                 best[c] = d;
-                field.nearest[c] = i as u32;
+                nearest[c] = i as u32;
             }
         }
         let (sx, sy) = (1, dims[0]);
         let sz = dims[0] * dims[1];
         while let Some(c) = queue.pop_front() {
             let c = c as usize;
-            let s = field.nearest[c];
+            let s = nearest[c];
             let p = &points[s as usize];
             let (x, y, z) = (c % dims[0], (c / dims[0]) % dims[1], c / sz);
             let neighbours = [
@@ -84,11 +93,12 @@ impl NearestField {
                 let d = dist2(p, &field.centre(nb));
                 if d < best[nb] {
                     best[nb] = d;
-                    field.nearest[nb] = s;
+                    nearest[nb] = s;
                     queue.push_back(nb as u32);
                 }
             }
         }
+        field.nearest = if points.len() < u16::MAX as usize { Indices::Small(nearest.into_iter().map(|i| i as u16).collect()) } else { Indices::Large(nearest) };
         Some(field)
     }
 
@@ -100,7 +110,11 @@ impl NearestField {
     /// The point (input index) nearest the centre of the cell holding `q`; `None` outside the grid.
     #[inline]
     pub fn nearest(&self, q: &[f64; 3]) -> Option<usize> {
-        self.cell_of(q).map(|c| self.nearest[c] as usize)
+        let c = self.cell_of(q)?;
+        Some(match &self.nearest {
+            Indices::Small(v) => v[c] as usize,
+            Indices::Large(v) => v[c] as usize,
+        })
     }
 
     #[inline]

@@ -104,12 +104,28 @@ struct PointSums {
     qt: Matrix3<f64>,
 }
 
-/// Sums for the point-to-plane normal equations.
+/// Sums for the point-to-plane normal equations: the upper triangle of JᵀWJ row by row (the
+/// matrix is symmetric; accumulating 21 entries instead of 36 is most of an iteration's work).
 #[derive(Clone, Copy)]
 struct PlaneSums {
-    h: Matrix6<f64>,
+    h: [f64; 21],
     g: Vector6<f64>,
     w: f64,
+}
+
+impl PlaneSums {
+    fn matrix(&self) -> Matrix6<f64> {
+        let mut m = Matrix6::zeros();
+        let mut k = 0;
+        for i in 0..6 {
+            for j in i..6 {
+                m[(i, j)] = self.h[k];
+                m[(j, i)] = self.h[k];
+                k += 1;
+            }
+        }
+        m
+    }
 }
 
 trait Sums: Copy + Send + Sync {
@@ -151,19 +167,26 @@ impl Sums for PointSums {
 
 impl Sums for PlaneSums {
     fn zero() -> Self {
-        PlaneSums { h: Matrix6::zeros(), g: Vector6::zeros(), w: 0.0 }
+        PlaneSums { h: [0.0; 21], g: Vector6::zeros(), w: 0.0 }
     }
     #[inline(always)]
     fn add(&mut self, q: &Vector3<f64>, t: &Vector3<f64>, n: &Vector3<f64>, w: f64) {
         let r = n.dot(&(q - t));
         let c = q.cross(n);
-        let j = Vector6::new(c.x, c.y, c.z, n.x, n.y, n.z);
-        self.h += (w * j) * j.transpose();
-        self.g += (w * r) * j;
+        let j = [c.x, c.y, c.z, n.x, n.y, n.z];
+        let mut k = 0;
+        for a in 0..6 {
+            let wa = w * j[a];
+            for b in a..6 {
+                self.h[k] += wa * j[b];
+                k += 1;
+            }
+        }
+        self.g += (w * r) * Vector6::from(j);
         self.w += w;
     }
     fn merge(self, o: Self) -> Self {
-        PlaneSums { h: self.h + o.h, g: self.g + o.g, w: self.w + o.w }
+        PlaneSums { h: std::array::from_fn(|k| self.h[k] + o.h[k]), g: self.g + o.g, w: self.w + o.w }
     }
     #[inline(always)]
     fn residual(q: &Vector3<f64>, t: &Vector3<f64>, n: &Vector3<f64>) -> f64 {
@@ -375,21 +398,23 @@ fn point_step(s: &PointSums) -> Option<(Vector3<f64>, Vector3<f64>)> {
 /// Gauss–Newton step for point-to-plane, solved through the eigen-decomposition of the 6×6
 /// normal matrix so that directions the geometry cannot observe (sliding along a plane) get no
 /// motion instead of a huge one.
-fn plane_step(s: &PlaneSums) -> Option<(Vector3<f64>, Vector3<f64>)> {
+fn plane_step(sums: &PlaneSums) -> Option<(Vector3<f64>, Vector3<f64>)> {
+    let h = sums.matrix();
+    let g = sums.g;
     // Well-conditioned systems (the usual case) are solved by Cholesky on the Jacobi-scaled
     // matrix, a tenth of the eigen-decomposition's cost. A small pivot there means a direction
     // the geometry barely observes; then the eigen path below decides.
-    let d = s.h.diagonal().map(|x| if x > 0.0 { 1.0 / x.sqrt() } else { 0.0 });
+    let d = h.diagonal().map(|x| if x > 0.0 { 1.0 / x.sqrt() } else { 0.0 });
     if d.iter().all(|x| *x > 0.0 && x.is_finite()) {
-        let scaled = Matrix6::from_fn(|i, j| s.h[(i, j)] * d[i] * d[j]);
+        let scaled = Matrix6::from_fn(|i, j| h[(i, j)] * d[i] * d[j]);
         if let Some(ch) = scaled.cholesky() {
             if (0..6).all(|i| ch.l_dirty()[(i, i)] * ch.l_dirty()[(i, i)] > 1e-4) {
-                let x = ch.solve(&(-s.g.component_mul(&d))).component_mul(&d);
+                let x = ch.solve(&(-g.component_mul(&d))).component_mul(&d);
                 return Some((Vector3::new(x[0], x[1], x[2]), Vector3::new(x[3], x[4], x[5])));
             }
         }
     }
-    let eig = SymmetricEigen::new(s.h);
+    let eig = SymmetricEigen::new(h);
     let max = eig.eigenvalues.iter().cloned().fold(0.0, f64::max);
     if max <= 0.0 {
         return None;
@@ -399,7 +424,7 @@ fn plane_step(s: &PlaneSums) -> Option<(Vector3<f64>, Vector3<f64>)> {
         let lambda = eig.eigenvalues[k];
         if lambda > 1e-10 * max {
             let e = eig.eigenvectors.column(k);
-            delta -= e * (e.dot(&s.g) / lambda);
+            delta -= e * (e.dot(&g) / lambda);
         }
     }
     Some((Vector3::new(delta[0], delta[1], delta[2]), Vector3::new(delta[3], delta[4], delta[5])))

@@ -188,13 +188,15 @@ pub fn depth_evidence(target: &IcpTarget, heights: &HeightMap, t_scene_model: &I
     let normals = target.normals().unwrap_or(&[]);
     let t_model_scene = t_scene_model.inverse();
     let mut e = Evidence::default();
+    let rot = t_scene_model.rotation.to_rotation_matrix().into_inner();
+    let shift = t_scene_model.translation.vector;
     for (p, n) in target.points().iter().zip(normals).step_by(step.max(1)) {
         let c = n.dot(&up_model);
         if c < 0.3 {
             continue;
         }
         e.facing += 1;
-        let q = t_scene_model * p;
+        let q = Point::from(rot * p.coords + shift);
         let h = q.coords.dot(&heights.up);
         // The top of a cell on a slope lies up to a cell × tan(slope) above the probe.
         let slack = tol + heights.cell * (1.0 - c * c).sqrt() / c;
@@ -240,10 +242,12 @@ pub fn inlier_stats(points: &[Point], target: &IcpTarget, t_model_scene: &Isomet
 pub fn coarse_inlier_fraction(points: &[Point], target: &IcpTarget, t_model_scene: &Isometry3<f64>, tol: f64) -> f64 {
     let Some(field) = target.field() else { return inlier_stats(points, target, t_model_scene, tol).0 };
     let model = target.points();
+    let r = t_model_scene.rotation.to_rotation_matrix().into_inner();
+    let t = t_model_scene.translation.vector;
     let n = points
         .iter()
         .filter(|p| {
-            let q = t_model_scene * *p;
+            let q = Point::from(r * p.coords + t);
             field.nearest(&[q.x, q.y, q.z]).is_some_and(|j| (model[j] - q).norm_squared() <= tol * tol)
         })
         .count();
