@@ -43,6 +43,7 @@ PAPER_CCP = [  # position error x, y, z (mm), rotation error θx, θy, θz (deg)
     (-1.45, 1.69, -0.41, 0.04, 0.57, 0.1, 1.78),
     (-0.05, 1.55, 1.6, -0.63, 0.01, -0.6, 1.46),
 ]
+THREADS = 1  # worker threads of both methods (the paper ran one)
 PAPER_ICP_ROT = [(142.69, -66.39, -155.21), (-214.61, -39.01, 69.89), (0.13, 0.36, 0.1), (0.1, 0.43, -0.1), (113.26, 59.88, 15), (134.19, -93.45, -113.3)]
 
 
@@ -93,12 +94,12 @@ def run_case(model, model_cloud, data, pos, rot_deg, repeats=1):
     model.prepared()  # once per part (search structures, symmetries, PPF table): not part of a case's time
 
     def by_icp():
-        icp = binpick.icp(scene, model_cloud, method="point_to_point", max_correspondence_distance=1000.0, max_iterations=200, num_threads=1)
+        icp = binpick.icp(scene, model_cloud, method="point_to_point", max_correspondence_distance=1000.0, max_iterations=200, num_threads=THREADS)
         return np.linalg.inv(icp.T_target_source)
 
     def by_ccp():
         try:
-            return binpick.estimate_pose(scene, model, method="ccp", up=up, num_threads=1, min_fitness=0.5).T_scene_model
+            return binpick.estimate_pose(scene, model, method="ccp", up=up, num_threads=THREADS, min_fitness=0.5).T_scene_model
         except binpick.NoObjectFound:
             return None
 

@@ -26,6 +26,9 @@ use std::time::Instant;
 /// CCP candidates (the best-prescored of distinct rotations) that get the stage-one ICP check.
 const STAGE_ONE: usize = 8;
 
+/// Readings the first, cheap tier of scoring passes on to the second.
+const SECOND_TIER: usize = 32;
+
 /// Object points the coarse checks judge a pose by (fewer than about 100 cannot tell a wrong
 /// reading of a partial view from the right one), and model points their depth test probes.
 const PROBE_POINTS: usize = 150;
@@ -476,7 +479,15 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
                 unique.push(*c);
             }
         }
-        let mut ranked: Vec<(f64, Isometry3<f64>)> = unique.iter().map(|c| (score_of(&c.inverse(), &probe, coarse_tol), *c)).collect();
+        // Two tiers: a third of the probe sorts out the readings that are plainly wrong, the
+        // whole probe ranks the rest.
+        let glance: Vec<Point> = probe.iter().step_by(3).copied().collect();
+        let mut ranked: Vec<(f64, Isometry3<f64>)> = unique.iter().map(|c| (score_of(&c.inverse(), &glance, coarse_tol), *c)).collect();
+        ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
+        ranked.truncate(SECOND_TIER);
+        for r in ranked.iter_mut() {
+            r.0 = score_of(&r.1.inverse(), &probe, coarse_tol);
+        }
         ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
         // Views of a part on its side leave the coarse pose ambiguous up to a quarter or half turn
         // about one of the part's axes; add those turns of the best two candidates before the ICP check.
@@ -502,7 +513,7 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
         let short = IcpConfig {
             method: IcpMethod::PointToPlane,
             max_correspondence_distance: (0.25 * model.diameter).max(3.0 * tol),
-            max_iterations: 20,
+            max_iterations: 12,
             rotation_tolerance: 1e-4,
             translation_tolerance: 1e-2,
             kernel: RobustKernel::Tukey((0.1 * model.diameter).max(3.0 * tol)),

@@ -116,6 +116,11 @@ impl CorrespondenceTree {
             if bound_squared <= reach * reach {
                 return g.nearest_within(q, bound_squared);
             }
+            // A wide bound, but most queries lie near the surface: a point within one cell
+            // edge is the nearest of all, and the grid finds it in a few short scans.
+            if let Some(hit) = g.nearest_within(q, g.cell * g.cell) {
+                return Some(hit);
+            }
         }
         self.search::<false>(q, bound_squared, usize::MAX)
     }
