@@ -94,8 +94,6 @@ pub struct PoseModel {
     /// The mesh surface sampled densely, when the samples are much sparser than that: the final
     /// refinement and its verification run against it.
     pub surface: Option<IcpTarget>,
-    /// Spacing of that sampling, mm.
-    pub surface_spacing: Option<f64>,
 }
 
 impl PoseModel {
@@ -121,17 +119,12 @@ impl PoseModel {
                 hi - lo
             })
             .fold(f64::INFINITY, f64::min);
-        Ok(PoseModel { target: IcpTarget::new(points, Some(normals))?.with_field(diameter / FIELD_CELLS, FIELD_MARGIN * diameter), diameter, area, layout, spacing, symmetries, radius, thickness, ppf: None, surface: None, surface_spacing: None })
+        Ok(PoseModel { target: IcpTarget::new(points, Some(normals))?.with_field(diameter / FIELD_CELLS, FIELD_MARGIN * diameter), diameter, area, layout, spacing, symmetries, radius, thickness, ppf: None, surface: None })
     }
 
     /// The dense model as an ICP target.
     pub fn target(&self) -> &IcpTarget {
         &self.target
-    }
-
-    /// Sample spacing of [`PoseModel::fine_target`], mm.
-    pub fn fine_spacing(&self) -> f64 {
-        self.surface_spacing.unwrap_or(self.spacing)
     }
 
     /// What the final refinement registers onto: the dense mesh surface when there is one,
@@ -159,7 +152,6 @@ impl PoseModel {
         let on = probes.iter().filter(|p| surface.search().nearest_within(&[p.x, p.y, p.z], reach * reach).is_some()).count();
         if on * 10 >= 9 * probes.len() {
             self.surface = Some(surface);
-            self.surface_spacing = Some(spacing);
         }
         Ok(self)
     }
@@ -518,7 +510,7 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
             translation_tolerance: 1e-2,
             kernel: RobustKernel::Tukey((0.1 * model.diameter).max(3.0 * tol)),
             num_threads: 0,
-            approximate: std::env::var("BP_EXACT").is_err(),
+            approximate: true,
             ..Default::default()
         };
         // Many readings give nearly the same rotation; keep the best-ranked of each 15° cluster.
@@ -544,7 +536,7 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
         // Stage two: the best three converge on a larger sample and are judged at the inlier
         // distance (those far behind the leader after stage one are not worth it).
         let lead = tried[0].0;
-        for (_, t0, cand) in tried.iter().take(3).filter(|t| std::env::var("BP_NOF").is_ok() || t.0 >= 0.7 * lead) {
+        for (_, t0, cand) in tried.iter().take(3).filter(|t| t.0 >= 0.7 * lead) {
             let r = icp(&sample, &model.target, t0, &short)?;
             let s = score_with(&r.t_target_source, &sample, tol, fine_step);
             if best.as_ref().map_or(true, |b| s > b.0) {
@@ -564,7 +556,7 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
                 let r = UnitQuaternion::from_scaled_axis(axis * std::f64::consts::PI);
                 let turned = t_scene_model0 * Isometry3::from_parts(Translation3::from(c_model - r * c_model), r);
                 let rough = icp(&probe, &model.target, &turned.inverse(), &quick)?;
-                if std::env::var("BP_NOF").is_err() && score_of(&rough.t_target_source, &probe, coarse_tol) < 0.8 * quick_winner {
+                if score_of(&rough.t_target_source, &probe, coarse_tol) < 0.8 * quick_winner {
                     continue;
                 }
                 let fit = icp(&sample, &model.target, &rough.t_target_source, &short)?;
