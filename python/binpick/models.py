@@ -86,6 +86,12 @@ class Model:
     Build one with :meth:`from_mesh` (STL, PLY, OBJ files) or :meth:`from_arrays`, or take a
     built-in part from :mod:`binpick.parts`. The model frame is the mesh file's frame.
 
+    The samples drive detection and the coarse pose; the final refinement of
+    :func:`binpick.estimate_pose` registers onto them too, unless they are sparser than 1.5 ×
+    1/100 of the mesh's bounding-box diagonal (a paper-style 300-point model cloud): then it
+    registers onto the mesh surface sampled at that 1/100, so accuracy does not depend on how
+    sparse the samples are. The samples must lie on the mesh, in its frame.
+
     Attributes:
         vertices: (V, 3) mesh vertices, mm.
         faces: (F, 3) triangle vertex indices.
