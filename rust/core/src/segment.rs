@@ -52,7 +52,7 @@ pub struct ScanSpacing {
     pub across: f64,
 }
 
-/// Measures [`ScanSpacing`] on a sample of up to 256 points from their 32 nearest neighbours.
+/// Measures [`ScanSpacing`] on a sample of about 96 points from their 32 nearest neighbours.
 pub fn scan_spacing(points: &[Point], index: &KdIndex) -> ScanSpacing {
     let along = point_spacing(points, index);
     if points.len() < 8 {
