@@ -204,3 +204,16 @@ def camera_cloud(view, cell, step: int, seed: int = 0, noise: float = 0.15) -> t
     pts, ids = pts[keep][::step], ids[keep][::step]
     T = cell.T_base_camera
     return pts @ T[:3, :3].T + T[:3, 3] + np.random.default_rng(seed).normal(0, noise, pts.shape), ids
+
+
+def pile_view(model, count: int, seed: int, step: int, noise_seed: int = 0):
+    """``count`` copies of ``model`` dropped into the simulated cell's bin by the physics engine
+    and seen by its camera from the scan pose (every ``step``-th pixel, noise drawn with
+    ``noise_seed``): (cell, pile, scene points, their part ids)."""
+    from binpick import sim
+
+    cell = sim.Cell()
+    pile = sim.Pile(model, count, bin=cell.bin, seed=seed)
+    view = sim.World.of_pile(pile, bin=cell.bin).view(cell)
+    scene, ids = camera_cloud(view, cell, step=step, seed=noise_seed)
+    return cell, pile, scene, ids

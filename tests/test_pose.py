@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import binpick
-from _geometry import camera_cloud, pose_error, random_rotation
+from _geometry import pile_view, pose_error, random_rotation
 
 
 def rot_about(axis, angle) -> np.ndarray:
@@ -86,14 +86,8 @@ def test_icp_alone_fails_where_ccp_succeeds():
 @pytest.fixture(scope="module")
 def pile_scene():
     """A physics pile of five tees, seen by the simulated camera from the scan pose."""
-    from binpick import sim
-
     tee = binpick.parts.tee(resolution=1.0)
-    cell = sim.Cell()
-    pile = sim.Pile(tee, 5, bin=cell.bin, seed=11)
-    view = sim.World.of_pile(pile, bin=cell.bin).view(cell)
-    scene, ids = camera_cloud(view, cell, step=3)
-    return tee, cell, pile, scene, ids
+    return (tee, *pile_view(tee, 5, seed=11, step=3))
 
 
 def test_segmentation_separates_touching_parts_in_a_pile(pile_scene):

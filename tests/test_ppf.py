@@ -8,7 +8,7 @@ import pytest
 
 import binpick
 from binpick import sim
-from _geometry import camera_cloud, extruded_mesh, random_rotation, revolved_mesh, rot, symmetric_pose_error
+from _geometry import camera_cloud, extruded_mesh, pile_view, random_rotation, revolved_mesh, rot, symmetric_pose_error
 
 # An L-bracket with unequal legs: no proper symmetry.
 L_BRACKET = [(0, 0), (80, 0), (80, 12), (12, 12), (12, 50), (0, 50)]
@@ -114,9 +114,8 @@ def test_poses_that_differ_by_a_symmetry_have_one_canonical_form(parts, name):
 
 def part_in_bin(model: binpick.Model, seed: int):
     """One part dropped into the cell's bin, seen with the bin and the table (a real cell's view)."""
-    cell = sim.Cell()
-    pile = sim.Pile(model, 1, bin=cell.bin, seed=seed)
-    return cell, pile, camera_cloud(sim.World.of_pile(pile, bin=cell.bin).view(cell), cell, step=2, seed=seed)[0]
+    cell, pile, scene, _ = pile_view(model, 1, seed=seed, step=2, noise_seed=seed)
+    return cell, pile, scene
 
 
 @pytest.mark.parametrize("shown,asked", [("hexagon", "bracket"), ("bracket", "hexagon"), ("shaft", "bracket"), ("bracket", "shaft"), ("hexagon", "shaft")])
@@ -149,11 +148,7 @@ def test_an_empty_bin_gives_no_object_found(parts):
 def bracket_pile(parts):
     """Eight brackets dropped into the cell's bin by the physics engine, seen from the scan pose."""
     model = parts["bracket"]
-    cell = sim.Cell()
-    pile = sim.Pile(model, 8, bin=cell.bin, seed=5)
-    view = sim.World.of_pile(pile, bin=cell.bin).view(cell)
-    scene, ids = camera_cloud(view, cell, step=2)
-    return model, cell, pile, scene, ids
+    return (model, *pile_view(model, 8, seed=5, step=2))
 
 
 def test_estimate_poses_finds_distinct_instances_most_pickable_first(bracket_pile):

@@ -36,12 +36,12 @@ pub fn centroid(points: &[Point]) -> Point {
     Point::from(sum / points.len() as f64)
 }
 
-/// The covariance (divided by n) of points given by an iterator (walked twice), without
-/// collecting them.
-pub fn covariance_of<'a>(points: impl Iterator<Item = &'a Point> + Clone) -> Matrix3<f64> {
+/// Centroid and covariance (divided by n) of points given by an iterator (walked twice),
+/// without collecting them; the origin and zero for no points.
+pub fn covariance_of<'a>(points: impl Iterator<Item = &'a Point> + Clone) -> (Point, Matrix3<f64>) {
     let (n, sum) = points.clone().fold((0usize, Vector3::zeros()), |(n, s), p| (n + 1, s + p.coords));
     if n == 0 {
-        return Matrix3::zeros();
+        return (Point::origin(), Matrix3::zeros());
     }
     let c = sum / n as f64;
     let mut cov = Matrix3::zeros();
@@ -49,21 +49,12 @@ pub fn covariance_of<'a>(points: impl Iterator<Item = &'a Point> + Clone) -> Mat
         let d = p.coords - c;
         cov += d * d.transpose();
     }
-    cov / n as f64
+    (Point::from(c), cov / n as f64)
 }
 
 /// Centroid and covariance (divided by n) of the points.
 pub fn covariance(points: &[Point]) -> (Point, Matrix3<f64>) {
-    let c = centroid(points);
-    let mut cov = Matrix3::zeros();
-    for p in points {
-        let d = p - c;
-        cov += d * d.transpose();
-    }
-    if !points.is_empty() {
-        cov /= points.len() as f64;
-    }
-    (c, cov)
+    covariance_of(points.iter())
 }
 
 /// Principal axes of a covariance: eigenvalues sorted descending with their unit eigenvectors.

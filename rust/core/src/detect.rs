@@ -13,7 +13,7 @@ use crate::normals::{normals_at, Orientation};
 use crate::pose::{CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
 use crate::registration::ppf::{DetectConfig, PpfModel};
 use crate::registration::verify::{depth_evidence, Evidence, HeightMap};
-use crate::registration::{icp, IcpConfig, IcpMethod, RobustKernel};
+use crate::registration::{icp, IcpConfig};
 use crate::segment::{remove_support_planes, Plane};
 use crate::voxel::{subsample, voxel_downsample};
 use nalgebra::{Isometry3, Vector3};
@@ -126,15 +126,7 @@ impl DetectionScene {
         if local.len() < 12 {
             return None;
         }
-        let quick = IcpConfig {
-            method: IcpMethod::PointToPlane,
-            max_correspondence_distance: 1.5 * step,
-            max_iterations: 8,
-            rotation_tolerance: 1e-3,
-            translation_tolerance: 5e-2,
-            kernel: RobustKernel::Tukey(1.5 * step),
-            ..Default::default()
-        };
+        let quick = IcpConfig::robust_plane(1.5 * step, 8, 1e-3, 5e-2);
         let r = icp(&local, model.target(), &start.inverse(), &quick).ok()?;
         let t_scene_model = r.t_target_source.inverse();
         let evidence = depth_evidence(model.target(), &self.heights, &t_scene_model, Self::probe_step(model, 300), self.tol, false);
@@ -149,15 +141,7 @@ impl DetectionScene {
         if local.len() < 12 {
             return None;
         }
-        let fine = IcpConfig {
-            method: IcpMethod::PointToPlane,
-            max_correspondence_distance: (3.0 * self.tol).max(0.5 * step),
-            max_iterations: 20,
-            rotation_tolerance: 1e-6,
-            translation_tolerance: 1e-4,
-            kernel: RobustKernel::Tukey((3.0 * self.tol).max(0.5 * step)),
-            ..Default::default()
-        };
+        let fine = IcpConfig::robust_plane((3.0 * self.tol).max(0.5 * step), 20, 1e-6, 1e-4);
         let r = icp(&local, model.target(), &j.t_scene_model.inverse(), &fine).ok()?;
         let t_scene_model = r.t_target_source.inverse();
         let evidence = self.judge(model, &t_scene_model);

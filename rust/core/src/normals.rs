@@ -38,7 +38,7 @@ pub fn normals_at(queries: &[Point], cloud: &[Point], index: &KdIndex, k: usize,
         .par_iter()
         .map_init(Vec::new, |found, p| {
             index.knn_into(p, k, found);
-            let cov = covariance_of(found.iter().map(|f| &cloud[f.1 as usize]));
+            let (_, cov) = covariance_of(found.iter().map(|f| &cloud[f.1 as usize]));
             let n = extreme_axis(&cov, false).unwrap_or_else(|| principal_axes(&cov).1[2]);
             let facing = match orientation {
                 Orientation::TowardPoint(v) => v - p,

@@ -18,7 +18,7 @@ use crate::registration::ppf::{DetectConfig, PpfConfig, PpfModel};
 use crate::voxel::subsample;
 use crate::registration::verify::{coarse_inlier_fraction, depth_evidence, inlier_stats, HeightMap};
 use crate::symmetry::{detect_symmetries, SymmetryConfig, Symmetries};
-use crate::registration::{icp, IcpConfig, IcpMethod, IcpTarget, RobustKernel};
+use crate::registration::{icp, IcpConfig, IcpTarget, RobustKernel};
 use crate::segment::{could_hold_support_plane, crop_to_bin, point_spacing, remove_support_planes, scan_spacing, segment_top, BinBox, SegmentConfig};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::time::Instant;
@@ -119,7 +119,12 @@ impl PoseModel {
                 hi - lo
             })
             .fold(f64::INFINITY, f64::min);
-        Ok(PoseModel { target: IcpTarget::new(points, Some(normals))?.with_field(diameter / FIELD_CELLS, FIELD_MARGIN * diameter), diameter, area, layout, spacing, symmetries, radius, thickness, ppf: None, surface: None })
+        // Only CCP's coarse checks use the nearest field: a model without branches does not pay for it.
+        let mut target = IcpTarget::new(points, Some(normals))?;
+        if layout.is_some() {
+            target = target.with_field(diameter / FIELD_CELLS, FIELD_MARGIN * diameter);
+        }
+        Ok(PoseModel { target, diameter, area, layout, spacing, symmetries, radius, thickness, ppf: None, surface: None })
     }
 
     /// The dense model as an ICP target.
@@ -503,21 +508,15 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
         }
         ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
         let short = IcpConfig {
-            method: IcpMethod::PointToPlane,
-            max_correspondence_distance: (0.25 * model.diameter).max(3.0 * tol),
-            max_iterations: 12,
-            rotation_tolerance: 1e-4,
-            translation_tolerance: 1e-2,
             kernel: RobustKernel::Tukey((0.1 * model.diameter).max(3.0 * tol)),
-            num_threads: 0,
             approximate: true,
-            ..Default::default()
+            ..IcpConfig::robust_plane((0.25 * model.diameter).max(3.0 * tol), 12, 1e-4, 1e-2)
         };
         // Many readings give nearly the same rotation; keep the best-ranked of each 15° cluster.
         let mut distinct: Vec<(f64, Isometry3<f64>)> = Vec::with_capacity(ranked.len());
+        // Rotations within 15° have unit quaternions with |q₁·q₂| > cos 7.5°.
+        let near = 7.5f64.to_radians().cos();
         for (sc, c) in ranked {
-            // Rotations within 15° have unit quaternions with |q₁·q₂| > cos 7.5°.
-            let near = 7.5f64.to_radians().cos();
             if !distinct.iter().any(|(_, d)| d.rotation.coords.dot(&c.rotation.coords).abs() > near) {
                 distinct.push((sc, c));
             }
@@ -568,17 +567,8 @@ fn run(scene: &[Point], pts: &[Point], model: &PoseModel, cfg: &PoseConfig, meth
             best = Some(winner);
         }
         let (_, t_model_scene0, coarse) = best.expect("at least one candidate");
-        let fine = IcpConfig {
-            method: IcpMethod::PointToPlane,
-            max_correspondence_distance: 3.0 * tol,
-            max_iterations: 60,
-            // 0.0006° and a micrometre: far below what the scan can resolve.
-            rotation_tolerance: 1e-5,
-            translation_tolerance: 1e-3,
-            kernel: RobustKernel::Tukey(3.0 * tol),
-            num_threads: 0,
-            ..Default::default()
-        };
+        // Stops at 0.0006° and a micrometre: far below what the scan can resolve.
+        let fine = IcpConfig::robust_plane(3.0 * tol, 60, 1e-5, 1e-3);
         let refined = icp(&object, model.fine_target(), &t_model_scene0, &fine)?;
         let t_model_scene = refined.t_target_source;
         lap("icp", timings);

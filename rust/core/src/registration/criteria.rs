@@ -94,6 +94,22 @@ impl Default for IcpConfig {
 }
 
 impl IcpConfig {
+    /// Point-to-plane with a Tukey kernel as wide as the correspondence distance `reach` (mm):
+    /// the robust refinement the pose pipelines run, stopping after `max_iterations` or once an
+    /// update rotates less than `rotation_tolerance` (rad) and moves less than
+    /// `translation_tolerance` (mm).
+    pub fn robust_plane(reach: f64, max_iterations: usize, rotation_tolerance: f64, translation_tolerance: f64) -> Self {
+        IcpConfig {
+            method: IcpMethod::PointToPlane,
+            max_correspondence_distance: reach,
+            max_iterations,
+            rotation_tolerance,
+            translation_tolerance,
+            kernel: RobustKernel::Tukey(reach),
+            ..Default::default()
+        }
+    }
+
     /// Checks every field; the error names the field and the allowed range.
     pub fn validate(&self) -> Result<()> {
         let positive = |name: &str, v: f64| {
