@@ -21,7 +21,11 @@ fn bench_icp(c: &mut Criterion) {
         let target = sample_surface(&part.mesh, Density::Count(n), 1).unwrap();
         let source = sample_surface(&part.mesh, Density::Count(n), 2).unwrap();
         let mut rng = Rng::new(3);
-        let noisy: Vec<Point> = source.points.iter().map(|p| p + Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.2).collect();
+        let noisy: Vec<Point> = source
+            .points
+            .iter()
+            .map(|p| p + Vector3::new(rng.normal(), rng.normal(), rng.normal()) * 0.2)
+            .collect();
         let offset = Isometry3::from_parts(
             Translation3::new(10.0 / 3f64.sqrt(), 10.0 / 3f64.sqrt(), 10.0 / 3f64.sqrt()),
             UnitQuaternion::from_axis_angle(&Unit::new_normalize(Vector3::new(1.0, 2.0, 3.0)), 5f64.to_radians()),
@@ -29,7 +33,10 @@ fn bench_icp(c: &mut Criterion) {
         let source = transform_points(&offset, &noisy);
         let tgt = IcpTarget::new(target.points, Some(target.normals)).unwrap();
         group.throughput(Throughput::Elements((n * ITERATIONS) as u64));
-        for (name, method) in [("point_to_point", IcpMethod::PointToPoint), ("point_to_plane", IcpMethod::PointToPlane)] {
+        for (name, method) in [
+            ("point_to_point", IcpMethod::PointToPoint),
+            ("point_to_plane", IcpMethod::PointToPlane),
+        ] {
             let cfg = IcpConfig {
                 method,
                 max_correspondence_distance: 20.0,

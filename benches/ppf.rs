@@ -7,9 +7,9 @@ use binpick_core::knn::KdIndex;
 use binpick_core::model::{sample_surface, Density};
 use binpick_core::parts::{tee, TeeParams};
 use binpick_core::registration::ppf::{DetectConfig, PpfConfig, PpfModel};
-use binpick_core::voxel::subsample;
 use binpick_core::rng::Rng;
 use binpick_core::symmetry::Symmetries;
+use binpick_core::voxel::subsample;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use nalgebra::{Isometry3, Translation3, Vector3};
 use std::hint::black_box;
@@ -24,14 +24,21 @@ fn bench_ppf(c: &mut Criterion) {
     let mut group = c.benchmark_group("ppf");
     group.sample_size(10);
     group.throughput(Throughput::Elements((mp.len() * mp.len()) as u64));
-    group.bench_function("build_table", |b| b.iter(|| black_box(PpfModel::new(mp.clone(), mn.clone(), diameter, config).unwrap())));
+    group.bench_function("build_table", |b| {
+        b.iter(|| black_box(PpfModel::new(mp.clone(), mn.clone(), diameter, config).unwrap()))
+    });
     let model = PpfModel::new(mp, mn, diameter, config).unwrap();
 
     let mut rng = Rng::new(5);
     let truth = Isometry3::from_parts(Translation3::new(400.0, 0.0, 40.0), rng.rotation());
     let view = sample_surface(&part.mesh, Density::Spacing(0.8), 2).unwrap();
-    let (pts, nrm): (Vec<Point>, Vec<Vector3<f64>>) =
-        view.points.iter().zip(&view.normals).map(|(p, n)| (truth * p, truth.rotation * n)).filter(|(_, n)| n.z > 0.1).unzip();
+    let (pts, nrm): (Vec<Point>, Vec<Vector3<f64>>) = view
+        .points
+        .iter()
+        .zip(&view.normals)
+        .map(|(p, n)| (truth * p, truth.rotation * n))
+        .filter(|(_, n)| n.z > 0.1)
+        .unzip();
     let keep = subsample(&pts, model.step());
     let (sp, sn): (Vec<Point>, Vec<Vector3<f64>>) = keep.iter().map(|&i| (pts[i], nrm[i])).unzip();
     let index = KdIndex::new(&sp);

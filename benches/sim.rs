@@ -16,20 +16,42 @@ const SEED: u64 = 3;
 
 /// The default cell's camera: the paper's 1032 × 778 sensor with mild barrel distortion.
 fn camera() -> Camera {
-    Camera { dist: [-0.04, 0.01, 0.0, 0.0, 0.0], ..Camera::default() }
+    Camera {
+        dist: [-0.04, 0.01, 0.0, 0.0, 0.0],
+        ..Camera::default()
+    }
 }
 
 /// The camera 580 mm above the bin's floor at (400, 0), looking straight down (z down, x along +x).
 fn t_base_camera() -> Isometry3<f64> {
-    Isometry3::from_parts(Translation3::new(400.0, 0.0, 580.0), UnitQuaternion::from_axis_angle(&Vector3::x_axis(), PI))
+    Isometry3::from_parts(
+        Translation3::new(400.0, 0.0, 580.0),
+        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), PI),
+    )
 }
 
 /// The bin and the settled pile as a render scene (parts are the mesh the pile was dropped with).
 fn scene(pile: &Pile, mesh: &binpick_core::mesh::TriMesh) -> Scene {
     let mut s = Scene::new();
-    let bin = s.add_mesh(&pile.bin().mesh(), Material { albedo: [0.30, 0.34, 0.40], ..Default::default() }).unwrap();
+    let bin = s
+        .add_mesh(
+            &pile.bin().mesh(),
+            Material {
+                albedo: [0.30, 0.34, 0.40],
+                ..Default::default()
+            },
+        )
+        .unwrap();
     s.add_instance(bin, Isometry3::identity(), -2).unwrap();
-    let part = s.add_mesh(mesh, Material { albedo: [0.72, 0.72, 0.70], ..Default::default() }).unwrap();
+    let part = s
+        .add_mesh(
+            mesh,
+            Material {
+                albedo: [0.72, 0.72, 0.70],
+                ..Default::default()
+            },
+        )
+        .unwrap();
     for (id, t) in pile.poses() {
         s.add_instance(part, t, id as i32).unwrap();
     }
@@ -39,7 +61,10 @@ fn scene(pile: &Pile, mesh: &binpick_core::mesh::TriMesh) -> Scene {
 fn bench_sim(c: &mut Criterion) {
     let part = tee(&TeeParams::default()).unwrap();
     let bin = BinSpec::default();
-    let params = PileParams { seed: SEED, ..Default::default() };
+    let params = PileParams {
+        seed: SEED,
+        ..Default::default()
+    };
 
     let mut group = c.benchmark_group("sim_pile");
     group.sample_size(10);

@@ -20,8 +20,14 @@ fn camera(dist: [f64; 5]) -> Camera {
 fn sensor(dist: [f64; 5]) -> Sensor {
     Sensor {
         camera: camera(dist),
-        t_camera_laser0: Isometry3::from_parts(Translation3::new(-150.0, 2.0, 5.0), UnitQuaternion::from_euler_angles(0.01, -0.02, 0.015)),
-        t_flange_camera: Isometry3::from_parts(Translation3::new(30.0, -10.0, 90.0), UnitQuaternion::from_euler_angles(0.02, -0.01, 0.3)),
+        t_camera_laser0: Isometry3::from_parts(
+            Translation3::new(-150.0, 2.0, 5.0),
+            UnitQuaternion::from_euler_angles(0.01, -0.02, 0.015),
+        ),
+        t_flange_camera: Isometry3::from_parts(
+            Translation3::new(30.0, -10.0, 90.0),
+            UnitQuaternion::from_euler_angles(0.02, -0.01, 0.3),
+        ),
     }
 }
 
@@ -31,7 +37,10 @@ fn scan(n: usize) -> (Vec<FramePose>, Vec<[f64; 2]>, Vec<u32>) {
     let frames: Vec<FramePose> = (0..n.div_ceil(rows))
         .map(|f| FramePose {
             angle: 0.1 + 0.4 * (f % 400) as f64 / 400.0,
-            t_base_flange: Isometry3::from_parts(Translation3::new(400.0, -20.0, 600.0), UnitQuaternion::from_euler_angles(3.1, 0.0, 0.1)),
+            t_base_flange: Isometry3::from_parts(
+                Translation3::new(400.0, -20.0, 600.0),
+                UnitQuaternion::from_euler_angles(3.1, 0.0, 0.1),
+            ),
         })
         .collect();
     let (mut pixels, mut index) = (Vec::with_capacity(n), Vec::with_capacity(n));
@@ -51,11 +60,18 @@ fn bench_triangulate(c: &mut Criterion) {
         let mut points = vec![[0.0; 3]; n];
         let mut status = vec![PointStatus::Valid; n];
         group.throughput(Throughput::Elements(n as u64));
-        for (name, dist) in [("distorted", [-0.09, 0.06, 0.0006, -0.0004, -0.01]), ("no_distortion", [0.0; 5])] {
+        for (name, dist) in [
+            ("distorted", [-0.09, 0.06, 0.0006, -0.0004, -0.01]),
+            ("no_distortion", [0.0; 5]),
+        ] {
             let s = sensor(dist);
             RayTable::shared(&s.camera);
             group.bench_with_input(BenchmarkId::new(name, n), &n, |b, _| {
-                b.iter(|| with_threads(1, || triangulate_into(&s, &frames, &pixels, &index, &mut points, &mut status).unwrap()));
+                b.iter(|| {
+                    with_threads(1, || {
+                        triangulate_into(&s, &frames, &pixels, &index, &mut points, &mut status).unwrap()
+                    })
+                });
                 black_box(&points);
             });
         }
@@ -70,9 +86,25 @@ fn bench_undistort(c: &mut Criterion) {
     let cam = camera([-0.09, 0.06, 0.0006, -0.0004, -0.01]);
     let table = RayTable::new(&cam);
     group.throughput(Throughput::Elements(n as u64));
-    group.bench_function("exact_newton", |b| b.iter(|| pixels.iter().map(|&[u, v]| cam.ray(u, v).map_or(0.0, |r| r.x)).sum::<f64>()));
-    group.bench_function("ray_table", |b| b.iter(|| pixels.iter().map(|&[u, v]| table.ray(u, v).map_or(0.0, |r| r.x)).sum::<f64>()));
-    group.bench_function("build_table", |b| b.iter(|| with_threads(1, || black_box(RayTable::new(&cam)))));
+    group.bench_function("exact_newton", |b| {
+        b.iter(|| {
+            pixels
+                .iter()
+                .map(|&[u, v]| cam.ray(u, v).map_or(0.0, |r| r.x))
+                .sum::<f64>()
+        })
+    });
+    group.bench_function("ray_table", |b| {
+        b.iter(|| {
+            pixels
+                .iter()
+                .map(|&[u, v]| table.ray(u, v).map_or(0.0, |r| r.x))
+                .sum::<f64>()
+        })
+    });
+    group.bench_function("build_table", |b| {
+        b.iter(|| with_threads(1, || black_box(RayTable::new(&cam))))
+    });
     group.finish();
 }
 

@@ -11,7 +11,11 @@ pub fn check_finite(arg: &str, points: &[Point]) -> Result<()> {
     for (i, p) in points.iter().enumerate() {
         for v in p.coords.iter() {
             if !v.is_finite() {
-                return Err(Error::NonFinite { arg: arg.into(), index: i, value: format!("{v}") });
+                return Err(Error::NonFinite {
+                    arg: arg.into(),
+                    index: i,
+                    value: format!("{v}"),
+                });
             }
         }
     }
@@ -21,8 +25,17 @@ pub fn check_finite(arg: &str, points: &[Point]) -> Result<()> {
 /// Checks that a cloud has at least `needed` points.
 pub fn check_count(arg: &str, points: &[Point], needed: usize, hint: &str) -> Result<()> {
     if points.len() < needed {
-        let hint = if hint.is_empty() { String::new() } else { format!("; {hint}") };
-        return Err(Error::TooFewPoints { arg: arg.into(), got: points.len(), needed, hint });
+        let hint = if hint.is_empty() {
+            String::new()
+        } else {
+            format!("; {hint}")
+        };
+        return Err(Error::TooFewPoints {
+            arg: arg.into(),
+            got: points.len(),
+            needed,
+            hint,
+        });
     }
     Ok(())
 }
@@ -39,7 +52,9 @@ pub fn centroid(points: &[Point]) -> Point {
 /// Centroid and covariance (divided by n) of points given by an iterator (walked twice),
 /// without collecting them; the origin and zero for no points.
 pub fn covariance_of<'a>(points: impl Iterator<Item = &'a Point> + Clone) -> (Point, Matrix3<f64>) {
-    let (n, sum) = points.clone().fold((0usize, Vector3::zeros()), |(n, s), p| (n + 1, s + p.coords));
+    let (n, sum) = points
+        .clone()
+        .fold((0usize, Vector3::zeros()), |(n, s), p| (n + 1, s + p.coords));
     if n == 0 {
         return (Point::origin(), Matrix3::zeros());
     }
@@ -84,11 +99,17 @@ pub fn extreme_axis(a: &Matrix3<f64>, largest: bool) -> Option<Vector3<f64>> {
     let b = (a - Matrix3::identity() * q) / p;
     let r = (b.determinant() / 2.0).clamp(-1.0, 1.0);
     let phi = r.acos() / 3.0;
-    let lambda = if largest { q + 2.0 * p * phi.cos() } else { q + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos() };
+    let lambda = if largest {
+        q + 2.0 * p * phi.cos()
+    } else {
+        q + 2.0 * p * (phi + 2.0 * std::f64::consts::FRAC_PI_3).cos()
+    };
     let m = a - Matrix3::identity() * lambda;
     let (r0, r1, r2) = (m.row(0).transpose(), m.row(1).transpose(), m.row(2).transpose());
     let candidates = [r0.cross(&r1), r0.cross(&r2), r1.cross(&r2)];
-    let best = candidates.iter().max_by(|x, y| x.norm_squared().total_cmp(&y.norm_squared()))?;
+    let best = candidates
+        .iter()
+        .max_by(|x, y| x.norm_squared().total_cmp(&y.norm_squared()))?;
     // The rows of A − λI span a plane only when λ is a simple eigenvalue; then the longest cross
     // product is of the order of (spread of the others)². Demand a clear margin over rounding.
     let scale = p * p;
@@ -123,7 +144,11 @@ pub fn check_spread(arg: &str, points: &[Point], needed: usize, advice: &str) ->
             1 => "all points lie on one line",
             _ => "all points lie in one plane",
         };
-        return Err(Error::Degenerate { arg: arg.into(), what: what.into(), advice: advice.into() });
+        return Err(Error::Degenerate {
+            arg: arg.into(),
+            what: what.into(),
+            advice: advice.into(),
+        });
     }
     Ok(())
 }
@@ -137,11 +162,17 @@ pub fn transform_points(t: &Isometry3<f64>, points: &[Point]) -> Vec<Point> {
 /// the rotation block orthonormal with determinant +1 (to 1e-6) and the last row `0 0 0 1`.
 pub fn isometry_from_matrix(arg: &str, m: &Matrix4<f64>) -> Result<Isometry3<f64>> {
     if m.iter().any(|v| !v.is_finite()) {
-        return Err(Error::invalid(arg, "the transform holds NaN or inf; pass a finite 4×4 rigid transform"));
+        return Err(Error::invalid(
+            arg,
+            "the transform holds NaN or inf; pass a finite 4×4 rigid transform",
+        ));
     }
     let last = m.row(3);
     if (last[0].abs() + last[1].abs() + last[2].abs() + (last[3] - 1.0).abs()) > 1e-9 {
-        return Err(Error::invalid(arg, format!("the last row must be [0, 0, 0, 1], got {last}")));
+        return Err(Error::invalid(
+            arg,
+            format!("the last row must be [0, 0, 0, 1], got {last}"),
+        ));
     }
     let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
     let ortho_err = (r.transpose() * r - Matrix3::identity()).abs().max();
@@ -169,12 +200,17 @@ mod tests {
         assert_eq!(spanned_dimensions(&same), 0);
         let line: Vec<Point> = (0..10).map(|i| Point::new(i as f64, 2.0 * i as f64, 5.0)).collect();
         assert_eq!(spanned_dimensions(&line), 1);
-        let plane: Vec<Point> = (0..100).map(|i| Point::new((i % 10) as f64, (i / 10) as f64, 5.0)).collect();
+        let plane: Vec<Point> = (0..100)
+            .map(|i| Point::new((i % 10) as f64, (i / 10) as f64, 5.0))
+            .collect();
         assert_eq!(spanned_dimensions(&plane), 2);
         let mut solid = plane.clone();
         solid.push(Point::new(0.0, 0.0, 9.0));
         assert_eq!(spanned_dimensions(&solid), 3);
-        assert!(matches!(check_spread("x", &line, 2, "fix it"), Err(Error::Degenerate { .. })));
+        assert!(matches!(
+            check_spread("x", &line, 2, "fix it"),
+            Err(Error::Degenerate { .. })
+        ));
     }
 
     #[test]
@@ -204,12 +240,19 @@ mod tests {
             // Random rotations of diagonal spreads, from isotropic-ish to nearly flat and thin.
             let r = Rotation3::from_scaled_axis(Vector3::new(rng.normal(), rng.normal(), rng.normal()));
             let flat = 10f64.powf(-rng.range(0.0, 6.0));
-            let d = Matrix3::from_diagonal(&Vector3::new(rng.range(1.0, 3.0) * 100.0, rng.range(0.2, 1.0) * 30.0, flat));
+            let d = Matrix3::from_diagonal(&Vector3::new(
+                rng.range(1.0, 3.0) * 100.0,
+                rng.range(0.2, 1.0) * 30.0,
+                flat,
+            ));
             let cov = r.matrix() * d * r.matrix().transpose();
             let (_, axes) = principal_axes(&cov);
             for (largest, want) in [(false, axes[2]), (true, axes[0])] {
                 let got = extreme_axis(&cov, largest).unwrap_or_else(|| panic!("trial {trial}: no axis"));
-                assert!(got.dot(&want).abs() > 1.0 - 1e-9, "trial {trial}, largest {largest}: {got} vs {want}");
+                assert!(
+                    got.dot(&want).abs() > 1.0 - 1e-9,
+                    "trial {trial}, largest {largest}: {got} vs {want}"
+                );
             }
         }
         // A line's smallest axis is not defined; an isotropic spread has none.

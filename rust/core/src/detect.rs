@@ -63,7 +63,13 @@ impl DetectionScene {
     /// map of the whole scene (the bin's floor is evidence too: surface predicted above a
     /// visible floor is surface where the sensor saw free space). Without a bin box, support
     /// planes wider than the part are removed from the voxel grid.
-    pub fn new(scene_all: &[Point], points: &[Point], model: &PoseModel, ppf: &PpfModel, cfg: &PoseConfig) -> Result<Self> {
+    pub fn new(
+        scene_all: &[Point],
+        points: &[Point],
+        model: &PoseModel,
+        ppf: &PpfModel,
+        cfg: &PoseConfig,
+    ) -> Result<Self> {
         let step = ppf.step();
         let voxel = (step / 3.0).max(0.5);
         let mut fine = voxel_downsample(points, None, voxel)?.points;
@@ -71,11 +77,20 @@ impl DetectionScene {
         let mut supports = Vec::new();
         if let Some(bin) = &cfg.bin {
             let (lo, hi) = (bin.min.coords, bin.max.coords);
-            supports.push(Plane { normal: Vector3::z(), offset: lo.z });
+            supports.push(Plane {
+                normal: Vector3::z(),
+                offset: lo.z,
+            });
             for k in 0..2 {
                 let e = Vector3::ith(k, 1.0);
-                supports.push(Plane { normal: e, offset: lo[k] });
-                supports.push(Plane { normal: -e, offset: -hi[k] });
+                supports.push(Plane {
+                    normal: e,
+                    offset: lo[k],
+                });
+                supports.push(Plane {
+                    normal: -e,
+                    offset: -hi[k],
+                });
             }
         } else if fine.len() >= 50 {
             let (keep, planes) = remove_support_planes(&fine, model.diameter, (0.5 * voxel).max(1.0), 1);
@@ -87,16 +102,42 @@ impl DetectionScene {
                 planes
                     .into_iter()
                     .filter(|p| p.normal.dot(&up).abs() > 0.8)
-                    .map(|p| if p.normal.dot(&up) > 0.0 { p } else { Plane { normal: -p.normal, offset: -p.offset } })
-                    .filter(|p| fine.iter().filter(|q| p.normal.dot(&q.coords) < p.offset - 2.0 * tol).count() * 50 < fine.len()),
+                    .map(|p| {
+                        if p.normal.dot(&up) > 0.0 {
+                            p
+                        } else {
+                            Plane {
+                                normal: -p.normal,
+                                offset: -p.offset,
+                            }
+                        }
+                    })
+                    .filter(|p| {
+                        fine.iter()
+                            .filter(|q| p.normal.dot(&q.coords) < p.offset - 2.0 * tol)
+                            .count()
+                            * 50
+                            < fine.len()
+                    }),
             );
         }
         if fine.len() < 10 {
-            return Err(Error::NoObjectFound { reason: format!("only {} occupied {voxel:.1} mm voxels remain after removing the bin; the bin is empty", fine.len()) });
+            return Err(Error::NoObjectFound {
+                reason: format!(
+                    "only {} occupied {voxel:.1} mm voxels remain after removing the bin; the bin is empty",
+                    fine.len()
+                ),
+            });
         }
         let fine_index = KdIndex::new(&fine);
         let heights = HeightMap::fitted(scene_all, &up, (0.5 * voxel).max(1.0));
-        Ok(DetectionScene { fine, fine_index, heights, tol: tolerance(step), supports })
+        Ok(DetectionScene {
+            fine,
+            fine_index,
+            heights,
+            tol: tolerance(step),
+            supports,
+        })
     }
 
     /// Probe stride over the model's dense points for about `n` probes.
@@ -106,14 +147,26 @@ impl DetectionScene {
 
     /// Judges a pose with the dense probe (about 2000 model points).
     pub fn judge(&self, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> Evidence {
-        depth_evidence(model.target(), &self.heights, t_scene_model, Self::probe_step(model, 2000), self.tol, true)
+        depth_evidence(
+            model.target(),
+            &self.heights,
+            t_scene_model,
+            Self::probe_step(model, 2000),
+            self.tol,
+            true,
+        )
     }
 
     /// Indices of the voxel points within the model's reach around `t_scene_model`, at most
     /// `limit` of them (evenly thinned).
     fn local(&self, model: &PoseModel, step: f64, t_scene_model: &Isometry3<f64>, limit: usize) -> Vec<usize> {
         let c = t_scene_model * model.symmetries.center;
-        let mut idx: Vec<usize> = self.fine_index.within(&c, model.radius + step).iter().map(|n| n.index).collect();
+        let mut idx: Vec<usize> = self
+            .fine_index
+            .within(&c, model.radius + step)
+            .iter()
+            .map(|n| n.index)
+            .collect();
         idx.sort_unstable();
         let stride = idx.len().div_ceil(limit.max(1)).max(1);
         idx.into_iter().step_by(stride).collect()
@@ -122,15 +175,33 @@ impl DetectionScene {
     /// A few ICP steps on a thinned neighbourhood and a cheap judgement: the screen every
     /// hypothesis passes through.
     fn screen(&self, model: &PoseModel, step: f64, start: &Isometry3<f64>) -> Option<Judged> {
-        let local: Vec<Point> = self.local(model, step, start, 200).iter().map(|&i| self.fine[i]).collect();
+        let local: Vec<Point> = self
+            .local(model, step, start, 200)
+            .iter()
+            .map(|&i| self.fine[i])
+            .collect();
         if local.len() < 12 {
             return None;
         }
         let quick = IcpConfig::robust_plane(1.5 * step, 8, 1e-3, 5e-2);
         let r = icp(&local, model.target(), &start.inverse(), &quick).ok()?;
         let t_scene_model = r.t_target_source.inverse();
-        let evidence = depth_evidence(model.target(), &self.heights, &t_scene_model, Self::probe_step(model, 300), self.tol, false);
-        Some(Judged { t_scene_model, coarse: *start, evidence, rmse: f64::NAN, iterations: r.iterations, support: Vec::new() })
+        let evidence = depth_evidence(
+            model.target(),
+            &self.heights,
+            &t_scene_model,
+            Self::probe_step(model, 300),
+            self.tol,
+            false,
+        );
+        Some(Judged {
+            t_scene_model,
+            coarse: *start,
+            evidence,
+            rmse: f64::NAN,
+            iterations: r.iterations,
+            support: Vec::new(),
+        })
     }
 
     /// Converges a screened pose on the full neighbourhood, judges it with the dense probe and
@@ -153,14 +224,29 @@ impl DetectionScene {
             .into_iter()
             .filter_map(|i| {
                 let q = r.t_target_source * self.fine[i];
-                model.target().search().nearest_within(&[q.x, q.y, q.z], tol2).map(|(_, d)| {
-                    sq += d;
-                    i
-                })
+                model
+                    .target()
+                    .search()
+                    .nearest_within(&[q.x, q.y, q.z], tol2)
+                    .map(|(_, d)| {
+                        sq += d;
+                        i
+                    })
             })
             .collect();
-        let rmse = if support.is_empty() { f64::INFINITY } else { (sq / support.len() as f64).sqrt() };
-        Some(Judged { t_scene_model, coarse: j.coarse, evidence, rmse, iterations: j.iterations + r.iterations, support })
+        let rmse = if support.is_empty() {
+            f64::INFINITY
+        } else {
+            (sq / support.len() as f64).sqrt()
+        };
+        Some(Judged {
+            t_scene_model,
+            coarse: j.coarse,
+            evidence,
+            rmse,
+            iterations: j.iterations + r.iterations,
+            support,
+        })
     }
 }
 
@@ -171,7 +257,10 @@ const MIN_SUPPORTED: f64 = 0.5;
 /// Whether a judged pose is an instance: the scan confirms it wherever it can judge, it shows
 /// enough of its surface, and not much of it hangs over cells without data.
 fn accepted(e: &Evidence, cfg: &PoseConfig) -> bool {
-    e.coverage() >= cfg.min_coverage && e.seen >= 12 && e.visible_fraction() >= 0.08 && e.supported_fraction() >= MIN_SUPPORTED
+    e.coverage() >= cfg.min_coverage
+        && e.seen >= 12
+        && e.visible_fraction() >= 0.08
+        && e.supported_fraction() >= MIN_SUPPORTED
 }
 
 impl DetectionScene {
@@ -188,7 +277,9 @@ impl DetectionScene {
             .step_by(step)
             .filter(|p| {
                 let q = t_scene_model * *p;
-                self.supports.iter().any(|s| s.normal.dot(&q.coords) < s.offset - 2.0 * self.tol)
+                self.supports
+                    .iter()
+                    .any(|s| s.normal.dot(&q.coords) < s.offset - 2.0 * self.tol)
             })
             .count();
         (inside as f64) < 0.02 * pts.len().div_ceil(step) as f64
@@ -197,7 +288,14 @@ impl DetectionScene {
 
 /// All instances found by PPF, most pickable first (at most `cfg.max_instances`), and the
 /// prepared scene (for judging other methods' poses on the same terms).
-pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, ppf: &PpfModel, cfg: &PoseConfig, timings: &mut Vec<(&'static str, f64)>) -> Result<(Vec<PoseEstimate>, DetectionScene)> {
+pub(crate) fn detect(
+    scene_all: &[Point],
+    points: &[Point],
+    model: &PoseModel,
+    ppf: &PpfModel,
+    cfg: &PoseConfig,
+    timings: &mut Vec<(&'static str, f64)>,
+) -> Result<(Vec<PoseEstimate>, DetectionScene)> {
     let mut clock = Instant::now();
     let mut lap = |name: &'static str, timings: &mut Vec<(&'static str, f64)>| {
         timings.push((name, clock.elapsed().as_secs_f64() * 1e3));
@@ -216,16 +314,24 @@ pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, p
     let sparse_normals = normals_at(&sparse, &scene.fine, &scene.fine_index, 10, orientation);
     let sparse_index = KdIndex::new(&sparse);
     lap("normals", timings);
-    let detect_cfg = DetectConfig { max_hypotheses: cfg.detect.max_hypotheses.max(8 * cfg.max_instances), ..cfg.detect };
+    let detect_cfg = DetectConfig {
+        max_hypotheses: cfg.detect.max_hypotheses.max(8 * cfg.max_instances),
+        ..cfg.detect
+    };
     let votes = ppf.vote(&sparse, &sparse_normals, &sparse_index, &detect_cfg);
     lap("voting", timings);
     let hypotheses = ppf.cluster(&votes, &model.symmetries, &detect_cfg);
     lap("clustering", timings);
     if hypotheses.is_empty() {
-        return Err(Error::NoObjectFound { reason: format!("no point pair of the {} scene samples matched the model", sparse.len()) });
+        return Err(Error::NoObjectFound {
+            reason: format!("no point pair of the {} scene samples matched the model", sparse.len()),
+        });
     }
     // Screen every hypothesis; converge the most promising few.
-    let mut screened: Vec<Judged> = hypotheses.par_iter().filter_map(|h| scene.screen(model, step, &h.t_scene_model)).collect();
+    let mut screened: Vec<Judged> = hypotheses
+        .par_iter()
+        .filter_map(|h| scene.screen(model, step, &h.t_scene_model))
+        .collect();
     screened.sort_by(|a, b| b.evidence.quality().total_cmp(&a.evidence.quality()));
     // The best few, spread over distinct places (a pile's best hypotheses crowd on one part).
     let polish_count = 2 * cfg.max_instances + 1;
@@ -235,7 +341,10 @@ pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, p
         if chosen.len() >= polish_count {
             break;
         }
-        let crowded = chosen.iter().filter(|k| (k.center(model) - j.center(model)).norm() < min_gap).count();
+        let crowded = chosen
+            .iter()
+            .filter(|k| (k.center(model) - j.center(model)).norm() < min_gap)
+            .count();
         if crowded < 2 {
             chosen.push(j);
         }
@@ -251,7 +360,10 @@ pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, p
     // pose already taken is the same instance (or a ghost made of its points).
     let mut owner = vec![false; scene.fine.len()];
     let mut instances: Vec<Judged> = Vec::new();
-    for j in judged.into_iter().filter(|j| accepted(&j.evidence, cfg) && scene.physically_possible(model, &j.t_scene_model)) {
+    for j in judged
+        .into_iter()
+        .filter(|j| accepted(&j.evidence, cfg) && scene.physically_possible(model, &j.t_scene_model))
+    {
         let shared = j.support.iter().filter(|&&i| owner[i]).count();
         if j.support.len() < 12 || shared as f64 > 0.3 * j.support.len() as f64 {
             continue;
@@ -300,14 +412,18 @@ pub(crate) fn detect(scene_all: &[Point], points: &[Point], model: &PoseModel, p
 fn rank(instances: Vec<Judged>, model: &PoseModel, cfg: &PoseConfig) -> Vec<(Judged, f64)> {
     let up = cfg.up.normalize();
     let heights: Vec<f64> = instances.iter().map(|j| j.center(model).coords.dot(&up)).collect();
-    let (lo, hi) = heights.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
+    let (lo, hi) = heights
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));
     let span = (hi - lo).max(0.25 * model.diameter);
     let mut ranked: Vec<(Judged, f64)> = instances
         .into_iter()
         .zip(heights)
         .map(|(j, h)| {
             let e = &j.evidence;
-            let pick = 0.5 * (1.0 - (hi - h) / span).max(0.0) + (1.0 / 3.0) * e.visible_fraction().min(1.0) + (1.0 / 6.0) * (1.0 - e.occluded_fraction().min(1.0));
+            let pick = 0.5 * (1.0 - (hi - h) / span).max(0.0)
+                + (1.0 / 3.0) * e.visible_fraction().min(1.0)
+                + (1.0 / 6.0) * (1.0 - e.occluded_fraction().min(1.0));
             (j, pick)
         })
         .collect();
@@ -316,7 +432,12 @@ fn rank(instances: Vec<Judged>, model: &PoseModel, cfg: &PoseConfig) -> Vec<(Jud
 }
 
 /// Indices of `points` within `tol` of the posed model.
-pub(crate) fn scene_indices(points: &[Point], model: &PoseModel, t_scene_model: &Isometry3<f64>, tol: f64) -> Vec<usize> {
+pub(crate) fn scene_indices(
+    points: &[Point],
+    model: &PoseModel,
+    t_scene_model: &Isometry3<f64>,
+    tol: f64,
+) -> Vec<usize> {
     let c = t_scene_model * model.symmetries.center;
     let reach = model.radius + tol;
     let t_model_scene = t_scene_model.inverse();
@@ -326,7 +447,11 @@ pub(crate) fn scene_indices(points: &[Point], model: &PoseModel, t_scene_model: 
         .filter(|(_, p)| (*p - c).norm_squared() <= reach * reach)
         .filter(|(_, p)| {
             let q = t_model_scene * *p;
-            model.target().search().nearest_within(&[q.x, q.y, q.z], tol * tol).is_some()
+            model
+                .target()
+                .search()
+                .nearest_within(&[q.x, q.y, q.z], tol * tol)
+                .is_some()
         })
         .map(|(i, _)| i)
         .collect()

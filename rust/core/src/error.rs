@@ -87,12 +87,18 @@ pub enum Error {
 impl Error {
     /// Shorthand for [`Error::InvalidInput`].
     pub fn invalid(arg: impl Into<String>, problem: impl Into<String>) -> Self {
-        Error::InvalidInput { arg: arg.into(), problem: problem.into() }
+        Error::InvalidInput {
+            arg: arg.into(),
+            problem: problem.into(),
+        }
     }
 
     /// Shorthand for [`Error::BadFile`].
     pub fn bad_file(path: impl Into<String>, problem: impl Into<String>) -> Self {
-        Error::BadFile { path: path.into(), problem: problem.into() }
+        Error::BadFile {
+            path: path.into(),
+            problem: problem.into(),
+        }
     }
 
     /// The short name of the error kind; the Python layer picks its exception class by it.

@@ -34,7 +34,12 @@ impl KdIndex {
     pub fn new(points: &[Point]) -> Self {
         let entries: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
         let tree = ImmutableKdTree::new_from_slice(&entries).expect("kiddo tree from finite points");
-        KdIndex { tree, len: points.len(), points: points.to_vec(), knn_tree: OnceLock::new() }
+        KdIndex {
+            tree,
+            len: points.len(),
+            points: points.to_vec(),
+            knn_tree: OnceLock::new(),
+        }
     }
 
     /// Number of indexed points.
@@ -58,25 +63,42 @@ impl KdIndex {
             .query(&[query.x, query.y, query.z])
             .nearest_one::<SquaredEuclidean<f64>>()
             .execute();
-        Some(Neighbour { index: r.item as usize, distance_squared: r.distance })
+        Some(Neighbour {
+            index: r.item as usize,
+            distance_squared: r.distance,
+        })
     }
 
     /// The `k` nearest indexed points, nearest first (fewer if the set is smaller).
     pub fn knn(&self, query: &Point, k: usize) -> Vec<Neighbour> {
         let mut found = Vec::with_capacity(k.min(self.len));
         self.knn_into(query, k, &mut found);
-        found.into_iter().map(|(d, i)| Neighbour { index: i as usize, distance_squared: d }).collect()
+        found
+            .into_iter()
+            .map(|(d, i)| Neighbour {
+                index: i as usize,
+                distance_squared: d,
+            })
+            .collect()
     }
 
     /// [`KdIndex::knn`] into a reused buffer of (squared distance, index), nearest first.
     pub fn knn_into(&self, query: &Point, k: usize, found: &mut Vec<(f64, u32)>) {
-        self.knn_tree.get_or_init(|| CorrespondenceTree::tree_only(&self.points)).knn_into(&[query.x, query.y, query.z], k.min(self.len), f64::INFINITY, found);
+        self.knn_tree
+            .get_or_init(|| CorrespondenceTree::tree_only(&self.points))
+            .knn_into(&[query.x, query.y, query.z], k.min(self.len), f64::INFINITY, found);
     }
 
     /// The nearest indexed point other than point `i` itself (duplicates of it count).
     pub fn nearest_other(&self, i: usize) -> Option<Neighbour> {
         let p = self.points.get(i)?;
-        self.knn_tree.get_or_init(|| CorrespondenceTree::tree_only(&self.points)).nearest_other(&[p.x, p.y, p.z], i).map(|(index, distance_squared)| Neighbour { index, distance_squared })
+        self.knn_tree
+            .get_or_init(|| CorrespondenceTree::tree_only(&self.points))
+            .nearest_other(&[p.x, p.y, p.z], i)
+            .map(|(index, distance_squared)| Neighbour {
+                index,
+                distance_squared,
+            })
     }
 
     /// Every indexed point within `radius` (mm, inclusive) of `query`, in no particular order.
@@ -90,7 +112,10 @@ impl KdIndex {
             .unsorted()
             .execute()
             .into_iter()
-            .map(|r| Neighbour { index: r.item as usize, distance_squared: r.distance })
+            .map(|r| Neighbour {
+                index: r.item as usize,
+                distance_squared: r.distance,
+            })
             .collect()
     }
 }
@@ -112,7 +137,9 @@ mod tests {
     #[test]
     fn knn_matches_brute_force() {
         let mut rng = crate::rng::Rng::new(9);
-        let pts: Vec<Point> = (0..3000).map(|_| Point::new(rng.range(0.0, 50.0), rng.range(0.0, 50.0), rng.range(0.0, 2.0))).collect();
+        let pts: Vec<Point> = (0..3000)
+            .map(|_| Point::new(rng.range(0.0, 50.0), rng.range(0.0, 50.0), rng.range(0.0, 2.0)))
+            .collect();
         let idx = KdIndex::new(&pts);
         for _ in 0..300 {
             let q = Point::new(rng.range(-5.0, 55.0), rng.range(-5.0, 55.0), rng.range(-3.0, 5.0));
@@ -124,7 +151,12 @@ mod tests {
             }
         }
         for i in (0..pts.len()).step_by(97) {
-            let brute = pts.iter().enumerate().filter(|(j, _)| *j != i).map(|(_, p)| (p - pts[i]).norm_squared()).fold(f64::INFINITY, f64::min);
+            let brute = pts
+                .iter()
+                .enumerate()
+                .filter(|(j, _)| *j != i)
+                .map(|(_, p)| (p - pts[i]).norm_squared())
+                .fold(f64::INFINITY, f64::min);
             assert_eq!(idx.nearest_other(i).unwrap().distance_squared, brute);
         }
         assert!(KdIndex::new(&[]).knn(&Point::origin(), 3).is_empty());

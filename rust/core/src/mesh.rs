@@ -30,7 +30,10 @@ impl TriMesh {
         crate::cloud::check_finite("vertices", &vertices)?;
         let n = vertices.len() as u32;
         if let Some((i, f)) = faces.iter().enumerate().find(|(_, f)| f.iter().any(|&v| v >= n)) {
-            return Err(Error::invalid("faces", format!("face {i} {f:?} indexes past the {n} vertices")));
+            return Err(Error::invalid(
+                "faces",
+                format!("face {i} {f:?} indexes past the {n} vertices"),
+            ));
         }
         Ok(TriMesh { vertices, faces })
     }
@@ -39,7 +42,11 @@ impl TriMesh {
     #[inline]
     pub fn triangle(&self, i: usize) -> [Point; 3] {
         let f = self.faces[i];
-        [self.vertices[f[0] as usize], self.vertices[f[1] as usize], self.vertices[f[2] as usize]]
+        [
+            self.vertices[f[0] as usize],
+            self.vertices[f[1] as usize],
+            self.vertices[f[2] as usize],
+        ]
     }
 
     /// Twice-area-weighted (unnormalised) normal of face `i`.
@@ -97,7 +104,10 @@ impl TriMesh {
         let mut best = 0.0f64;
         let mut a = v[0];
         for _ in 0..6 {
-            let far = v.iter().max_by(|p, q| (*p - a).norm_squared().total_cmp(&(*q - a).norm_squared())).unwrap();
+            let far = v
+                .iter()
+                .max_by(|p, q| (*p - a).norm_squared().total_cmp(&(*q - a).norm_squared()))
+                .unwrap();
             best = best.max((far - a).norm());
             a = *far;
         }

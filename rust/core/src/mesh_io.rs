@@ -12,9 +12,15 @@ use std::path::Path;
 fn read_bytes(path: &Path) -> Result<Vec<u8>> {
     let shown = path.display().to_string();
     if path.is_dir() {
-        return Err(Error::FileNotFound { path: shown, reason: "it is a directory".into() });
+        return Err(Error::FileNotFound {
+            path: shown,
+            reason: "it is a directory".into(),
+        });
     }
-    let bytes = std::fs::read(path).map_err(|e| Error::FileNotFound { path: shown.clone(), reason: e.to_string() })?;
+    let bytes = std::fs::read(path).map_err(|e| Error::FileNotFound {
+        path: shown.clone(),
+        reason: e.to_string(),
+    })?;
     if bytes.is_empty() {
         return Err(Error::bad_file(shown, "the file is empty"));
     }
@@ -25,9 +31,16 @@ fn read_bytes(path: &Path) -> Result<Vec<u8>> {
 /// Coordinates are returned as stored; convert units with [`crate::mesh::unit_scale`].
 pub fn read_mesh(path: &Path) -> Result<TriMesh> {
     let shown = path.display().to_string();
-    let ext = path.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).unwrap_or_default();
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(|e| e.to_ascii_lowercase())
+        .unwrap_or_default();
     if !matches!(ext.as_str(), "stl" | "ply" | "obj") {
-        return Err(Error::bad_file(shown, format!("unsupported extension {ext:?}; binpick reads .stl, .ply and .obj meshes")));
+        return Err(Error::bad_file(
+            shown,
+            format!("unsupported extension {ext:?}; binpick reads .stl, .ply and .obj meshes"),
+        ));
     }
     let bytes = read_bytes(path)?;
     let mut mesh = match ext.as_str() {
@@ -36,14 +49,20 @@ pub fn read_mesh(path: &Path) -> Result<TriMesh> {
             if p.faces.is_empty() {
                 Err("the PLY file has no faces; it is a point cloud, not a mesh (use read_ply)".to_string())
             } else {
-                Ok(TriMesh { vertices: p.points, faces: p.faces })
+                Ok(TriMesh {
+                    vertices: p.points,
+                    faces: p.faces,
+                })
             }
         }),
         _ => parse_obj(&bytes),
     }
     .map_err(|problem| Error::bad_file(shown.clone(), problem))?;
     if let Err(Error::NonFinite { index, .. }) = crate::cloud::check_finite("vertices", &mesh.vertices) {
-        return Err(Error::bad_file(shown, format!("vertex {index} is not finite; the file is corrupt")));
+        return Err(Error::bad_file(
+            shown,
+            format!("vertex {index} is not finite; the file is corrupt"),
+        ));
     }
     mesh.drop_degenerate_faces();
     if mesh.faces.is_empty() {
@@ -60,7 +79,10 @@ struct Welder {
 
 impl Welder {
     fn new() -> Self {
-        Welder { map: HashMap::new(), vertices: Vec::new() }
+        Welder {
+            map: HashMap::new(),
+            vertices: Vec::new(),
+        }
     }
     fn add(&mut self, p: [f64; 3]) -> u32 {
         // +0.0 and -0.0 are the same place.
@@ -81,10 +103,13 @@ fn parse_stl(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
         }
     }
     let text = std::str::from_utf8(bytes).map_err(|_| {
-        "not a valid STL: the size does not match a binary STL's triangle count and the content is not ASCII text".to_string()
+        "not a valid STL: the size does not match a binary STL's triangle count and the content is not ASCII text"
+            .to_string()
     })?;
     if !text.trim_start().to_ascii_lowercase().starts_with("solid") {
-        return Err("not a valid STL: neither a binary STL (size mismatch) nor an ASCII one (no 'solid' header)".into());
+        return Err(
+            "not a valid STL: neither a binary STL (size mismatch) nor an ASCII one (no 'solid' header)".into(),
+        );
     }
     parse_stl_ascii(text)
 }
@@ -104,7 +129,10 @@ fn parse_stl_binary(bytes: &[u8], n: usize) -> std::result::Result<TriMesh, Stri
         };
         faces.push([corner(0), corner(1), corner(2)]);
     }
-    Ok(TriMesh { vertices: w.vertices, faces })
+    Ok(TriMesh {
+        vertices: w.vertices,
+        faces,
+    })
 }
 
 fn parse_stl_ascii(text: &str) -> std::result::Result<TriMesh, String> {
@@ -115,7 +143,10 @@ fn parse_stl_ascii(text: &str) -> std::result::Result<TriMesh, String> {
         let mut it = line.split_whitespace();
         match it.next() {
             Some("vertex") => {
-                let v: Vec<f64> = it.map(|s| s.parse::<f64>()).collect::<std::result::Result<_, _>>().map_err(|_| format!("line {}: a vertex with a bad number: {line:?}", lineno + 1))?;
+                let v: Vec<f64> = it
+                    .map(|s| s.parse::<f64>())
+                    .collect::<std::result::Result<_, _>>()
+                    .map_err(|_| format!("line {}: a vertex with a bad number: {line:?}", lineno + 1))?;
                 if v.len() != 3 {
                     return Err(format!("line {}: a vertex needs 3 coordinates: {line:?}", lineno + 1));
                 }
@@ -123,7 +154,11 @@ fn parse_stl_ascii(text: &str) -> std::result::Result<TriMesh, String> {
             }
             Some("endloop") => {
                 if corners.len() != 3 {
-                    return Err(format!("line {}: a facet with {} vertices; STL facets have 3", lineno + 1, corners.len()));
+                    return Err(format!(
+                        "line {}: a facet with {} vertices; STL facets have 3",
+                        lineno + 1,
+                        corners.len()
+                    ));
                 }
                 faces.push([corners[0], corners[1], corners[2]]);
                 corners.clear();
@@ -134,7 +169,10 @@ fn parse_stl_ascii(text: &str) -> std::result::Result<TriMesh, String> {
     if faces.is_empty() {
         return Err("the ASCII STL holds no complete facet".into());
     }
-    Ok(TriMesh { vertices: w.vertices, faces })
+    Ok(TriMesh {
+        vertices: w.vertices,
+        faces,
+    })
 }
 
 fn parse_obj(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
@@ -145,7 +183,11 @@ fn parse_obj(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
         let mut it = line.split_whitespace();
         match it.next() {
             Some("v") => {
-                let v: Vec<f64> = it.take(3).map(|s| s.parse::<f64>()).collect::<std::result::Result<_, _>>().map_err(|_| format!("line {}: a vertex with a bad number: {line:?}", lineno + 1))?;
+                let v: Vec<f64> = it
+                    .take(3)
+                    .map(|s| s.parse::<f64>())
+                    .collect::<std::result::Result<_, _>>()
+                    .map_err(|_| format!("line {}: a vertex with a bad number: {line:?}", lineno + 1))?;
                 if v.len() != 3 {
                     return Err(format!("line {}: a vertex needs 3 coordinates: {line:?}", lineno + 1));
                 }
@@ -155,11 +197,22 @@ fn parse_obj(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
                 let mut idx = Vec::new();
                 for tok in it {
                     let first = tok.split('/').next().unwrap_or("");
-                    let i: i64 = first.parse().map_err(|_| format!("line {}: a face index that is not a number: {tok:?}", lineno + 1))?;
+                    let i: i64 = first
+                        .parse()
+                        .map_err(|_| format!("line {}: a face index that is not a number: {tok:?}", lineno + 1))?;
                     let n = vertices.len() as i64;
-                    let resolved = if i > 0 { i - 1 } else if i < 0 { n + i } else { -1 };
+                    let resolved = if i > 0 {
+                        i - 1
+                    } else if i < 0 {
+                        n + i
+                    } else {
+                        -1
+                    };
                     if resolved < 0 || resolved >= n {
-                        return Err(format!("line {}: face index {i} refers to no vertex (only {n} defined so far)", lineno + 1));
+                        return Err(format!(
+                            "line {}: face index {i} refers to no vertex (only {n} defined so far)",
+                            lineno + 1
+                        ));
                     }
                     idx.push(resolved as u32);
                 }
@@ -228,7 +281,11 @@ impl Scalar {
         macro_rules! rd {
             ($t:ty, $n:expr) => {{
                 let a: [u8; $n] = b[..$n].try_into().unwrap();
-                (if big { <$t>::from_be_bytes(a) } else { <$t>::from_le_bytes(a) }) as f64
+                (if big {
+                    <$t>::from_be_bytes(a)
+                } else {
+                    <$t>::from_le_bytes(a)
+                }) as f64
             }};
         }
         match self {
@@ -286,19 +343,34 @@ fn parse_ply(bytes: &[u8]) -> std::result::Result<PlyData, String> {
             }
             Some("element") => {
                 let name = tok.get(1).ok_or("an element line without a name")?.to_string();
-                let count = tok.get(2).and_then(|c| c.parse().ok()).ok_or(format!("element {name} has no valid count"))?;
-                elements.push(Element { name, count, props: Vec::new() });
+                let count = tok
+                    .get(2)
+                    .and_then(|c| c.parse().ok())
+                    .ok_or(format!("element {name} has no valid count"))?;
+                elements.push(Element {
+                    name,
+                    count,
+                    props: Vec::new(),
+                });
             }
             Some("property") => {
                 let el = elements.last_mut().ok_or("a property before any element")?;
                 if tok.get(1) == Some(&"list") {
                     let (c, i, n) = (tok.get(2), tok.get(3), tok.get(4));
-                    let c = c.and_then(|s| Scalar::parse(s)).ok_or(format!("bad list count type in {line:?}"))?;
-                    let i = i.and_then(|s| Scalar::parse(s)).ok_or(format!("bad list item type in {line:?}"))?;
+                    let c = c
+                        .and_then(|s| Scalar::parse(s))
+                        .ok_or(format!("bad list count type in {line:?}"))?;
+                    let i = i
+                        .and_then(|s| Scalar::parse(s))
+                        .ok_or(format!("bad list item type in {line:?}"))?;
                     el.props.push(Property::List(n.unwrap_or(&"").to_string(), c, i));
                 } else {
-                    let t = tok.get(1).and_then(|s| Scalar::parse(s)).ok_or(format!("bad property type in {line:?}"))?;
-                    el.props.push(Property::Scalar(tok.get(2).unwrap_or(&"").to_string(), t));
+                    let t = tok
+                        .get(1)
+                        .and_then(|s| Scalar::parse(s))
+                        .ok_or(format!("bad property type in {line:?}"))?;
+                    el.props
+                        .push(Property::Scalar(tok.get(2).unwrap_or(&"").to_string(), t));
                 }
             }
             _ => {}
@@ -309,15 +381,22 @@ fn parse_ply(bytes: &[u8]) -> std::result::Result<PlyData, String> {
     let mut out = PlyData::default();
     let big = format == PlyFormat::BinaryBe;
     let mut ascii_values = match format {
-        PlyFormat::Ascii => Some(std::str::from_utf8(body).map_err(|_| "the ASCII PLY body is not text")?.split_ascii_whitespace()),
+        PlyFormat::Ascii => Some(
+            std::str::from_utf8(body)
+                .map_err(|_| "the ASCII PLY body is not text")?
+                .split_ascii_whitespace(),
+        ),
         _ => None,
     };
     let mut pos = 0usize;
     let mut next = |t: Scalar| -> std::result::Result<f64, String> {
         match ascii_values.as_mut() {
             Some(it) => {
-                let s = it.next().ok_or("the ASCII PLY body ends early; the file is truncated")?;
-                s.parse::<f64>().map_err(|_| format!("a value that is not a number: {s:?}"))
+                let s = it
+                    .next()
+                    .ok_or("the ASCII PLY body ends early; the file is truncated")?;
+                s.parse::<f64>()
+                    .map_err(|_| format!("a value that is not a number: {s:?}"))
             }
             None => {
                 let n = t.size();
@@ -333,9 +412,13 @@ fn parse_ply(bytes: &[u8]) -> std::result::Result<PlyData, String> {
     for el in &elements {
         let is_vertex = el.name == "vertex";
         let is_face = el.name == "face";
-        let names: Vec<&str> = el.props.iter().map(|p| match p {
-            Property::Scalar(n, _) | Property::List(n, _, _) => n.as_str(),
-        }).collect();
+        let names: Vec<&str> = el
+            .props
+            .iter()
+            .map(|p| match p {
+                Property::Scalar(n, _) | Property::List(n, _, _) => n.as_str(),
+            })
+            .collect();
         let col = |n: &str| names.iter().position(|x| *x == n);
         let (xi, yi, zi) = (col("x"), col("y"), col("z"));
         let (nxi, nyi, nzi) = (col("nx"), col("ny"), col("nz"));
@@ -366,7 +449,8 @@ fn parse_ply(bytes: &[u8]) -> std::result::Result<PlyData, String> {
                 }
             }
             if is_vertex {
-                out.points.push(Point::new(row[xi.unwrap()], row[yi.unwrap()], row[zi.unwrap()]));
+                out.points
+                    .push(Point::new(row[xi.unwrap()], row[yi.unwrap()], row[zi.unwrap()]));
                 if has_normals {
                     normals.push(Vector3::new(row[nxi.unwrap()], row[nyi.unwrap()], row[nzi.unwrap()]));
                 }
@@ -383,7 +467,9 @@ fn parse_ply(bytes: &[u8]) -> std::result::Result<PlyData, String> {
     }
     let n = out.points.len() as u32;
     if let Some(f) = out.faces.iter().find(|f| f.iter().any(|&v| v >= n)) {
-        return Err(format!("a face {f:?} indexes past the {n} vertices; the file is corrupt"));
+        return Err(format!(
+            "a face {f:?} indexes past the {n} vertices; the file is corrupt"
+        ));
     }
     Ok(out)
 }
@@ -411,7 +497,10 @@ pub fn read_ply(path: &Path) -> Result<PlyData> {
         return Err(Error::bad_file(shown, "the PLY file holds no vertex"));
     }
     if let Err(Error::NonFinite { index, .. }) = crate::cloud::check_finite("points", &data.points) {
-        return Err(Error::bad_file(shown, format!("vertex {index} is not finite; the file is corrupt")));
+        return Err(Error::bad_file(
+            shown,
+            format!("vertex {index} is not finite; the file is corrupt"),
+        ));
     }
     Ok(data)
 }
@@ -421,7 +510,10 @@ pub fn write_ply(path: &Path, points: &[Point], normals: Option<&[Vector3<f64>]>
     let shown = path.display().to_string();
     if let Some(n) = normals {
         if n.len() != points.len() {
-            return Err(Error::invalid("normals", format!("has {} rows but points has {}", n.len(), points.len())));
+            return Err(Error::invalid(
+                "normals",
+                format!("has {} rows but points has {}", n.len(), points.len()),
+            ));
         }
     }
     let mut buf: Vec<u8> = Vec::with_capacity(64 + points.len() * 48);
@@ -446,7 +538,10 @@ pub fn write_ply(path: &Path, points: &[Point], normals: Option<&[Vector3<f64>]>
             }
         }
     }
-    std::fs::write(path, buf).map_err(|e| Error::WriteFailed { path: shown, reason: e.to_string() })
+    std::fs::write(path, buf).map_err(|e| Error::WriteFailed {
+        path: shown,
+        reason: e.to_string(),
+    })
 }
 
 #[cfg(test)]

@@ -4,8 +4,8 @@ use crate::cloud::Point;
 use crate::error::{Error, Result};
 use crate::mesh::TriMesh;
 use crate::rng::Rng;
-use nalgebra::Vector3;
 use crate::voxel::DiskGrid;
+use nalgebra::Vector3;
 
 /// How densely to sample a surface.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -36,7 +36,11 @@ pub fn sample_surface(mesh: &TriMesh, density: Density, seed: u64) -> Result<Sur
     let areas: Vec<f64> = (0..mesh.faces.len()).map(|i| 0.5 * mesh.face_cross(i).norm()).collect();
     let total: f64 = areas.iter().sum();
     if !(total > 0.0) {
-        return Err(Error::Degenerate { arg: "mesh".into(), what: "its surface has zero area".into(), advice: "check that the file holds real triangles".into() });
+        return Err(Error::Degenerate {
+            arg: "mesh".into(),
+            what: "its surface has zero area".into(),
+            advice: "check that the file holds real triangles".into(),
+        });
     }
     // Faces wound inward (negative enclosed volume) get their normals flipped.
     let flip = if mesh.volume() < 0.0 { -1.0 } else { 1.0 };
@@ -69,13 +73,18 @@ pub fn sample_surface(mesh: &TriMesh, density: Density, seed: u64) -> Result<Sur
         }
         Density::Spacing(s) => {
             if !(s.is_finite() && s > 0.0) {
-                return Err(Error::invalid("spacing", format!("must be a positive length in mm, got {s}")));
+                return Err(Error::invalid(
+                    "spacing",
+                    format!("must be a positive length in mm, got {s}"),
+                ));
             }
             let expected = total / (s * s);
             if expected > 5e6 {
                 return Err(Error::invalid(
                     "spacing",
-                    format!("{s} mm would give about {expected:.0} points over {total:.0} mm²; choose a larger spacing"),
+                    format!(
+                        "{s} mm would give about {expected:.0} points over {total:.0} mm²; choose a larger spacing"
+                    ),
                 ));
             }
             let r = DISK_RATIO * s;
@@ -112,7 +121,12 @@ impl Model {
     pub fn new(mesh: TriMesh, density: Density, seed: u64) -> Result<Self> {
         let s = sample_surface(&mesh, density, seed)?;
         let diameter = mesh.diameter();
-        Ok(Model { mesh, points: s.points, normals: s.normals, diameter })
+        Ok(Model {
+            mesh,
+            points: s.points,
+            normals: s.normals,
+            diameter,
+        })
     }
 }
 
@@ -121,10 +135,28 @@ mod tests {
     use super::*;
 
     fn unit_cube(size: f64) -> TriMesh {
-        let v: Vec<Point> = (0..8).map(|i| Point::new(size * (i & 1) as f64, size * ((i >> 1) & 1) as f64, size * ((i >> 2) & 1) as f64)).collect();
+        let v: Vec<Point> = (0..8)
+            .map(|i| {
+                Point::new(
+                    size * (i & 1) as f64,
+                    size * ((i >> 1) & 1) as f64,
+                    size * ((i >> 2) & 1) as f64,
+                )
+            })
+            .collect();
         let faces = vec![
-            [0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
-            [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5],
+            [0, 2, 1],
+            [1, 2, 3],
+            [4, 5, 6],
+            [5, 7, 6],
+            [0, 1, 4],
+            [1, 5, 4],
+            [2, 6, 3],
+            [3, 6, 7],
+            [0, 4, 2],
+            [2, 4, 6],
+            [1, 3, 5],
+            [3, 7, 5],
         ];
         TriMesh::new(v, faces).unwrap()
     }

@@ -17,15 +17,26 @@ pub enum Orientation {
 
 /// Estimates a unit normal per point from the PCA of its `k` nearest neighbours (itself included),
 /// flipped to face `orientation`. `index` must be built over `points`.
-pub fn estimate_normals(points: &[Point], index: &KdIndex, k: usize, orientation: Orientation) -> Result<Vec<Vector3<f64>>> {
+pub fn estimate_normals(
+    points: &[Point],
+    index: &KdIndex,
+    k: usize,
+    orientation: Orientation,
+) -> Result<Vec<Vector3<f64>>> {
     if k < 3 {
-        return Err(Error::invalid("k", format!("must be at least 3 to fit a plane, got {k}")));
+        return Err(Error::invalid(
+            "k",
+            format!("must be at least 3 to fit a plane, got {k}"),
+        ));
     }
     check_finite("points", points)?;
     check_count("points", points, 3, "normals need at least 3 points")?;
     if let Orientation::TowardDirection(d) = orientation {
         if !(d.norm() > 0.0) || d.iter().any(|v| !v.is_finite()) {
-            return Err(Error::invalid("orientation", "the direction must be finite and non-zero"));
+            return Err(Error::invalid(
+                "orientation",
+                "the direction must be finite and non-zero",
+            ));
         }
     }
     Ok(normals_at(points, points, index, k, orientation))
@@ -33,7 +44,13 @@ pub fn estimate_normals(points: &[Point], index: &KdIndex, k: usize, orientation
 
 /// Unit normals at `queries` from the PCA of their `k` nearest points of `cloud` (`index` built
 /// over `cloud`), flipped to face `orientation`. Inputs are not checked (see [`estimate_normals`]).
-pub fn normals_at(queries: &[Point], cloud: &[Point], index: &KdIndex, k: usize, orientation: Orientation) -> Vec<Vector3<f64>> {
+pub fn normals_at(
+    queries: &[Point],
+    cloud: &[Point],
+    index: &KdIndex,
+    k: usize,
+    orientation: Orientation,
+) -> Vec<Vector3<f64>> {
     queries
         .par_iter()
         .map_init(Vec::new, |found, p| {
@@ -44,7 +61,11 @@ pub fn normals_at(queries: &[Point], cloud: &[Point], index: &KdIndex, k: usize,
                 Orientation::TowardPoint(v) => v - p,
                 Orientation::TowardDirection(d) => d,
             };
-            if n.dot(&facing) < 0.0 { -n } else { n }
+            if n.dot(&facing) < 0.0 {
+                -n
+            } else {
+                n
+            }
         })
         .collect()
 }
@@ -55,7 +76,9 @@ mod tests {
 
     #[test]
     fn plane_normals_face_the_viewpoint() {
-        let pts: Vec<Point> = (0..400).map(|i| Point::new((i % 20) as f64, (i / 20) as f64, 0.3 * (i % 20) as f64)).collect();
+        let pts: Vec<Point> = (0..400)
+            .map(|i| Point::new((i % 20) as f64, (i / 20) as f64, 0.3 * (i % 20) as f64))
+            .collect();
         let idx = KdIndex::new(&pts);
         let ns = estimate_normals(&pts, &idx, 10, Orientation::TowardPoint(Point::new(0.0, 0.0, 100.0))).unwrap();
         let expect = Vector3::new(-0.3, 0.0, 1.0).normalize();

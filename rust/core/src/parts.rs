@@ -51,7 +51,14 @@ pub struct TeeParams {
 
 impl Default for TeeParams {
     fn default() -> Self {
-        TeeParams { outer_diameter: 26.0, run_length: 80.0, branch_length: 40.0, boss_semi_axes: (11.0, 8.0), boss_height: 17.0, resolution: 0.6 }
+        TeeParams {
+            outer_diameter: 26.0,
+            run_length: 80.0,
+            branch_length: 40.0,
+            boss_semi_axes: (11.0, 8.0),
+            boss_height: 17.0,
+            resolution: 0.6,
+        }
     }
 }
 
@@ -68,7 +75,11 @@ pub struct FittingParams {
 
 impl Default for FittingParams {
     fn default() -> Self {
-        FittingParams { outer_diameter: 26.0, branch_length: 40.0, resolution: 0.6 }
+        FittingParams {
+            outer_diameter: 26.0,
+            branch_length: 40.0,
+            resolution: 0.6,
+        }
     }
 }
 
@@ -76,14 +87,23 @@ fn positive(name: &str, v: f64) -> Result<()> {
     if v.is_finite() && v > 0.0 {
         Ok(())
     } else {
-        Err(Error::invalid(name, format!("must be a positive length in mm, got {v}")))
+        Err(Error::invalid(
+            name,
+            format!("must be a positive length in mm, got {v}"),
+        ))
     }
 }
 
 fn check_resolution(res: f64, radius: f64) -> Result<()> {
     positive("resolution", res)?;
     if res > radius / 3.0 {
-        return Err(Error::invalid("resolution", format!("{res} mm is too coarse for a {radius} mm radius; use at most {:.3}", radius / 3.0)));
+        return Err(Error::invalid(
+            "resolution",
+            format!(
+                "{res} mm is too coarse for a {radius} mm radius; use at most {:.3}",
+                radius / 3.0
+            ),
+        ));
     }
     Ok(())
 }
@@ -123,23 +143,44 @@ pub fn tee(p: &TeeParams) -> Result<Part> {
     let r = p.outer_diameter / 2.0;
     check_resolution(p.resolution, r)?;
     if p.branch_length <= r {
-        return Err(Error::invalid("branch_length", format!("must exceed the radius {r} mm so the branch shows")));
+        return Err(Error::invalid(
+            "branch_length",
+            format!("must exceed the radius {r} mm so the branch shows"),
+        ));
     }
     if p.run_length / 2.0 <= r {
-        return Err(Error::invalid("run_length", format!("must exceed the outer diameter {} mm", p.outer_diameter)));
+        return Err(Error::invalid(
+            "run_length",
+            format!("must exceed the outer diameter {} mm", p.outer_diameter),
+        ));
     }
     let (ba, bb) = p.boss_semi_axes;
     if p.boss_height > 0.0 {
         positive("boss_semi_axes", ba.min(bb))?;
         if p.boss_height <= r {
-            return Err(Error::invalid("boss_height", format!("must exceed the radius {r} mm to stand out of the pipe, or be 0 for no boss")));
+            return Err(Error::invalid(
+                "boss_height",
+                format!("must exceed the radius {r} mm to stand out of the pipe, or be 0 for no boss"),
+            ));
         }
     }
     let half = p.run_length / 2.0;
     let branches = vec![
-        Branch { direction: Vector3::x(), length: half, radius: r },
-        Branch { direction: -Vector3::x(), length: half, radius: r },
-        Branch { direction: Vector3::y(), length: p.branch_length, radius: r },
+        Branch {
+            direction: Vector3::x(),
+            length: half,
+            radius: r,
+        },
+        Branch {
+            direction: -Vector3::x(),
+            length: half,
+            radius: r,
+        },
+        Branch {
+            direction: Vector3::y(),
+            length: p.branch_length,
+            radius: r,
+        },
     ];
     let boss_h = p.boss_height;
     let origin = Point::origin();
@@ -152,7 +193,15 @@ pub fn tee(p: &TeeParams) -> Result<Part> {
             |q| {
                 let mut d = capped_cylinder(q, &run_a, &run_b, r).min(capped_cylinder(q, &origin, &side, r));
                 if boss_h > 0.0 {
-                    d = d.min(elliptic_cylinder(q, &origin, &Vector3::z(), &Vector3::x(), boss_h, ba, bb));
+                    d = d.min(elliptic_cylinder(
+                        q,
+                        &origin,
+                        &Vector3::z(),
+                        &Vector3::x(),
+                        boss_h,
+                        ba,
+                        bb,
+                    ));
                 }
                 d
             },
@@ -182,11 +231,32 @@ fn fitting(p: &FittingParams, dirs: &[Vector3<f64>], corner_sphere: bool) -> Res
     let r = p.outer_diameter / 2.0;
     check_resolution(p.resolution, r)?;
     if p.branch_length <= r {
-        return Err(Error::invalid("branch_length", format!("must exceed the radius {r} mm so the branch shows")));
+        return Err(Error::invalid(
+            "branch_length",
+            format!("must exceed the radius {r} mm so the branch shows"),
+        ));
     }
-    let branches: Vec<Branch> = dirs.iter().map(|d| Branch { direction: *d, length: p.branch_length, radius: r }).collect();
+    let branches: Vec<Branch> = dirs
+        .iter()
+        .map(|d| Branch {
+            direction: *d,
+            length: p.branch_length,
+            radius: r,
+        })
+        .collect();
     let origin = Point::origin();
-    let mesh = branches_mesh(&branches, |q| if corner_sphere { sphere(q, &origin, r) } else { f64::INFINITY }, p.resolution, r);
+    let mesh = branches_mesh(
+        &branches,
+        |q| {
+            if corner_sphere {
+                sphere(q, &origin, r)
+            } else {
+                f64::INFINITY
+            }
+        },
+        p.resolution,
+        r,
+    );
     Ok(Part { mesh, branches })
 }
 
@@ -210,9 +280,21 @@ mod tests {
 
     #[test]
     fn bad_dimensions_are_rejected() {
-        assert!(tee(&TeeParams { outer_diameter: -1.0, ..Default::default() }).is_err());
-        assert!(tee(&TeeParams { resolution: 10.0, ..Default::default() }).is_err());
-        assert!(cross(&FittingParams { branch_length: 5.0, ..Default::default() }).is_err());
+        assert!(tee(&TeeParams {
+            outer_diameter: -1.0,
+            ..Default::default()
+        })
+        .is_err());
+        assert!(tee(&TeeParams {
+            resolution: 10.0,
+            ..Default::default()
+        })
+        .is_err());
+        assert!(cross(&FittingParams {
+            branch_length: 5.0,
+            ..Default::default()
+        })
+        .is_err());
         assert_eq!(elbow(&FittingParams::default()).unwrap().branches.len(), 2);
     }
 }

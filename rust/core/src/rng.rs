@@ -18,7 +18,9 @@ impl Rng {
             x = (x ^ (x >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
             x ^ (x >> 31)
         };
-        Rng { s: [next(), next(), next(), next()] }
+        Rng {
+            s: [next(), next(), next(), next()],
+        }
     }
 
     /// The next 64 random bits.
@@ -62,6 +64,11 @@ impl Rng {
         let (u1, u2, u3) = (self.uniform(), self.uniform(), self.uniform());
         let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
         let (t2, t3) = (std::f64::consts::TAU * u2, std::f64::consts::TAU * u3);
-        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(b * t3.cos(), a * t2.sin(), a * t2.cos(), b * t3.sin()))
+        nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+            b * t3.cos(),
+            a * t2.sin(),
+            a * t2.cos(),
+            b * t3.sin(),
+        ))
     }
 }

@@ -11,21 +11,34 @@ use rayon::prelude::*;
 use std::collections::HashMap;
 
 /// Cube corners as (dx, dy, dz) bits: corner i = (i & 1, (i >> 1) & 1, (i >> 2) & 1).
-const KUHN: [[usize; 4]; 6] = [[0, 1, 3, 7], [0, 1, 5, 7], [0, 2, 3, 7], [0, 2, 6, 7], [0, 4, 5, 7], [0, 4, 6, 7]];
+const KUHN: [[usize; 4]; 6] = [
+    [0, 1, 3, 7],
+    [0, 1, 5, 7],
+    [0, 2, 3, 7],
+    [0, 2, 6, 7],
+    [0, 4, 5, 7],
+    [0, 4, 6, 7],
+];
 
 /// Meshes the surface `sdf = 0` (negative inside) within the box `lo..hi` on a grid of `cell` mm.
 /// The box must enclose the solid with at least one cell to spare.
 pub fn mesh_sdf<F: Fn(&Point) -> f64 + Sync>(sdf: F, lo: Point, hi: Point, cell: f64) -> TriMesh {
     let n = ((hi - lo) / cell).map(|v| v.ceil() as usize + 1);
     let (nx, ny, nz) = (n.x + 1, n.y + 1, n.z + 1);
-    let at = |i: usize, j: usize, k: usize| Point::new(lo.x + i as f64 * cell, lo.y + j as f64 * cell, lo.z + k as f64 * cell);
+    let at = |i: usize, j: usize, k: usize| {
+        Point::new(lo.x + i as f64 * cell, lo.y + j as f64 * cell, lo.z + k as f64 * cell)
+    };
     let values: Vec<f64> = (0..nx * ny * nz)
         .into_par_iter()
         .map(|g| {
             let (i, j, k) = (g % nx, (g / nx) % ny, g / (nx * ny));
             let v = sdf(&at(i, j, k));
             // A value of exactly zero would put a vertex on a grid point; nudge it outside.
-            if v == 0.0 { 1e-12 } else { v }
+            if v == 0.0 {
+                1e-12
+            } else {
+                v
+            }
         })
         .collect();
     let gid = |i: usize, j: usize, k: usize| i + nx * (j + ny * k);
@@ -57,8 +70,16 @@ pub fn mesh_sdf<F: Fn(&Point) -> f64 + Sync>(sdf: F, lo: Point, hi: Point, cell:
                     let g = tet.map(|c| ids[c]);
                     let (ins, outs): (Vec<usize>, Vec<usize>) = g.iter().partition(|&&x| values[x] < 0.0);
                     let tris: Vec<[u32; 3]> = match ins.len() {
-                        1 => vec![[vertex_on(ins[0], outs[0], &mut vertices), vertex_on(ins[0], outs[1], &mut vertices), vertex_on(ins[0], outs[2], &mut vertices)]],
-                        3 => vec![[vertex_on(outs[0], ins[0], &mut vertices), vertex_on(outs[0], ins[1], &mut vertices), vertex_on(outs[0], ins[2], &mut vertices)]],
+                        1 => vec![[
+                            vertex_on(ins[0], outs[0], &mut vertices),
+                            vertex_on(ins[0], outs[1], &mut vertices),
+                            vertex_on(ins[0], outs[2], &mut vertices),
+                        ]],
+                        3 => vec![[
+                            vertex_on(outs[0], ins[0], &mut vertices),
+                            vertex_on(outs[0], ins[1], &mut vertices),
+                            vertex_on(outs[0], ins[2], &mut vertices),
+                        ]],
                         2 => {
                             let a = vertex_on(ins[0], outs[0], &mut vertices);
                             let b = vertex_on(ins[0], outs[1], &mut vertices);
@@ -69,11 +90,17 @@ pub fn mesh_sdf<F: Fn(&Point) -> f64 + Sync>(sdf: F, lo: Point, hi: Point, cell:
                         _ => vec![],
                     };
                     let centre = |set: &[usize]| {
-                        set.iter().fold(Vector3::zeros(), |s, &x| s + at(x % nx, (x / nx) % ny, x / (nx * ny)).coords) / set.len() as f64
+                        set.iter().fold(Vector3::zeros(), |s, &x| {
+                            s + at(x % nx, (x / nx) % ny, x / (nx * ny)).coords
+                        }) / set.len() as f64
                     };
                     let outward = centre(&outs) - centre(&ins);
                     for mut t in tris {
-                        let (p0, p1, p2) = (vertices[t[0] as usize], vertices[t[1] as usize], vertices[t[2] as usize]);
+                        let (p0, p1, p2) = (
+                            vertices[t[0] as usize],
+                            vertices[t[1] as usize],
+                            vertices[t[2] as usize],
+                        );
                         if (p1 - p0).cross(&(p2 - p0)).dot(&outward) < 0.0 {
                             t.swap(1, 2);
                         }
@@ -104,7 +131,15 @@ pub fn capped_cylinder(p: &Point, a: &Point, b: &Point, r: f64) -> f64 {
 
 /// Signed distance (exact zero set, approximate elsewhere) to an elliptic cylinder whose axis
 /// runs from `a` along unit `axis` for `height` mm, with semi-axes `ra` along `u` and `rb` along `axis × u`.
-pub fn elliptic_cylinder(p: &Point, a: &Point, axis: &Vector3<f64>, u: &Vector3<f64>, height: f64, ra: f64, rb: f64) -> f64 {
+pub fn elliptic_cylinder(
+    p: &Point,
+    a: &Point,
+    axis: &Vector3<f64>,
+    u: &Vector3<f64>,
+    height: f64,
+    ra: f64,
+    rb: f64,
+) -> f64 {
     let w = axis.cross(u);
     let rel = p - a;
     let (x, y, z) = (rel.dot(u), rel.dot(&w), rel.dot(axis));
@@ -126,7 +161,12 @@ mod tests {
     #[test]
     fn sphere_mesh_is_closed_and_accurate() {
         let c = Point::origin();
-        let m = mesh_sdf(|p| sphere(p, &c, 20.0), Point::new(-22.0, -22.0, -22.0), Point::new(22.0, 22.0, 22.0), 1.0);
+        let m = mesh_sdf(
+            |p| sphere(p, &c, 20.0),
+            Point::new(-22.0, -22.0, -22.0),
+            Point::new(22.0, 22.0, 22.0),
+            1.0,
+        );
         let v = m.volume();
         let exact = 4.0 / 3.0 * std::f64::consts::PI * 8000.0;
         assert!((v - exact).abs() / exact < 0.01, "volume {v} vs {exact}");

@@ -83,7 +83,10 @@ pub fn scan_spacing(points: &[Point], index: &KdIndex) -> ScanSpacing {
     }
     let mid = across.len() / 2;
     let a = *across.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1;
-    ScanSpacing { along, across: a.max(along) }
+    ScanSpacing {
+        along,
+        across: a.max(along),
+    }
 }
 
 /// Indices of the points inside `bin`, at least `margin` mm above its floor and inside its walls.
@@ -91,13 +94,24 @@ pub fn scan_spacing(points: &[Point], index: &KdIndex) -> ScanSpacing {
 /// above `max.z`.
 pub fn crop_to_bin(points: &[Point], bin: &BinBox, margin: f64) -> Result<Vec<usize>> {
     if (0..3).any(|k| !(bin.max[k] > bin.min[k])) {
-        return Err(Error::invalid("bin", format!("the box must have max > min on every axis, got min {:?} max {:?}", bin.min.coords.as_slice(), bin.max.coords.as_slice())));
+        return Err(Error::invalid(
+            "bin",
+            format!(
+                "the box must have max > min on every axis, got min {:?} max {:?}",
+                bin.min.coords.as_slice(),
+                bin.max.coords.as_slice()
+            ),
+        ));
     }
     Ok(points
         .iter()
         .enumerate()
         .filter(|(_, p)| {
-            p.x > bin.min.x + margin && p.x < bin.max.x - margin && p.y > bin.min.y + margin && p.y < bin.max.y - margin && p.z > bin.min.z + margin
+            p.x > bin.min.x + margin
+                && p.x < bin.max.x - margin
+                && p.y > bin.min.y + margin
+                && p.y < bin.max.y - margin
+                && p.z > bin.min.z + margin
         })
         .map(|(i, _)| i)
         .collect())
@@ -116,14 +130,21 @@ pub struct Plane {
 /// one (inliers spanning more than 1.2 × the part): no plane spans more than the whole scene.
 pub fn could_hold_support_plane(points: &[Point], model_diameter: f64) -> bool {
     let Some(first) = points.first() else { return false };
-    let (lo, hi) = points.iter().fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
+    let (lo, hi) = points
+        .iter()
+        .fold((*first, *first), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
     (hi - lo).norm() >= 1.2 * model_diameter
 }
 
 /// Removes support planes (floor, walls, rims) found by RANSAC, largest first: a plane is
 /// removed only when its inliers span more than `1.2 × model_diameter`, which no face of the
 /// part can, so that the flat faces of parts stay. Returns the kept indices and the removed planes.
-pub fn remove_support_planes(points: &[Point], model_diameter: f64, tolerance: f64, seed: u64) -> (Vec<usize>, Vec<Plane>) {
+pub fn remove_support_planes(
+    points: &[Point],
+    model_diameter: f64,
+    tolerance: f64,
+    seed: u64,
+) -> (Vec<usize>, Vec<Plane>) {
     let mut keep: Vec<usize> = (0..points.len()).collect();
     let mut planes = Vec::new();
     if !could_hold_support_plane(points, model_diameter) {
@@ -134,7 +155,9 @@ pub fn remove_support_planes(points: &[Point], model_diameter: f64, tolerance: f
         if keep.len() < 50 {
             break;
         }
-        let Some((plane, inliers)) = ransac_plane(points, &keep, tolerance, 300, &mut rng) else { break };
+        let Some((plane, inliers)) = ransac_plane(points, &keep, tolerance, 300, &mut rng) else {
+            break;
+        };
         let pts: Vec<Point> = inliers.iter().map(|&i| points[i]).collect();
         let (_, cov) = covariance(&pts);
         let (_, axes) = principal_axes(&cov);
@@ -155,33 +178,58 @@ pub fn remove_support_planes(points: &[Point], model_diameter: f64, tolerance: f
     (keep, planes)
 }
 
-fn ransac_plane(points: &[Point], subset: &[usize], tol: f64, trials: usize, rng: &mut Rng) -> Option<(Plane, Vec<usize>)> {
+fn ransac_plane(
+    points: &[Point],
+    subset: &[usize],
+    tol: f64,
+    trials: usize,
+    rng: &mut Rng,
+) -> Option<(Plane, Vec<usize>)> {
     let mut best: Option<(Plane, usize)> = None;
     let step = (subset.len() / 4000).max(1);
     for _ in 0..trials {
-        let (a, b, c) = (points[subset[rng.below(subset.len())]], points[subset[rng.below(subset.len())]], points[subset[rng.below(subset.len())]]);
+        let (a, b, c) = (
+            points[subset[rng.below(subset.len())]],
+            points[subset[rng.below(subset.len())]],
+            points[subset[rng.below(subset.len())]],
+        );
         let n = (b - a).cross(&(c - a));
         if n.norm() < 1e-9 {
             continue;
         }
         let n = n.normalize();
         let d = n.dot(&a.coords);
-        let count = subset.iter().step_by(step).filter(|&&i| (n.dot(&points[i].coords) - d).abs() < tol).count();
+        let count = subset
+            .iter()
+            .step_by(step)
+            .filter(|&&i| (n.dot(&points[i].coords) - d).abs() < tol)
+            .count();
         if best.as_ref().map_or(true, |b| count > b.1) {
             best = Some((Plane { normal: n, offset: d }, count));
         }
     }
     let (plane, _) = best?;
     // Refit on the inliers for an unbiased plane, then collect them.
-    let inl: Vec<Point> = subset.iter().map(|&i| points[i]).filter(|p| (plane.normal.dot(&p.coords) - plane.offset).abs() < tol).collect();
+    let inl: Vec<Point> = subset
+        .iter()
+        .map(|&i| points[i])
+        .filter(|p| (plane.normal.dot(&p.coords) - plane.offset).abs() < tol)
+        .collect();
     if inl.len() < 3 {
         return None;
     }
     let (c, cov) = covariance(&inl);
     let (_, axes) = principal_axes(&cov);
     let n = axes[2];
-    let refit = Plane { normal: n, offset: n.dot(&c.coords) };
-    let inliers = subset.iter().copied().filter(|&i| (refit.normal.dot(&points[i].coords) - refit.offset).abs() < tol).collect();
+    let refit = Plane {
+        normal: n,
+        offset: n.dot(&c.coords),
+    };
+    let inliers = subset
+        .iter()
+        .copied()
+        .filter(|&i| (refit.normal.dot(&points[i].coords) - refit.offset).abs() < tol)
+        .collect();
     Some((refit, inliers))
 }
 
@@ -203,9 +251,18 @@ pub struct SegmentConfig {
 /// Table 2: the region of the highest point that makes a whole object. Returns indices into
 /// `points` (of the first region with at least `min_points`), or `NoObjectFound`. Points marked
 /// in `excluded` (regions already tried) are neither seeds nor members.
-pub fn segment_top(points: &[Point], normals: Option<&[Vector3<f64>]>, index: &KdIndex, cfg: &SegmentConfig, excluded: Option<&[bool]>) -> Result<Vec<usize>> {
+pub fn segment_top(
+    points: &[Point],
+    normals: Option<&[Vector3<f64>]>,
+    index: &KdIndex,
+    cfg: &SegmentConfig,
+    excluded: Option<&[bool]>,
+) -> Result<Vec<usize>> {
     if !(cfg.d_star.is_finite() && cfg.d_star > 0.0) {
-        return Err(Error::invalid("d_star", format!("must be a positive distance in mm, got {}", cfg.d_star)));
+        return Err(Error::invalid(
+            "d_star",
+            format!("must be a positive distance in mm, got {}", cfg.d_star),
+        ));
     }
     let cos_limit = cfg.max_normal_angle.cos();
     let up = cfg.up.normalize();
@@ -243,7 +300,14 @@ pub fn segment_top(points: &[Point], normals: Option<&[Vector3<f64>]>, index: &K
         }
         // Too few points: noise or a sliver; they stay labelled and the next top point is tried.
     }
-    Err(Error::NoObjectFound { reason: format!("no region of at least {} points (d* = {:.2} mm) in {} points", cfg.min_points, cfg.d_star, points.len()) })
+    Err(Error::NoObjectFound {
+        reason: format!(
+            "no region of at least {} points (d* = {:.2} mm) in {} points",
+            cfg.min_points,
+            cfg.d_star,
+            points.len()
+        ),
+    })
 }
 
 #[cfg(test)]
@@ -253,9 +317,13 @@ mod tests {
     #[test]
     fn floor_is_removed_but_a_box_top_is_kept() {
         let mut rng = Rng::new(1);
-        let mut pts: Vec<Point> = (0..20000).map(|_| Point::new(rng.range(0.0, 400.0), rng.range(0.0, 300.0), 0.05 * rng.normal())).collect();
+        let mut pts: Vec<Point> = (0..20000)
+            .map(|_| Point::new(rng.range(0.0, 400.0), rng.range(0.0, 300.0), 0.05 * rng.normal()))
+            .collect();
         // A 40 mm cube standing on the floor: its flat top must stay.
-        let cube_top: Vec<Point> = (0..1600).map(|i| Point::new(100.0 + (i % 40) as f64, 100.0 + (i / 40) as f64, 40.0)).collect();
+        let cube_top: Vec<Point> = (0..1600)
+            .map(|i| Point::new(100.0 + (i % 40) as f64, 100.0 + (i / 40) as f64, 40.0))
+            .collect();
         pts.extend(&cube_top);
         let (keep, planes) = remove_support_planes(&pts, 70.0, 0.5, 3);
         assert_eq!(planes.len(), 1);
@@ -272,13 +340,29 @@ mod tests {
             pts.push(Point::new((i % 20) as f64, (i / 20) as f64, 10.0));
             pts.push(Point::new(25.0 + (i % 20) as f64, (i / 20) as f64, 5.0));
         }
-        pts.extend([Point::new(60.0, 60.0, 50.0), Point::new(60.5, 60.0, 50.0), Point::new(61.0, 60.0, 50.0)]);
+        pts.extend([
+            Point::new(60.0, 60.0, 50.0),
+            Point::new(60.5, 60.0, 50.0),
+            Point::new(61.0, 60.0, 50.0),
+        ]);
         let idx = KdIndex::new(&pts);
-        let cfg = SegmentConfig { d_star: 1.5, min_points: 50, max_normal_angle: std::f64::consts::PI, max_extent: f64::INFINITY, up: Vector3::z() };
+        let cfg = SegmentConfig {
+            d_star: 1.5,
+            min_points: 50,
+            max_normal_angle: std::f64::consts::PI,
+            max_extent: f64::INFINITY,
+            up: Vector3::z(),
+        };
         let region = segment_top(&pts, None, &idx, &cfg, None).unwrap();
         assert_eq!(region.len(), 400);
         assert!(region.iter().all(|&i| pts[i].z == 10.0));
-        let cfg_big = SegmentConfig { min_points: 1000, ..cfg };
-        assert!(matches!(segment_top(&pts, None, &idx, &cfg_big, None), Err(Error::NoObjectFound { .. })));
+        let cfg_big = SegmentConfig {
+            min_points: 1000,
+            ..cfg
+        };
+        assert!(matches!(
+            segment_top(&pts, None, &idx, &cfg_big, None),
+            Err(Error::NoObjectFound { .. })
+        ));
     }
 }

@@ -106,7 +106,12 @@ pub struct SymmetryConfig {
 
 impl Default for SymmetryConfig {
     fn default() -> Self {
-        SymmetryConfig { tolerance: None, min_agreement: 0.98, max_order: 12, max_points: 2000 }
+        SymmetryConfig {
+            tolerance: None,
+            min_agreement: 0.98,
+            max_order: 12,
+            max_points: 2000,
+        }
     }
 }
 
@@ -130,7 +135,11 @@ pub struct Symmetries {
 impl Symmetries {
     /// The trivial group (identity only) about `center`.
     pub fn none(center: Point) -> Self {
-        Symmetries { center, continuous_axis: None, rotations: vec![Rot::identity()] }
+        Symmetries {
+            center,
+            continuous_axis: None,
+            rotations: vec![Rot::identity()],
+        }
     }
 
     /// True when the identity is the only symmetry.
@@ -159,7 +168,11 @@ impl Symmetries {
                 (0..k).map(|i| rot(&a, TAU * i as f64 / k as f64)).collect()
             }
         };
-        self.elements().iter().flat_map(|r| spins.iter().map(move |s| r * s)).map(|r| self.about_center(&r)).collect()
+        self.elements()
+            .iter()
+            .flat_map(|r| spins.iter().map(move |s| r * s))
+            .map(|r| self.about_center(&r))
+            .collect()
     }
 
     /// The representative of `t_scene_model · S` (S over the group) whose rotation is closest to
@@ -178,7 +191,10 @@ impl Symmetries {
     pub fn pose_error(&self, estimate: &Isometry3<f64>, truth: &Isometry3<f64>) -> (f64, f64) {
         let s = self.closest(&(estimate.rotation.inverse() * truth.rotation));
         let t = truth * self.about_center(&s);
-        ((estimate.rotation.inverse() * t.rotation).angle(), (estimate.translation.vector - t.translation.vector).norm())
+        (
+            (estimate.rotation.inverse() * t.rotation).angle(),
+            (estimate.translation.vector - t.translation.vector).norm(),
+        )
     }
 
     fn elements(&self) -> Vec<Rot> {
@@ -218,31 +234,58 @@ impl Symmetries {
 /// for most parts, and detection then takes milliseconds to tens of milliseconds.
 pub fn detect_symmetries(points: &[Point], normals: &[Vector3<f64>], cfg: &SymmetryConfig) -> Result<Symmetries> {
     check_finite("points", points)?;
-    check_count("points", points, 32, "sample the part's surface more densely (model::sample_surface)")?;
+    check_count(
+        "points",
+        points,
+        32,
+        "sample the part's surface more densely (model::sample_surface)",
+    )?;
     if normals.len() != points.len() {
-        return Err(Error::invalid("normals", format!("has {} rows but points has {}; pass one normal per point", normals.len(), points.len())));
+        return Err(Error::invalid(
+            "normals",
+            format!(
+                "has {} rows but points has {}; pass one normal per point",
+                normals.len(),
+                points.len()
+            ),
+        ));
     }
     check_spread("points", points, 2, "symmetries need a sampled surface, not a curve")?;
     let mut unit = Vec::with_capacity(normals.len());
     for (i, n) in normals.iter().enumerate() {
         let len = n.norm();
         if !(len.is_finite() && len > 0.0) {
-            return Err(Error::invalid("normals", format!("row {i} is {n:?}; pass finite non-zero normals")));
+            return Err(Error::invalid(
+                "normals",
+                format!("row {i} is {n:?}; pass finite non-zero normals"),
+            ));
         }
         unit.push(n / len);
     }
     if !(cfg.min_agreement > 0.0 && cfg.min_agreement <= 1.0) {
-        return Err(Error::invalid("min_agreement", format!("must be in (0, 1], got {}", cfg.min_agreement)));
+        return Err(Error::invalid(
+            "min_agreement",
+            format!("must be in (0, 1], got {}", cfg.min_agreement),
+        ));
     }
     if cfg.max_order < 2 {
-        return Err(Error::invalid("max_order", format!("must be at least 2, got {}", cfg.max_order)));
+        return Err(Error::invalid(
+            "max_order",
+            format!("must be at least 2, got {}", cfg.max_order),
+        ));
     }
     if cfg.max_points < 64 {
-        return Err(Error::invalid("max_points", format!("must be at least 64, got {}", cfg.max_points)));
+        return Err(Error::invalid(
+            "max_points",
+            format!("must be at least 64, got {}", cfg.max_points),
+        ));
     }
     if let Some(t) = cfg.tolerance {
         if !(t.is_finite() && t > 0.0) {
-            return Err(Error::invalid("tolerance", format!("must be a positive length in mm, got {t}")));
+            return Err(Error::invalid(
+                "tolerance",
+                format!("must be a positive length in mm, got {t}"),
+            ));
         }
     }
     let matcher = Matcher::new(points, unit, cfg)?;
@@ -302,11 +345,20 @@ impl<'a> Matcher<'a> {
         let step = (points.len() / 512).max(1);
         let mut d: Vec<f64> = (0..points.len())
             .step_by(step)
-            .filter_map(|i| kd.knn(&points[i], 4).iter().map(|n| n.distance_squared).find(|&d2| d2 > 0.0))
+            .filter_map(|i| {
+                kd.knn(&points[i], 4)
+                    .iter()
+                    .map(|n| n.distance_squared)
+                    .find(|&d2| d2 > 0.0)
+            })
             .map(f64::sqrt)
             .collect();
         if d.is_empty() {
-            return Err(Error::Degenerate { arg: "points".into(), what: "all points are equal".into(), advice: "pass a sampled surface".into() });
+            return Err(Error::Degenerate {
+                arg: "points".into(),
+                what: "all points are equal".into(),
+                advice: "pass a sampled surface".into(),
+            });
         }
         d.sort_by(f64::total_cmp);
         let median = d[d.len() / 2];
@@ -349,7 +401,10 @@ impl<'a> Matcher<'a> {
     #[inline]
     fn correspond(&self, m: &Point, nr: &V3, tol: f64, fallback: bool) -> Option<(usize, f64)> {
         let q = [m.x, m.y, m.z];
-        let (j, _) = self.tree.nearest_within(&q, self.near2).or_else(|| self.tree.nearest_within(&q, self.reach2))?;
+        let (j, _) = self
+            .tree
+            .nearest_within(&q, self.near2)
+            .or_else(|| self.tree.nearest_within(&q, self.reach2))?;
         let agrees = |j: usize| {
             let r = self.normals[j].dot(&(m - self.points[j]));
             (nr.dot(&self.normals[j]) > MIN_NORMAL_DOT && r.abs() <= tol).then_some((j, r))
@@ -360,7 +415,11 @@ impl<'a> Matcher<'a> {
         if !fallback {
             return None;
         }
-        self.kd.knn(m, FALLBACK_NEIGHBOURS).iter().take_while(|n| n.distance_squared <= self.reach2).find_map(|n| agrees(n.index))
+        self.kd
+            .knn(m, FALLBACK_NEIGHBOURS)
+            .iter()
+            .take_while(|n| n.distance_squared <= self.reach2)
+            .find_map(|n| agrees(n.index))
     }
 
     /// Fraction of the test subsample mapped onto the surface by `r` about `c`; stops early (and
@@ -425,7 +484,9 @@ impl<'a> Matcher<'a> {
                 for &i in &self.test[..self.refine] {
                     let d = rm * (self.points[i] - c);
                     let m = c + d;
-                    let Some((j, res)) = self.correspond(&m, &(r * self.normals[i]), 3.0 * self.tol, false) else { continue };
+                    let Some((j, res)) = self.correspond(&m, &(r * self.normals[i]), 3.0 * self.tol, false) else {
+                        continue;
+                    };
                     let nj = self.normals[j];
                     let dn = d.cross(&nj);
                     let pc = i_minus_r.transpose() * nj;
@@ -442,7 +503,9 @@ impl<'a> Matcher<'a> {
             for i in 0..5 {
                 h[(i, i)] += damping;
             }
-            let Some(x) = h.cholesky().map(|ch| ch.solve(&(-g))) else { break };
+            let Some(x) = h.cholesky().map(|ch| ch.solve(&(-g))) else {
+                break;
+            };
             let tilt = x[0] * u + x[1] * v;
             let shift = V3::new(x[2], x[3], x[4]);
             a = (a + tilt).normalize();
@@ -463,7 +526,9 @@ impl<'a> Matcher<'a> {
         // Largest first: small turns barely move a compact part, so they only count together.
         let continuous: Vec<f64> = CONTINUOUS_ANGLES_DEG.iter().rev().map(|d| d.to_radians()).collect();
         let soft = |a: &V3, c: &Point, angle: f64| self.soft_score(&rot(a, angle), c, SCREEN_MIN);
-        let mut trials: Vec<(f64, Vec<f64>)> = (2..=self.max_order).map(|n| (soft(axis, point, TAU / n as f64), vec![TAU / n as f64])).collect();
+        let mut trials: Vec<(f64, Vec<f64>)> = (2..=self.max_order)
+            .map(|n| (soft(axis, point, TAU / n as f64), vec![TAU / n as f64]))
+            .collect();
         let mut all_continuous = f64::INFINITY;
         for &angle in &continuous {
             all_continuous = all_continuous.min(soft(axis, point, angle));
@@ -487,14 +552,20 @@ impl<'a> Matcher<'a> {
         let (order, angles) = if continuous.iter().all(|&angle| holds(&a, &c, angle)) {
             (0, continuous.clone())
         } else {
-            let mut passing: Vec<usize> = (2..=self.max_order).filter(|&n| holds(&a, &c, TAU / n as f64)).collect();
+            let mut passing: Vec<usize> = (2..=self.max_order)
+                .filter(|&n| holds(&a, &c, TAU / n as f64))
+                .collect();
             let l = passing.iter().fold(1, |l, &n| lcm(l, n));
             if l > self.max_order && l <= 4 * self.max_order && holds(&a, &c, TAU / l as f64) {
                 passing.push(l);
             }
             // The powers of a true 2π/n turn are symmetries too, so every divisor of n must pass;
             // a round-ish part can pass a fine turn within the tolerance without its powers.
-            let order = passing.iter().copied().filter(|&n| (2..=n).filter(|d| n % d == 0).all(|d| passing.contains(&d))).max()?;
+            let order = passing
+                .iter()
+                .copied()
+                .filter(|&n| (2..=n).filter(|d| n % d == 0).all(|d| passing.contains(&d)))
+                .max()?;
             let mut angles = vec![TAU / order as f64];
             if order >= 4 {
                 angles.push(TAU * (order / 2) as f64 / order as f64);
@@ -509,7 +580,13 @@ impl<'a> Matcher<'a> {
         } else {
             agreement = self.agreement(&rot(&a, angles[0]), &c);
         }
-        Some(AxisFinding { axis: a, point: c, order, continuous: order == 0, agreement })
+        Some(AxisFinding {
+            axis: a,
+            point: c,
+            order,
+            continuous: order == 0,
+            agreement,
+        })
     }
 
     /// Sweeps the lines through `point` perpendicular to `axis` for a 180° flip; returns the
@@ -553,7 +630,13 @@ impl<'a> Matcher<'a> {
         peaks.into_iter().find_map(|k| {
             let (u, c) = self.refine(&dir(k), point, &[PI]);
             let agreement = self.agreement(&rot(&u, PI), &c);
-            (agreement >= self.min_agreement).then_some(AxisFinding { axis: u, point: c, order: 2, continuous: false, agreement })
+            (agreement >= self.min_agreement).then_some(AxisFinding {
+                axis: u,
+                point: c,
+                order: 2,
+                continuous: false,
+                agreement,
+            })
         })
     }
 
@@ -577,8 +660,16 @@ impl<'a> Matcher<'a> {
         let least = (self.test.len() / 100).max(3);
         clusters.retain(|c| c.1 >= least);
         clusters.sort_by_key(|c| std::cmp::Reverse(c.1));
-        let mut axes: Vec<V3> = clusters.iter().take(MAX_SAMPLE_AXES / 2).map(|c| c.0.normalize()).collect();
-        let mut far: Vec<(f64, usize)> = self.test.iter().map(|&i| ((self.points[i] - self.centroid).norm(), i)).collect();
+        let mut axes: Vec<V3> = clusters
+            .iter()
+            .take(MAX_SAMPLE_AXES / 2)
+            .map(|c| c.0.normalize())
+            .collect();
+        let mut far: Vec<(f64, usize)> = self
+            .test
+            .iter()
+            .map(|&i| ((self.points[i] - self.centroid).norm(), i))
+            .collect();
         far.sort_by(|x, y| y.0.total_cmp(&x.0));
         let take = (self.test.len() / 50).max(8);
         let mut far_axes: Vec<V3> = Vec::new();
@@ -603,7 +694,10 @@ impl<'a> Matcher<'a> {
         let mut rng = Rng::new(SEED ^ 0x4A1F);
         let mut sum_sq = 0.0;
         for _ in 0..EIGEN_SPLITS {
-            let mut halves = [(0usize, V3::zeros(), Matrix3::zeros()), (0usize, V3::zeros(), Matrix3::zeros())];
+            let mut halves = [
+                (0usize, V3::zeros(), Matrix3::zeros()),
+                (0usize, V3::zeros(), Matrix3::zeros()),
+            ];
             for p in self.points {
                 let h = &mut halves[(rng.next_u64() >> 63) as usize];
                 let d = p - self.centroid;
@@ -628,7 +722,8 @@ impl<'a> Matcher<'a> {
         let (vals, vecs) = principal_axes(&cov);
         let noise = self.eigenvalue_noise();
         let gap = |i: usize, j: usize| (vals[i] - vals[j]).abs();
-        let equal = |i: usize, j: usize| gap(i, j) <= (EQUAL_EIGENVALUES * vals[i].max(vals[j])).max(EQUAL_NOISE * noise);
+        let equal =
+            |i: usize, j: usize| gap(i, j) <= (EQUAL_EIGENVALUES * vals[i].max(vals[j])).max(EQUAL_NOISE * noise);
         let (e01, e12) = (equal(0, 1), equal(1, 2));
         let distinct = match (e01, e12) {
             (true, false) => Some(2),
@@ -661,7 +756,9 @@ impl<'a> Matcher<'a> {
             // a sphere, which keeps the first axis): other lines are not worth testing.
             let spin = findings.iter().find(|f| f.continuous);
             if let Some(sp) = spin {
-                let flipped = findings.iter().any(|f| !f.continuous && f.axis.dot(&sp.axis).abs() < across);
+                let flipped = findings
+                    .iter()
+                    .any(|f| !f.continuous && f.axis.dot(&sp.axis).abs() < across);
                 if flipped || sp.axis.dot(a).abs() >= across {
                     continue;
                 }
@@ -673,7 +770,11 @@ impl<'a> Matcher<'a> {
                 }
                 findings.push(f);
                 // Every rotation axis of the group found so far is settled.
-                let found: Vec<Rot> = findings.iter().filter(|f| !f.continuous).map(|f| rot(&f.axis, TAU / f.order as f64)).collect();
+                let found: Vec<Rot> = findings
+                    .iter()
+                    .filter(|f| !f.continuous)
+                    .map(|f| rot(&f.axis, TAU / f.order as f64))
+                    .collect();
                 known_lines = findings.iter().map(|f| f.axis).collect();
                 if let Some(g) = close(&found, self.max_group()) {
                     known_lines.extend(axis_lines(&g).into_iter().map(|l| l.0));
@@ -684,7 +785,10 @@ impl<'a> Matcher<'a> {
         // of their own: sweep for one unless the rotations found already reverse the axis.
         let mut sweeps: Vec<(V3, Point, Option<usize>)> = Vec::new();
         if let Some(i) = distinct {
-            match findings.iter().find(|f| same_line(&f.axis, &vecs[i], 5f64.to_radians())) {
+            match findings
+                .iter()
+                .find(|f| same_line(&f.axis, &vecs[i], 5f64.to_radians()))
+            {
                 Some(f) => sweeps.push((f.axis, f.point, (!f.continuous).then_some(f.order))),
                 // An unreliable eigenvector that is no symmetry axis is not worth a sweep.
                 None if !from_sample => sweeps.push((vecs[i], c0, Some(1))),
@@ -701,8 +805,13 @@ impl<'a> Matcher<'a> {
             }
         }
         for (a, p, order) in sweeps {
-            let found: Vec<Rot> = findings.iter().filter(|f| !f.continuous).map(|f| rot(&f.axis, TAU / f.order as f64)).collect();
-            let reversed = close(&found, self.max_group()).is_some_and(|g| g.iter().any(|r| (r * a).dot(&a) < -(3f64.to_radians().cos())));
+            let found: Vec<Rot> = findings
+                .iter()
+                .filter(|f| !f.continuous)
+                .map(|f| rot(&f.axis, TAU / f.order as f64))
+                .collect();
+            let reversed = close(&found, self.max_group())
+                .is_some_and(|g| g.iter().any(|r| (r * a).dot(&a) < -(3f64.to_radians().cos())));
             if !reversed {
                 if let Some(f) = self.flip_across(&a, &p, order) {
                     findings.push(f);
@@ -749,7 +858,10 @@ impl<'a> Matcher<'a> {
             lines.push((u, f.point));
             rotations.push(rot(&u, PI));
         }
-        let check = |c: &Point| self.passes(&rot(&a, CONTINUOUS_ANGLES_DEG[3].to_radians()), c) && rotations.iter().skip(1).all(|r| self.passes(r, c));
+        let check = |c: &Point| {
+            self.passes(&rot(&a, CONTINUOUS_ANGLES_DEG[3].to_radians()), c)
+                && rotations.iter().skip(1).all(|r| self.passes(r, c))
+        };
         let mut center = self.center_of(&lines);
         if !check(&center) {
             center = cont.point;
@@ -757,7 +869,11 @@ impl<'a> Matcher<'a> {
                 rotations.truncate(1);
             }
         }
-        Symmetries { center, continuous_axis: Some(a), rotations }
+        Symmetries {
+            center,
+            continuous_axis: Some(a),
+            rotations,
+        }
     }
 
     fn discrete_group(&self, mut findings: Vec<AxisFinding>) -> Symmetries {
@@ -790,13 +906,25 @@ impl<'a> Matcher<'a> {
         if let Some((exact, gens)) = exact_group(&group) {
             for c in [center, self.centroid] {
                 if gens.iter().all(|g| self.passes(g, &c)) {
-                    return Symmetries { center: c, continuous_axis: None, rotations: exact };
+                    return Symmetries {
+                        center: c,
+                        continuous_axis: None,
+                        rotations: exact,
+                    };
                 }
             }
         }
         // Inconsistent or unrecognised: keep the closure of the accepted rotations as found.
-        let center = if generators.iter().all(|g| self.passes(g, &center)) { center } else { self.centroid };
-        Symmetries { center, continuous_axis: None, rotations: group }
+        let center = if generators.iter().all(|g| self.passes(g, &center)) {
+            center
+        } else {
+            self.centroid
+        };
+        Symmetries {
+            center,
+            continuous_axis: None,
+            rotations: group,
+        }
     }
 }
 
@@ -840,7 +968,10 @@ fn axis_lines(group: &[Rot]) -> Vec<(V3, usize)> {
             continue;
         }
         let axis = axis.into_inner();
-        match lines.iter_mut().find(|(s, _)| same_line(&s.normalize(), &axis, SAME_AXIS)) {
+        match lines
+            .iter_mut()
+            .find(|(s, _)| same_line(&s.normalize(), &axis, SAME_AXIS))
+        {
             Some((s, n)) => {
                 *s += if axis.dot(s) >= 0.0 { axis } else { -axis };
                 *n += 1;
@@ -860,7 +991,12 @@ fn exact_group(approx: &[Rot]) -> Option<(Vec<Rot>, Vec<Rot>)> {
     let size = approx.len();
     let lines = axis_lines(approx);
     let top = lines.first()?.1;
-    let perpendicular = |a: &V3, order: usize| lines.iter().find(|(b, n)| *n == order && a.dot(b).abs() < 3f64.to_radians().sin()).map(|l| l.0);
+    let perpendicular = |a: &V3, order: usize| {
+        lines
+            .iter()
+            .find(|(b, n)| *n == order && a.dot(b).abs() < 3f64.to_radians().sin())
+            .map(|l| l.0)
+    };
     let frame = |x: &V3, y: &V3| {
         let y = (y - x * x.dot(y)).normalize();
         let m = Matrix3::from_columns(&[*x, y, x.cross(&y)]);
@@ -884,7 +1020,10 @@ fn exact_group(approx: &[Rot]) -> Option<(Vec<Rot>, Vec<Rot>)> {
         let y = perpendicular(&x, 2)?;
         let f = frame(&x, &y);
         let variants = if size == 12 { vec![tetrahedral()] } else { icosahedral() };
-        variants.iter().map(|(elements, gens)| (conjugate(&f, elements), conjugate(&f, gens))).collect()
+        variants
+            .iter()
+            .map(|(elements, gens)| (conjugate(&f, elements), conjugate(&f, gens)))
+            .collect()
     } else if (size, top) == (24, 4) {
         let x = lines[0].0;
         let y = perpendicular(&x, 4)?;
@@ -895,7 +1034,10 @@ fn exact_group(approx: &[Rot]) -> Option<(Vec<Rot>, Vec<Rot>)> {
         return None;
     };
     candidates.into_iter().find(|(elements, _)| {
-        elements.len() == size && elements.iter().all(|e| approx.iter().any(|q| q.angle_to(e) < MAX_REBUILD_SHIFT))
+        elements.len() == size
+            && elements
+                .iter()
+                .all(|e| approx.iter().any(|q| q.angle_to(e) < MAX_REBUILD_SHIFT))
     })
 }
 
@@ -908,7 +1050,12 @@ fn standard(generators: Vec<Rot>) -> Option<StandardGroup> {
 
 /// The rotations of a regular tetrahedron whose 2-fold axes are x, y, z.
 fn tetrahedral() -> StandardGroup {
-    standard(vec![rot(&V3::x(), PI), rot(&V3::y(), PI), rot(&V3::new(1.0, 1.0, 1.0), TAU / 3.0)]).expect("12 elements")
+    standard(vec![
+        rot(&V3::x(), PI),
+        rot(&V3::y(), PI),
+        rot(&V3::new(1.0, 1.0, 1.0), TAU / 3.0),
+    ])
+    .expect("12 elements")
 }
 
 /// The rotations of a cube with faces across x, y, z.
@@ -922,7 +1069,14 @@ fn icosahedral() -> Vec<StandardGroup> {
     let phi = (1.0 + 5f64.sqrt()) / 2.0;
     [V3::new(0.0, 1.0, phi), V3::new(0.0, phi, 1.0)]
         .iter()
-        .filter_map(|v| standard(vec![rot(&V3::x(), PI), rot(&V3::y(), PI), rot(&V3::new(1.0, 1.0, 1.0), TAU / 3.0), rot(v, TAU / 5.0)]))
+        .filter_map(|v| {
+            standard(vec![
+                rot(&V3::x(), PI),
+                rot(&V3::y(), PI),
+                rot(&V3::new(1.0, 1.0, 1.0), TAU / 3.0),
+                rot(v, TAU / 5.0),
+            ])
+        })
         .filter(|g| g.0.len() == 60)
         .collect()
 }
@@ -942,7 +1096,20 @@ mod tests {
                 Point::from(V3::new(s(0, half[0]), s(1, half[1]), s(2, half[2])) + offset)
             })
             .collect();
-        let faces = vec![[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4], [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]];
+        let faces = vec![
+            [0, 2, 1],
+            [1, 2, 3],
+            [4, 5, 6],
+            [5, 7, 6],
+            [0, 1, 4],
+            [1, 5, 4],
+            [2, 6, 3],
+            [3, 6, 7],
+            [0, 4, 2],
+            [2, 4, 6],
+            [1, 3, 5],
+            [3, 7, 5],
+        ];
         (v, faces)
     }
 
@@ -985,7 +1152,14 @@ mod tests {
 
     fn detect(mesh: Mesh, spacing: f64, seed: u64) -> Case {
         let mut rng = Rng::new(seed);
-        let pose = Isometry3::from_parts(Translation3::new(rng.range(-100.0, 100.0), rng.range(-100.0, 100.0), rng.range(-100.0, 100.0)), rng.rotation());
+        let pose = Isometry3::from_parts(
+            Translation3::new(
+                rng.range(-100.0, 100.0),
+                rng.range(-100.0, 100.0),
+                rng.range(-100.0, 100.0),
+            ),
+            rng.rotation(),
+        );
         let mesh = TriMesh::new(mesh.0.iter().map(|p| pose.transform_point(p)).collect(), mesh.1).unwrap();
         assert!(mesh.volume() > 0.0);
         let s = sample_surface(&mesh, Density::Spacing(spacing), seed).unwrap();
@@ -1002,7 +1176,12 @@ mod tests {
         for e in expected {
             let e = q * e * q.inverse();
             let best = got.iter().map(|g| g.angle_to(&e)).fold(f64::INFINITY, f64::min);
-            assert!(best < 1f64.to_radians(), "missing {:?} by {:.3}°", e.axis_angle(), best.to_degrees());
+            assert!(
+                best < 1f64.to_radians(),
+                "missing {:?} by {:.3}°",
+                e.axis_angle(),
+                best.to_degrees()
+            );
         }
         // Exactly closed: every product is an element to rounding.
         for a in got {
@@ -1020,11 +1199,22 @@ mod tests {
     }
 
     fn random_pose(rng: &mut Rng) -> Isometry3<f64> {
-        Isometry3::from_parts(Translation3::new(rng.range(-500.0, 500.0), rng.range(-500.0, 500.0), rng.range(0.0, 800.0)), rng.rotation())
+        Isometry3::from_parts(
+            Translation3::new(
+                rng.range(-500.0, 500.0),
+                rng.range(-500.0, 500.0),
+                rng.range(0.0, 800.0),
+            ),
+            rng.rotation(),
+        )
     }
 
     fn assert_same_pose(a: &Isometry3<f64>, b: &Isometry3<f64>) {
-        assert!(a.rotation.angle_to(&b.rotation) < 1e-9, "rotations differ by {:e}", a.rotation.angle_to(&b.rotation));
+        assert!(
+            a.rotation.angle_to(&b.rotation) < 1e-9,
+            "rotations differ by {:e}",
+            a.rotation.angle_to(&b.rotation)
+        );
         assert!((a.translation.vector - b.translation.vector).norm() < 1e-7);
     }
 
@@ -1045,7 +1235,10 @@ mod tests {
             let t = random_pose(&mut rng);
             let canon = sym.canonical(&t);
             assert!(canon.rotation.angle() <= t.rotation.angle() + 1e-12);
-            let wobble = sym.about_center(&rot(&V3::new(rng.normal(), rng.normal(), rng.normal()), 3f64.to_radians()));
+            let wobble = sym.about_center(&rot(
+                &V3::new(rng.normal(), rng.normal(), rng.normal()),
+                3f64.to_radians(),
+            ));
             for s in &all {
                 let ts = t * s;
                 assert_same_pose(&sym.canonical(&ts), &canon);
@@ -1065,8 +1258,15 @@ mod tests {
     fn box_with_three_sides_has_the_d2_group() {
         let case = detect(cuboid([30.0, 20.0, 12.0], V3::zeros()), 1.8, 1);
         assert!(case.sym.continuous_axis.is_none());
-        assert_group(&case, &[Rot::identity(), rot(&V3::x(), PI), rot(&V3::y(), PI), rot(&V3::z(), PI)]);
-        assert!((case.sym.center - case.pose.translation.vector).coords.norm() < 0.3, "{:?}", case.sym.center);
+        assert_group(
+            &case,
+            &[Rot::identity(), rot(&V3::x(), PI), rot(&V3::y(), PI), rot(&V3::z(), PI)],
+        );
+        assert!(
+            (case.sym.center - case.pose.translation.vector).coords.norm() < 0.3,
+            "{:?}",
+            case.sym.center
+        );
         check_poses(&case.sym, 11);
     }
 
@@ -1111,7 +1311,10 @@ mod tests {
 
     #[test]
     fn box_with_an_off_centre_bump_is_asymmetric() {
-        let part = merge(&[cuboid([30.0, 20.0, 12.0], V3::zeros()), cuboid([6.0, 6.0, 3.5], V3::new(14.0, 7.0, 15.0))]);
+        let part = merge(&[
+            cuboid([30.0, 20.0, 12.0], V3::zeros()),
+            cuboid([6.0, 6.0, 3.5], V3::new(14.0, 7.0, 15.0)),
+        ]);
         let case = detect(part, 1.8, 6);
         let sym = &case.sym;
         assert!(sym.is_trivial(), "{sym:?}");
@@ -1137,7 +1340,11 @@ mod tests {
                 for k in j + 1..n {
                     if is_edge(i, j) && is_edge(j, k) && is_edge(i, k) {
                         let normal = (v[j] - v[i]).cross(&(v[k] - v[i]));
-                        let t = if normal.dot(&(v[i].coords)) > 0.0 { [i, j, k] } else { [i, k, j] };
+                        let t = if normal.dot(&(v[i].coords)) > 0.0 {
+                            [i, j, k]
+                        } else {
+                            [i, k, j]
+                        };
                         f.push(t.map(|x| x as u32));
                     }
                 }
@@ -1149,7 +1356,8 @@ mod tests {
     #[test]
     fn tetrahedron_has_the_tetrahedral_group() {
         let s = 18.0;
-        let v = [(1.0, 1.0, 1.0), (1.0, -1.0, -1.0), (-1.0, 1.0, -1.0), (-1.0, -1.0, 1.0)].map(|(x, y, z)| Point::new(s * x, s * y, s * z));
+        let v = [(1.0, 1.0, 1.0), (1.0, -1.0, -1.0), (-1.0, 1.0, -1.0), (-1.0, -1.0, 1.0)]
+            .map(|(x, y, z)| Point::new(s * x, s * y, s * z));
         let mesh = polyhedron(v.to_vec(), s * 8f64.sqrt());
         assert_eq!(mesh.1.len(), 4);
         let case = detect(mesh, 1.8, 7);
@@ -1163,7 +1371,11 @@ mod tests {
         let mut v = Vec::new();
         for a in [-1.0, 1.0] {
             for b in [-phi, phi] {
-                v.extend([Point::new(0.0, s * a, s * b), Point::new(s * a, s * b, 0.0), Point::new(s * b, 0.0, s * a)]);
+                v.extend([
+                    Point::new(0.0, s * a, s * b),
+                    Point::new(s * a, s * b, 0.0),
+                    Point::new(s * b, 0.0, s * a),
+                ]);
             }
         }
         let mesh = polyhedron(v, 2.0 * s);
@@ -1176,9 +1388,15 @@ mod tests {
     #[test]
     fn a_centred_boss_leaves_a_cyclic_group() {
         // A square prism with a square boss centred on one end keeps only its 4-fold turns.
-        let part = merge(&[prism(4, 20.0 * 2f64.sqrt(), 35.0), cuboid([6.0, 6.0, 3.5], V3::new(0.0, 0.0, 38.0))]);
+        let part = merge(&[
+            prism(4, 20.0 * 2f64.sqrt(), 35.0),
+            cuboid([6.0, 6.0, 3.5], V3::new(0.0, 0.0, 38.0)),
+        ]);
         let case = detect(part, 2.2, 9);
-        assert_group(&case, &(0..4).map(|k| rot(&V3::z(), TAU * k as f64 / 4.0)).collect::<Vec<_>>());
+        assert_group(
+            &case,
+            &(0..4).map(|k| rot(&V3::z(), TAU * k as f64 / 4.0)).collect::<Vec<_>>(),
+        );
         check_poses(&case.sym, 19);
     }
 
@@ -1207,18 +1425,39 @@ mod tests {
         let (v, f) = cuboid([30.0, 20.0, 12.0], V3::zeros());
         let s = sample_surface(&TriMesh::new(v, f).unwrap(), Density::Spacing(3.0), 1).unwrap();
         let cfg = SymmetryConfig::default();
-        assert!(matches!(detect_symmetries(&s.points[..10], &s.normals[..10], &cfg), Err(Error::TooFewPoints { .. })));
-        assert!(matches!(detect_symmetries(&s.points, &s.normals[1..], &cfg), Err(Error::InvalidInput { .. })));
+        assert!(matches!(
+            detect_symmetries(&s.points[..10], &s.normals[..10], &cfg),
+            Err(Error::TooFewPoints { .. })
+        ));
+        assert!(matches!(
+            detect_symmetries(&s.points, &s.normals[1..], &cfg),
+            Err(Error::InvalidInput { .. })
+        ));
         let mut zero = s.normals.clone();
         zero[3] = V3::zeros();
-        assert!(matches!(detect_symmetries(&s.points, &zero, &cfg), Err(Error::InvalidInput { .. })));
+        assert!(matches!(
+            detect_symmetries(&s.points, &zero, &cfg),
+            Err(Error::InvalidInput { .. })
+        ));
         for bad in [
-            SymmetryConfig { tolerance: Some(-1.0), ..cfg },
-            SymmetryConfig { min_agreement: 0.0, ..cfg },
+            SymmetryConfig {
+                tolerance: Some(-1.0),
+                ..cfg
+            },
+            SymmetryConfig {
+                min_agreement: 0.0,
+                ..cfg
+            },
             SymmetryConfig { max_order: 1, ..cfg },
             SymmetryConfig { max_points: 10, ..cfg },
         ] {
-            assert!(matches!(detect_symmetries(&s.points, &s.normals, &bad), Err(Error::InvalidInput { .. })), "{bad:?}");
+            assert!(
+                matches!(
+                    detect_symmetries(&s.points, &s.normals, &bad),
+                    Err(Error::InvalidInput { .. })
+                ),
+                "{bad:?}"
+            );
         }
         let none = Symmetries::none(Point::new(1.0, 2.0, 3.0));
         assert!(none.is_trivial());

@@ -110,18 +110,40 @@ impl Camera {
     /// that the focal lengths are positive, the last row is `0 0 1` and everything is finite.
     pub fn new(width: u32, height: u32, k: &Matrix3<f64>, dist: [f64; 5]) -> Result<Self> {
         if width < 2 || height < 2 {
-            return Err(Error::invalid("camera", format!("image size {width}×{height} is too small; pass the sensor's size in pixels")));
+            return Err(Error::invalid(
+                "camera",
+                format!("image size {width}×{height} is too small; pass the sensor's size in pixels"),
+            ));
         }
         if k.iter().chain(dist.iter()).any(|v| !v.is_finite()) {
-            return Err(Error::invalid("camera", "K or dist holds NaN or inf; pass a calibrated camera"));
+            return Err(Error::invalid(
+                "camera",
+                "K or dist holds NaN or inf; pass a calibrated camera",
+            ));
         }
         if k[(0, 0)] <= 0.0 || k[(1, 1)] <= 0.0 {
-            return Err(Error::invalid("K", format!("focal lengths fx={}, fy={} must be positive pixels", k[(0, 0)], k[(1, 1)])));
+            return Err(Error::invalid(
+                "K",
+                format!(
+                    "focal lengths fx={}, fy={} must be positive pixels",
+                    k[(0, 0)],
+                    k[(1, 1)]
+                ),
+            ));
         }
         if k[(1, 0)] != 0.0 || k[(2, 0)] != 0.0 || k[(2, 1)] != 0.0 || k[(2, 2)] != 1.0 {
             return Err(Error::invalid("K", "must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]]"));
         }
-        Ok(Camera { width, height, fx: k[(0, 0)], fy: k[(1, 1)], cx: k[(0, 2)], cy: k[(1, 2)], skew: k[(0, 1)], dist })
+        Ok(Camera {
+            width,
+            height,
+            fx: k[(0, 0)],
+            fy: k[(1, 1)],
+            cx: k[(0, 2)],
+            cy: k[(1, 2)],
+            skew: k[(0, 1)],
+            dist,
+        })
     }
 
     /// Applies the distortion to normalised coordinates `(x, y)` (`z = 1`).
@@ -168,7 +190,10 @@ impl Camera {
         let [k1, k2, p1, p2, k3] = self.dist;
         let r2 = x * x + y * y;
         let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-        (x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd, y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd)
+        (
+            x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x) - xd,
+            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y - yd,
+        )
     }
 
     /// The Jacobian of `distort` at `(x, y)`, symmetric: `(∂x_d/∂x, ∂x_d/∂y = ∂y_d/∂x, ∂y_d/∂y)`.
@@ -241,7 +266,14 @@ impl RayTable {
     pub fn new(camera: &Camera) -> Self {
         let (inv_fx, inv_fy) = (1.0 / camera.fx, 1.0 / camera.fy);
         if camera.dist == [0.0; 5] {
-            return RayTable { camera: *camera, inv_fx, inv_fy, cols: 0, rows: 0, nodes: Vec::new() };
+            return RayTable {
+                camera: *camera,
+                inv_fx,
+                inv_fy,
+                cols: 0,
+                rows: 0,
+                nodes: Vec::new(),
+            };
         }
         let nodes_along = |size: u32| ((size as f64 - 1.0) / TABLE_STEP).ceil() as usize + 1;
         let (cols, rows) = (nodes_along(camera.width), nodes_along(camera.height));
@@ -252,14 +284,33 @@ impl RayTable {
                 let u = -0.5 + (k % cols) as f64 * TABLE_STEP;
                 let v = -0.5 + (k / cols) as f64 * TABLE_STEP;
                 let Some(r) = camera.ray(u, v) else {
-                    return Node { x: f64::NAN, y: f64::NAN, a: f32::NAN, b: f32::NAN, c: f32::NAN };
+                    return Node {
+                        x: f64::NAN,
+                        y: f64::NAN,
+                        a: f32::NAN,
+                        b: f32::NAN,
+                        c: f32::NAN,
+                    };
                 };
                 let (jxx, cross, jyy) = camera.jacobian(r.x, r.y);
                 let det = jxx * jyy - cross * cross;
-                Node { x: r.x, y: r.y, a: (jyy / det) as f32, b: (-cross / det) as f32, c: (jxx / det) as f32 }
+                Node {
+                    x: r.x,
+                    y: r.y,
+                    a: (jyy / det) as f32,
+                    b: (-cross / det) as f32,
+                    c: (jxx / det) as f32,
+                }
             })
             .collect();
-        RayTable { camera: *camera, inv_fx, inv_fy, cols, rows, nodes }
+        RayTable {
+            camera: *camera,
+            inv_fx,
+            inv_fy,
+            cols,
+            rows,
+            nodes,
+        }
     }
 
     /// The table of `camera`, built on first use and kept for the last few cameras seen, so
@@ -311,7 +362,12 @@ impl RayTable {
         let j = (tv as usize).min(self.rows - 2);
         let (fu, fv) = (tu - i as f64, tv - j as f64);
         let k = j * self.cols + i;
-        let (n00, n01, n10, n11) = (&self.nodes[k], &self.nodes[k + 1], &self.nodes[k + self.cols], &self.nodes[k + self.cols + 1]);
+        let (n00, n01, n10, n11) = (
+            &self.nodes[k],
+            &self.nodes[k + 1],
+            &self.nodes[k + self.cols],
+            &self.nodes[k + self.cols + 1],
+        );
         let lerp = |f: fn(&Node) -> f64| {
             let top = f(n00) + fu * (f(n01) - f(n00));
             let bottom = f(n10) + fu * (f(n11) - f(n10));
@@ -326,7 +382,11 @@ impl RayTable {
         }
         // A poor guess (a failed node nearby, or a pixel off the grid): the full iteration.
         let (xd, yd) = cam.normalised(u, v);
-        let start = if x.is_finite() && y.is_finite() { (x, y) } else { (xd, yd) };
+        let start = if x.is_finite() && y.is_finite() {
+            (x, y)
+        } else {
+            (xd, yd)
+        };
         cam.undistort(xd, yd, start.0, start.1)
     }
 }
@@ -336,7 +396,10 @@ impl RayTable {
 pub fn laser_plane(t_camera_laser0: &Isometry3<f64>, angle: f64) -> Plane {
     let (s, c) = angle.sin_cos();
     let normal = t_camera_laser0.rotation * Vector3::new(c, 0.0, -s);
-    Plane { normal, offset: normal.dot(&t_camera_laser0.translation.vector) }
+    Plane {
+        normal,
+        offset: normal.dot(&t_camera_laser0.translation.vector),
+    }
 }
 
 /// Intersects the ray `s · dir` (from the origin) with `plane`: the point, or why there is none.
@@ -356,25 +419,49 @@ pub fn intersect_ray_plane(dir: &Vector3<f64>, plane: &Plane) -> std::result::Re
 fn check_pixels(camera: &Camera, pixels: &[[f64; 2]], frame_index: Option<(&[u32], usize)>) -> Result<()> {
     let (w, h) = (camera.width as f64 - 0.5, camera.height as f64 - 0.5);
     // A branch-free pass first (NaN fails every comparison); the loop below only names the culprit.
-    let inside = pixels.iter().fold(true, |ok, &[u, v]| ok & (u >= -0.5) & (u <= w) & (v >= -0.5) & (v <= h));
+    let inside = pixels
+        .iter()
+        .fold(true, |ok, &[u, v]| ok & (u >= -0.5) & (u <= w) & (v >= -0.5) & (v <= h));
     for (i, &[u, v]) in pixels.iter().enumerate().filter(|_| !inside) {
         if !(u.is_finite() && v.is_finite()) {
-            return Err(Error::NonFinite { arg: "pixels".into(), index: i, value: format!("({u}, {v})") });
+            return Err(Error::NonFinite {
+                arg: "pixels".into(),
+                index: i,
+                value: format!("({u}, {v})"),
+            });
         }
         if !(-0.5..=w).contains(&u) || !(-0.5..=h).contains(&v) {
             return Err(Error::invalid(
                 "pixels",
-                format!("row {i} is ({u}, {v}), outside the {}×{} image; pixels are (u, v) = (column, row)", camera.width, camera.height),
+                format!(
+                    "row {i} is ({u}, {v}), outside the {}×{} image; pixels are (u, v) = (column, row)",
+                    camera.width, camera.height
+                ),
             ));
         }
     }
     if let Some((index, frames)) = frame_index {
         if index.len() != pixels.len() {
-            return Err(Error::invalid("frame_index", format!("has {} entries for {} pixels; give one frame index per pixel", index.len(), pixels.len())));
+            return Err(Error::invalid(
+                "frame_index",
+                format!(
+                    "has {} entries for {} pixels; give one frame index per pixel",
+                    index.len(),
+                    pixels.len()
+                ),
+            ));
         }
         let largest = index.iter().copied().max().map_or(0, |f| f as usize);
-        if let Some((i, &f)) = index.iter().enumerate().filter(|_| largest >= frames).find(|(_, &f)| f as usize >= frames) {
-            return Err(Error::invalid("frame_index", format!("entry {i} is {f} but the scan has {frames} frames")));
+        if let Some((i, &f)) = index
+            .iter()
+            .enumerate()
+            .filter(|_| largest >= frames)
+            .find(|(_, &f)| f as usize >= frames)
+        {
+            return Err(Error::invalid(
+                "frame_index",
+                format!("entry {i} is {f} but the scan has {frames} frames"),
+            ));
         }
     }
     Ok(())
@@ -384,7 +471,11 @@ fn check_pixels(camera: &Camera, pixels: &[[f64; 2]], frame_index: Option<(&[u32
 /// cannot be inverted.
 pub fn pixel_rays(camera: &Camera, pixels: &[[f64; 2]]) -> Result<Vec<Option<Vector3<f64>>>> {
     check_pixels(camera, pixels, None)?;
-    Ok(pixels.par_iter().with_min_len(4096).map(|&[u, v]| camera.ray(u, v)).collect())
+    Ok(pixels
+        .par_iter()
+        .with_min_len(4096)
+        .map(|&[u, v]| camera.ray(u, v))
+        .collect())
 }
 
 /// Triangulates laser-line pixels of a whole scan into points of the base frame.
@@ -394,11 +485,19 @@ pub fn pixel_rays(camera: &Camera, pixels: &[[f64; 2]]) -> Result<Vec<Option<Vec
 /// plane, meets it behind the camera, or cannot be undistorted give NaN points and a status
 /// saying why; malformed input (bad index, pixel outside the image, NaN) is an error.
 /// Runs on the current rayon pool; see [`triangulate_into`] for the allocation-free form.
-pub fn triangulate(sensor: &Sensor, frames: &[FramePose], pixels: &[[f64; 2]], frame_index: &[u32]) -> Result<Triangulation> {
+pub fn triangulate(
+    sensor: &Sensor,
+    frames: &[FramePose],
+    pixels: &[[f64; 2]],
+    frame_index: &[u32],
+) -> Result<Triangulation> {
     let mut points = vec![[0.0; 3]; pixels.len()];
     let mut status = vec![PointStatus::Valid; pixels.len()];
     triangulate_into(sensor, frames, pixels, frame_index, &mut points, &mut status)?;
-    Ok(Triangulation { points: points.into_iter().map(Point::from).collect(), status })
+    Ok(Triangulation {
+        points: points.into_iter().map(Point::from).collect(),
+        status,
+    })
 }
 
 /// [`triangulate`] writing `(x, y, z)` of each point into `points` and its status into
@@ -415,18 +514,31 @@ pub fn triangulate_into(
     if points.len() != pixels.len() || status.len() != pixels.len() {
         return Err(Error::invalid(
             "points",
-            format!("output buffers hold {} points and {} statuses for {} pixels; give one of each per pixel", points.len(), status.len(), pixels.len()),
+            format!(
+                "output buffers hold {} points and {} statuses for {} pixels; give one of each per pixel",
+                points.len(),
+                status.len(),
+                pixels.len()
+            ),
         ));
     }
     if let Some((i, f)) = frames.iter().enumerate().find(|(_, f)| !f.angle.is_finite()) {
-        return Err(Error::NonFinite { arg: "angles".into(), index: i, value: f.angle.to_string() });
+        return Err(Error::NonFinite {
+            arg: "angles".into(),
+            index: i,
+            value: f.angle.to_string(),
+        });
     }
     let per_frame: Vec<FrameGeometry> = frames
         .iter()
         .map(|f| {
             let t_base_camera = f.t_base_flange * sensor.t_flange_camera;
             let plane = laser_plane(&sensor.t_camera_laser0, f.angle);
-            FrameGeometry { plane, rotation: t_base_camera.rotation.to_rotation_matrix().into_inner(), translation: t_base_camera.translation.vector }
+            FrameGeometry {
+                plane,
+                rotation: t_base_camera.rotation.to_rotation_matrix().into_inner(),
+                translation: t_base_camera.translation.vector,
+            }
         })
         .collect();
     let table = RayTable::shared(&sensor.camera);
@@ -497,7 +609,10 @@ mod tests {
                 Translation3::new(-150.0, 3.0, 10.0),
                 UnitQuaternion::from_euler_angles(0.01, 0.02, -0.015),
             ),
-            t_flange_camera: Isometry3::from_parts(Translation3::new(20.0, -5.0, 80.0), UnitQuaternion::from_euler_angles(0.1, -0.05, 0.3)),
+            t_flange_camera: Isometry3::from_parts(
+                Translation3::new(20.0, -5.0, 80.0),
+                UnitQuaternion::from_euler_angles(0.1, -0.05, 0.3),
+            ),
         }
     }
 
@@ -508,7 +623,10 @@ mod tests {
             for v in (0..778).step_by(29) {
                 let ray = cam.ray(u as f64, v as f64).expect("converges");
                 let back = cam.project(&Point::from(ray * 3.0)).unwrap();
-                assert!((back[0] - u as f64).abs() < 1e-9 && (back[1] - v as f64).abs() < 1e-9, "{u},{v} -> {back:?}");
+                assert!(
+                    (back[0] - u as f64).abs() < 1e-9 && (back[1] - v as f64).abs() < 1e-9,
+                    "{u},{v} -> {back:?}"
+                );
             }
         }
     }
@@ -525,7 +643,9 @@ mod tests {
         let mut check = |u: f64, v: f64| {
             let exact = cam.ray(u, v).expect("exact converges");
             let fast = table.ray(u, v).expect("table converges");
-            worst = worst.max(((fast.x - exact.x) * cam.fx).abs()).max(((fast.y - exact.y) * cam.fy).abs());
+            worst = worst
+                .max(((fast.x - exact.x) * cam.fx).abs())
+                .max(((fast.y - exact.y) * cam.fy).abs());
         };
         for v in 0..778 {
             for u in 0..1032 {
@@ -570,7 +690,10 @@ mod tests {
         let frames: Vec<FramePose> = (0..5)
             .map(|i| FramePose {
                 angle: 0.2 + 0.06 * i as f64,
-                t_base_flange: Isometry3::from_parts(Translation3::new(300.0 + i as f64, -40.0, 700.0), UnitQuaternion::from_euler_angles(3.1, 0.05 * i as f64, 0.2)),
+                t_base_flange: Isometry3::from_parts(
+                    Translation3::new(300.0 + i as f64, -40.0, 700.0),
+                    UnitQuaternion::from_euler_angles(3.1, 0.05 * i as f64, 0.2),
+                ),
             })
             .collect();
         let (mut pixels, mut index, mut truth) = (vec![], vec![], vec![]);
@@ -602,13 +725,23 @@ mod tests {
 
     #[test]
     fn singular_geometry_is_reported_per_point() {
-        let s = Sensor { camera: camera([0.0; 5]), t_camera_laser0: Isometry3::identity(), t_flange_camera: Isometry3::identity() };
-        let frames = [FramePose { angle: 0.0, t_base_flange: Isometry3::identity() }];
+        let s = Sensor {
+            camera: camera([0.0; 5]),
+            t_camera_laser0: Isometry3::identity(),
+            t_flange_camera: Isometry3::identity(),
+        };
+        let frames = [FramePose {
+            angle: 0.0,
+            t_base_flange: Isometry3::identity(),
+        }];
         // The laser plane x = 0 contains the optical centre: every ray is in the plane or misses it.
         let out = triangulate(&s, &frames, &[[516.0, 100.0], [700.0, 100.0]], &[0, 0]).unwrap();
         assert_eq!(out.status[0], PointStatus::Parallel);
         assert!(out.points[0].x.is_nan());
-        let behind = Sensor { t_camera_laser0: Isometry3::translation(50.0, 0.0, 0.0), ..s };
+        let behind = Sensor {
+            t_camera_laser0: Isometry3::translation(50.0, 0.0, 0.0),
+            ..s
+        };
         let out = triangulate(&behind, &frames, &[[300.0, 100.0], [700.0, 100.0]], &[0, 0]).unwrap();
         assert_eq!(out.status, vec![PointStatus::Behind, PointStatus::Valid]);
     }
@@ -616,7 +749,10 @@ mod tests {
     #[test]
     fn malformed_input_is_an_error_naming_the_argument() {
         let s = sensor();
-        let frames = [FramePose { angle: 0.1, t_base_flange: Isometry3::identity() }];
+        let frames = [FramePose {
+            angle: 0.1,
+            t_base_flange: Isometry3::identity(),
+        }];
         let e = triangulate(&s, &frames, &[[10.0, 10.0]], &[1]).unwrap_err();
         assert!(e.to_string().starts_with("frame_index"), "{e}");
         let e = triangulate(&s, &frames, &[[2000.0, 10.0]], &[0]).unwrap_err();

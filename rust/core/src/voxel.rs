@@ -21,11 +21,17 @@ pub struct Downsampled {
 /// Averages the points (and normals) that fall in each cube of edge `voxel_size` mm.
 pub fn voxel_downsample(points: &[Point], normals: Option<&[Vector3<f64>]>, voxel_size: f64) -> Result<Downsampled> {
     if !(voxel_size.is_finite() && voxel_size > 0.0) {
-        return Err(Error::invalid("voxel_size", format!("must be a positive length in mm, got {voxel_size}")));
+        return Err(Error::invalid(
+            "voxel_size",
+            format!("must be a positive length in mm, got {voxel_size}"),
+        ));
     }
     if let Some(n) = normals {
         if n.len() != points.len() {
-            return Err(Error::invalid("normals", format!("has {} rows but points has {}", n.len(), points.len())));
+            return Err(Error::invalid(
+                "normals",
+                format!("has {} rows but points has {}", n.len(), points.len()),
+            ));
         }
     }
     let inv = 1.0 / voxel_size;
@@ -33,7 +39,11 @@ pub fn voxel_downsample(points: &[Point], normals: Option<&[Vector3<f64>]>, voxe
     let mut sums: Vec<(Vector3<f64>, Vector3<f64>, usize)> = Vec::new();
     let mut first_index = Vec::new();
     for (i, p) in points.iter().enumerate() {
-        let key = [(p.x * inv).floor() as i64, (p.y * inv).floor() as i64, (p.z * inv).floor() as i64];
+        let key = [
+            (p.x * inv).floor() as i64,
+            (p.y * inv).floor() as i64,
+            (p.z * inv).floor() as i64,
+        ];
         let slot = *slot_of.entry(key).or_insert_with(|| {
             sums.push((Vector3::zeros(), Vector3::zeros(), 0));
             first_index.push(i);
@@ -52,13 +62,21 @@ pub fn voxel_downsample(points: &[Point], normals: Option<&[Vector3<f64>]>, voxe
             .zip(&first_index)
             .map(|(s, &i)| {
                 let n = s.1.norm();
-                if n > 1e-12 { s.1 / n } else { normals.unwrap()[i] }
+                if n > 1e-12 {
+                    s.1 / n
+                } else {
+                    normals.unwrap()[i]
+                }
             })
             .collect()
     } else {
         Vec::new()
     };
-    Ok(Downsampled { points: points_out, normals: normals_out, first_index })
+    Ok(Downsampled {
+        points: points_out,
+        normals: normals_out,
+        first_index,
+    })
 }
 
 /// Points kept at least `radius` apart: each candidate is accepted unless an accepted point lies
@@ -73,17 +91,29 @@ pub struct DiskGrid {
 impl DiskGrid {
     /// An empty selection with disk radius `radius` (mm, positive).
     pub fn new(radius: f64) -> Self {
-        DiskGrid { inv: 1.0 / radius, r2: radius * radius, cells: HashMap::new(), points: Vec::new() }
+        DiskGrid {
+            inv: 1.0 / radius,
+            r2: radius * radius,
+            cells: HashMap::new(),
+            points: Vec::new(),
+        }
     }
 
     /// Accepts `p` when no accepted point lies within the radius; returns whether it did.
     pub fn try_insert(&mut self, p: Point) -> bool {
-        let key = [(p.x * self.inv).floor() as i64, (p.y * self.inv).floor() as i64, (p.z * self.inv).floor() as i64];
+        let key = [
+            (p.x * self.inv).floor() as i64,
+            (p.y * self.inv).floor() as i64,
+            (p.z * self.inv).floor() as i64,
+        ];
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
                     if let Some(ids) = self.cells.get(&[key[0] + dx, key[1] + dy, key[2] + dz]) {
-                        if ids.iter().any(|&k| (self.points[k as usize] - p).norm_squared() < self.r2) {
+                        if ids
+                            .iter()
+                            .any(|&k| (self.points[k as usize] - p).norm_squared() < self.r2)
+                        {
                             return false;
                         }
                     }
@@ -109,7 +139,11 @@ mod tests {
 
     #[test]
     fn one_point_per_voxel_at_the_mean() {
-        let pts = vec![Point::new(0.1, 0.1, 0.1), Point::new(0.3, 0.5, 0.9), Point::new(1.5, 0.0, 0.0)];
+        let pts = vec![
+            Point::new(0.1, 0.1, 0.1),
+            Point::new(0.3, 0.5, 0.9),
+            Point::new(1.5, 0.0, 0.0),
+        ];
         let d = voxel_downsample(&pts, None, 1.0).unwrap();
         assert_eq!(d.points.len(), 2);
         assert!((d.points[0] - Point::new(0.2, 0.3, 0.5)).norm() < 1e-12);

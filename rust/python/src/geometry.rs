@@ -73,16 +73,25 @@ fn faces_to_py<'py>(py: Python<'py>, faces: &[[u32; 3]]) -> Bound<'py, PyArray2<
     PyArray2::from_owned_array(py, Array2::from_shape_vec((faces.len(), 3), flat).expect("m×3"))
 }
 
-pub(crate) fn mesh_from_py(vertices: &PyReadonlyArray2<'_, f64>, faces: &PyReadonlyArray2<'_, i64>) -> PyResult<TriMesh> {
+pub(crate) fn mesh_from_py(
+    vertices: &PyReadonlyArray2<'_, f64>,
+    faces: &PyReadonlyArray2<'_, i64>,
+) -> PyResult<TriMesh> {
     let v = points(vertices, "vertices")?;
     let f = faces.as_array();
     if f.ncols() != 3 {
-        return Err(invalid("faces", &format!("must have shape (M, 3), got {:?}", f.shape())));
+        return Err(invalid(
+            "faces",
+            &format!("must have shape (M, 3), got {:?}", f.shape()),
+        ));
     }
     let mut out = Vec::with_capacity(f.nrows());
     for (i, r) in f.rows().into_iter().enumerate() {
         if r.iter().any(|&x| x < 0 || x >= v.len() as i64) {
-            return Err(invalid("faces", &format!("row {i} {:?} indexes outside the {} vertices", r.to_vec(), v.len())));
+            return Err(invalid(
+                "faces",
+                &format!("row {i} {:?} indexes outside the {} vertices", r.to_vec(), v.len()),
+            ));
         }
         out.push([r[0] as u32, r[1] as u32, r[2] as u32]);
     }
@@ -117,30 +126,54 @@ fn sample_mesh<'py>(
         (None, Some(c)) => Density::Count(c),
         _ => return Err(invalid("spacing/count", "give exactly one of spacing (mm) or count")),
     };
-    let (s, diameter, area) = run(py, move || Ok((sample_surface(&mesh, density, seed)?, mesh.diameter(), mesh.area())))?;
-    Ok((points_to_py(py, &s.points), vectors_to_py(py, &s.normals), diameter, area))
+    let (s, diameter, area) = run(py, move || {
+        Ok((sample_surface(&mesh, density, seed)?, mesh.diameter(), mesh.area()))
+    })?;
+    Ok((
+        points_to_py(py, &s.points),
+        vectors_to_py(py, &s.normals),
+        diameter,
+        area,
+    ))
 }
 
 /// Reads a PLY point cloud: (points, normals or None).
 #[pyfunction]
 fn read_ply<'py>(py: Python<'py>, path: PathBuf) -> PyResult<(Arr<'py>, Option<Arr<'py>>)> {
     let d = run(py, move || mesh_io::read_ply(&path))?;
-    Ok((points_to_py(py, &d.points), d.normals.as_ref().map(|n| vectors_to_py(py, n))))
+    Ok((
+        points_to_py(py, &d.points),
+        d.normals.as_ref().map(|n| vectors_to_py(py, n)),
+    ))
 }
 
 /// Writes a PLY point cloud.
 #[pyfunction]
 #[pyo3(signature = (path, points_in, normals, ascii))]
-fn write_ply(py: Python<'_>, path: PathBuf, points_in: PyReadonlyArray2<'_, f64>, normals: Option<PyReadonlyArray2<'_, f64>>, ascii: bool) -> PyResult<()> {
+fn write_ply(
+    py: Python<'_>,
+    path: PathBuf,
+    points_in: PyReadonlyArray2<'_, f64>,
+    normals: Option<PyReadonlyArray2<'_, f64>>,
+    ascii: bool,
+) -> PyResult<()> {
     let pts = points(&points_in, "points")?;
     let ns = normals.as_ref().map(|n| vectors(n, "normals")).transpose()?;
     run(py, move || mesh_io::write_ply(&path, &pts, ns.as_deref(), ascii))
 }
 
 fn part_to_py<'py>(py: Python<'py>, part: Part) -> (Arr<'py>, Bound<'py, PyArray2<i64>>, Arr<'py>) {
-    let rows: Vec<f64> = part.branches.iter().flat_map(|b| [b.direction.x, b.direction.y, b.direction.z, b.length, b.radius]).collect();
+    let rows: Vec<f64> = part
+        .branches
+        .iter()
+        .flat_map(|b| [b.direction.x, b.direction.y, b.direction.z, b.length, b.radius])
+        .collect();
     let branches = PyArray2::from_owned_array(py, Array2::from_shape_vec((part.branches.len(), 5), rows).expect("k×5"));
-    (points_to_py(py, &part.mesh.vertices), faces_to_py(py, &part.mesh.faces), branches)
+    (
+        points_to_py(py, &part.mesh.vertices),
+        faces_to_py(py, &part.mesh.faces),
+        branches,
+    )
 }
 
 /// The paper's tee: (vertices, faces, branches as rows [dx, dy, dz, length, radius]).
@@ -155,19 +188,41 @@ fn part_tee<'py>(
     boss_height: f64,
     resolution: f64,
 ) -> PyResult<(Arr<'py>, Bound<'py, PyArray2<i64>>, Arr<'py>)> {
-    let p = parts::TeeParams { outer_diameter, run_length, branch_length, boss_semi_axes, boss_height, resolution };
+    let p = parts::TeeParams {
+        outer_diameter,
+        run_length,
+        branch_length,
+        boss_semi_axes,
+        boss_height,
+        resolution,
+    };
     Ok(part_to_py(py, run(py, move || parts::tee(&p))?))
 }
 
 /// An elbow or a cross: (vertices, faces, branches).
 #[pyfunction]
 #[allow(clippy::type_complexity)]
-fn part_fitting<'py>(py: Python<'py>, kind: &str, outer_diameter: f64, branch_length: f64, resolution: f64) -> PyResult<(Arr<'py>, Bound<'py, PyArray2<i64>>, Arr<'py>)> {
-    let p = parts::FittingParams { outer_diameter, branch_length, resolution };
+fn part_fitting<'py>(
+    py: Python<'py>,
+    kind: &str,
+    outer_diameter: f64,
+    branch_length: f64,
+    resolution: f64,
+) -> PyResult<(Arr<'py>, Bound<'py, PyArray2<i64>>, Arr<'py>)> {
+    let p = parts::FittingParams {
+        outer_diameter,
+        branch_length,
+        resolution,
+    };
     let part = match kind {
         "elbow" => run(py, move || parts::elbow(&p))?,
         "cross" => run(py, move || parts::cross(&p))?,
-        other => return Err(invalid("kind", &format!("unknown fitting {other:?}; use \"elbow\" or \"cross\""))),
+        other => {
+            return Err(invalid(
+                "kind",
+                &format!("unknown fitting {other:?}; use \"elbow\" or \"cross\""),
+            ))
+        }
     };
     Ok(part_to_py(py, part))
 }

@@ -6,15 +6,17 @@ mod errors;
 mod geometry;
 mod pose;
 mod registration;
-mod triangulate;
 mod sim;
+mod triangulate;
 
 use pyo3::prelude::*;
 
 /// Panics inside the guarded region; the tests use it to prove no panic reaches Python.
 #[pyfunction]
 fn _panic_for_test(py: Python<'_>) -> PyResult<()> {
-    errors::run(py, || -> Result<(), binpick_core::Error> { panic!("deliberate test panic") })
+    errors::run(py, || -> Result<(), binpick_core::Error> {
+        panic!("deliberate test panic")
+    })
 }
 
 #[pymodule]

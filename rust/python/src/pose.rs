@@ -28,7 +28,10 @@ fn vector3(s: &[f64], arg: &str) -> PyResult<Vector3<f64>> {
     Ok(Vector3::new(s[0], s[1], s[2]))
 }
 
-fn layout_from(branches: Option<PyReadonlyArray2<'_, f64>>, special: Option<PyReadonlyArray1<'_, f64>>) -> PyResult<Option<BranchLayout>> {
+fn layout_from(
+    branches: Option<PyReadonlyArray2<'_, f64>>,
+    special: Option<PyReadonlyArray1<'_, f64>>,
+) -> PyResult<Option<BranchLayout>> {
     let Some(b) = branches else { return Ok(None) };
     let a = b.as_array();
     if a.ncols() != 5 {
@@ -42,7 +45,11 @@ fn layout_from(branches: Option<PyReadonlyArray2<'_, f64>>, special: Option<PyRe
         None => None,
     };
     Ok(Some(BranchLayout {
-        directions: a.rows().into_iter().map(|r| Vector3::new(r[0], r[1], r[2]).normalize()).collect(),
+        directions: a
+            .rows()
+            .into_iter()
+            .map(|r| Vector3::new(r[0], r[1], r[2]).normalize())
+            .collect(),
         lengths: a.rows().into_iter().map(|r| r[3]).collect(),
         radius: a.rows().into_iter().map(|r| r[4]).fold(0.0, f64::max),
         special,
@@ -83,8 +90,14 @@ impl PreparedModel {
             }
             let mut from_cache = false;
             if let Some((sampling_ratio, angle_bins, rotation_bins)) = ppf {
-                let config = PpfConfig { sampling_ratio, angle_bins, rotation_bins };
-                let cached = ppf_cache.and_then(|b| PpfModel::from_bytes(&b).ok()).filter(|t| t.config() == &config);
+                let config = PpfConfig {
+                    sampling_ratio,
+                    angle_bins,
+                    rotation_bins,
+                };
+                let cached = ppf_cache
+                    .and_then(|b| PpfModel::from_bytes(&b).ok())
+                    .filter(|t| t.config() == &config);
                 match cached.map(|t| m.set_ppf(t)) {
                     Some(Ok(())) => from_cache = true,
                     _ => m.build_ppf(config)?,
@@ -92,7 +105,10 @@ impl PreparedModel {
             }
             Ok((m, from_cache))
         })?;
-        Ok(PreparedModel { inner: Arc::new(inner), ppf_from_cache: from_cache })
+        Ok(PreparedModel {
+            inner: Arc::new(inner),
+            ppf_from_cache: from_cache,
+        })
     }
 
     /// The PPF table as bytes (for the cache on disk), or None when it was not built.
@@ -130,7 +146,11 @@ impl PreparedModel {
     }
 
     /// The canonical form of a pose (4,4) under the symmetries.
-    fn canonical<'py>(&self, py: Python<'py>, t_scene_model: PyReadonlyArray2<'py, f64>) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    fn canonical<'py>(
+        &self,
+        py: Python<'py>,
+        t_scene_model: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let m = crate::convert::matrix4(&t_scene_model, "T_scene_model")?;
         let t = binpick_core::cloud::isometry_from_matrix("T_scene_model", &m).map_err(crate::errors::to_py)?;
         Ok(isometry_to_py(py, &self.inner.symmetries.canonical(&t)))
@@ -138,9 +158,15 @@ impl PreparedModel {
 
     /// (rotation error rad, translation error mm) of `estimate` against `truth`, minimised over
     /// the symmetries.
-    fn pose_error(&self, estimate: PyReadonlyArray2<'_, f64>, truth: PyReadonlyArray2<'_, f64>) -> PyResult<(f64, f64)> {
-        let a = binpick_core::cloud::isometry_from_matrix("estimate", &crate::convert::matrix4(&estimate, "estimate")?).map_err(crate::errors::to_py)?;
-        let b = binpick_core::cloud::isometry_from_matrix("truth", &crate::convert::matrix4(&truth, "truth")?).map_err(crate::errors::to_py)?;
+    fn pose_error(
+        &self,
+        estimate: PyReadonlyArray2<'_, f64>,
+        truth: PyReadonlyArray2<'_, f64>,
+    ) -> PyResult<(f64, f64)> {
+        let a = binpick_core::cloud::isometry_from_matrix("estimate", &crate::convert::matrix4(&estimate, "estimate")?)
+            .map_err(crate::errors::to_py)?;
+        let b = binpick_core::cloud::isometry_from_matrix("truth", &crate::convert::matrix4(&truth, "truth")?)
+            .map_err(crate::errors::to_py)?;
         Ok(self.inner.symmetries.pose_error(&a, &b))
     }
 }
@@ -212,7 +238,12 @@ fn estimate_poses<'py>(
         "centroid" => CoarseMethod::Centroid,
         "ppf" => CoarseMethod::Ppf,
         "auto" => CoarseMethod::Auto,
-        other => return Err(invalid("method", &format!("unknown coarse method {other:?}; use \"auto\", \"ppf\", \"ccp\" or \"centroid\""))),
+        other => {
+            return Err(invalid(
+                "method",
+                &format!("unknown coarse method {other:?}; use \"auto\", \"ppf\", \"ccp\" or \"centroid\""),
+            ))
+        }
     };
     let defaults = DetectConfig::default();
     let detect = DetectConfig {

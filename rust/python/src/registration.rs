@@ -30,21 +30,44 @@ fn icp<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let src = points(&source, "source")?;
     let tgt = points(&target, "target")?;
-    let normals = target_normals.as_ref().map(|n| vectors(n, "target_normals")).transpose()?;
+    let normals = target_normals
+        .as_ref()
+        .map(|n| vectors(n, "target_normals"))
+        .transpose()?;
     let init_m = matrix4(&init, "init")?;
     let method = match method {
         "point_to_point" => IcpMethod::PointToPoint,
         "point_to_plane" => IcpMethod::PointToPlane,
-        other => return Err(invalid("method", &format!("unknown method {other:?}; use \"point_to_point\" or \"point_to_plane\""))),
+        other => {
+            return Err(invalid(
+                "method",
+                &format!("unknown method {other:?}; use \"point_to_point\" or \"point_to_plane\""),
+            ))
+        }
     };
     let kernel = match kernel {
         "none" => RobustKernel::None,
         "huber" => RobustKernel::Huber(kernel_scale),
         "tukey" => RobustKernel::Tukey(kernel_scale),
         "cauchy" => RobustKernel::Cauchy(kernel_scale),
-        other => return Err(invalid("kernel", &format!("unknown kernel {other:?}; use \"none\", \"huber\", \"tukey\" or \"cauchy\""))),
+        other => {
+            return Err(invalid(
+                "kernel",
+                &format!("unknown kernel {other:?}; use \"none\", \"huber\", \"tukey\" or \"cauchy\""),
+            ))
+        }
     };
-    let config = IcpConfig { method, max_correspondence_distance, max_iterations, rotation_tolerance, translation_tolerance, kernel, trim_fraction, num_threads, approximate: false };
+    let config = IcpConfig {
+        method,
+        max_correspondence_distance,
+        max_iterations,
+        rotation_tolerance,
+        translation_tolerance,
+        kernel,
+        trim_fraction,
+        num_threads,
+        approximate: false,
+    };
     let res = run(py, move || {
         let init_t = isometry_from_matrix("init", &init_m)?;
         let target = IcpTarget::new(tgt, normals)?;

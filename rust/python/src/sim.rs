@@ -7,7 +7,9 @@ use crate::errors::{invalid, run};
 use binpick_core::cloud::Point;
 use binpick_core::mesh::TriMesh;
 use binpick_core::sim::pile::{convex_decomposition, max_interpenetration, BinSpec, Pile, PileParams, SettleReport};
-use binpick_core::sim::render::{render_checkerboard, Camera, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View};
+use binpick_core::sim::render::{
+    render_checkerboard, Camera, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View,
+};
 use binpick_core::Error;
 use nalgebra::{Isometry3, Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
 use numpy::ndarray::{Array2, Array3};
@@ -32,7 +34,10 @@ fn mesh_in(vertices: &PyReadonlyArray2<'_, f64>, faces: &PyReadonlyArray2<'_, i6
     let v = points(vertices, "vertices")?;
     let f = faces.as_array();
     if f.ncols() != 3 {
-        return Err(invalid("faces", &format!("must have shape (M, 3), got {:?}", f.shape())));
+        return Err(invalid(
+            "faces",
+            &format!("must have shape (M, 3), got {:?}", f.shape()),
+        ));
     }
     let n = v.len() as i64;
     let mut out = Vec::with_capacity(f.nrows());
@@ -42,7 +47,10 @@ fn mesh_in(vertices: &PyReadonlyArray2<'_, f64>, faces: &PyReadonlyArray2<'_, i6
         }
         out.push([row[0] as u32, row[1] as u32, row[2] as u32]);
     }
-    Ok(TriMesh { vertices: v, faces: out })
+    Ok(TriMesh {
+        vertices: v,
+        faces: out,
+    })
 }
 
 fn mesh_out<'py>(py: Python<'py>, v: &[Point], f: &[[u32; 3]]) -> (Arr<'py>, Bound<'py, PyArray2<i64>>) {
@@ -72,7 +80,12 @@ fn report(r: SettleReport) -> (usize, f64, bool, f64) {
 }
 
 fn bin_spec(center: (f64, f64), size: (f64, f64, f64), floor_z: f64, wall_thickness: f64) -> BinSpec {
-    BinSpec { center, inner_size: Vector3::new(size.0, size.1, size.2), floor_z, wall_thickness }
+    BinSpec {
+        center,
+        inner_size: Vector3::new(size.0, size.1, size.2),
+        floor_z,
+        wall_thickness,
+    }
 }
 
 /// A physics pile: `count` instances of a mesh dropped into a bin and settled.
@@ -106,7 +119,17 @@ impl PySimPile {
     ) -> PyResult<Self> {
         let mesh = mesh_in(&vertices, &faces)?;
         let bin = bin_spec(bin_center, bin_size, floor_z, wall_thickness);
-        let params = PileParams { seed, friction, restitution, time_step, max_settle_time, skin, decomposition_resolution, max_convex_hulls, ..Default::default() };
+        let params = PileParams {
+            seed,
+            friction,
+            restitution,
+            time_step,
+            max_settle_time,
+            skin,
+            decomposition_resolution,
+            max_convex_hulls,
+            ..Default::default()
+        };
         let inner = run(py, move || Pile::drop(&mesh, count, &bin, &params))?;
         Ok(PySimPile { inner })
     }
@@ -148,36 +171,67 @@ impl PySimPile {
 
     /// The convex pieces (vertices, faces) a part collides with, model frame.
     fn collision_hulls<'py>(&self, py: Python<'py>) -> Vec<(Arr<'py>, Bound<'py, PyArray2<i64>>)> {
-        self.inner.collision_hulls().iter().map(|(v, f)| mesh_out(py, v, f)).collect()
+        self.inner
+            .collision_hulls()
+            .iter()
+            .map(|(v, f)| mesh_out(py, v, f))
+            .collect()
     }
 }
 
 /// Convex pieces enclosing a mesh, as the pile uses them: list of (vertices, faces).
 #[pyfunction]
 #[pyo3(signature = (vertices, faces, decomposition_resolution, max_convex_hulls))]
-fn sim_convex_decomposition<'py>(py: Python<'py>, vertices: PyReadonlyArray2<'py, f64>, faces: PyReadonlyArray2<'py, i64>, decomposition_resolution: u32, max_convex_hulls: u32) -> PyResult<Vec<(Arr<'py>, Bound<'py, PyArray2<i64>>)>> {
+fn sim_convex_decomposition<'py>(
+    py: Python<'py>,
+    vertices: PyReadonlyArray2<'py, f64>,
+    faces: PyReadonlyArray2<'py, i64>,
+    decomposition_resolution: u32,
+    max_convex_hulls: u32,
+) -> PyResult<Vec<(Arr<'py>, Bound<'py, PyArray2<i64>>)>> {
     let mesh = mesh_in(&vertices, &faces)?;
-    let params = PileParams { decomposition_resolution, max_convex_hulls, ..Default::default() };
+    let params = PileParams {
+        decomposition_resolution,
+        max_convex_hulls,
+        ..Default::default()
+    };
     let hulls = run(py, move || convex_decomposition(&mesh, &params))?;
     Ok(hulls.iter().map(|(v, f)| mesh_out(py, v, f)).collect())
 }
 
 /// Deepest interpenetration (mm) of mesh instances at `poses` (N, 4, 4), from surface `samples`.
 #[pyfunction]
-fn sim_max_interpenetration(py: Python<'_>, vertices: PyReadonlyArray2<'_, f64>, faces: PyReadonlyArray2<'_, i64>, poses: PyReadonlyArray3<'_, f64>, samples: PyReadonlyArray2<'_, f64>) -> PyResult<f64> {
+fn sim_max_interpenetration(
+    py: Python<'_>,
+    vertices: PyReadonlyArray2<'_, f64>,
+    faces: PyReadonlyArray2<'_, i64>,
+    poses: PyReadonlyArray3<'_, f64>,
+    samples: PyReadonlyArray2<'_, f64>,
+) -> PyResult<f64> {
     let mesh = mesh_in(&vertices, &faces)?;
     let p = poses.as_array();
     if p.shape()[1] != 4 || p.shape()[2] != 4 {
-        return Err(invalid("poses", &format!("must have shape (N, 4, 4), got {:?}", p.shape())));
+        return Err(invalid(
+            "poses",
+            &format!("must have shape (N, 4, 4), got {:?}", p.shape()),
+        ));
     }
-    let t: Vec<Isometry3<f64>> = (0..p.shape()[0]).map(|k| isometry(&Matrix4::from_fn(|r, c| p[[k, r, c]]))).collect();
+    let t: Vec<Isometry3<f64>> = (0..p.shape()[0])
+        .map(|k| isometry(&Matrix4::from_fn(|r, c| p[[k, r, c]])))
+        .collect();
     let s = points(&samples, "samples")?;
     run(py, move || max_interpenetration(&mesh, &t, &s))
 }
 
 /// The bin's render mesh (vertices, faces) in the base frame.
 #[pyfunction]
-fn sim_bin_mesh<'py>(py: Python<'py>, center: (f64, f64), size: (f64, f64, f64), floor_z: f64, wall_thickness: f64) -> PyResult<(Arr<'py>, Bound<'py, PyArray2<i64>>)> {
+fn sim_bin_mesh<'py>(
+    py: Python<'py>,
+    center: (f64, f64),
+    size: (f64, f64, f64),
+    floor_z: f64,
+    wall_thickness: f64,
+) -> PyResult<(Arr<'py>, Bound<'py, PyArray2<i64>>)> {
     let bin = bin_spec(center, size, floor_z, wall_thickness);
     bin.validate().map_err(crate::errors::to_py)?;
     let m = bin.mesh();
@@ -189,20 +243,53 @@ type LightingArgs = (f64, f64, [f64; 3], f64);
 type NoiseArgs = (f64, f64, f64, f64, f64);
 
 fn camera(c: CameraArgs) -> Camera {
-    Camera { width: c.0, height: c.1, fx: c.2, fy: c.3, cx: c.4, cy: c.5, dist: c.6 }
+    Camera {
+        width: c.0,
+        height: c.1,
+        fx: c.2,
+        fy: c.3,
+        cx: c.4,
+        cy: c.5,
+        dist: c.6,
+    }
 }
 
 fn lighting(l: LightingArgs) -> Lighting {
-    Lighting { ambient: l.0, lamp: l.1, lamp_direction: Vector3::from(l.2), background: l.3 }
+    Lighting {
+        ambient: l.0,
+        lamp: l.1,
+        lamp_direction: Vector3::from(l.2),
+        background: l.3,
+    }
 }
 
 fn noise(n: NoiseArgs) -> SensorNoise {
-    SensorNoise { read_noise: n.0, shot_noise: n.1, speckle: n.2, reflections: n.3, blur: n.4 }
+    SensorNoise {
+        read_noise: n.0,
+        shot_noise: n.1,
+        speckle: n.2,
+        reflections: n.3,
+        blur: n.4,
+    }
 }
 
 #[allow(clippy::too_many_arguments)]
-fn laser(t: &PyReadonlyArray2<'_, f64>, sheet_sigma: f64, power: f64, fan_angle: f64, color: [f64; 3], reference_distance: f64) -> PyResult<Laser> {
-    Ok(Laser { t_camera_laser0: transform(t, "T_camera_laser")?, sheet_sigma, power, fan_angle, color, reference_distance })
+fn laser(
+    t: &PyReadonlyArray2<'_, f64>,
+    sheet_sigma: f64,
+    power: f64,
+    fan_angle: f64,
+    color: [f64; 3],
+    reference_distance: f64,
+) -> PyResult<Laser> {
+    Ok(Laser {
+        t_camera_laser0: transform(t, "T_camera_laser")?,
+        sheet_sigma,
+        power,
+        fan_angle,
+        color,
+        reference_distance,
+    })
 }
 
 fn image_out<'py>(py: Python<'py>, data: Vec<u8>, h: usize, w: usize) -> Bound<'py, PyArray3<u8>> {
@@ -223,10 +310,27 @@ impl PySimScene {
     }
 
     /// Adds a mesh with its material; returns the mesh index.
-    fn add_mesh(&mut self, py: Python<'_>, vertices: PyReadonlyArray2<'_, f64>, faces: PyReadonlyArray2<'_, i64>, albedo: [f64; 3], specular: f64, shininess: f64) -> PyResult<usize> {
+    fn add_mesh(
+        &mut self,
+        py: Python<'_>,
+        vertices: PyReadonlyArray2<'_, f64>,
+        faces: PyReadonlyArray2<'_, i64>,
+        albedo: [f64; 3],
+        specular: f64,
+        shininess: f64,
+    ) -> PyResult<usize> {
         let mesh = mesh_in(&vertices, &faces)?;
         let scene = &mut self.inner;
-        run(py, move || scene.add_mesh(&mesh, Material { albedo, specular, shininess }))
+        run(py, move || {
+            scene.add_mesh(
+                &mesh,
+                Material {
+                    albedo,
+                    specular,
+                    shininess,
+                },
+            )
+        })
     }
 
     /// Places mesh `mesh` at `T_base_object` as instance `id`.
@@ -253,7 +357,11 @@ impl PySimScene {
 
     /// (distances (N,) mm, ids (N,) int32): each point's (base frame) exact distance to the
     /// nearest surface and that surface's instance id; (inf, −1) in an empty scene.
-    fn nearest_surface<'py>(&self, py: Python<'py>, points_base: PyReadonlyArray2<'py, f64>) -> PyResult<(Bound<'py, numpy::PyArray1<f64>>, Bound<'py, numpy::PyArray1<i32>>)> {
+    fn nearest_surface<'py>(
+        &self,
+        py: Python<'py>,
+        points_base: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<(Bound<'py, numpy::PyArray1<f64>>, Bound<'py, numpy::PyArray1<i32>>)> {
         let pts = points(&points_base, "points")?;
         let scene = self.inner.clone();
         let found = run(py, move || Ok::<_, Error>(scene.nearest_surface(&pts)))?;
@@ -263,11 +371,20 @@ impl PySimScene {
 
     /// Casts the camera's rays from `T_base_camera`.
     #[pyo3(signature = (camera_args, t_base_camera, lighting_args, num_threads))]
-    fn view(&self, py: Python<'_>, camera_args: CameraArgs, t_base_camera: PyReadonlyArray2<'_, f64>, lighting_args: LightingArgs, num_threads: usize) -> PyResult<PySimView> {
+    fn view(
+        &self,
+        py: Python<'_>,
+        camera_args: CameraArgs,
+        t_base_camera: PyReadonlyArray2<'_, f64>,
+        lighting_args: LightingArgs,
+        num_threads: usize,
+    ) -> PyResult<PySimView> {
         let t = transform(&t_base_camera, "T_base_camera")?;
         let (cam, light) = (camera(camera_args), lighting(lighting_args));
         let scene = self.inner.clone();
-        let view = run(py, move || binpick_core::parallel::with_threads(num_threads, || scene.view(&cam, &t, &light)))?;
+        let view = run(py, move || {
+            binpick_core::parallel::with_threads(num_threads, || scene.view(&cam, &t, &light))
+        })?;
         Ok(PySimView { inner: Arc::new(view) })
     }
 }
@@ -283,13 +400,19 @@ impl PySimView {
     /// (H, W) float32 depth, mm, NaN where nothing is hit.
     fn depth<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
         let c = self.inner.camera();
-        PyArray2::from_owned_array(py, Array2::from_shape_vec((c.height, c.width), self.inner.depth()).expect("h×w"))
+        PyArray2::from_owned_array(
+            py,
+            Array2::from_shape_vec((c.height, c.width), self.inner.depth()).expect("h×w"),
+        )
     }
 
     /// (H, W) int32 instance ids, −1 for none.
     fn ids<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i32>> {
         let c = self.inner.camera();
-        PyArray2::from_owned_array(py, Array2::from_shape_vec((c.height, c.width), self.inner.ids()).expect("h×w"))
+        PyArray2::from_owned_array(
+            py,
+            Array2::from_shape_vec((c.height, c.width), self.inner.ids()).expect("h×w"),
+        )
     }
 
     /// (H, W, 3) float32 surface points in the camera frame (NaN where none).
@@ -307,7 +430,12 @@ impl PySimView {
     }
 
     /// The frame without the laser.
-    fn ambient_frame<'py>(&self, py: Python<'py>, noise_args: NoiseArgs, seed: u64) -> PyResult<Bound<'py, PyArray3<u8>>> {
+    fn ambient_frame<'py>(
+        &self,
+        py: Python<'py>,
+        noise_args: NoiseArgs,
+        seed: u64,
+    ) -> PyResult<Bound<'py, PyArray3<u8>>> {
         let view = self.inner.clone();
         let n = noise(noise_args);
         let img = run(py, move || view.ambient_frame(&n, seed))?;
@@ -333,7 +461,14 @@ impl PySimView {
         seed: u64,
         num_threads: usize,
     ) -> PyResult<Bound<'py, numpy::PyArray4<u8>>> {
-        let l = laser(&t_camera_laser0, sheet_sigma, power, fan_angle, color, reference_distance)?;
+        let l = laser(
+            &t_camera_laser0,
+            sheet_sigma,
+            power,
+            fan_angle,
+            color,
+            reference_distance,
+        )?;
         let n = noise(noise_args);
         let view = self.inner.clone();
         let k = angles.len();
@@ -358,7 +493,14 @@ impl PySimView {
 #[pyfunction]
 fn sim_default_laser(py: Python<'_>) -> PyResult<(Arr<'_>, f64, f64, f64, [f64; 3], f64)> {
     let l = run(py, || Ok::<_, Error>(Laser::default()))?;
-    Ok((crate::convert::isometry_to_py(py, &l.t_camera_laser0), l.sheet_sigma, l.power, l.fan_angle, l.color, l.reference_distance))
+    Ok((
+        crate::convert::isometry_to_py(py, &l.t_camera_laser0),
+        l.sheet_sigma,
+        l.power,
+        l.fan_angle,
+        l.color,
+        l.reference_distance,
+    ))
 }
 
 /// (H, W, 3) uint8 image of a checkerboard at `T_camera_board`, optionally with the laser line.
@@ -379,11 +521,27 @@ fn sim_render_checkerboard<'py>(
 ) -> PyResult<Bound<'py, PyArray3<u8>>> {
     let cam = camera(camera_args);
     let (h, w) = (cam.height, cam.width);
-    let b = Checkerboard { cols: board.0, rows: board.1, square: board.2, margin: board.3 };
+    let b = Checkerboard {
+        cols: board.0,
+        rows: board.1,
+        square: board.2,
+        margin: board.3,
+    };
     let t = transform(&t_camera_board, "T_camera_board")?;
     let l = laser_args.map(|a| laser(&a.0, a.1, a.2, a.3, a.4, a.5)).transpose()?;
     let (light, n) = (lighting(lighting_args), noise(noise_args));
-    let img = run(py, move || render_checkerboard(&cam, &b, &t, &light, l.as_ref().map(|l| (l, angle)), &n, supersample, seed))?;
+    let img = run(py, move || {
+        render_checkerboard(
+            &cam,
+            &b,
+            &t,
+            &light,
+            l.as_ref().map(|l| (l, angle)),
+            &n,
+            supersample,
+            seed,
+        )
+    })?;
     Ok(image_out(py, img, h, w))
 }
 

@@ -9,14 +9,22 @@ use nalgebra::{Matrix3, Matrix4, Vector3};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
 
-fn camera(width: u32, height: u32, k: &PyReadonlyArray2<'_, f64>, dist: &PyReadonlyArray1<'_, f64>) -> PyResult<Camera> {
+fn camera(
+    width: u32,
+    height: u32,
+    k: &PyReadonlyArray2<'_, f64>,
+    dist: &PyReadonlyArray1<'_, f64>,
+) -> PyResult<Camera> {
     let k = k.as_array();
     if k.shape() != [3, 3] {
         return Err(invalid("K", &format!("must have shape (3, 3), got {:?}", k.shape())));
     }
     let d = dist.as_array();
     if d.len() != 5 {
-        return Err(invalid("dist", &format!("must hold 5 coefficients [k1, k2, p1, p2, k3], got {}", d.len())));
+        return Err(invalid(
+            "dist",
+            &format!("must hold 5 coefficients [k1, k2, p1, p2, k3], got {}", d.len()),
+        ));
     }
     let km = Matrix3::from_fn(|r, c| k[[r, c]]);
     Camera::new(width, height, &km, [d[0], d[1], d[2], d[3], d[4]]).map_err(crate::errors::to_py)
@@ -25,7 +33,10 @@ fn camera(width: u32, height: u32, k: &PyReadonlyArray2<'_, f64>, dist: &PyReado
 fn pixel_list(arr: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 2]>> {
     let a = arr.as_array();
     if a.ncols() != 2 {
-        return Err(invalid("pixels", &format!("must have shape (N, 2) holding (u, v), got {:?}", a.shape())));
+        return Err(invalid(
+            "pixels",
+            &format!("must have shape (N, 2) holding (u, v), got {:?}", a.shape()),
+        ));
     }
     Ok(a.rows().into_iter().map(|r| [r[0], r[1]]).collect())
 }
@@ -50,7 +61,12 @@ fn pixel_rays_py<'py>(
 }
 
 /// Points (N, 3), status (N,), pixels (N, 2) and the number kept of a triangulated scan.
-type ScanArrays<'py> = (Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<u8>>, Bound<'py, PyArray2<f64>>, usize);
+type ScanArrays<'py> = (
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray1<u8>>,
+    Bound<'py, PyArray2<f64>>,
+    usize,
+);
 
 /// Triangulates a scan's laser pixels: (points in the base frame (N, 3), status (N,) uint8,
 /// pixels (N, 2), kept). The first `kept` rows of points and pixels are the pixels that gave a
@@ -81,13 +97,22 @@ fn triangulate_scan<'py>(
     if poses.shape()[1..] != [4, 4] || poses.shape()[0] != angles.len() {
         return Err(invalid(
             "T_base_flanges",
-            &format!("must have shape ({}, 4, 4), one pose per angle, got {:?}", angles.len(), poses.shape()),
+            &format!(
+                "must have shape ({}, 4, 4), one pose per angle, got {:?}",
+                angles.len(),
+                poses.shape()
+            ),
         ));
     }
-    let pose_mats: Vec<Matrix4<f64>> = (0..angles.len()).map(|f| Matrix4::from_fn(|r, c| poses[[f, r, c]])).collect();
+    let pose_mats: Vec<Matrix4<f64>> = (0..angles.len())
+        .map(|f| Matrix4::from_fn(|r, c| poses[[f, r, c]]))
+        .collect();
     let input = pixels.as_array();
     if input.ncols() != 2 {
-        return Err(invalid("pixels", &format!("must have shape (N, 2) holding (u, v), got {:?}", input.shape())));
+        return Err(invalid(
+            "pixels",
+            &format!("must have shape (N, 2) holding (u, v), got {:?}", input.shape()),
+        ));
     }
     let n = input.nrows();
     // The input copy and the outputs are numpy arrays made here: numpy backs large arrays with
@@ -100,13 +125,26 @@ fn triangulate_scan<'py>(
     let mut px_rw = px_copy.readwrite();
     px_rw.as_array_mut().assign(&input);
     let mut points_rw = points.readwrite();
-    let (px, _) = px_rw.as_slice_mut().expect("a new array is contiguous").as_chunks_mut::<2>();
-    let (out, _) = points_rw.as_slice_mut().expect("a new array is contiguous").as_chunks_mut::<3>();
+    let (px, _) = px_rw
+        .as_slice_mut()
+        .expect("a new array is contiguous")
+        .as_chunks_mut::<2>();
+    let (out, _) = points_rw
+        .as_slice_mut()
+        .expect("a new array is contiguous")
+        .as_chunks_mut::<3>();
     let idx = frame_index.as_array();
     let in_range = |f: i64| (0..=u32::MAX as i64).contains(&f);
     if !idx.iter().fold(true, |ok, &f| ok & in_range(f)) {
-        let (i, f) = idx.iter().enumerate().find(|(_, &f)| !in_range(f)).expect("an entry out of range");
-        return Err(invalid("frame_index", &format!("entry {i} is {f}; frame indices are ≥ 0")));
+        let (i, f) = idx
+            .iter()
+            .enumerate()
+            .find(|(_, &f)| !in_range(f))
+            .expect("an entry out of range");
+        return Err(invalid(
+            "frame_index",
+            &format!("entry {i} is {f}; frame indices are ≥ 0"),
+        ));
     }
     let idx: Vec<u32> = idx.iter().map(|&f| f as u32).collect();
     let (status, kept) = run(py, move || {
@@ -119,10 +157,17 @@ fn triangulate_scan<'py>(
             .iter()
             .zip(&pose_mats)
             .enumerate()
-            .map(|(i, (&angle, m))| Ok(FramePose { angle, t_base_flange: isometry_from_matrix(&format!("T_base_flanges[{i}]"), m)? }))
+            .map(|(i, (&angle, m))| {
+                Ok(FramePose {
+                    angle,
+                    t_base_flange: isometry_from_matrix(&format!("T_base_flanges[{i}]"), m)?,
+                })
+            })
             .collect::<binpick_core::Result<Vec<_>>>()?;
         let mut status = vec![PointStatus::Valid; px.len()];
-        parallel::with_threads(num_threads, || triangulate_into(&sensor, &frames, px, &idx, out, &mut status))?;
+        parallel::with_threads(num_threads, || {
+            triangulate_into(&sensor, &frames, px, &idx, out, &mut status)
+        })?;
         // Moving the valid rows up in place is far cheaper than boolean masks in numpy.
         let mut kept = 0;
         for (i, &s) in status.iter().enumerate() {

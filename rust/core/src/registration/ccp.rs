@@ -61,15 +61,29 @@ pub struct CcpResult {
 
 /// Runs CCP on a data cloud (one object's points). `view` is the direction toward the sensor in
 /// the data frame if known; it places the translation on the visible half of the model.
-pub fn ccp(data: &[Point], layout: &BranchLayout, model_points: &[Point], model_normals: &[Vector3<f64>], view: Option<Vector3<f64>>, cfg: &CcpConfig) -> Result<CcpResult> {
+pub fn ccp(
+    data: &[Point],
+    layout: &BranchLayout,
+    model_points: &[Point],
+    model_normals: &[Vector3<f64>],
+    view: Option<Vector3<f64>>,
+    cfg: &CcpConfig,
+) -> Result<CcpResult> {
     if layout.directions.len() < 2 {
         return Err(Error::invalid("model", "CCP needs a model with at least two cylindrical branches; declare them (Model branches) or use method=\"ppf\""));
     }
     if data.len() < 10 {
-        return Err(Error::TooFewPoints { arg: "data".into(), got: data.len(), needed: 10, hint: "; CCP needs the object's points".into() });
+        return Err(Error::TooFewPoints {
+            arg: "data".into(),
+            got: data.len(),
+            needed: 10,
+            hint: "; CCP needs the object's points".into(),
+        });
     }
     let s = cfg.closer_radius.unwrap_or(1.5 * layout.radius);
-    let tau = cfg.tau.unwrap_or(0.8 * layout.lengths.iter().cloned().fold(f64::INFINITY, f64::min));
+    let tau = cfg
+        .tau
+        .unwrap_or(0.8 * layout.lengths.iter().cloned().fold(f64::INFINITY, f64::min));
     // Eq. 20–21.
     let pc = centroid(data);
     let near: Vec<Point> = data.iter().copied().filter(|p| (p - pc).norm() <= s).collect();
@@ -80,7 +94,12 @@ pub fn ccp(data: &[Point], layout: &BranchLayout, model_points: &[Point], model_
     let mut dist: Vec<f64> = data.iter().map(|p| (p - pcc).norm()).collect();
     let min_reach = 0.5 * layout.radius;
     for _ in 0..n_end {
-        let (i, d) = dist.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map(|(i, d)| (i, *d)).unwrap();
+        let (i, d) = dist
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.total_cmp(b.1))
+            .map(|(i, d)| (i, *d))
+            .unwrap();
         if d < min_reach {
             break;
         }
@@ -93,17 +112,33 @@ pub fn ccp(data: &[Point], layout: &BranchLayout, model_points: &[Point], model_
     // The special endpoint: farthest from the plane of the points around p'_c.
     let mut special_endpoint = None;
     if layout.special.is_some() && endpoints.len() >= 3 {
-        let ring: Vec<Point> = data.iter().copied().filter(|p| (p - pcc).norm() <= 2.0 * layout.radius).collect();
+        let ring: Vec<Point> = data
+            .iter()
+            .copied()
+            .filter(|p| (p - pcc).norm() <= 2.0 * layout.radius)
+            .collect();
         if ring.len() >= 3 {
             let (c, cov) = covariance(&ring);
             let (_, axes) = principal_axes(&cov);
             let n = axes[2];
-            let k = (0..endpoints.len()).max_by(|&a, &b| (endpoints[a] - c).dot(&n).abs().total_cmp(&(endpoints[b] - c).dot(&n).abs())).unwrap();
+            let k = (0..endpoints.len())
+                .max_by(|&a, &b| {
+                    (endpoints[a] - c)
+                        .dot(&n)
+                        .abs()
+                        .total_cmp(&(endpoints[b] - c).dot(&n).abs())
+                })
+                .unwrap();
             special_endpoint = Some(endpoints.remove(k));
         }
     }
     if endpoints.len() < 2 {
-        return Err(Error::NoObjectFound { reason: format!("CCP found {} branch endpoint(s); it needs two visible branches", endpoints.len()) });
+        return Err(Error::NoObjectFound {
+            reason: format!(
+                "CCP found {} branch endpoint(s); it needs two visible branches",
+                endpoints.len()
+            ),
+        });
     }
     // Eq. 25–27: groups along the lines p'_c → endpoint.
     let mut sums = vec![Vector3::zeros(); endpoints.len()];
@@ -129,7 +164,11 @@ pub fn ccp(data: &[Point], layout: &BranchLayout, model_points: &[Point], model_
     let mut axes = Vec::new();
     let mut group_sizes = Vec::new();
     for (g, e) in endpoints.iter().enumerate() {
-        let mean = if counts[g] > 0 { Point::from(sums[g] / counts[g] as f64) } else { *e };
+        let mean = if counts[g] > 0 {
+            Point::from(sums[g] / counts[g] as f64)
+        } else {
+            *e
+        };
         let u = mean - pcc;
         if u.norm() > 1e-9 {
             axes.push(u.normalize());
@@ -160,13 +199,20 @@ pub fn ccp(data: &[Point], layout: &BranchLayout, model_points: &[Point], model_
             }
             let Some(r) = kabsch(&h) else { continue };
             // Drop readings whose fitted branches miss what was seen by more than 50°.
-            let worst = assignment.iter().enumerate().map(|(o, &m)| (r * layout.directions[m]).dot(&obs[o].0)).fold(1.0, f64::min);
+            let worst = assignment
+                .iter()
+                .enumerate()
+                .map(|(o, &m)| (r * layout.directions[m]).dot(&obs[o].0))
+                .fold(1.0, f64::min);
             if worst < 50f64.to_radians().cos() {
                 continue;
             }
             let rot = UnitQuaternion::from_rotation_matrix(&r);
             let model_ref = visible_centroid(model_points, model_normals, &rot, view);
-            candidates.push(Isometry3::from_parts(Translation3::from(pc.coords - rot * model_ref.coords), rot));
+            candidates.push(Isometry3::from_parts(
+                Translation3::from(pc.coords - rot * model_ref.coords),
+                rot,
+            ));
         }
     };
     if special_dir.is_some() && axes.len() >= 2 {
@@ -176,29 +222,61 @@ pub fn ccp(data: &[Point], layout: &BranchLayout, model_points: &[Point], model_
     let n = all_axes.len();
     // Each observed axis may also be the special feature (the paper's plane test misses it when
     // the part lies on its side), the rest read as branches.
-    let special_choices: Vec<Option<usize>> = if layout.special.is_some() { std::iter::once(None).chain((0..n).map(Some)).collect() } else { vec![None] };
+    let special_choices: Vec<Option<usize>> = if layout.special.is_some() {
+        std::iter::once(None).chain((0..n).map(Some)).collect()
+    } else {
+        vec![None]
+    };
     for special in special_choices {
         for mask in 1u32..(1 << n) {
-            if special.is_some_and(|s| mask & (1 << s) != 0) || mask.count_ones() < 2 || mask.count_ones() as usize > layout.directions.len() {
+            if special.is_some_and(|s| mask & (1 << s) != 0)
+                || mask.count_ones() < 2
+                || mask.count_ones() as usize > layout.directions.len()
+            {
                 continue;
             }
-            let obs: Vec<(Vector3<f64>, usize)> = (0..n).filter(|i| mask & (1 << i) != 0).map(|i| all_axes[i]).collect();
+            let obs: Vec<(Vector3<f64>, usize)> =
+                (0..n).filter(|i| mask & (1 << i) != 0).map(|i| all_axes[i]).collect();
             add(&obs, special.map(|s| all_axes[s].0));
         }
     }
     if candidates.is_empty() {
-        return Err(Error::NoObjectFound { reason: "CCP found no branch assignment consistent with the model's layout".into() });
+        return Err(Error::NoObjectFound {
+            reason: "CCP found no branch assignment consistent with the model's layout".into(),
+        });
     }
-    Ok(CcpResult { center: pc, closer_center: pcc, endpoints, special_endpoint, axes, group_sizes, candidates })
+    Ok(CcpResult {
+        center: pc,
+        closer_center: pcc,
+        endpoints,
+        special_endpoint,
+        axes,
+        group_sizes,
+        candidates,
+    })
 }
 
 /// Centroid of the model points that face the sensor under rotation `rot` (all points if no view).
-fn visible_centroid(points: &[Point], normals: &[Vector3<f64>], rot: &UnitQuaternion<f64>, view: Option<Vector3<f64>>) -> Point {
+fn visible_centroid(
+    points: &[Point],
+    normals: &[Vector3<f64>],
+    rot: &UnitQuaternion<f64>,
+    view: Option<Vector3<f64>>,
+) -> Point {
     match view {
         Some(v) => {
             let v_model = rot.inverse() * v;
-            let vis: Vec<Point> = points.iter().zip(normals).filter(|(_, n)| n.dot(&v_model) > 0.0).map(|(p, _)| *p).collect();
-            if vis.is_empty() { centroid(points) } else { centroid(&vis) }
+            let vis: Vec<Point> = points
+                .iter()
+                .zip(normals)
+                .filter(|(_, n)| n.dot(&v_model) > 0.0)
+                .map(|(p, _)| *p)
+                .collect();
+            if vis.is_empty() {
+                centroid(points)
+            } else {
+                centroid(&vis)
+            }
         }
         None => centroid(points),
     }

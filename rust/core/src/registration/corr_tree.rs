@@ -70,7 +70,12 @@ impl CorrespondenceTree {
             build(points, &mut order, 0, &mut nodes);
         }
         let xyz = order.iter().map(|&i| points[i as usize].coords.into()).collect();
-        CorrespondenceTree { nodes, xyz, original: order, grid: None }
+        CorrespondenceTree {
+            nodes,
+            xyz,
+            original: order,
+            grid: None,
+        }
     }
 
     /// The nearest point to `q` other than the one whose input index is `skip`, as (input index,
@@ -87,7 +92,10 @@ impl CorrespondenceTree {
         let step = (points.len() / 256).max(1);
         let mut d: Vec<f64> = (0..points.len())
             .step_by(step)
-            .filter_map(|i| self.search::<true>(&points[i].coords.into(), f64::INFINITY, i).map(|(_, d2)| d2.sqrt()))
+            .filter_map(|i| {
+                self.search::<true>(&points[i].coords.into(), f64::INFINITY, i)
+                    .map(|(_, d2)| d2.sqrt())
+            })
             .collect();
         if d.is_empty() {
             return None;
@@ -161,14 +169,24 @@ impl CorrespondenceTree {
                 } else {
                     out[worst.1] = entry;
                 }
-                let (at, far) = out.iter().enumerate().fold((0, f64::NEG_INFINITY), |m, (i, e)| if e.0 > m.1 { (i, e.0) } else { m });
+                let (at, far) =
+                    out.iter()
+                        .enumerate()
+                        .fold((0, f64::NEG_INFINITY), |m, (i, e)| if e.0 > m.1 { (i, e.0) } else { m });
                 *worst = (far, at);
             }
             return;
         }
         let (l, r) = (n + 1, node.a);
-        let (dl, dr) = (box_dist2(&self.nodes[l as usize], q), box_dist2(&self.nodes[r as usize], q));
-        let ((first, d1), (second, d2)) = if dl <= dr { ((l, dl), (r, dr)) } else { ((r, dr), (l, dl)) };
+        let (dl, dr) = (
+            box_dist2(&self.nodes[l as usize], q),
+            box_dist2(&self.nodes[r as usize], q),
+        );
+        let ((first, d1), (second, d2)) = if dl <= dr {
+            ((l, dl), (r, dr))
+        } else {
+            ((r, dr), (l, dl))
+        };
         if d1 <= worst.0 {
             self.knn_descend(first, q, k, worst, out);
         }
@@ -204,8 +222,15 @@ impl CorrespondenceTree {
             return;
         }
         let (l, r) = (n + 1, node.a);
-        let (dl, dr) = (box_dist2(&self.nodes[l as usize], q), box_dist2(&self.nodes[r as usize], q));
-        let ((first, d1), (second, d2)) = if dl <= dr { ((l, dl), (r, dr)) } else { ((r, dr), (l, dl)) };
+        let (dl, dr) = (
+            box_dist2(&self.nodes[l as usize], q),
+            box_dist2(&self.nodes[r as usize], q),
+        );
+        let ((first, d1), (second, d2)) = if dl <= dr {
+            ((l, dl), (r, dr))
+        } else {
+            ((r, dr), (l, dl))
+        };
         if d1 <= best.0 {
             self.descend::<SKIP>(first, q, best, skip);
             if d2 <= best.0 {
@@ -272,7 +297,15 @@ impl Grid {
             xyz[at] = points[i].coords.into();
             original[at] = i as u32;
         }
-        Some(Grid { origin: lo, inv_cell, cell, dims, starts, xyz, original })
+        Some(Grid {
+            origin: lo,
+            inv_cell,
+            cell,
+            dims,
+            starts,
+            xyz,
+            original,
+        })
     }
 
     #[inline]
@@ -320,18 +353,37 @@ fn build(points: &[Point], order: &mut [u32], offset: usize, nodes: &mut Vec<Nod
         }
     }
     if order.len() <= LEAF_SIZE {
-        nodes.push(Node { lo, hi, a: offset as u32, b: 3 + order.len() as u32 });
+        nodes.push(Node {
+            lo,
+            hi,
+            a: offset as u32,
+            b: 3 + order.len() as u32,
+        });
         return;
     }
-    let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).unwrap();
+    let axis = (0..3)
+        .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
+        .unwrap();
     if hi[axis] - lo[axis] <= 0.0 {
         // All points equal: one oversized leaf is exact and cannot be split further.
-        nodes.push(Node { lo, hi, a: offset as u32, b: 3 + order.len() as u32 });
+        nodes.push(Node {
+            lo,
+            hi,
+            a: offset as u32,
+            b: 3 + order.len() as u32,
+        });
         return;
     }
     let mid = order.len() / 2;
-    order.select_nth_unstable_by(mid, |&a, &b| points[a as usize][axis].total_cmp(&points[b as usize][axis]));
-    nodes.push(Node { lo, hi, a: 0, b: axis as u32 });
+    order.select_nth_unstable_by(mid, |&a, &b| {
+        points[a as usize][axis].total_cmp(&points[b as usize][axis])
+    });
+    nodes.push(Node {
+        lo,
+        hi,
+        a: 0,
+        b: axis as u32,
+    });
     let (left, right) = order.split_at_mut(mid);
     build(points, left, offset, nodes);
     let right_index = nodes.len() as u32;
@@ -378,7 +430,9 @@ mod tests {
     use crate::rng::Rng;
 
     fn brute(pts: &[Point], q: &[f64; 3]) -> f64 {
-        pts.iter().map(|p| dist2(&p.coords.into(), q)).fold(f64::INFINITY, f64::min)
+        pts.iter()
+            .map(|p| dist2(&p.coords.into(), q))
+            .fold(f64::INFINITY, f64::min)
     }
 
     #[test]
@@ -386,7 +440,13 @@ mod tests {
         let mut rng = Rng::new(4);
         // A surface-like cloud with many equal coordinates on one axis, as flat CAD faces give.
         let pts: Vec<Point> = (0..4000)
-            .map(|i| if i % 3 == 0 { Point::new(5.0, rng.range(-20.0, 20.0), rng.range(-3.0, 3.0)) } else { Point::new(rng.range(-20.0, 20.0), rng.range(-20.0, 20.0), 0.1 * rng.normal()) })
+            .map(|i| {
+                if i % 3 == 0 {
+                    Point::new(5.0, rng.range(-20.0, 20.0), rng.range(-3.0, 3.0))
+                } else {
+                    Point::new(rng.range(-20.0, 20.0), rng.range(-20.0, 20.0), 0.1 * rng.normal())
+                }
+            })
             .collect();
         let tree = CorrespondenceTree::new(&pts);
         assert!(tree.grid.is_some());
@@ -405,14 +465,22 @@ mod tests {
             }
         }
         let same = vec![Point::new(1.0, 1.0, 1.0); 100];
-        assert_eq!(CorrespondenceTree::new(&same).nearest_within(&[1.0, 1.0, 2.0], 4.0).unwrap().1, 1.0);
+        assert_eq!(
+            CorrespondenceTree::new(&same)
+                .nearest_within(&[1.0, 1.0, 2.0], 4.0)
+                .unwrap()
+                .1,
+            1.0
+        );
         assert!(CorrespondenceTree::new(&[]).nearest_within(&[0.0; 3], 1.0).is_none());
     }
 
     #[test]
     fn spatial_order_is_a_permutation() {
         let mut rng = Rng::new(1);
-        let pts: Vec<Point> = (0..500).map(|_| Point::new(rng.range(0.0, 9.0), rng.range(0.0, 9.0), rng.range(0.0, 9.0))).collect();
+        let pts: Vec<Point> = (0..500)
+            .map(|_| Point::new(rng.range(0.0, 9.0), rng.range(0.0, 9.0), rng.range(0.0, 9.0)))
+            .collect();
         let mut order = spatial_order(&pts, 1.0);
         order.sort();
         assert_eq!(order, (0..500).collect::<Vec<u32>>());

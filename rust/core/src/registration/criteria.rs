@@ -31,7 +31,11 @@ impl RobustKernel {
         match *self {
             RobustKernel::None => 1.0,
             RobustKernel::Huber(k) => {
-                if r <= k { 1.0 } else { k / r }
+                if r <= k {
+                    1.0
+                } else {
+                    k / r
+                }
             }
             RobustKernel::Tukey(k) => {
                 if r >= k {
@@ -98,7 +102,12 @@ impl IcpConfig {
     /// the robust refinement the pose pipelines run, stopping after `max_iterations` or once an
     /// update rotates less than `rotation_tolerance` (rad) and moves less than
     /// `translation_tolerance` (mm).
-    pub fn robust_plane(reach: f64, max_iterations: usize, rotation_tolerance: f64, translation_tolerance: f64) -> Self {
+    pub fn robust_plane(
+        reach: f64,
+        max_iterations: usize,
+        rotation_tolerance: f64,
+        translation_tolerance: f64,
+    ) -> Self {
         IcpConfig {
             method: IcpMethod::PointToPlane,
             max_correspondence_distance: reach,
@@ -116,15 +125,24 @@ impl IcpConfig {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(Error::invalid(name, format!("must be a positive finite number, got {v}")))
+                Err(Error::invalid(
+                    name,
+                    format!("must be a positive finite number, got {v}"),
+                ))
             }
         };
         positive("max_correspondence_distance", self.max_correspondence_distance)?;
         if !(self.rotation_tolerance.is_finite() && self.rotation_tolerance >= 0.0) {
-            return Err(Error::invalid("rotation_tolerance", format!("must be ≥ 0 radians, got {}", self.rotation_tolerance)));
+            return Err(Error::invalid(
+                "rotation_tolerance",
+                format!("must be ≥ 0 radians, got {}", self.rotation_tolerance),
+            ));
         }
         if !(self.translation_tolerance.is_finite() && self.translation_tolerance >= 0.0) {
-            return Err(Error::invalid("translation_tolerance", format!("must be ≥ 0 mm, got {}", self.translation_tolerance)));
+            return Err(Error::invalid(
+                "translation_tolerance",
+                format!("must be ≥ 0 mm, got {}", self.translation_tolerance),
+            ));
         }
         if self.max_iterations == 0 {
             return Err(Error::invalid("max_iterations", "must be at least 1"));
@@ -133,7 +151,10 @@ impl IcpConfig {
             positive("kernel scale", k)?;
         }
         if !(self.trim_fraction.is_finite() && (0.0..=0.9).contains(&self.trim_fraction)) {
-            return Err(Error::invalid("trim_fraction", format!("must be in [0, 0.9], got {}", self.trim_fraction)));
+            return Err(Error::invalid(
+                "trim_fraction",
+                format!("must be in [0, 0.9], got {}", self.trim_fraction),
+            ));
         }
         Ok(())
     }

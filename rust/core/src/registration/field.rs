@@ -59,12 +59,20 @@ impl NearestField {
             cell *= 1.25;
         };
         let n = dims.iter().product::<usize>();
-        let mut field = NearestField { origin: lo, inv_cell: 1.0 / cell, cell, dims, nearest: Indices::Small(Vec::new()) };
+        let mut field = NearestField {
+            origin: lo,
+            inv_cell: 1.0 / cell,
+            cell,
+            dims,
+            nearest: Indices::Small(Vec::new()),
+        };
         let mut nearest = vec![u32::MAX; n];
         let mut best = vec![f64::INFINITY; n];
         let mut queue: VecDeque<u32> = VecDeque::new();
         for (i, p) in points.iter().enumerate() {
-            let Some(c) = field.cell_of(&[p.x, p.y, p.z]) else { continue };
+            let Some(c) = field.cell_of(&[p.x, p.y, p.z]) else {
+                continue;
+            };
             let d = dist2(p, &field.centre(c));
             if d < best[c] {
                 if best[c].is_infinite() {
@@ -98,7 +106,11 @@ impl NearestField {
                 }
             }
         }
-        field.nearest = if points.len() < u16::MAX as usize { Indices::Small(nearest.into_iter().map(|i| i as u16).collect()) } else { Indices::Large(nearest) };
+        field.nearest = if points.len() < u16::MAX as usize {
+            Indices::Small(nearest.into_iter().map(|i| i as u16).collect())
+        } else {
+            Indices::Large(nearest)
+        };
         Some(field)
     }
 
@@ -131,7 +143,11 @@ impl NearestField {
     }
 
     fn centre(&self, c: usize) -> Point {
-        let (x, y, z) = (c % self.dims[0], (c / self.dims[0]) % self.dims[1], c / (self.dims[0] * self.dims[1]));
+        let (x, y, z) = (
+            c % self.dims[0],
+            (c / self.dims[0]) % self.dims[1],
+            c / (self.dims[0] * self.dims[1]),
+        );
         Point::new(
             self.origin[0] + (x as f64 + 0.5) * self.cell,
             self.origin[1] + (y as f64 + 0.5) * self.cell,
@@ -171,7 +187,11 @@ mod tests {
             let got = (pts[field.nearest(&q).expect("inside the grid")] - qp).norm();
             worst = worst.max(got - truth);
         }
-        assert!(worst <= 2.0 * diag, "worst excess {worst:.2} mm, two diagonals {:.2} mm", 2.0 * diag);
+        assert!(
+            worst <= 2.0 * diag,
+            "worst excess {worst:.2} mm, two diagonals {:.2} mm",
+            2.0 * diag
+        );
         assert!(field.nearest(&[200.0, 0.0, 0.0]).is_none());
         assert!(NearestField::new(&[], 1.0, 1.0).is_none());
     }

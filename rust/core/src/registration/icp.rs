@@ -8,13 +8,15 @@
 //! rayon task and merged, so the work splits across threads without locks. Sums are taken
 //! about the target's centroid, which keeps them well conditioned far from the origin.
 
+use super::corr_tree::{spatial_order, CorrespondenceTree};
 use super::criteria::{IcpConfig, IcpMethod};
+use super::field::NearestField;
 use crate::cloud::{centroid, check_count, check_finite, check_spread, Point};
 use crate::error::{Error, Result};
-use super::corr_tree::{spatial_order, CorrespondenceTree};
-use super::field::NearestField;
 use crate::parallel::with_threads;
-use nalgebra::{Isometry3, Matrix3, Matrix6, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{
+    Isometry3, Matrix3, Matrix6, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6,
+};
 use rayon::prelude::*;
 
 const CHUNK: usize = 2048;
@@ -34,10 +36,18 @@ impl IcpTarget {
     pub fn new(points: Vec<Point>, normals: Option<Vec<Vector3<f64>>>) -> Result<Self> {
         check_finite("target", &points)?;
         check_count("target", &points, 3, "ICP needs a target surface")?;
-        check_spread("target", &points, 2, "ICP cannot fix a rotation against a line or a single point; pass a cloud that covers a surface")?;
+        check_spread(
+            "target",
+            &points,
+            2,
+            "ICP cannot fix a rotation against a line or a single point; pass a cloud that covers a surface",
+        )?;
         if let Some(n) = &normals {
             if n.len() != points.len() {
-                return Err(Error::invalid("target_normals", format!("has {} rows but target has {}", n.len(), points.len())));
+                return Err(Error::invalid(
+                    "target_normals",
+                    format!("has {} rows but target has {}", n.len(), points.len()),
+                ));
             }
             for (i, v) in n.iter().enumerate() {
                 if !v.iter().all(|x| x.is_finite()) || (v.norm() - 1.0).abs() > 1e-3 {
@@ -47,7 +57,13 @@ impl IcpTarget {
         }
         let search = CorrespondenceTree::new(&points);
         let center = centroid(&points);
-        Ok(IcpTarget { points, normals, search, center, field: None })
+        Ok(IcpTarget {
+            points,
+            normals,
+            search,
+            center,
+            field: None,
+        })
     }
 
     /// The target's points.
@@ -141,7 +157,12 @@ trait Sums: Copy + Send + Sync {
 
 impl Sums for PointSums {
     fn zero() -> Self {
-        PointSums { w: 0.0, q: Vector3::zeros(), t: Vector3::zeros(), qt: Matrix3::zeros() }
+        PointSums {
+            w: 0.0,
+            q: Vector3::zeros(),
+            t: Vector3::zeros(),
+            qt: Matrix3::zeros(),
+        }
     }
     #[inline(always)]
     fn add(&mut self, q: &Vector3<f64>, t: &Vector3<f64>, _n: &Vector3<f64>, w: f64) {
@@ -151,7 +172,12 @@ impl Sums for PointSums {
         self.qt += (w * q) * t.transpose();
     }
     fn merge(self, o: Self) -> Self {
-        PointSums { w: self.w + o.w, q: self.q + o.q, t: self.t + o.t, qt: self.qt + o.qt }
+        PointSums {
+            w: self.w + o.w,
+            q: self.q + o.q,
+            t: self.t + o.t,
+            qt: self.qt + o.qt,
+        }
     }
     #[inline(always)]
     fn residual(q: &Vector3<f64>, t: &Vector3<f64>, _n: &Vector3<f64>) -> f64 {
@@ -167,7 +193,11 @@ impl Sums for PointSums {
 
 impl Sums for PlaneSums {
     fn zero() -> Self {
-        PlaneSums { h: [0.0; 21], g: Vector6::zeros(), w: 0.0 }
+        PlaneSums {
+            h: [0.0; 21],
+            g: Vector6::zeros(),
+            w: 0.0,
+        }
     }
     #[inline(always)]
     fn add(&mut self, q: &Vector3<f64>, t: &Vector3<f64>, n: &Vector3<f64>, w: f64) {
@@ -186,7 +216,11 @@ impl Sums for PlaneSums {
         self.w += w;
     }
     fn merge(self, o: Self) -> Self {
-        PlaneSums { h: std::array::from_fn(|k| self.h[k] + o.h[k]), g: self.g + o.g, w: self.w + o.w }
+        PlaneSums {
+            h: std::array::from_fn(|k| self.h[k] + o.h[k]),
+            g: self.g + o.g,
+            w: self.w + o.w,
+        }
     }
     #[inline(always)]
     fn residual(q: &Vector3<f64>, t: &Vector3<f64>, n: &Vector3<f64>) -> f64 {
@@ -210,10 +244,18 @@ struct Pass<S> {
 
 impl<S: Sums> Pass<S> {
     fn zero() -> Self {
-        Pass { sums: S::zero(), inliers: 0, sq_dist: 0.0 }
+        Pass {
+            sums: S::zero(),
+            inliers: 0,
+            sq_dist: 0.0,
+        }
     }
     fn merge(self, o: Self) -> Self {
-        Pass { sums: self.sums.merge(o.sums), inliers: self.inliers + o.inliers, sq_dist: self.sq_dist + o.sq_dist }
+        Pass {
+            sums: self.sums.merge(o.sums),
+            inliers: self.inliers + o.inliers,
+            sq_dist: self.sq_dist + o.sq_dist,
+        }
     }
 }
 
@@ -229,15 +271,29 @@ pub fn icp(source: &[Point], target: &IcpTarget, init: &Isometry3<f64>, config: 
         IcpMethod::PointToPoint => PointSums::min_pairs(),
         IcpMethod::PointToPlane => PlaneSums::min_pairs(),
     };
-    check_count("source", source, needed, "register more points, or use a coarser voxel size")?;
-    check_spread("source", source, 2, "ICP cannot fix a rotation from points on a line; pass a cloud that covers a surface")?;
+    check_count(
+        "source",
+        source,
+        needed,
+        "register more points, or use a coarser voxel size",
+    )?;
+    check_spread(
+        "source",
+        source,
+        2,
+        "ICP cannot fix a rotation from points on a line; pass a cloud that covers a surface",
+    )?;
     match config.method {
-        IcpMethod::PointToPoint => Ok(with_threads(config.num_threads, || run::<PointSums>(source, target, init, config))),
+        IcpMethod::PointToPoint => Ok(with_threads(config.num_threads, || {
+            run::<PointSums>(source, target, init, config)
+        })),
         IcpMethod::PointToPlane => {
             if target.normals.is_none() {
                 return Err(Error::invalid("target_normals", "point-to-plane ICP needs target normals; estimate them first (binpick.estimate_normals) or use method=\"point_to_point\""));
             }
-            Ok(with_threads(config.num_threads, || run::<PlaneSums>(source, target, init, config)))
+            Ok(with_threads(config.num_threads, || {
+                run::<PlaneSums>(source, target, init, config)
+            }))
         }
     }
 }
@@ -247,7 +303,11 @@ fn run<S: Sums>(source_in: &[Point], target: &IcpTarget, init: &Isometry3<f64>, 
     let max_sq = config.max_correspondence_distance * config.max_correspondence_distance;
     let zero_normal = Vector3::zeros();
     let normals = target.normals.as_deref();
-    let approx = if config.approximate { target.field.as_ref() } else { None };
+    let approx = if config.approximate {
+        target.field.as_ref()
+    } else {
+        None
+    };
     let source: Vec<Point> = spatial_order(source_in, config.max_correspondence_distance.max(1e-3) * 0.25)
         .into_iter()
         .map(|i| source_in[i as usize])
@@ -281,7 +341,11 @@ fn run<S: Sums>(source_in: &[Point], target: &IcpTarget, init: &Isometry3<f64>, 
             let moved = (q - (rot_prev * p.coords + shift_prev)).norm();
             // The previous match is at most `last + moved` away now, so nothing nearer is missed.
             let bound = (*last + moved) * (1.0 + 1e-9) + 1e-12;
-            let mut bound_sq = if bound.is_finite() { (bound * bound).min(max_sq) } else { max_sq };
+            let mut bound_sq = if bound.is_finite() {
+                (bound * bound).min(max_sq)
+            } else {
+                max_sq
+            };
             if let Some(h) = hint {
                 bound_sq = bound_sq.min((qw - *h).norm_squared() * (1.0 + 1e-9) + 1e-12);
             }
@@ -345,7 +409,11 @@ fn run<S: Sums>(source_in: &[Point], target: &IcpTarget, init: &Isometry3<f64>, 
             if source.len() <= CHUNK {
                 chunk_pass(&source, &mut last_match)
             } else {
-                source.par_chunks(CHUNK).zip(last_match.par_chunks_mut(CHUNK)).map(|(chunk, lasts)| chunk_pass(chunk, lasts)).reduce(Pass::zero, Pass::merge)
+                source
+                    .par_chunks(CHUNK)
+                    .zip(last_match.par_chunks_mut(CHUNK))
+                    .map(|(chunk, lasts)| chunk_pass(chunk, lasts))
+                    .reduce(Pass::zero, Pass::merge)
             }
         };
         last = pass;
@@ -369,8 +437,19 @@ fn run<S: Sums>(source_in: &[Point], target: &IcpTarget, init: &Isometry3<f64>, 
     }
     t_est.rotation.renormalize();
     let fitness = last.inliers as f64 / source.len() as f64;
-    let rmse = if last.inliers > 0 { (last.sq_dist / last.inliers as f64).sqrt() } else { f64::INFINITY };
-    IcpResult { t_target_source: t_est, converged, iterations, fitness, rmse, num_inliers: last.inliers }
+    let rmse = if last.inliers > 0 {
+        (last.sq_dist / last.inliers as f64).sqrt()
+    } else {
+        f64::INFINITY
+    };
+    IcpResult {
+        t_target_source: t_est,
+        converged,
+        iterations,
+        fitness,
+        rmse,
+        num_inliers: last.inliers,
+    }
 }
 
 /// Closed-form point-to-point step (Arun/Kabsch): the rotation from the SVD of the centred
@@ -427,5 +506,8 @@ fn plane_step(sums: &PlaneSums) -> Option<(Vector3<f64>, Vector3<f64>)> {
             delta -= e * (e.dot(&g) / lambda);
         }
     }
-    Some((Vector3::new(delta[0], delta[1], delta[2]), Vector3::new(delta[3], delta[4], delta[5])))
+    Some((
+        Vector3::new(delta[0], delta[1], delta[2]),
+        Vector3::new(delta[3], delta[4], delta[5]),
+    ))
 }

@@ -40,7 +40,11 @@ pub struct PpfConfig {
 
 impl Default for PpfConfig {
     fn default() -> Self {
-        PpfConfig { sampling_ratio: 0.05, angle_bins: 30, rotation_bins: 30 }
+        PpfConfig {
+            sampling_ratio: 0.05,
+            angle_bins: 30,
+            rotation_bins: 30,
+        }
     }
 }
 
@@ -48,13 +52,25 @@ impl PpfConfig {
     /// Checks the ranges.
     pub fn validate(&self) -> Result<()> {
         if !(self.sampling_ratio.is_finite() && self.sampling_ratio >= 0.005 && self.sampling_ratio <= 0.25) {
-            return Err(Error::invalid("sampling_ratio", format!("must be between 0.005 and 0.25 of the model's diameter, got {}", self.sampling_ratio)));
+            return Err(Error::invalid(
+                "sampling_ratio",
+                format!(
+                    "must be between 0.005 and 0.25 of the model's diameter, got {}",
+                    self.sampling_ratio
+                ),
+            ));
         }
         if !(6..=90).contains(&self.angle_bins) {
-            return Err(Error::invalid("angle_bins", format!("must be between 6 and 90, got {}", self.angle_bins)));
+            return Err(Error::invalid(
+                "angle_bins",
+                format!("must be between 6 and 90, got {}", self.angle_bins),
+            ));
         }
         if !(6..=180).contains(&self.rotation_bins) {
-            return Err(Error::invalid("rotation_bins", format!("must be between 6 and 180, got {}", self.rotation_bins)));
+            return Err(Error::invalid(
+                "rotation_bins",
+                format!("must be between 6 and 180, got {}", self.rotation_bins),
+            ));
         }
         Ok(())
     }
@@ -70,8 +86,12 @@ struct Frame {
 
 impl Frame {
     fn new(p: &Point, n: &Vector3<f64>) -> Self {
-        let r = UnitQuaternion::rotation_between(n, &Vector3::x()).unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), PI));
-        Frame { rotation: *r.to_rotation_matrix().matrix(), origin: *p }
+        let r = UnitQuaternion::rotation_between(n, &Vector3::x())
+            .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), PI));
+        Frame {
+            rotation: *r.to_rotation_matrix().matrix(),
+            origin: *p,
+        }
     }
 
     /// The angle that turns `q` (in this frame) about +x into the half-plane z = 0, y > 0.
@@ -182,14 +202,29 @@ impl PpfModel {
     pub fn new(points: Vec<Point>, normals: Vec<Vector3<f64>>, diameter: f64, config: PpfConfig) -> Result<Self> {
         config.validate()?;
         if points.len() != normals.len() {
-            return Err(Error::invalid("normals", format!("has {} rows but points has {}", normals.len(), points.len())));
+            return Err(Error::invalid(
+                "normals",
+                format!("has {} rows but points has {}", normals.len(), points.len()),
+            ));
         }
         if points.len() < 4 {
-            return Err(Error::TooFewPoints { arg: "model".into(), got: points.len(), needed: 4, hint: "; sample the model more densely".into() });
+            return Err(Error::TooFewPoints {
+                arg: "model".into(),
+                got: points.len(),
+                needed: 4,
+                hint: "; sample the model more densely".into(),
+            });
         }
         if points.len() > 60_000 {
             // (and model indices fit the table's 16 bits)
-            return Err(Error::invalid("model", format!("{} sampled points would make a table of {} pairs; use a larger sampling_ratio", points.len(), points.len() * points.len())));
+            return Err(Error::invalid(
+                "model",
+                format!(
+                    "{} sampled points would make a table of {} pairs; use a larger sampling_ratio",
+                    points.len(),
+                    points.len() * points.len()
+                ),
+            ));
         }
         if !(diameter.is_finite() && diameter > 0.0) {
             return Err(Error::invalid("diameter", "must be a positive length in mm"));
@@ -197,7 +232,17 @@ impl PpfModel {
         let step = config.sampling_ratio * diameter;
         let distance_bins = (diameter / step).ceil() as u32 + 2;
         let frames: Vec<Frame> = points.iter().zip(&normals).map(|(p, n)| Frame::new(p, n)).collect();
-        let mut model = PpfModel { config, step, diameter, points, normals, frames, distance_bins, offsets: Vec::new(), entries: Vec::new() };
+        let mut model = PpfModel {
+            config,
+            step,
+            diameter,
+            points,
+            normals,
+            frames,
+            distance_bins,
+            offsets: Vec::new(),
+            entries: Vec::new(),
+        };
         model.build_table();
         Ok(model)
     }
@@ -223,7 +268,10 @@ impl PpfModel {
                     .filter(|&j| j != i)
                     .filter_map(|j| {
                         let q = self.quantise(&self.points[i], &self.normals[i], &self.points[j], &self.normals[j])?;
-                        Some((self.key(&q.bins) as u32, turn_fraction(self.frames[i].alpha(&self.points[j]))))
+                        Some((
+                            self.key(&q.bins) as u32,
+                            turn_fraction(self.frames[i].alpha(&self.points[j])),
+                        ))
                     })
                     .collect()
             })
@@ -269,7 +317,11 @@ impl PpfModel {
         let mut bins = [0u32; 4];
         let mut frac = [0f32; 4];
         for k in 0..4 {
-            let max = if k == 0 { self.distance_bins - 2 } else { self.config.angle_bins - 1 };
+            let max = if k == 0 {
+                self.distance_bins - 2
+            } else {
+                self.config.angle_bins - 1
+            };
             let b = (pos[k].floor().max(0.0) as u32).min(max);
             bins[k] = b;
             frac[k] = (pos[k] - b as f64).clamp(0.0, 0.999) as f32;
@@ -304,7 +356,12 @@ impl PpfModel {
         for v in [self.config.sampling_ratio, self.diameter] {
             out.extend_from_slice(&v.to_le_bytes());
         }
-        for v in [self.config.angle_bins, self.config.rotation_bins, self.points.len() as u32, self.entries.len() as u32] {
+        for v in [
+            self.config.angle_bins,
+            self.config.rotation_bins,
+            self.points.len() as u32,
+            self.entries.len() as u32,
+        ] {
             out.extend_from_slice(&v.to_le_bytes());
         }
         for (p, n) in self.points.iter().zip(&self.normals) {
@@ -317,7 +374,13 @@ impl PpfModel {
             out.extend_from_slice(&a.to_le_bytes());
         }
         // The key table is mostly empty: store (key, count) of the keys that hold pairs.
-        let used: Vec<(u32, u32)> = self.offsets.windows(2).enumerate().filter(|(_, w)| w[1] > w[0]).map(|(k, w)| (k as u32, w[1] - w[0])).collect();
+        let used: Vec<(u32, u32)> = self
+            .offsets
+            .windows(2)
+            .enumerate()
+            .filter(|(_, w)| w[1] > w[0])
+            .map(|(k, w)| (k as u32, w[1] - w[0]))
+            .collect();
         out.extend_from_slice(&(used.len() as u32).to_le_bytes());
         for (k, c) in used {
             out.extend_from_slice(&k.to_le_bytes());
@@ -328,7 +391,12 @@ impl PpfModel {
 
     /// Reads what [`PpfModel::to_bytes`] wrote; any mismatch is an error (the caller rebuilds).
     pub fn from_bytes(bytes: &[u8]) -> Result<Self> {
-        let bad = |what: &str| Error::invalid("ppf_cache", format!("{what}; the cache file is stale or corrupt and will be rebuilt"));
+        let bad = |what: &str| {
+            Error::invalid(
+                "ppf_cache",
+                format!("{what}; the cache file is stale or corrupt and will be rebuilt"),
+            )
+        };
         let mut at = 0usize;
         let mut take = |n: usize| -> Result<&[u8]> {
             let s = bytes.get(at..at + n).ok_or_else(|| bad("truncated"))?;
@@ -346,7 +414,11 @@ impl PpfModel {
         let rotation_bins = u32_at(take(4)?);
         let n = u32_at(take(4)?) as usize;
         let m = u32_at(take(4)?) as usize;
-        let config = PpfConfig { sampling_ratio, angle_bins, rotation_bins };
+        let config = PpfConfig {
+            sampling_ratio,
+            angle_bins,
+            rotation_bins,
+        };
         config.validate().map_err(|_| bad("invalid parameters"))?;
         if !(diameter.is_finite() && diameter > 0.0) || n < 4 || n > 60_000 || m > n * n {
             return Err(bad("invalid sizes"));
@@ -374,7 +446,17 @@ impl PpfModel {
         let step = sampling_ratio * diameter;
         let distance_bins = (diameter / step).ceil() as u32 + 2;
         let frames = points.iter().zip(&normals).map(|(p, n)| Frame::new(p, n)).collect();
-        let mut model = PpfModel { config, step, diameter, points, normals, frames, distance_bins, offsets: Vec::new(), entries };
+        let mut model = PpfModel {
+            config,
+            step,
+            diameter,
+            points,
+            normals,
+            frames,
+            distance_bins,
+            offsets: Vec::new(),
+            entries,
+        };
         let keys = model.key_count();
         let used = u32_at(take(4)?) as usize;
         if used > m.min(keys) {
@@ -391,7 +473,9 @@ impl PpfModel {
             previous = Some(k);
         }
         for k in 0..keys {
-            counts[k + 1] = counts[k].checked_add(counts[k + 1]).ok_or_else(|| bad("inconsistent table"))?;
+            counts[k + 1] = counts[k]
+                .checked_add(counts[k + 1])
+                .ok_or_else(|| bad("inconsistent table"))?;
         }
         if at != bytes.len() || counts[keys] as usize != m {
             return Err(bad("inconsistent table"));
@@ -405,7 +489,8 @@ impl PpfModel {
     /// about [`PpfModel::step`], `index` a KD-tree over them.
     pub fn vote(&self, points: &[Point], normals: &[Vector3<f64>], index: &KdIndex, cfg: &DetectConfig) -> Vec<Vote> {
         // At least MIN_REFERENCES reference points however small the scene.
-        let stride = ((1.0 / cfg.reference_fraction.clamp(1e-3, 1.0)).round().max(1.0) as usize).min((points.len() / MIN_REFERENCES).max(1));
+        let stride = ((1.0 / cfg.reference_fraction.clamp(1e-3, 1.0)).round().max(1.0) as usize)
+            .min((points.len() / MIN_REFERENCES).max(1));
         let refs: Vec<usize> = (0..points.len()).step_by(stride).collect();
         let n_model = self.points.len();
         let rot_bins = self.config.rotation_bins as usize;
@@ -428,7 +513,15 @@ impl PpfModel {
             .collect()
     }
 
-    fn vote_one(&self, points: &[Point], normals: &[Vector3<f64>], index: &KdIndex, r: usize, acc: &mut [u32], touched: &mut Vec<u32>) {
+    fn vote_one(
+        &self,
+        points: &[Point],
+        normals: &[Vector3<f64>],
+        index: &KdIndex,
+        r: usize,
+        acc: &mut [u32],
+        touched: &mut Vec<u32>,
+    ) {
         let (sr, nr) = (&points[r], &normals[r]);
         let frame = Frame::new(sr, nr);
         let rb = self.config.rotation_bins as usize;
@@ -438,14 +531,20 @@ impl PpfModel {
             if j == r {
                 continue;
             }
-            let Some(q) = self.quantise(sr, nr, &points[j], &normals[j]) else { continue };
+            let Some(q) = self.quantise(sr, nr, &points[j], &normals[j]) else {
+                continue;
+            };
             let alpha_s = turn_fraction(frame.alpha(&points[j]));
             // The feature's own bin plus, per dimension, the neighbouring bin when the feature
             // lies within SPREAD of it.
             let mut nkeys = 1usize;
             keys[0] = self.key(&q.bins);
             for k in 0..4 {
-                let max = if k == 0 { self.distance_bins - 2 } else { self.config.angle_bins - 1 };
+                let max = if k == 0 {
+                    self.distance_bins - 2
+                } else {
+                    self.config.angle_bins - 1
+                };
                 let other = if q.frac[k] < SPREAD && q.bins[k] > 0 {
                     Some(q.bins[k] - 1)
                 } else if q.frac[k] > 1.0 - SPREAD && q.bins[k] < max {
@@ -481,11 +580,25 @@ impl PpfModel {
     #[inline]
     fn unkey(&self, key: usize) -> [u32; 4] {
         let a = self.config.angle_bins as usize;
-        [(key / (a * a * a)) as u32, ((key / (a * a)) % a) as u32, ((key / a) % a) as u32, (key % a) as u32]
+        [
+            (key / (a * a * a)) as u32,
+            ((key / (a * a)) % a) as u32,
+            ((key / a) % a) as u32,
+            (key % a) as u32,
+        ]
     }
 
     #[allow(clippy::too_many_arguments)]
-    fn peaks(&self, acc: &[u32], touched: &[u32], r: usize, sr: &Point, nr: &Vector3<f64>, cfg: &DetectConfig, out: &mut Vec<Vote>) {
+    fn peaks(
+        &self,
+        acc: &[u32],
+        touched: &[u32],
+        r: usize,
+        sr: &Point,
+        nr: &Vector3<f64>,
+        cfg: &DetectConfig,
+        out: &mut Vec<Vote>,
+    ) {
         let rb = self.config.rotation_bins as usize;
         // Votes of a cell with its two rotation neighbours: a true pose straddling two bins
         // keeps its strength.
@@ -514,12 +627,23 @@ impl PpfModel {
             }
             let (m, b) = (c / rb, c % rb);
             // Sub-bin rotation from the neighbours' votes (parabolic peak).
-            let (l, h) = (acc[m * rb + (b + rb - 1) % rb] as f64, acc[m * rb + (b + 1) % rb] as f64);
+            let (l, h) = (
+                acc[m * rb + (b + rb - 1) % rb] as f64,
+                acc[m * rb + (b + 1) % rb] as f64,
+            );
             let mid = acc[c] as f64;
             let denom = l - 2.0 * mid + h;
-            let shift = if denom < 0.0 { (0.5 * (l - h) / denom).clamp(-0.5, 0.5) } else { 0.0 };
+            let shift = if denom < 0.0 {
+                (0.5 * (l - h) / denom).clamp(-0.5, 0.5)
+            } else {
+                0.0
+            };
             let alpha = -PI + (b as f64 + 0.5 + shift) * 2.0 * PI / rb as f64;
-            out.push(Vote { t_scene_model: self.local_pose(&frame, m, alpha), votes: v as f64, reference: r });
+            out.push(Vote {
+                t_scene_model: self.local_pose(&frame, m, alpha),
+                votes: v as f64,
+                reference: r,
+            });
         }
     }
 
@@ -539,7 +663,10 @@ impl PpfModel {
     /// most votes first.
     pub fn cluster(&self, votes: &[Vote], symmetries: &Symmetries, cfg: &DetectConfig) -> Vec<Hypothesis> {
         let center = symmetries.center;
-        let mut order: Vec<(Isometry3<f64>, f64)> = votes.iter().map(|v| (symmetries.canonical(&v.t_scene_model), v.votes)).collect();
+        let mut order: Vec<(Isometry3<f64>, f64)> = votes
+            .iter()
+            .map(|v| (symmetries.canonical(&v.t_scene_model), v.votes))
+            .collect();
         order.sort_by(|a, b| b.1.total_cmp(&a.1));
         let max_d = cfg.cluster_distance_ratio * self.diameter;
         struct Acc {
@@ -553,7 +680,8 @@ impl PpfModel {
         for (t, v) in order {
             let c = t * center;
             let hit = clusters.iter_mut().find(|k| {
-                (k.first * center - c).norm() < max_d && symmetries.rotation_distance(&k.first.rotation, &t.rotation) < cfg.cluster_angle
+                (k.first * center - c).norm() < max_d
+                    && symmetries.rotation_distance(&k.first.rotation, &t.rotation) < cfg.cluster_angle
             });
             // Members are averaged in the frame of the cluster's first pose (their symmetric
             // copy nearest to it), so the mean quaternion is meaningful.
@@ -561,13 +689,23 @@ impl PpfModel {
                 Some(k) => {
                     let t_near = symmetries.nearest_equivalent(&t, &k.first);
                     let q = t_near.rotation.coords;
-                    let sign = if q.dot(&k.first.rotation.coords) < 0.0 { -1.0 } else { 1.0 };
+                    let sign = if q.dot(&k.first.rotation.coords) < 0.0 {
+                        -1.0
+                    } else {
+                        1.0
+                    };
                     k.sum_q += q * (sign * v);
                     k.sum_t += (t_near * center).coords * v;
                     k.votes += v;
                     k.members += 1;
                 }
-                None => clusters.push(Acc { first: t, sum_t: c.coords * v, sum_q: t.rotation.coords * v, votes: v, members: 1 }),
+                None => clusters.push(Acc {
+                    first: t,
+                    sum_t: c.coords * v,
+                    sum_q: t.rotation.coords * v,
+                    votes: v,
+                    members: 1,
+                }),
             }
         }
         clusters.sort_by(|a, b| b.votes.total_cmp(&a.votes));
@@ -578,7 +716,11 @@ impl PpfModel {
                 let rot = UnitQuaternion::from_quaternion(nalgebra::Quaternion::from(k.sum_q / k.votes));
                 let c = k.sum_t / k.votes;
                 let t = c - rot * center.coords;
-                Hypothesis { t_scene_model: Isometry3::from_parts(Translation3::from(t), rot), votes: k.votes, members: k.members }
+                Hypothesis {
+                    t_scene_model: Isometry3::from_parts(Translation3::from(t), rot),
+                    votes: k.votes,
+                    members: k.members,
+                }
             })
             .collect()
     }
@@ -588,18 +730,45 @@ impl PpfModel {
 mod tests {
     use super::*;
     use crate::model::{sample_surface, Density};
-    use crate::voxel::subsample;
     use crate::rng::Rng;
+    use crate::voxel::subsample;
 
     fn box_mesh(a: f64, b: f64, c: f64) -> crate::mesh::TriMesh {
-        let v: Vec<Point> = (0..8).map(|i| Point::new(a * ((i & 1) as f64 - 0.5), b * (((i >> 1) & 1) as f64 - 0.5), c * (((i >> 2) & 1) as f64 - 0.5))).collect();
-        let faces = vec![[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4], [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]];
+        let v: Vec<Point> = (0..8)
+            .map(|i| {
+                Point::new(
+                    a * ((i & 1) as f64 - 0.5),
+                    b * (((i >> 1) & 1) as f64 - 0.5),
+                    c * (((i >> 2) & 1) as f64 - 0.5),
+                )
+            })
+            .collect();
+        let faces = vec![
+            [0, 2, 1],
+            [1, 2, 3],
+            [4, 5, 6],
+            [5, 7, 6],
+            [0, 1, 4],
+            [1, 5, 4],
+            [2, 6, 3],
+            [3, 6, 7],
+            [0, 4, 2],
+            [2, 4, 6],
+            [1, 3, 5],
+            [3, 7, 5],
+        ];
         crate::mesh::TriMesh::new(v, faces).unwrap()
     }
 
     fn prepared(points: &[Point], normals: &[Vector3<f64>], diameter: f64) -> PpfModel {
         let keep = subsample(points, 0.04 * diameter);
-        PpfModel::new(keep.iter().map(|&i| points[i]).collect(), keep.iter().map(|&i| normals[i]).collect(), diameter, PpfConfig::default()).unwrap()
+        PpfModel::new(
+            keep.iter().map(|&i| points[i]).collect(),
+            keep.iter().map(|&i| normals[i]).collect(),
+            diameter,
+            PpfConfig::default(),
+        )
+        .unwrap()
     }
 
     #[test]
@@ -619,7 +788,9 @@ mod tests {
         assert!((pose * model.points[j] - sj).norm() < 1e-9);
         assert!((pose.rotation * model.normals[j] - nj).norm() < 1e-9);
         // Same feature, same key.
-        let qm = model.quantise(&model.points[i], &model.normals[i], &model.points[j], &model.normals[j]).unwrap();
+        let qm = model
+            .quantise(&model.points[i], &model.normals[i], &model.points[j], &model.normals[j])
+            .unwrap();
         let qs = model.quantise(&si, &ni, &sj, &nj).unwrap();
         assert_eq!(qm.bins, qs.bins);
     }
@@ -632,7 +803,10 @@ mod tests {
         let mut rng = Rng::new(9);
         let sym = crate::symmetry::Symmetries::none(crate::cloud::centroid(&s.points));
         for trial in 0..4 {
-            let truth = Isometry3::from_parts(Translation3::new(rng.range(-50.0, 50.0), rng.range(-50.0, 50.0), 100.0), rng.rotation());
+            let truth = Isometry3::from_parts(
+                Translation3::new(rng.range(-50.0, 50.0), rng.range(-50.0, 50.0), 100.0),
+                rng.rotation(),
+            );
             // The view: points whose normals face +z.
             let (pts, nrm): (Vec<Point>, Vec<Vector3<f64>>) = s
                 .points
@@ -648,12 +822,26 @@ mod tests {
             let hyps = model.cluster(&votes, &sym, &DetectConfig::default());
             // The box has the symmetries of D2; compare modulo those by checking surface distance.
             let best = &hyps[0];
-            let err = s.points.iter().step_by(20).map(|p| (best.t_scene_model * p - truth * p).norm()).fold(0.0, f64::max);
+            let err = s
+                .points
+                .iter()
+                .step_by(20)
+                .map(|p| (best.t_scene_model * p - truth * p).norm())
+                .fold(0.0, f64::max);
             let flipped = [Vector3::x(), Vector3::y(), Vector3::z()].iter().any(|ax| {
                 let r = UnitQuaternion::from_scaled_axis(ax * PI);
-                s.points.iter().step_by(20).map(|p| (best.t_scene_model * (r * p) - truth * p).norm()).fold(0.0, f64::max) < 0.1 * mesh.diameter()
+                s.points
+                    .iter()
+                    .step_by(20)
+                    .map(|p| (best.t_scene_model * (r * p) - truth * p).norm())
+                    .fold(0.0, f64::max)
+                    < 0.1 * mesh.diameter()
             });
-            assert!(err < 0.1 * mesh.diameter() || flipped, "trial {trial}: max vertex error {err:.1} mm, {} hypotheses", hyps.len());
+            assert!(
+                err < 0.1 * mesh.diameter() || flipped,
+                "trial {trial}: max vertex error {err:.1} mm, {} hypotheses",
+                hyps.len()
+            );
         }
     }
 
@@ -680,7 +868,9 @@ mod tests {
     #[test]
     fn subsample_keeps_points_apart_and_covers() {
         let mut rng = Rng::new(1);
-        let pts: Vec<Point> = (0..5000).map(|_| Point::new(rng.range(0.0, 100.0), rng.range(0.0, 100.0), 0.0)).collect();
+        let pts: Vec<Point> = (0..5000)
+            .map(|_| Point::new(rng.range(0.0, 100.0), rng.range(0.0, 100.0), 0.0))
+            .collect();
         let keep = subsample(&pts, 5.0);
         for (a, &i) in keep.iter().enumerate() {
             for &j in &keep[a + 1..] {

@@ -34,7 +34,9 @@ impl HeightMap {
     /// 4 million cells).
     pub fn new(points: &[Point], up: &Vector3<f64>, cell: f64) -> Self {
         let up = up.normalize();
-        let e1 = up.cross(&if up.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() }).normalize();
+        let e1 = up
+            .cross(&if up.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() })
+            .normalize();
         let e2 = up.cross(&e1);
         let (mut lo, mut hi) = ((f64::INFINITY, f64::INFINITY), (f64::NEG_INFINITY, f64::NEG_INFINITY));
         for p in points {
@@ -51,7 +53,16 @@ impl HeightMap {
             cell *= 1.5;
         }
         let size = (((hi.0 - lo.0) / cell) as usize + 1, ((hi.1 - lo.1) / cell) as usize + 1);
-        let mut map = HeightMap { e1, e2, up, cell, origin: lo, size, top: vec![[0.0; 3]; size.0 * size.1], height: vec![f32::NAN; size.0 * size.1] };
+        let mut map = HeightMap {
+            e1,
+            e2,
+            up,
+            cell,
+            origin: lo,
+            size,
+            top: vec![[0.0; 3]; size.0 * size.1],
+            height: vec![f32::NAN; size.0 * size.1],
+        };
         for p in points {
             let (Some(k), h) = map.key(p) else { continue };
             let h = h as f32;
@@ -94,7 +105,11 @@ impl HeightMap {
                 gapped += (across || along) as usize;
             }
         }
-        if occupied == 0 { 0.0 } else { gapped as f64 / occupied as f64 }
+        if occupied == 0 {
+            0.0
+        } else {
+            gapped as f64 / occupied as f64
+        }
     }
 
     /// The cell size, mm.
@@ -183,7 +198,14 @@ impl Evidence {
 /// rise. With `check_occluders`, a higher scan point is looked up on the posed model to tell
 /// hidden (under the part's own surface) from occluded (under something else); without, both
 /// count as occluded.
-pub fn depth_evidence(target: &IcpTarget, heights: &HeightMap, t_scene_model: &Isometry3<f64>, step: usize, tol: f64, check_occluders: bool) -> Evidence {
+pub fn depth_evidence(
+    target: &IcpTarget,
+    heights: &HeightMap,
+    t_scene_model: &Isometry3<f64>,
+    step: usize,
+    tol: f64,
+    check_occluders: bool,
+) -> Evidence {
     let up_model = t_scene_model.rotation.inverse() * heights.up;
     let normals = target.normals().unwrap_or(&[]);
     let t_model_scene = t_scene_model.inverse();
@@ -209,7 +231,11 @@ pub fn depth_evidence(target: &IcpTarget, heights: &HeightMap, t_scene_model: &I
             Some((top, _)) if top < h - slack => e.violated += 1,
             Some((_, at)) => {
                 let m = t_model_scene * at;
-                let own = check_occluders && target.search().nearest_within(&[m.x, m.y, m.z], 4.0 * tol * tol).is_some();
+                let own = check_occluders
+                    && target
+                        .search()
+                        .nearest_within(&[m.x, m.y, m.z], 4.0 * tol * tol)
+                        .is_some();
                 if own {
                     e.hidden += 1;
                 } else {
@@ -240,7 +266,9 @@ pub fn inlier_stats(points: &[Point], target: &IcpTarget, t_model_scene: &Isomet
 /// Fraction of `points` within about `tol` of the posed model by the target's approximate
 /// nearest field (exact search without one): the cheap score of coarse checks.
 pub fn coarse_inlier_fraction(points: &[Point], target: &IcpTarget, t_model_scene: &Isometry3<f64>, tol: f64) -> f64 {
-    let Some(field) = target.field() else { return inlier_stats(points, target, t_model_scene, tol).0 };
+    let Some(field) = target.field() else {
+        return inlier_stats(points, target, t_model_scene, tol).0;
+    };
     let model = target.points();
     let r = t_model_scene.rotation.to_rotation_matrix().into_inner();
     let t = t_model_scene.translation.vector;
@@ -248,7 +276,9 @@ pub fn coarse_inlier_fraction(points: &[Point], target: &IcpTarget, t_model_scen
         .iter()
         .filter(|p| {
             let q = Point::from(r * p.coords + t);
-            field.nearest(&[q.x, q.y, q.z]).is_some_and(|j| (model[j] - q).norm_squared() <= tol * tol)
+            field
+                .nearest(&[q.x, q.y, q.z])
+                .is_some_and(|j| (model[j] - q).norm_squared() <= tol * tol)
         })
         .count();
     n as f64 / points.len().max(1) as f64
@@ -262,7 +292,9 @@ mod tests {
     /// A 40 × 40 mm plate at z = 10 seen from above, judged as a model of itself.
     #[test]
     fn a_true_pose_is_seen_a_lifted_one_violates_and_a_covered_one_is_occluded() {
-        let plate: Vec<Point> = (0..1600).map(|i| Point::new((i % 40) as f64, (i / 40) as f64, 0.0)).collect();
+        let plate: Vec<Point> = (0..1600)
+            .map(|i| Point::new((i % 40) as f64, (i / 40) as f64, 0.0))
+            .collect();
         let normals = vec![Vector3::z(); plate.len()];
         let target = IcpTarget::new(plate.clone(), Some(normals)).unwrap();
         let at = |z: f64| Isometry3::from_parts(Translation3::new(0.0, 0.0, z), UnitQuaternion::identity());

@@ -36,7 +36,12 @@ pub struct BinSpec {
 impl Default for BinSpec {
     /// The default cell's bin: 300 × 200 mm inside, 80 mm deep, centred at (400, 0), floor at z = 0.
     fn default() -> Self {
-        BinSpec { center: (400.0, 0.0), inner_size: Vector3::new(300.0, 200.0, 80.0), floor_z: 0.0, wall_thickness: 8.0 }
+        BinSpec {
+            center: (400.0, 0.0),
+            inner_size: Vector3::new(300.0, 200.0, 80.0),
+            floor_z: 0.0,
+            wall_thickness: 8.0,
+        }
     }
 }
 
@@ -45,10 +50,16 @@ impl BinSpec {
     pub fn validate(&self) -> Result<()> {
         let s = self.inner_size;
         if !(s.iter().all(|v| v.is_finite() && *v > 0.0)) {
-            return Err(Error::invalid("bin", format!("inner size must be three positive lengths in mm, got {s:?}")));
+            return Err(Error::invalid(
+                "bin",
+                format!("inner size must be three positive lengths in mm, got {s:?}"),
+            ));
         }
         if !(self.wall_thickness.is_finite() && self.wall_thickness > 0.0) {
-            return Err(Error::invalid("wall_thickness", format!("must be a positive length in mm, got {}", self.wall_thickness)));
+            return Err(Error::invalid(
+                "wall_thickness",
+                format!("must be a positive length in mm, got {}", self.wall_thickness),
+            ));
         }
         if !(self.center.0.is_finite() && self.center.1.is_finite() && self.floor_z.is_finite()) {
             return Err(Error::invalid("bin", "the centre and floor height must be finite"));
@@ -61,7 +72,11 @@ impl BinSpec {
         let h = self.inner_size / 2.0;
         (
             Point::new(self.center.0 - h.x, self.center.1 - h.y, self.floor_z),
-            Point::new(self.center.0 + h.x, self.center.1 + h.y, self.floor_z + self.inner_size.z),
+            Point::new(
+                self.center.0 + h.x,
+                self.center.1 + h.y,
+                self.floor_z + self.inner_size.z,
+            ),
         )
     }
 
@@ -73,11 +88,26 @@ impl BinSpec {
         let h = self.inner_size / 2.0;
         let zc = self.floor_z + wall_height / 2.0;
         vec![
-            (Point::new(c.x, c.y, self.floor_z - t / 2.0), Vector3::new(h.x + t, h.y + t, t / 2.0)),
-            (Point::new(lo.x - t / 2.0, c.y, zc), Vector3::new(t / 2.0, h.y + t, wall_height / 2.0)),
-            (Point::new(hi.x + t / 2.0, c.y, zc), Vector3::new(t / 2.0, h.y + t, wall_height / 2.0)),
-            (Point::new(c.x, lo.y - t / 2.0, zc), Vector3::new(h.x, t / 2.0, wall_height / 2.0)),
-            (Point::new(c.x, hi.y + t / 2.0, zc), Vector3::new(h.x, t / 2.0, wall_height / 2.0)),
+            (
+                Point::new(c.x, c.y, self.floor_z - t / 2.0),
+                Vector3::new(h.x + t, h.y + t, t / 2.0),
+            ),
+            (
+                Point::new(lo.x - t / 2.0, c.y, zc),
+                Vector3::new(t / 2.0, h.y + t, wall_height / 2.0),
+            ),
+            (
+                Point::new(hi.x + t / 2.0, c.y, zc),
+                Vector3::new(t / 2.0, h.y + t, wall_height / 2.0),
+            ),
+            (
+                Point::new(c.x, lo.y - t / 2.0, zc),
+                Vector3::new(h.x, t / 2.0, wall_height / 2.0),
+            ),
+            (
+                Point::new(c.x, hi.y + t / 2.0, zc),
+                Vector3::new(h.x, t / 2.0, wall_height / 2.0),
+            ),
         ]
     }
 
@@ -92,7 +122,14 @@ impl BinSpec {
                 vertices.push(Point::new(c.x + s(1) * h.x, c.y + s(2) * h.y, c.z + s(4) * h.z));
             }
             // Outward-wound quads of the box, corner index bits (x = 1, y = 2, z = 4).
-            for q in [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]] {
+            for q in [
+                [0, 2, 3, 1],
+                [4, 5, 7, 6],
+                [0, 1, 5, 4],
+                [2, 6, 7, 3],
+                [0, 4, 6, 2],
+                [1, 3, 7, 5],
+            ] {
                 faces.push([base + q[0], base + q[1], base + q[2]]);
                 faces.push([base + q[0], base + q[2], base + q[3]]);
             }
@@ -157,20 +194,38 @@ impl PileParams {
             ("friction", self.friction, self.friction >= 0.0),
             ("restitution", self.restitution, (0.0..=1.0).contains(&self.restitution)),
             ("drop_gap", self.drop_gap, self.drop_gap >= 0.0),
-            ("time_step", self.time_step, self.time_step > 0.0 && self.time_step <= 0.05),
+            (
+                "time_step",
+                self.time_step,
+                self.time_step > 0.0 && self.time_step <= 0.05,
+            ),
             ("max_settle_time", self.max_settle_time, self.max_settle_time > 0.0),
-            ("rest_linear_speed", self.rest_linear_speed, self.rest_linear_speed > 0.0),
-            ("rest_angular_speed", self.rest_angular_speed, self.rest_angular_speed > 0.0),
+            (
+                "rest_linear_speed",
+                self.rest_linear_speed,
+                self.rest_linear_speed > 0.0,
+            ),
+            (
+                "rest_angular_speed",
+                self.rest_angular_speed,
+                self.rest_angular_speed > 0.0,
+            ),
             ("simplify_cell", self.simplify_cell, self.simplify_cell >= 0.0),
             ("skin", self.skin, (0.0..=5.0).contains(&self.skin)),
         ];
         for (name, v, ok) in checks {
             if !v.is_finite() || !ok {
-                return Err(Error::invalid(name, format!("{v} is out of range; see PileParams for the allowed values")));
+                return Err(Error::invalid(
+                    name,
+                    format!("{v} is out of range; see PileParams for the allowed values"),
+                ));
             }
         }
         if self.decomposition_resolution < 8 || self.decomposition_resolution > 256 {
-            return Err(Error::invalid("decomposition_resolution", format!("must be in 8..=256, got {}", self.decomposition_resolution)));
+            return Err(Error::invalid(
+                "decomposition_resolution",
+                format!("must be in 8..=256, got {}", self.decomposition_resolution),
+            ));
         }
         if self.max_convex_hulls == 0 {
             return Err(Error::invalid("max_convex_hulls", "must be at least 1"));
@@ -204,7 +259,11 @@ pub fn simplify(mesh: &TriMesh, cell: f64) -> TriMesh {
         .vertices
         .iter()
         .map(|p| {
-            let key = ((p.x / cell).floor() as i64, (p.y / cell).floor() as i64, (p.z / cell).floor() as i64);
+            let key = (
+                (p.x / cell).floor() as i64,
+                (p.y / cell).floor() as i64,
+                (p.z / cell).floor() as i64,
+            );
             let id = *index.entry(key).or_insert_with(|| {
                 sums.push((Vector3::zeros(), 0.0));
                 sums.len() as u32 - 1
@@ -235,20 +294,31 @@ pub fn simplify(mesh: &TriMesh, cell: f64) -> TriMesh {
 pub fn convex_decomposition(mesh: &TriMesh, params: &PileParams) -> Result<Vec<(Vec<Point>, Vec<[u32; 3]>)>> {
     params.validate()?;
     let shape = decomposition_shape(mesh, params)?;
-    let compound = shape.as_compound().ok_or_else(|| Error::invalid("mesh", "the convex decomposition failed"))?;
+    let compound = shape
+        .as_compound()
+        .ok_or_else(|| Error::invalid("mesh", "the convex decomposition failed"))?;
     Ok(compound
         .shapes()
         .iter()
         .filter_map(|(pos, s)| {
-            let (v, i) = s.as_convex_polyhedron().or_else(|| s.as_round_convex_polyhedron().map(|r| &r.inner_shape))?.to_trimesh();
-            Some((v.into_iter().map(|p| convert::point(pos.transform_point(p))).collect(), i))
+            let (v, i) = s
+                .as_convex_polyhedron()
+                .or_else(|| s.as_round_convex_polyhedron().map(|r| &r.inner_shape))?
+                .to_trimesh();
+            Some((
+                v.into_iter().map(|p| convert::point(pos.transform_point(p))).collect(),
+                i,
+            ))
         })
         .collect())
 }
 
 fn decomposition_shape(mesh: &TriMesh, params: &PileParams) -> Result<SharedShape> {
     if mesh.faces.len() < 4 {
-        return Err(Error::invalid("mesh", format!("has {} faces; a part needs a closed mesh", mesh.faces.len())));
+        return Err(Error::invalid(
+            "mesh",
+            format!("has {} faces; a part needs a closed mesh", mesh.faces.len()),
+        ));
     }
     let coarse = simplify(mesh, params.simplify_cell);
     let mut coarse = if coarse.faces.len() >= 4 { coarse } else { mesh.clone() };
@@ -259,7 +329,8 @@ fn decomposition_shape(mesh: &TriMesh, params: &PileParams) -> Result<SharedShap
         max_convex_hulls: params.max_convex_hulls,
         ..Default::default()
     };
-    let pieces = VHACD::decompose(&vhacd, &verts, &coarse.faces, false).compute_convex_hulls(vhacd.convex_hull_downsampling);
+    let pieces =
+        VHACD::decompose(&vhacd, &verts, &coarse.faces, false).compute_convex_hulls(vhacd.convex_hull_downsampling);
     // V-HACD's hulls bound the voxelised volume: a voxel too fat in places, too thin in others.
     // Each piece is rebuilt as the hull of the mesh's own vertices it holds (within a margin, so
     // that neighbouring pieces overlap); a vertex no piece holds joins the piece it is least
@@ -281,12 +352,20 @@ fn decomposition_shape(mesh: &TriMesh, params: &PileParams) -> Result<SharedShap
         })
         .collect();
     if planes.is_empty() {
-        return Err(Error::invalid("mesh", "the convex decomposition produced no piece; pass a closed, non-flat mesh"));
+        return Err(Error::invalid(
+            "mesh",
+            "the convex decomposition produced no piece; pass a closed, non-flat mesh",
+        ));
     }
     let (lo, hi) = mesh.bounds();
     let margin = (0.5 * (hi - lo).max() / params.decomposition_resolution as f64) as f32;
     let mut points: Vec<Vec<Vector>> = vec![Vec::new(); planes.len()];
-    let outside = |p: Vector| -> Vec<f32> { planes.iter().map(|pl| pl.iter().map(|(n, d)| n.dot(p) - d).fold(f32::NEG_INFINITY, f32::max)).collect() };
+    let outside = |p: Vector| -> Vec<f32> {
+        planes
+            .iter()
+            .map(|pl| pl.iter().map(|(n, d)| n.dot(p) - d).fold(f32::NEG_INFINITY, f32::max))
+            .collect()
+    };
     for p in mesh.vertices.iter().map(convert::point_vec) {
         let out = outside(p);
         let mut held = false;
@@ -297,7 +376,12 @@ fn decomposition_shape(mesh: &TriMesh, params: &PileParams) -> Result<SharedShap
             }
         }
         if !held {
-            let best = out.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i).expect("a piece");
+            let best = out
+                .iter()
+                .enumerate()
+                .min_by(|a, b| a.1.total_cmp(b.1))
+                .map(|(i, _)| i)
+                .expect("a piece");
             points[best].push(p);
         }
     }
@@ -317,9 +401,16 @@ fn decomposition_shape(mesh: &TriMesh, params: &PileParams) -> Result<SharedShap
             }
         }
     }
-    let parts: Vec<(Pose, SharedShape)> = points.iter().filter(|p| p.len() >= 4).filter_map(|pts| SharedShape::round_convex_hull(pts, params.skin as f32).map(|s| (Pose::IDENTITY, s))).collect();
+    let parts: Vec<(Pose, SharedShape)> = points
+        .iter()
+        .filter(|p| p.len() >= 4)
+        .filter_map(|pts| SharedShape::round_convex_hull(pts, params.skin as f32).map(|s| (Pose::IDENTITY, s)))
+        .collect();
     if parts.is_empty() {
-        return Err(Error::invalid("mesh", "the convex decomposition produced no piece; pass a closed, non-flat mesh"));
+        return Err(Error::invalid(
+            "mesh",
+            "the convex decomposition produced no piece; pass a closed, non-flat mesh",
+        ));
     }
     Ok(SharedShape::compound(parts))
 }
@@ -337,7 +428,11 @@ pub struct Pile {
 
 impl std::fmt::Debug for Pile {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Pile").field("remaining", &self.remaining()).field("bin", &self.bin).field("last", &self.last).finish()
+        f.debug_struct("Pile")
+            .field("remaining", &self.remaining())
+            .field("bin", &self.bin)
+            .field("last", &self.last)
+            .finish()
     }
 }
 
@@ -351,7 +446,10 @@ impl Pile {
             return Err(Error::invalid("count", "must be at least 1"));
         }
         if count > 500 {
-            return Err(Error::invalid("count", format!("{count} parts is more than the simulator supports (500)")));
+            return Err(Error::invalid(
+                "count",
+                format!("{count} parts is more than the simulator supports (500)"),
+            ));
         }
         let hull_shape = decomposition_shape(mesh, params)?;
         // The bounding sphere about the mesh's centroid-of-bounds keeps drop positions apart.
@@ -365,7 +463,11 @@ impl Pile {
         for _ in 0..count {
             let span = |a: f64, b: f64, rng: &mut Rng| {
                 let (a, b) = (a + radius, b - radius);
-                if a < b { rng.range(a, b) } else { 0.5 * (a + b) }
+                if a < b {
+                    rng.range(a, b)
+                } else {
+                    0.5 * (a + b)
+                }
             };
             let x = span(blo.x, bhi.x, &mut rng);
             let y = span(blo.y, bhi.y, &mut rng);
@@ -415,7 +517,13 @@ impl Pile {
         }
         let mut bodies = Vec::with_capacity(count);
         for t in &poses {
-            let body = RigidBodyBuilder::dynamic().pose(convert::pose(t)).ccd_enabled(true).can_sleep(false).linear_damping(0.2).angular_damping(0.5).build();
+            let body = RigidBodyBuilder::dynamic()
+                .pose(convert::pose(t))
+                .ccd_enabled(true)
+                .can_sleep(false)
+                .linear_damping(0.2)
+                .angular_damping(0.5)
+                .build();
             let collider = ColliderBuilder::new(hull_shape.clone())
                 .density(1e-3)
                 .friction(params.friction as f32)
@@ -430,7 +538,12 @@ impl Pile {
             params: params.clone(),
             bin: *bin,
             hull_shape,
-            last: SettleReport { steps: 0, simulated_time: 0.0, settled: false, max_speed: 0.0 },
+            last: SettleReport {
+                steps: 0,
+                simulated_time: 0.0,
+                settled: false,
+                max_speed: 0.0,
+            },
         };
         pile.settle();
         Ok(pile)
@@ -464,7 +577,12 @@ impl Pile {
                 quiet = 0;
             }
         }
-        self.last = SettleReport { steps, simulated_time: steps as f64 * dt, settled: quiet >= need_quiet, max_speed };
+        self.last = SettleReport {
+            steps,
+            simulated_time: steps as f64 * dt,
+            settled: quiet >= need_quiet,
+            max_speed,
+        };
         self.last
     }
 
@@ -497,7 +615,15 @@ impl Pile {
         let handle = match self.bodies.get(id) {
             Some(Some(h)) => *h,
             Some(None) => return Err(Error::invalid("id", format!("part {id} was already removed"))),
-            None => return Err(Error::invalid("id", format!("no part {id}; ids run from 0 to {}", self.bodies.len().saturating_sub(1)))),
+            None => {
+                return Err(Error::invalid(
+                    "id",
+                    format!(
+                        "no part {id}; ids run from 0 to {}",
+                        self.bodies.len().saturating_sub(1)
+                    ),
+                ))
+            }
         };
         self.world.remove_body(handle);
         self.bodies[id] = None;
@@ -519,12 +645,20 @@ impl Pile {
 
     /// The convex pieces every part collides with, in the model frame.
     pub fn collision_hulls(&self) -> Vec<(Vec<Point>, Vec<[u32; 3]>)> {
-        let Some(c) = self.hull_shape.as_compound() else { return Vec::new() };
+        let Some(c) = self.hull_shape.as_compound() else {
+            return Vec::new();
+        };
         c.shapes()
             .iter()
             .filter_map(|(pos, s)| {
-                let (v, i) = s.as_convex_polyhedron().or_else(|| s.as_round_convex_polyhedron().map(|r| &r.inner_shape))?.to_trimesh();
-                Some((v.into_iter().map(|p| convert::point(pos.transform_point(p))).collect(), i))
+                let (v, i) = s
+                    .as_convex_polyhedron()
+                    .or_else(|| s.as_round_convex_polyhedron().map(|r| &r.inner_shape))?
+                    .to_trimesh();
+                Some((
+                    v.into_iter().map(|p| convert::point(pos.transform_point(p))).collect(),
+                    i,
+                ))
             })
             .collect()
     }
@@ -538,8 +672,17 @@ pub fn max_interpenetration(mesh: &TriMesh, poses: &[Isometry3<f64>], samples: &
         return Err(Error::invalid("mesh", "has no faces"));
     }
     let verts: Vec<Vector> = mesh.vertices.iter().map(convert::point_vec).collect();
-    let shape = parry3d::shape::TriMesh::with_flags(verts, mesh.faces.clone(), TriMeshFlags::ORIENTED | TriMeshFlags::MERGE_DUPLICATE_VERTICES)
-        .map_err(|e| Error::invalid("mesh", format!("cannot be used for inside tests ({e}); pass a closed, consistently wound mesh")))?;
+    let shape = parry3d::shape::TriMesh::with_flags(
+        verts,
+        mesh.faces.clone(),
+        TriMeshFlags::ORIENTED | TriMeshFlags::MERGE_DUPLICATE_VERTICES,
+    )
+    .map_err(|e| {
+        Error::invalid(
+            "mesh",
+            format!("cannot be used for inside tests ({e}); pass a closed, consistently wound mesh"),
+        )
+    })?;
     let aabb = shape.local_aabb();
     let (lo, hi) = mesh.bounds();
     let centre = nalgebra::center(&lo, &hi);
@@ -576,7 +719,12 @@ mod tests {
     use crate::parts::{tee, TeeParams};
 
     fn small_tee() -> TriMesh {
-        tee(&TeeParams { resolution: 2.0, ..Default::default() }).unwrap().mesh
+        tee(&TeeParams {
+            resolution: 2.0,
+            ..Default::default()
+        })
+        .unwrap()
+        .mesh
     }
 
     #[test]
@@ -591,7 +739,16 @@ mod tests {
         let m = small_tee();
         let hulls = convex_decomposition(&m, &PileParams::default()).unwrap();
         assert!(hulls.len() >= 2, "a tee is not convex: {} pieces", hulls.len());
-        let hull_volume: f64 = hulls.iter().map(|(v, f)| TriMesh { vertices: v.clone(), faces: f.clone() }.volume()).sum();
+        let hull_volume: f64 = hulls
+            .iter()
+            .map(|(v, f)| {
+                TriMesh {
+                    vertices: v.clone(),
+                    faces: f.clone(),
+                }
+                .volume()
+            })
+            .sum();
         assert!(hull_volume > 0.95 * m.volume(), "{hull_volume} vs {}", m.volume());
     }
 
@@ -599,7 +756,10 @@ mod tests {
     fn pile_settles_inside_the_bin_and_repeats_for_a_seed() {
         let m = small_tee();
         let bin = BinSpec::default();
-        let params = PileParams { seed: 7, ..Default::default() };
+        let params = PileParams {
+            seed: 7,
+            ..Default::default()
+        };
         let a = Pile::drop(&m, 4, &bin, &params).unwrap();
         let b = Pile::drop(&m, 4, &bin, &params).unwrap();
         assert_eq!(a.poses(), b.poses());
@@ -608,7 +768,10 @@ mod tests {
         for (_, t) in a.poses() {
             for v in m.vertices.iter().step_by(7) {
                 let p = t * v;
-                assert!(p.x > lo.x - 0.5 && p.x < hi.x + 0.5 && p.y > lo.y - 0.5 && p.y < hi.y + 0.5 && p.z > lo.z - 0.5, "{p}");
+                assert!(
+                    p.x > lo.x - 0.5 && p.x < hi.x + 0.5 && p.y > lo.y - 0.5 && p.y < hi.y + 0.5 && p.z > lo.z - 0.5,
+                    "{p}"
+                );
             }
         }
     }
@@ -624,4 +787,3 @@ mod tests {
         assert!(pile.remove(9).is_err());
     }
 }
-

@@ -43,7 +43,15 @@ pub struct Camera {
 impl Default for Camera {
     /// The paper's camera (AVT Guppy F-080C, 1032 × 778) with an 8 mm-class lens, no distortion.
     fn default() -> Self {
-        Camera { width: 1032, height: 778, fx: 1600.0, fy: 1600.0, cx: 515.5, cy: 388.5, dist: [0.0; 5] }
+        Camera {
+            width: 1032,
+            height: 778,
+            fx: 1600.0,
+            fy: 1600.0,
+            cx: 515.5,
+            cy: 388.5,
+            dist: [0.0; 5],
+        }
     }
 }
 
@@ -51,7 +59,13 @@ impl Camera {
     /// Checks sizes, focal lengths and distortion.
     pub fn validate(&self) -> Result<()> {
         if self.width == 0 || self.height == 0 || self.width > 16384 || self.height > 16384 {
-            return Err(Error::invalid("camera", format!("image size {}×{} must be between 1 and 16384 px", self.width, self.height)));
+            return Err(Error::invalid(
+                "camera",
+                format!(
+                    "image size {}×{} must be between 1 and 16384 px",
+                    self.width, self.height
+                ),
+            ));
         }
         for (name, v) in [("fx", self.fx), ("fy", self.fy)] {
             if !(v.is_finite() && v > 0.0) {
@@ -59,7 +73,10 @@ impl Camera {
             }
         }
         if !(self.cx.is_finite() && self.cy.is_finite() && self.dist.iter().all(|d| d.is_finite())) {
-            return Err(Error::invalid("camera", "principal point and distortion must be finite"));
+            return Err(Error::invalid(
+                "camera",
+                "principal point and distortion must be finite",
+            ));
         }
         Ok(())
     }
@@ -70,7 +87,10 @@ impl Camera {
         let [k1, k2, p1, p2, k3] = self.dist;
         let r2 = x * x + y * y;
         let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-        (x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x), y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y)
+        (
+            x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
+            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
+        )
     }
 
     /// Removes lens distortion from normalised image coordinates (fixed-point iteration).
@@ -170,7 +190,10 @@ impl Laser {
             && self.reference_distance > 0.0
             && self.color.iter().all(|c| c.is_finite() && *c >= 0.0);
         if !ok {
-            return Err(Error::invalid("laser", "sheet_sigma and reference_distance must be positive, power and colour ≥ 0, fan_angle in (0, π)"));
+            return Err(Error::invalid(
+                "laser",
+                "sheet_sigma and reference_distance must be positive, power and colour ≥ 0, fan_angle in (0, π)",
+            ));
         }
         Ok(())
     }
@@ -189,7 +212,11 @@ pub struct Material {
 
 impl Default for Material {
     fn default() -> Self {
-        Material { albedo: [0.7, 0.7, 0.68], specular: 0.0, shininess: 20.0 }
+        Material {
+            albedo: [0.7, 0.7, 0.68],
+            specular: 0.0,
+            shininess: 20.0,
+        }
     }
 }
 
@@ -208,7 +235,12 @@ pub struct Lighting {
 
 impl Default for Lighting {
     fn default() -> Self {
-        Lighting { ambient: 55.0, lamp: 45.0, lamp_direction: Vector3::new(0.3, -0.2, 1.0), background: 6.0 }
+        Lighting {
+            ambient: 55.0,
+            lamp: 45.0,
+            lamp_direction: Vector3::new(0.3, -0.2, 1.0),
+            background: 6.0,
+        }
     }
 }
 
@@ -229,20 +261,41 @@ pub struct SensorNoise {
 
 impl Default for SensorNoise {
     fn default() -> Self {
-        SensorNoise { read_noise: 1.5, shot_noise: 0.08, speckle: 0.0, reflections: 0.0, blur: 0.6 }
+        SensorNoise {
+            read_noise: 1.5,
+            shot_noise: 0.08,
+            speckle: 0.0,
+            reflections: 0.0,
+            blur: 0.6,
+        }
     }
 }
 
 impl SensorNoise {
     /// An ideal sensor (no noise, no speckle, no reflections) with the default optics blur.
     pub fn none() -> Self {
-        SensorNoise { read_noise: 0.0, shot_noise: 0.0, speckle: 0.0, reflections: 0.0, ..Default::default() }
+        SensorNoise {
+            read_noise: 0.0,
+            shot_noise: 0.0,
+            speckle: 0.0,
+            reflections: 0.0,
+            ..Default::default()
+        }
     }
 
     fn validate(&self) -> Result<()> {
-        let v = [self.read_noise, self.shot_noise, self.speckle, self.reflections, self.blur];
+        let v = [
+            self.read_noise,
+            self.shot_noise,
+            self.speckle,
+            self.reflections,
+            self.blur,
+        ];
         if !v.iter().all(|x| x.is_finite() && *x >= 0.0) {
-            return Err(Error::invalid("noise", "read_noise, shot_noise, speckle, reflections and blur must be finite and ≥ 0"));
+            return Err(Error::invalid(
+                "noise",
+                "read_noise, shot_noise, speckle, reflections and blur must be finite and ≥ 0",
+            ));
         }
         Ok(())
     }
@@ -272,7 +325,10 @@ pub struct Scene {
 
 impl std::fmt::Debug for Scene {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Scene").field("meshes", &self.meshes.len()).field("instances", &self.instances.len()).finish()
+        f.debug_struct("Scene")
+            .field("meshes", &self.meshes.len())
+            .field("instances", &self.instances.len())
+            .finish()
     }
 }
 
@@ -288,8 +344,14 @@ impl Scene {
         if mesh.faces.is_empty() {
             return Err(Error::invalid("faces", "the mesh has no faces"));
         }
-        if !material.albedo.iter().all(|a| a.is_finite() && (0.0..=1.0).contains(a)) || !(material.specular.is_finite() && material.specular >= 0.0) || !(material.shininess.is_finite() && material.shininess > 0.0) {
-            return Err(Error::invalid("material", "albedo must be in [0, 1], specular ≥ 0 and shininess > 0"));
+        if !material.albedo.iter().all(|a| a.is_finite() && (0.0..=1.0).contains(a))
+            || !(material.specular.is_finite() && material.specular >= 0.0)
+            || !(material.shininess.is_finite() && material.shininess > 0.0)
+        {
+            return Err(Error::invalid(
+                "material",
+                "albedo must be in [0, 1], specular ≥ 0 and shininess > 0",
+            ));
         }
         let mut m = mesh.clone();
         m.drop_degenerate_faces();
@@ -297,7 +359,8 @@ impl Scene {
             return Err(Error::invalid("faces", "every face of the mesh is degenerate"));
         }
         let verts = m.vertices.iter().map(convert::point_vec).collect();
-        let shape = parry3d::shape::TriMesh::new(verts, m.faces).map_err(|e| Error::invalid("mesh", format!("cannot build a ray-casting mesh: {e}")))?;
+        let shape = parry3d::shape::TriMesh::new(verts, m.faces)
+            .map_err(|e| Error::invalid("mesh", format!("cannot build a ray-casting mesh: {e}")))?;
         let aabb = shape.local_aabb();
         self.meshes.push(Arc::new(SceneMesh { shape, aabb, material }));
         Ok(self.meshes.len() - 1)
@@ -306,7 +369,10 @@ impl Scene {
     /// Places mesh `mesh` at `t_base_object` under instance id `id`.
     pub fn add_instance(&mut self, mesh: usize, t_base_object: Isometry3<f64>, id: i32) -> Result<()> {
         if mesh >= self.meshes.len() {
-            return Err(Error::invalid("mesh", format!("no mesh {mesh}; the scene has {}", self.meshes.len())));
+            return Err(Error::invalid(
+                "mesh",
+                format!("no mesh {mesh}; the scene has {}", self.meshes.len()),
+            ));
         }
         if id == -1 {
             return Err(Error::invalid("id", "−1 is reserved for 'no surface'; use another id"));
@@ -314,13 +380,21 @@ impl Scene {
         if self.instances.iter().any(|i| i.id == id) {
             return Err(Error::invalid("id", format!("an instance with id {id} already exists")));
         }
-        self.instances.push(Instance { mesh, t_base_object, id });
+        self.instances.push(Instance {
+            mesh,
+            t_base_object,
+            id,
+        });
         Ok(())
     }
 
     /// Moves instance `id`.
     pub fn set_pose(&mut self, id: i32, t_base_object: Isometry3<f64>) -> Result<()> {
-        let inst = self.instances.iter_mut().find(|i| i.id == id).ok_or_else(|| Error::invalid("id", format!("no instance {id}")))?;
+        let inst = self
+            .instances
+            .iter_mut()
+            .find(|i| i.id == id)
+            .ok_or_else(|| Error::invalid("id", format!("no instance {id}")))?;
         inst.t_base_object = t_base_object;
         Ok(())
     }
@@ -348,7 +422,11 @@ impl Scene {
         points
             .par_iter()
             .map(|p| {
-                let mut bounds: Vec<(f64, usize)> = placed.iter().enumerate().map(|(k, pl)| (box_distance(p, &pl.lo, &pl.hi), k)).collect();
+                let mut bounds: Vec<(f64, usize)> = placed
+                    .iter()
+                    .enumerate()
+                    .map(|(k, pl)| (box_distance(p, &pl.lo, &pl.hi), k))
+                    .collect();
                 bounds.sort_by(|a, b| a.0.total_cmp(&b.0));
                 let mut best = (f64::INFINITY, -1);
                 for (lower, k) in bounds {
@@ -359,7 +437,11 @@ impl Scene {
                     let local = convert::point_vec(&(pl.t_object_camera * p));
                     // The f32 projection is refined in f64 below; the slack keeps a surface that
                     // is nearer only within f32 rounding from being skipped.
-                    let limit = if best.0.is_finite() { best.0 as f32 + 1e-3 } else { f32::MAX };
+                    let limit = if best.0.is_finite() {
+                        best.0 as f32 + 1e-3
+                    } else {
+                        f32::MAX
+                    };
                     if let Some(proj) = pl.mesh.shape.project_local_point_with_max_dist(local, false, limit) {
                         let d = (convert::point(proj.point) - pl.t_object_camera * p).norm();
                         if d < best.0 {
@@ -387,7 +469,14 @@ impl Scene {
                         hi[k] = hi[k].max(p[k]);
                     }
                 }
-                Placed { t_object_camera: t_camera_object.inverse(), t_camera_object, lo, hi, id: inst.id, mesh }
+                Placed {
+                    t_object_camera: t_camera_object.inverse(),
+                    t_camera_object,
+                    lo,
+                    hi,
+                    id: inst.id,
+                    mesh,
+                }
             })
             .collect()
     }
@@ -399,7 +488,9 @@ impl Scene {
         let placed = self.placed(t_base_camera);
         let table = camera.ray_table();
         let (w, h) = (camera.width, camera.height);
-        let lamp = (t_base_camera.inverse().rotation * lighting.lamp_direction).try_normalize(1e-12).unwrap_or_else(Vector3::z);
+        let lamp = (t_base_camera.inverse().rotation * lighting.lamp_direction)
+            .try_normalize(1e-12)
+            .unwrap_or_else(Vector3::z);
         let ray_at = |u: usize, v: usize| {
             let [x, y] = table[v * w + u];
             Vector3::new(x, y, 1.0)
@@ -428,11 +519,19 @@ impl Scene {
                             let at = |uu: usize, vv: usize| {
                                 let rr = ray_at(uu, vv);
                                 let den = n.dot(&rr);
-                                if den.abs() < 1e-9 { p } else { rr * (n.dot(&p) / den) }
+                                if den.abs() < 1e-9 {
+                                    p
+                                } else {
+                                    rr * (n.dot(&p) / den)
+                                }
                             };
                             let diff = |a: Vector3<f64>, b: Vector3<f64>, span: f64| {
                                 let d = (a - b) / span;
-                                if d.norm() > 50.0 { Vector3::zeros() } else { d }
+                                if d.norm() > 50.0 {
+                                    Vector3::zeros()
+                                } else {
+                                    d
+                                }
                             };
                             let (u0, u1) = (u.saturating_sub(1), (u + 1).min(w - 1));
                             let (v0, v1) = (v.saturating_sub(1), (v + 1).min(h - 1));
@@ -440,7 +539,11 @@ impl Scene {
                             let dpdv = diff(at(u, v1), at(u, v0), (v1 - v0).max(1) as f64);
                             let m = &placed[k].mesh.material;
                             let lit = lighting.ambient + lighting.lamp * n.dot(&lamp).max(0.0);
-                            shade.push([(m.albedo[0] * lit) as f32, (m.albedo[1] * lit) as f32, (m.albedo[2] * lit) as f32]);
+                            shade.push([
+                                (m.albedo[0] * lit) as f32,
+                                (m.albedo[1] * lit) as f32,
+                                (m.albedo[2] * lit) as f32,
+                            ]);
                             hits.push(Hit {
                                 t: t as f32,
                                 p: f3(&p),
@@ -462,7 +565,13 @@ impl Scene {
             hits.extend(a);
             shade.extend(b);
         }
-        Ok(View { camera: camera.clone(), t_base_camera: *t_base_camera, placed, hits, shade })
+        Ok(View {
+            camera: camera.clone(),
+            t_base_camera: *t_base_camera,
+            placed,
+            hits,
+            shade,
+        })
     }
 }
 
@@ -557,7 +666,15 @@ struct Hit {
 }
 
 impl Hit {
-    const NONE: Hit = Hit { t: f32::INFINITY, p: [0.0; 3], n: [0.0; 3], dpdu: [0.0; 3], dpdv: [0.0; 3], id: -1, placed: u32::MAX };
+    const NONE: Hit = Hit {
+        t: f32::INFINITY,
+        p: [0.0; 3],
+        n: [0.0; 3],
+        dpdu: [0.0; 3],
+        dpdv: [0.0; 3],
+        id: -1,
+        placed: u32::MAX,
+    };
 }
 
 /// The geometry a camera sees from one robot pose: per pixel the first surface, its normal and
@@ -572,7 +689,10 @@ pub struct View {
 
 impl std::fmt::Debug for View {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("View").field("camera", &self.camera).field("t_base_camera", &self.t_base_camera).finish()
+        f.debug_struct("View")
+            .field("camera", &self.camera)
+            .field("t_base_camera", &self.t_base_camera)
+            .finish()
     }
 }
 
@@ -625,7 +745,10 @@ impl View {
 
     /// Depth image: z of the surface point in the camera frame, mm; NaN where nothing is hit.
     pub fn depth(&self) -> Vec<f32> {
-        self.hits.iter().map(|h| if h.id == -1 { f32::NAN } else { h.p[2] }).collect()
+        self.hits
+            .iter()
+            .map(|h| if h.id == -1 { f32::NAN } else { h.p[2] })
+            .collect()
     }
 
     /// Instance-id image: the id of the surface each pixel sees, −1 for none.
@@ -635,7 +758,10 @@ impl View {
 
     /// Surface point of every pixel in the camera frame, mm (NaN where nothing is hit).
     pub fn points(&self) -> Vec<[f32; 3]> {
-        self.hits.iter().map(|h| if h.id == -1 { [f32::NAN; 3] } else { h.p }).collect()
+        self.hits
+            .iter()
+            .map(|h| if h.id == -1 { [f32::NAN; 3] } else { h.p })
+            .collect()
     }
 
     /// Camera-facing unit normal of every pixel's surface in the camera frame (0 where none).
@@ -662,7 +788,11 @@ impl View {
         let t = laser.t_camera_laser(theta);
         let o = Point::from(t.translation.vector);
         let r = t.rotation.to_rotation_matrix();
-        let (xl, yl, zl) = (r.matrix().column(0).into_owned(), r.matrix().column(1).into_owned(), r.matrix().column(2).into_owned());
+        let (xl, yl, zl) = (
+            r.matrix().column(0).into_owned(),
+            r.matrix().column(1).into_owned(),
+            r.matrix().column(2).into_owned(),
+        );
         let tan_half_fan = (laser.fan_angle / 2.0).tan();
         let sigma2 = laser.sheet_sigma * laser.sheet_sigma;
         let pixel_var = 1.0 / 12.0 + noise.blur * noise.blur;
@@ -741,9 +871,13 @@ impl View {
             let incoming = (p - o).normalize();
             let out = incoming - n * (2.0 * incoming.dot(&n));
             let start = p + n * 0.05;
-            let Some((t, n2, k)) = cast(&self.placed, &start, &out, 2000.0) else { continue };
+            let Some((t, n2, k)) = cast(&self.placed, &start, &out, 2000.0) else {
+                continue;
+            };
             let q = start + out * t;
-            let Some((qu, qv)) = self.camera.project(&q) else { continue };
+            let Some((qu, qv)) = self.camera.project(&q) else {
+                continue;
+            };
             let (ui, vi) = (qu.round(), qv.round());
             if ui < 0.0 || vi < 0.0 || ui >= w as f64 || vi >= h as f64 {
                 continue;
@@ -780,21 +914,41 @@ pub struct Checkerboard {
 
 impl Default for Checkerboard {
     fn default() -> Self {
-        Checkerboard { cols: 10, rows: 7, square: 20.0, margin: 15.0 }
+        Checkerboard {
+            cols: 10,
+            rows: 7,
+            square: 20.0,
+            margin: 15.0,
+        }
     }
 }
 
 /// Renders a checkerboard at `t_camera_board` under `lighting` with `supersample`² samples per
 /// pixel, optionally with the laser line at an angle on it, and sensor noise: the images the
 /// camera and laser calibrations are computed from.
-pub fn render_checkerboard(camera: &Camera, board: &Checkerboard, t_camera_board: &Isometry3<f64>, lighting: &Lighting, laser: Option<(&Laser, f64)>, noise: &SensorNoise, supersample: usize, seed: u64) -> Result<Vec<u8>> {
+pub fn render_checkerboard(
+    camera: &Camera,
+    board: &Checkerboard,
+    t_camera_board: &Isometry3<f64>,
+    lighting: &Lighting,
+    laser: Option<(&Laser, f64)>,
+    noise: &SensorNoise,
+    supersample: usize,
+    seed: u64,
+) -> Result<Vec<u8>> {
     camera.validate()?;
     noise.validate()?;
     if board.cols < 2 || board.rows < 2 || !(board.square > 0.0) || !(board.margin >= 0.0) {
-        return Err(Error::invalid("board", "needs at least 2 × 2 squares, a positive square size and a margin ≥ 0"));
+        return Err(Error::invalid(
+            "board",
+            "needs at least 2 × 2 squares, a positive square size and a margin ≥ 0",
+        ));
     }
     if supersample == 0 || supersample > 16 {
-        return Err(Error::invalid("supersample", format!("must be in 1..=16, got {supersample}")));
+        return Err(Error::invalid(
+            "supersample",
+            format!("must be in 1..=16, got {supersample}"),
+        ));
     }
     if let Some((l, th)) = laser {
         l.validate()?;
@@ -810,11 +964,20 @@ pub fn render_checkerboard(camera: &Camera, board: &Checkerboard, t_camera_board
     let lamp = lighting.lamp_direction.try_normalize(1e-12).unwrap_or_else(Vector3::z);
     let shade = lighting.ambient + lighting.lamp * n.dot(&lamp).abs();
     let (xmin, ymin) = (-board.square - board.margin, -board.square - board.margin);
-    let (xmax, ymax) = ((board.cols - 1) as f64 * board.square + board.margin, (board.rows - 1) as f64 * board.square + board.margin);
+    let (xmax, ymax) = (
+        (board.cols - 1) as f64 * board.square + board.margin,
+        (board.rows - 1) as f64 * board.square + board.margin,
+    );
     let laser_frame = laser.map(|(l, th)| {
         let t = l.t_camera_laser(th);
         let r = t.rotation.to_rotation_matrix().into_inner();
-        (l, Point::from(t.translation.vector), r.column(0).into_owned(), r.column(1).into_owned(), r.column(2).into_owned())
+        (
+            l,
+            Point::from(t.translation.vector),
+            r.column(0).into_owned(),
+            r.column(1).into_owned(),
+            r.column(2).into_owned(),
+        )
     });
     let k = supersample;
     let img: Vec<[f32; 3]> = (0..h)
@@ -827,15 +990,25 @@ pub fn render_checkerboard(camera: &Camera, board: &Checkerboard, t_camera_board
                 let c = at(u, v);
                 let (u0, u1) = (u.saturating_sub(1), (u + 1).min(w - 1));
                 let (v0, v1) = (v.saturating_sub(1), (v + 1).min(h - 1));
-                let du = [(at(u1, v)[0] - at(u0, v)[0]) / (u1 - u0).max(1) as f64, (at(u1, v)[1] - at(u0, v)[1]) / (u1 - u0).max(1) as f64];
-                let dv = [(at(u, v1)[0] - at(u, v0)[0]) / (v1 - v0).max(1) as f64, (at(u, v1)[1] - at(u, v0)[1]) / (v1 - v0).max(1) as f64];
+                let du = [
+                    (at(u1, v)[0] - at(u0, v)[0]) / (u1 - u0).max(1) as f64,
+                    (at(u1, v)[1] - at(u0, v)[1]) / (u1 - u0).max(1) as f64,
+                ];
+                let dv = [
+                    (at(u, v1)[0] - at(u, v0)[0]) / (v1 - v0).max(1) as f64,
+                    (at(u, v1)[1] - at(u, v0)[1]) / (v1 - v0).max(1) as f64,
+                ];
                 let mut acc = [0.0f64; 3];
                 for i in 0..k {
                     for j in 0..k {
                         let (su, sv) = ((i as f64 + 0.5) / k as f64 - 0.5, (j as f64 + 0.5) / k as f64 - 0.5);
                         let r = Vector3::new(c[0] + su * du[0] + sv * dv[0], c[1] + su * du[1] + sv * dv[1], 1.0);
                         let den = n.dot(&r);
-                        let tt = if den.abs() > 1e-12 { n.dot(&p0.coords) / den } else { -1.0 };
+                        let tt = if den.abs() > 1e-12 {
+                            n.dot(&p0.coords) / den
+                        } else {
+                            -1.0
+                        };
                         if tt <= 0.0 {
                             for a in acc.iter_mut() {
                                 *a += lighting.background;
@@ -850,8 +1023,14 @@ pub fn render_checkerboard(camera: &Camera, board: &Checkerboard, t_camera_board
                             }
                             continue;
                         }
-                        let inside = b.x >= -board.square && b.x < (board.cols - 1) as f64 * board.square && b.y >= -board.square && b.y < (board.rows - 1) as f64 * board.square;
-                        let black = inside && ((b.x / board.square).floor() as i64 + (b.y / board.square).floor() as i64).rem_euclid(2) == 0;
+                        let inside = b.x >= -board.square
+                            && b.x < (board.cols - 1) as f64 * board.square
+                            && b.y >= -board.square
+                            && b.y < (board.rows - 1) as f64 * board.square;
+                        let black = inside
+                            && ((b.x / board.square).floor() as i64 + (b.y / board.square).floor() as i64)
+                                .rem_euclid(2)
+                                == 0;
                         let albedo = if black { 0.08 } else { 0.85 };
                         let mut rgb = [albedo * shade; 3];
                         if let Some((l, o, xl, yl, zl)) = laser_frame {
@@ -861,7 +1040,12 @@ pub fn render_checkerboard(camera: &Camera, board: &Checkerboard, t_camera_board
                                 let d = xl.dot(&wv);
                                 let dist = wv.norm();
                                 let cos_i = n.dot(&(wv / dist)).abs();
-                                let e = l.power * (-0.5 * d * d / (l.sheet_sigma * l.sheet_sigma)).exp() * l.reference_distance / dist * cos_i * albedo;
+                                let e = l.power
+                                    * (-0.5 * d * d / (l.sheet_sigma * l.sheet_sigma)).exp()
+                                    * l.reference_distance
+                                    / dist
+                                    * cos_i
+                                    * albedo;
                                 for ch in 0..3 {
                                     rgb[ch] += e * l.color[ch];
                                 }
@@ -886,18 +1070,34 @@ mod tests {
 
     fn plane_mesh(z: f64, half: f64) -> TriMesh {
         TriMesh {
-            vertices: vec![Point::new(-half, -half, z), Point::new(half, -half, z), Point::new(half, half, z), Point::new(-half, half, z)],
+            vertices: vec![
+                Point::new(-half, -half, z),
+                Point::new(half, -half, z),
+                Point::new(half, half, z),
+                Point::new(-half, half, z),
+            ],
             faces: vec![[0, 1, 2], [0, 2, 3]],
         }
     }
 
     fn small_camera() -> Camera {
-        Camera { width: 160, height: 120, fx: 200.0, fy: 200.0, cx: 79.5, cy: 59.5, dist: [0.0; 5] }
+        Camera {
+            width: 160,
+            height: 120,
+            fx: 200.0,
+            fy: 200.0,
+            cx: 79.5,
+            cy: 59.5,
+            dist: [0.0; 5],
+        }
     }
 
     #[test]
     fn undistort_inverts_distort() {
-        let cam = Camera { dist: [-0.2, 0.05, 0.001, -0.002, 0.01], ..Default::default() };
+        let cam = Camera {
+            dist: [-0.2, 0.05, 0.001, -0.002, 0.01],
+            ..Default::default()
+        };
         for &(x, y) in &[(0.1, -0.2), (0.3, 0.25), (-0.31, 0.0)] {
             let (xd, yd) = cam.distort(x, y);
             let (xu, yu) = cam.undistort(xd, yd);
@@ -909,8 +1109,12 @@ mod tests {
     fn depth_of_a_plane_is_its_distance() {
         let mut scene = Scene::new();
         let m = scene.add_mesh(&plane_mesh(0.0, 1000.0), Material::default()).unwrap();
-        scene.add_instance(m, Isometry3::translation(0.0, 0.0, 400.0), 5).unwrap();
-        let view = scene.view(&small_camera(), &Isometry3::identity(), &Lighting::default()).unwrap();
+        scene
+            .add_instance(m, Isometry3::translation(0.0, 0.0, 400.0), 5)
+            .unwrap();
+        let view = scene
+            .view(&small_camera(), &Isometry3::identity(), &Lighting::default())
+            .unwrap();
         let depth = view.depth();
         assert!(depth.iter().all(|d| (d - 400.0).abs() < 1e-3), "{:?}", &depth[..4]);
         assert!(view.ids().iter().all(|&i| i == 5));
@@ -919,13 +1123,37 @@ mod tests {
     #[test]
     fn laser_line_lands_where_the_sheet_meets_the_plane() {
         let mut scene = Scene::new();
-        let m = scene.add_mesh(&plane_mesh(0.0, 1000.0), Material { albedo: [0.8; 3], ..Default::default() }).unwrap();
-        scene.add_instance(m, Isometry3::translation(0.0, 0.0, 500.0), 0).unwrap();
+        let m = scene
+            .add_mesh(
+                &plane_mesh(0.0, 1000.0),
+                Material {
+                    albedo: [0.8; 3],
+                    ..Default::default()
+                },
+            )
+            .unwrap();
+        scene
+            .add_instance(m, Isometry3::translation(0.0, 0.0, 500.0), 0)
+            .unwrap();
         let cam = small_camera();
         let view = scene.view(&cam, &Isometry3::identity(), &Lighting::default()).unwrap();
-        let laser = Laser { sheet_sigma: 1.5, power: 150.0, ..Default::default() };
+        let laser = Laser {
+            sheet_sigma: 1.5,
+            power: 150.0,
+            ..Default::default()
+        };
         let on = view.frame(&laser, 0.02, &SensorNoise::none(), 1).unwrap();
-        let off = view.frame(&Laser { power: 0.0, ..laser.clone() }, 0.02, &SensorNoise::none(), 1).unwrap();
+        let off = view
+            .frame(
+                &Laser {
+                    power: 0.0,
+                    ..laser.clone()
+                },
+                0.02,
+                &SensorNoise::none(),
+                1,
+            )
+            .unwrap();
         // The sheet x_L = 0 meets z = 500 along a line of constant camera x (the laser's y axis is
         // the camera's); find it and compare with the red centroid of the middle row.
         let t = laser.t_camera_laser(0.02);
@@ -950,27 +1178,65 @@ mod tests {
         let mut scene = Scene::new();
         assert_eq!(scene.nearest_surface(&[Point::origin()]), vec![(f64::INFINITY, -1)]);
         let m = scene.add_mesh(&plane_mesh(0.0, 100.0), Material::default()).unwrap();
-        scene.add_instance(m, Isometry3::translation(400.0, 0.0, 0.0), 7).unwrap();
-        scene.add_instance(m, Isometry3::translation(400.0, 0.0, 30.0), 8).unwrap();
-        let got = scene.nearest_surface(&[Point::new(410.0, 5.0, 3.25), Point::new(390.0, 0.0, 20.0), Point::new(650.0, 0.0, 0.0)]);
+        scene
+            .add_instance(m, Isometry3::translation(400.0, 0.0, 0.0), 7)
+            .unwrap();
+        scene
+            .add_instance(m, Isometry3::translation(400.0, 0.0, 30.0), 8)
+            .unwrap();
+        let got = scene.nearest_surface(&[
+            Point::new(410.0, 5.0, 3.25),
+            Point::new(390.0, 0.0, 20.0),
+            Point::new(650.0, 0.0, 0.0),
+        ]);
         assert_eq!((got[0].1, got[1].1, got[2].1), (7, 8, 7));
-        assert!((got[0].0 - 3.25).abs() < 1e-4 && (got[1].0 - 10.0).abs() < 1e-4 && (got[2].0 - 150.0).abs() < 1e-3, "{got:?}");
+        assert!(
+            (got[0].0 - 3.25).abs() < 1e-4 && (got[1].0 - 10.0).abs() < 1e-4 && (got[2].0 - 150.0).abs() < 1e-3,
+            "{got:?}"
+        );
     }
 
     #[test]
     fn an_occluder_casts_a_laser_shadow() {
         let mut scene = Scene::new();
         let floor = scene.add_mesh(&plane_mesh(0.0, 1000.0), Material::default()).unwrap();
-        scene.add_instance(floor, Isometry3::translation(0.0, 0.0, 500.0), 0).unwrap();
+        scene
+            .add_instance(floor, Isometry3::translation(0.0, 0.0, 500.0), 0)
+            .unwrap();
         let cam = small_camera();
-        let laser = Laser { sheet_sigma: 1.0, ..Default::default() };
-        let clear = scene.view(&cam, &Isometry3::identity(), &Lighting::default()).unwrap().frame(&laser, 0.0, &SensorNoise::none(), 0).unwrap();
+        let laser = Laser {
+            sheet_sigma: 1.0,
+            ..Default::default()
+        };
+        let clear = scene
+            .view(&cam, &Isometry3::identity(), &Lighting::default())
+            .unwrap()
+            .frame(&laser, 0.0, &SensorNoise::none(), 0)
+            .unwrap();
         // A small plate in front of the projector, out of the camera's view, hides the line.
         let block = scene.add_mesh(&plane_mesh(0.0, 10.0), Material::default()).unwrap();
         let t = laser.t_camera_laser(0.0);
-        scene.add_instance(block, Isometry3::from_parts((t.translation.vector + t.rotation * Vector3::new(0.0, 0.0, 30.0)).into(), t.rotation), 1).unwrap();
-        let shadowed = scene.view(&cam, &Isometry3::identity(), &Lighting::default()).unwrap().frame(&laser, 0.0, &SensorNoise::none(), 0).unwrap();
+        scene
+            .add_instance(
+                block,
+                Isometry3::from_parts(
+                    (t.translation.vector + t.rotation * Vector3::new(0.0, 0.0, 30.0)).into(),
+                    t.rotation,
+                ),
+                1,
+            )
+            .unwrap();
+        let shadowed = scene
+            .view(&cam, &Isometry3::identity(), &Lighting::default())
+            .unwrap()
+            .frame(&laser, 0.0, &SensorNoise::none(), 0)
+            .unwrap();
         let red = |img: &[u8]| img.chunks(3).map(|p| p[0] as u64).sum::<u64>();
-        assert!(red(&clear) > red(&shadowed) + 1000, "{} {}", red(&clear), red(&shadowed));
+        assert!(
+            red(&clear) > red(&shadowed) + 1000,
+            "{} {}",
+            red(&clear),
+            red(&shadowed)
+        );
     }
 }
