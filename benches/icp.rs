@@ -2,11 +2,8 @@
 //! Source and target are independent samplings of the built-in tee with 0.2 mm noise, the
 //! source 5° and 10 mm off; every run does exactly ITERATIONS updates (tolerances 0).
 
-use binpick_core::cloud::{transform_points, Point};
-use binpick_core::model::{sample_surface, Density};
 use binpick_core::parts::{tee, TeeParams};
-use binpick_core::registration::{icp, IcpConfig, IcpMethod, IcpTarget};
-use binpick_core::rng::Rng;
+use binpick_core::{icp, sample_surface, transform_points, Density, IcpConfig, IcpMethod, IcpTarget, Point, Rng};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
 use std::hint::black_box;

@@ -2,14 +2,9 @@
 //! a view (scene samples per second). The part is the built-in tee seen from above at a random
 //! pose; the scene is sampled at the PPF step as the pipeline does.
 
-use binpick_core::cloud::Point;
-use binpick_core::knn::KdIndex;
-use binpick_core::model::{sample_surface, Density};
 use binpick_core::parts::{tee, TeeParams};
-use binpick_core::registration::ppf::{DetectConfig, PpfConfig, PpfModel};
-use binpick_core::rng::Rng;
-use binpick_core::symmetry::Symmetries;
-use binpick_core::voxel::subsample;
+use binpick_core::Symmetries;
+use binpick_core::{sample_surface, subsample, Density, DetectConfig, KdIndex, Point, PpfConfig, PpfModel, Rng};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use nalgebra::{Isometry3, Translation3, Vector3};
 use std::hint::black_box;
@@ -43,7 +38,7 @@ fn bench_ppf(c: &mut Criterion) {
     let (sp, sn): (Vec<Point>, Vec<Vector3<f64>>) = keep.iter().map(|&i| (pts[i], nrm[i])).unzip();
     let index = KdIndex::new(&sp);
     let cfg = DetectConfig::default();
-    let sym = Symmetries::none(binpick_core::cloud::centroid(&dense.points));
+    let sym = Symmetries::none(binpick_core::centroid(&dense.points));
     group.throughput(Throughput::Elements(sp.len() as u64));
     group.bench_function("vote_and_cluster_view", |b| {
         b.iter(|| {

@@ -3,9 +3,9 @@
 //! laser frame from the view (pixels per second). The layout is the default cell of
 //! `binpick.sim`: the bin centred at (400, 0), the camera 580 mm above its floor looking down.
 
-use binpick_core::parallel::with_threads;
 use binpick_core::parts::{tee, TeeParams};
 use binpick_core::sim::{BinSpec, Camera, Laser, Lighting, Material, Pile, PileParams, Scene, SensorNoise};
+use binpick_core::with_threads;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::PI;
@@ -31,7 +31,7 @@ fn t_base_camera() -> Isometry3<f64> {
 }
 
 /// The bin and the settled pile as a render scene (parts are the mesh the pile was dropped with).
-fn scene(pile: &Pile, mesh: &binpick_core::mesh::TriMesh) -> Scene {
+fn scene(pile: &Pile, mesh: &binpick_core::TriMesh) -> Scene {
     let mut s = Scene::new();
     let bin = s
         .add_mesh(

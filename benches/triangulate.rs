@@ -3,8 +3,8 @@
 //! the line moving across the image with the motor), a 1032×778 camera with and without lens
 //! distortion. Also undistortion alone: the exact Newton solve against the ray table.
 
-use binpick_core::parallel::with_threads;
-use binpick_core::triangulate::{triangulate_into, Camera, FramePose, PointStatus, RayTable, Sensor};
+use binpick_core::with_threads;
+use binpick_core::{triangulate_into, Camera, FramePose, PointStatus, RayTable, Sensor};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion};
 use std::hint::black_box;

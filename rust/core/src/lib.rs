@@ -2,26 +2,59 @@
 //!
 //! Lengths are millimetres, angles radians; rigid transforms are `Isometry3<f64>` named
 //! `t_to_from` in code (a point `p_from` maps to `t_to_from * p_from`).
+//!
+//! # Map of the crate
+//!
+//! The modules follow the path of one pick; each depends only on those listed above it.
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | `error` | the one [`Error`] enum and [`Result`] |
+//! | `rng`, `parallel` | the seeded [`Rng`]; thread-count control ([`with_threads`]) |
+//! | `geometry` | [`Point`] and its checks, cloud statistics, rigid transforms, the one [`Plane`], [`BinBox`], the one Kabsch |
+//! | `search` | nearest-neighbour structures: [`KdIndex`], the bounded correspondence tree, the coarse nearest field |
+//! | `voxel`, `normals` | voxel grids and even subsampling; normal estimation |
+//! | `mesh` | [`TriMesh`], file readers and writers, surface sampling, SDF modelling, the built-in [`parts`] |
+//! | `triangulate` | the measuring chain: camera model, ray tables, laser-plane triangulation |
+//! | `segment` | scan spacing, bin cropping, support-plane removal, top-object segmentation (Table 2) |
+//! | `symmetry` | proper symmetries of a part, canonical poses, symmetry-aware pose errors |
+//! | `registration` | ICP and its configuration, CCP, verification evidence, point-pair features |
+//! | `pose` | [`estimate_poses`]: bin removal → coarse pose (CCP, PPF, centroid) → ICP → the one judge |
+//! | [`sim`] (feature `sim`) | rapier3d piles and the parry3d ray-cast renderer of the simulated cell |
+//!
+//! The names below are the crate's front door; the modules behind them are internal.
 #![warn(missing_docs)]
 
-pub mod cloud;
 pub mod error;
-pub mod knn;
-
-pub use error::{Error, Result};
-pub mod detect;
+pub mod geometry;
 pub mod mesh;
-pub mod mesh_io;
-pub mod model;
 pub mod normals;
 pub mod parallel;
-pub mod parts;
 pub mod pose;
 pub mod registration;
 pub mod rng;
-pub mod sdf;
+pub mod search;
 pub mod segment;
 pub mod sim;
 pub mod symmetry;
 pub mod triangulate;
 pub mod voxel;
+
+pub use error::{Error, Result};
+pub use geometry::{centroid, isometry_from_matrix, transform_points, BinBox, Plane, Point};
+pub use mesh::io::{read_mesh, read_ply, write_ply, PlyData};
+pub use mesh::parts::{self, Part};
+pub use mesh::{sample_surface, unit_scale, Density, SurfaceSamples, TriMesh};
+pub use normals::{estimate_normals, Orientation};
+pub use parallel::with_threads;
+pub use pose::{estimate_pose, estimate_poses, CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
+pub use registration::ccp::{BranchLayout, CcpConfig};
+pub use registration::ppf::{DetectConfig, PpfConfig, PpfModel};
+pub use registration::{icp, IcpConfig, IcpMethod, IcpResult, IcpTarget, RobustKernel};
+pub use rng::Rng;
+pub use search::KdIndex;
+pub use symmetry::{detect_symmetries, Symmetries, SymmetryConfig};
+pub use triangulate::{
+    pixel_rays, triangulate, triangulate_into, Camera, FramePose, PointStatus, RayTable, Sensor, Triangulation,
+};
+pub use voxel::{subsample, voxel_downsample, Downsampled};

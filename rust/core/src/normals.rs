@@ -1,8 +1,8 @@
 //! Surface normals from k-nearest-neighbour PCA, oriented toward a viewpoint.
 
-use crate::cloud::{check_count, check_finite, covariance_of, extreme_axis, principal_axes, Point};
 use crate::error::{Error, Result};
-use crate::knn::KdIndex;
+use crate::geometry::{check_count, check_finite, covariance_of, extreme_axis, principal_axes, Point};
+use crate::search::KdIndex;
 use nalgebra::Vector3;
 use rayon::prelude::*;
 

@@ -7,21 +7,12 @@
 //! that keep touching parts apart: neighbours must have similar normals, and the region may not
 //! reach farther from its seed than the part's diameter.
 
-use crate::cloud::{covariance, extreme_axis, principal_axes, Point};
 use crate::error::{Error, Result};
-use crate::knn::KdIndex;
+use crate::geometry::{covariance, extreme_axis, principal_axes, BinBox, Plane, Point};
 use crate::rng::Rng;
+use crate::search::KdIndex;
 use nalgebra::Vector3;
 use std::collections::VecDeque;
-
-/// An axis-aligned bin box in the scene frame, mm.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BinBox {
-    /// Minimum corner (the floor is at `min.z`).
-    pub min: Point,
-    /// Maximum corner.
-    pub max: Point,
-}
 
 /// Median distance from a sample of points to their nearest other point (0 for < 2 points).
 pub fn point_spacing(points: &[Point], index: &KdIndex) -> f64 {
@@ -115,15 +106,6 @@ pub fn crop_to_bin(points: &[Point], bin: &BinBox, margin: f64) -> Result<Vec<us
         })
         .map(|(i, _)| i)
         .collect())
-}
-
-/// A plane `n · x = d` with unit `n`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Plane {
-    /// Unit normal.
-    pub normal: Vector3<f64>,
-    /// Offset along the normal, mm.
-    pub offset: f64,
 }
 
 /// Whether the scene is wide enough to hold a support plane as [`remove_support_planes`] judges

@@ -11,7 +11,7 @@
 //! per camera and cached) and one Newton step from the interpolated ray, so it agrees with the
 //! exact [`Camera::ray`] to far below 1e-4 px at a fraction of the cost.
 
-use crate::cloud::Point;
+use crate::geometry::{Plane, Point};
 use crate::{Error, Result};
 use nalgebra::{Isometry3, Matrix3, Vector3};
 use rayon::prelude::*;
@@ -50,15 +50,6 @@ pub enum PointStatus {
     Behind = 2,
     /// The distortion could not be inverted at this pixel (far outside the calibrated field).
     NotUndistortable = 3,
-}
-
-/// A plane `normal · x = offset` (unit normal, offset in mm).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Plane {
-    /// Unit normal.
-    pub normal: Vector3<f64>,
-    /// Signed distance of the plane from the origin along `normal`, mm.
-    pub offset: f64,
 }
 
 /// The robot pose and motor angle of one frame of a scan.

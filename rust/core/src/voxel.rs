@@ -1,8 +1,8 @@
 //! Downsampling: one point per occupied voxel (the mean of the points inside it), and even
 //! Poisson-disk subsets (no two kept points closer than a radius).
 
-use crate::cloud::Point;
 use crate::error::{Error, Result};
+use crate::geometry::Point;
 use nalgebra::Vector3;
 use std::collections::HashMap;
 

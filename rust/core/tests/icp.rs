@@ -1,11 +1,8 @@
 //! ICP and KD-tree against oracles: brute-force neighbours, and known seeded transforms.
 
-use binpick_core::cloud::{transform_points, Point};
-use binpick_core::knn::KdIndex;
-use binpick_core::model::{sample_surface, Density};
 use binpick_core::parts::{tee, TeeParams};
-use binpick_core::registration::{icp, IcpConfig, IcpMethod, IcpTarget, RobustKernel};
-use binpick_core::rng::Rng;
+use binpick_core::{icp, sample_surface, transform_points, Density, IcpConfig, IcpMethod, IcpTarget, RobustKernel};
+use binpick_core::{KdIndex, Point, Rng};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 fn random_points(rng: &mut Rng, n: usize) -> Vec<Point> {

@@ -1,6 +1,6 @@
 //! The one place where numpy arrays become nalgebra types and back.
 
-use binpick_core::cloud::Point;
+use binpick_core::Point;
 use nalgebra::{Isometry3, Matrix4, Vector3};
 use numpy::ndarray::Array2;
 use numpy::{PyArray1, PyArray2, PyReadonlyArray2};

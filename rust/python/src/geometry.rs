@@ -2,14 +2,11 @@
 
 use crate::convert::{indices_to_py, points, points_to_py, vectors, vectors_to_py};
 use crate::errors::{invalid, run};
-use binpick_core::cloud::Point;
-use binpick_core::knn::KdIndex;
-use binpick_core::mesh::{unit_scale, TriMesh};
-use binpick_core::model::{sample_surface, Density};
-use binpick_core::normals::{estimate_normals as core_normals, Orientation};
 use binpick_core::parts::{self, Part};
-use binpick_core::voxel::voxel_downsample as core_voxel;
-use binpick_core::{mesh_io, parallel};
+use binpick_core::{estimate_normals as core_normals, unit_scale, Orientation, TriMesh};
+use binpick_core::{read_mesh as core_read_mesh, read_ply as core_read_ply, write_ply as core_write_ply};
+use binpick_core::{sample_surface, voxel_downsample as core_voxel, with_threads};
+use binpick_core::{Density, KdIndex, Point};
 use nalgebra::Vector3;
 use numpy::ndarray::Array2;
 use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
@@ -43,7 +40,7 @@ fn estimate_normals<'py>(
         (None, None) => Orientation::TowardDirection(Vector3::z()),
     };
     let normals = run(py, move || {
-        parallel::with_threads(num_threads, || {
+        with_threads(num_threads, || {
             let index = KdIndex::new(&pts);
             core_normals(&pts, &index, k, orientation)
         })
@@ -104,7 +101,7 @@ fn read_mesh<'py>(py: Python<'py>, path: PathBuf, unit: &str) -> PyResult<(Arr<'
     let unit = unit.to_string();
     let mesh = run(py, move || {
         let scale = unit_scale(&unit)?;
-        Ok(mesh_io::read_mesh(&path)?.scaled(scale))
+        Ok(core_read_mesh(&path)?.scaled(scale))
     })?;
     Ok((points_to_py(py, &mesh.vertices), faces_to_py(py, &mesh.faces)))
 }
@@ -140,7 +137,7 @@ fn sample_mesh<'py>(
 /// Reads a PLY point cloud: (points, normals or None).
 #[pyfunction]
 fn read_ply<'py>(py: Python<'py>, path: PathBuf) -> PyResult<(Arr<'py>, Option<Arr<'py>>)> {
-    let d = run(py, move || mesh_io::read_ply(&path))?;
+    let d = run(py, move || core_read_ply(&path))?;
     Ok((
         points_to_py(py, &d.points),
         d.normals.as_ref().map(|n| vectors_to_py(py, n)),
@@ -159,7 +156,7 @@ fn write_ply(
 ) -> PyResult<()> {
     let pts = points(&points_in, "points")?;
     let ns = normals.as_ref().map(|n| vectors(n, "normals")).transpose()?;
-    run(py, move || mesh_io::write_ply(&path, &pts, ns.as_deref(), ascii))
+    run(py, move || core_write_ply(&path, &pts, ns.as_deref(), ascii))
 }
 
 fn part_to_py<'py>(py: Python<'py>, part: Part) -> (Arr<'py>, Bound<'py, PyArray2<i64>>, Arr<'py>) {

@@ -3,10 +3,8 @@
 use crate::convert::{indices_to_py, isometry_to_py, points, vectors};
 use crate::errors::{invalid, run};
 use crate::geometry::mesh_from_py;
-use binpick_core::pose::{estimate_poses as core_estimate, CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
-use binpick_core::registration::ccp::{BranchLayout, CcpConfig};
-use binpick_core::registration::ppf::{DetectConfig, PpfConfig, PpfModel};
-use binpick_core::segment::BinBox;
+use binpick_core::{estimate_poses as core_estimate, CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
+use binpick_core::{BinBox, BranchLayout, CcpConfig, DetectConfig, PpfConfig, PpfModel};
 use nalgebra::{Point3, Vector3};
 use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -152,7 +150,7 @@ impl PreparedModel {
         t_scene_model: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let m = crate::convert::matrix4(&t_scene_model, "T_scene_model")?;
-        let t = binpick_core::cloud::isometry_from_matrix("T_scene_model", &m).map_err(crate::errors::to_py)?;
+        let t = binpick_core::isometry_from_matrix("T_scene_model", &m).map_err(crate::errors::to_py)?;
         Ok(isometry_to_py(py, &self.inner.symmetries.canonical(&t)))
     }
 
@@ -163,9 +161,9 @@ impl PreparedModel {
         estimate: PyReadonlyArray2<'_, f64>,
         truth: PyReadonlyArray2<'_, f64>,
     ) -> PyResult<(f64, f64)> {
-        let a = binpick_core::cloud::isometry_from_matrix("estimate", &crate::convert::matrix4(&estimate, "estimate")?)
+        let a = binpick_core::isometry_from_matrix("estimate", &crate::convert::matrix4(&estimate, "estimate")?)
             .map_err(crate::errors::to_py)?;
-        let b = binpick_core::cloud::isometry_from_matrix("truth", &crate::convert::matrix4(&truth, "truth")?)
+        let b = binpick_core::isometry_from_matrix("truth", &crate::convert::matrix4(&truth, "truth")?)
             .map_err(crate::errors::to_py)?;
         Ok(self.inner.symmetries.pose_error(&a, &b))
     }

@@ -2,8 +2,7 @@
 
 use crate::convert::{isometry_to_py, matrix4, points, vectors};
 use crate::errors::{invalid, run};
-use binpick_core::cloud::isometry_from_matrix;
-use binpick_core::registration::{icp as core_icp, IcpConfig, IcpMethod, IcpTarget, RobustKernel};
+use binpick_core::{icp as core_icp, isometry_from_matrix, IcpConfig, IcpMethod, IcpTarget, RobustKernel};
 use numpy::PyReadonlyArray2;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;

@@ -4,13 +4,11 @@
 
 use crate::convert::{matrix4, points};
 use crate::errors::{invalid, run};
-use binpick_core::cloud::Point;
-use binpick_core::mesh::TriMesh;
-use binpick_core::sim::pile::{convex_decomposition, max_interpenetration, BinSpec, Pile, PileParams, SettleReport};
-use binpick_core::sim::render::{
+use binpick_core::sim::{convex_decomposition, max_interpenetration, BinSpec, Pile, PileParams, SettleReport};
+use binpick_core::sim::{
     render_checkerboard, Camera, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View,
 };
-use binpick_core::Error;
+use binpick_core::{Error, Point, TriMesh};
 use nalgebra::{Isometry3, Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{PyArray2, PyArray3, PyReadonlyArray2, PyReadonlyArray3};
@@ -383,7 +381,7 @@ impl PySimScene {
         let (cam, light) = (camera(camera_args), lighting(lighting_args));
         let scene = self.inner.clone();
         let view = run(py, move || {
-            binpick_core::parallel::with_threads(num_threads, || scene.view(&cam, &t, &light))
+            binpick_core::with_threads(num_threads, || scene.view(&cam, &t, &light))
         })?;
         Ok(PySimView { inner: Arc::new(view) })
     }
@@ -473,7 +471,7 @@ impl PySimView {
         let view = self.inner.clone();
         let k = angles.len();
         let frames = run(py, move || {
-            binpick_core::parallel::with_threads(num_threads, || {
+            binpick_core::with_threads(num_threads, || {
                 let mut all = Vec::new();
                 for (i, a) in angles.iter().enumerate() {
                     all.extend(view.frame(&l, *a, &n, seed.wrapping_add(i as u64))?);

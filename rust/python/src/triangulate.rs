@@ -2,9 +2,8 @@
 
 use crate::convert::{matrix4, vectors_to_py};
 use crate::errors::{invalid, run};
-use binpick_core::cloud::isometry_from_matrix;
-use binpick_core::parallel;
-use binpick_core::triangulate::{pixel_rays, triangulate_into, Camera, FramePose, PointStatus, Sensor};
+use binpick_core::{isometry_from_matrix, with_threads};
+use binpick_core::{pixel_rays, triangulate_into, Camera, FramePose, PointStatus, Sensor};
 use nalgebra::{Matrix3, Matrix4, Vector3};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
@@ -165,7 +164,7 @@ fn triangulate_scan<'py>(
             })
             .collect::<binpick_core::Result<Vec<_>>>()?;
         let mut status = vec![PointStatus::Valid; px.len()];
-        parallel::with_threads(num_threads, || {
+        with_threads(num_threads, || {
             triangulate_into(&sensor, &frames, px, &idx, out, &mut status)
         })?;
         // Moving the valid rows up in place is far cheaper than boolean masks in numpy.

@@ -14,9 +14,9 @@
 //! What a model needs for CCP: its branches (unit direction from the junction at the model
 //! origin, length, radius) and, if it has one, the direction of its special feature.
 
-use crate::cloud::{centroid, covariance, principal_axes, Point};
 use crate::error::{Error, Result};
-use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use crate::geometry::{centroid, covariance, kabsch, principal_axes, Point};
+use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 
 /// The branch layout of a model, in the model frame (junction at the origin).
 #[derive(Debug, Clone, PartialEq)]
@@ -280,17 +280,6 @@ fn visible_centroid(
         }
         None => centroid(points),
     }
-}
-
-/// Rotation R maximising Σ w b_iᵀ R a_i for H = Σ w a_i b_iᵀ (R maps model to data).
-fn kabsch(h: &Matrix3<f64>) -> Option<Rotation3<f64>> {
-    let svd = h.svd(true, true);
-    let (u, vt) = (svd.u?, svd.v_t?);
-    let mut d = Matrix3::identity();
-    if (vt.transpose() * u.transpose()).determinant() < 0.0 {
-        d[(2, 2)] = -1.0;
-    }
-    Some(Rotation3::from_matrix_unchecked(vt.transpose() * d * u.transpose()))
 }
 
 /// All injective maps from `k` observed items into `n` model items.

@@ -8,15 +8,13 @@
 //! rayon task and merged, so the work splits across threads without locks. Sums are taken
 //! about the target's centroid, which keeps them well conditioned far from the origin.
 
-use super::corr_tree::{spatial_order, CorrespondenceTree};
-use super::criteria::{IcpConfig, IcpMethod};
-use super::field::NearestField;
-use crate::cloud::{centroid, check_count, check_finite, check_spread, Point};
+use super::config::{IcpConfig, IcpMethod};
 use crate::error::{Error, Result};
+use crate::geometry::{centroid, check_count, check_finite, check_spread, kabsch, Point};
 use crate::parallel::with_threads;
-use nalgebra::{
-    Isometry3, Matrix3, Matrix6, Rotation3, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6,
-};
+use crate::search::corr_tree::{spatial_order, CorrespondenceTree};
+use crate::search::field::NearestField;
+use nalgebra::{Isometry3, Matrix3, Matrix6, SymmetricEigen, Translation3, UnitQuaternion, Vector3, Vector6};
 use rayon::prelude::*;
 
 const CHUNK: usize = 2048;
@@ -461,14 +459,7 @@ fn point_step(s: &PointSums) -> Option<(Vector3<f64>, Vector3<f64>)> {
     let qm = s.q / s.w;
     let tm = s.t / s.w;
     let h = s.qt - s.w * qm * tm.transpose();
-    let svd = h.svd(true, true);
-    let (u, vt) = (svd.u?, svd.v_t?);
-    let mut d = Matrix3::identity();
-    if (vt.transpose() * u.transpose()).determinant() < 0.0 {
-        d[(2, 2)] = -1.0;
-    }
-    let r = vt.transpose() * d * u.transpose();
-    let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r));
+    let rot = UnitQuaternion::from_rotation_matrix(&kabsch(&h)?);
     let omega = rot.scaled_axis();
     let v = tm - rot * qm;
     Some((omega, v))

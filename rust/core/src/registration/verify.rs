@@ -12,7 +12,7 @@
 //! buried instances show as occluded.
 
 use super::icp::IcpTarget;
-use crate::cloud::Point;
+use crate::geometry::Point;
 use nalgebra::{Isometry3, Vector3};
 
 /// The scan as a height map along `up` on a dense grid.

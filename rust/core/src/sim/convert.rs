@@ -6,7 +6,7 @@
 //! 0.05 px (≈ 0.02 mm) and 0.5 mm tolerances the simulator is held to. Ray casts are done in each
 //! part's own frame, where coordinates stay within the part's size.
 
-use crate::cloud::Point;
+use crate::geometry::Point;
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use parry3d::math::{Pose, Rotation, Vector};
 

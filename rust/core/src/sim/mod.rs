@@ -9,5 +9,5 @@ pub mod convert;
 pub mod pile;
 pub mod render;
 
-pub use pile::{BinSpec, Pile, PileParams, SettleReport};
+pub use pile::{convex_decomposition, max_interpenetration, BinSpec, Pile, PileParams, SettleReport};
 pub use render::{render_checkerboard, Camera, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View};

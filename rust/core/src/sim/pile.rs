@@ -7,8 +7,8 @@
 //! interpenetrate beyond the solver's contact tolerance.
 
 use super::convert;
-use crate::cloud::Point;
 use crate::error::{Error, Result};
+use crate::geometry::Point;
 use crate::mesh::TriMesh;
 use crate::rng::Rng;
 use nalgebra::{Isometry3, Translation3, Vector3};
@@ -391,7 +391,9 @@ fn decomposition_shape(mesh: &TriMesh, params: &PileParams) -> Result<SharedShap
     const FEW: usize = 16;
     if points.iter().any(|p| p.len() < FEW) {
         let spacing = (4.0 * margin as f64).max(1e-3 * (hi - lo).max());
-        let surface = crate::model::sample_surface(mesh, crate::model::Density::Spacing(spacing), params.seed)?.points;
+        let surface =
+            crate::mesh::sample::sample_surface(mesh, crate::mesh::sample::Density::Spacing(spacing), params.seed)?
+                .points;
         let sparse: Vec<bool> = points.iter().map(|p| p.len() < FEW).collect();
         for p in surface.iter().map(convert::point_vec) {
             for (i, o) in outside(p).iter().enumerate() {
@@ -716,7 +718,7 @@ pub fn max_interpenetration(mesh: &TriMesh, poses: &[Isometry3<f64>], samples: &
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::parts::{tee, TeeParams};
+    use crate::mesh::parts::{tee, TeeParams};
 
     fn small_tee() -> TriMesh {
         tee(&TeeParams {

@@ -1,7 +1,7 @@
 //! Triangle meshes: the type, its measures and unit conversion.
 
-use crate::cloud::Point;
 use crate::error::{Error, Result};
+use crate::geometry::Point;
 use nalgebra::Vector3;
 
 /// A triangle mesh in millimetres; faces index `vertices` counter-clockwise seen from outside.
@@ -27,7 +27,7 @@ pub fn unit_scale(unit: &str) -> Result<f64> {
 impl TriMesh {
     /// Builds a mesh, checking that every index is in range and every vertex finite.
     pub fn new(vertices: Vec<Point>, faces: Vec<[u32; 3]>) -> Result<Self> {
-        crate::cloud::check_finite("vertices", &vertices)?;
+        crate::geometry::check_finite("vertices", &vertices)?;
         let n = vertices.len() as u32;
         if let Some((i, f)) = faces.iter().enumerate().find(|(_, f)| f.iter().any(|&v| v >= n)) {
             return Err(Error::invalid(

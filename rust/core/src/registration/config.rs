@@ -77,7 +77,7 @@ pub struct IcpConfig {
     /// Worker threads; 0 = all cores.
     pub num_threads: usize,
     /// Take correspondences from the target's approximate nearest field when it has one (coarse
-    /// checks of poses still far off; see [`super::field::NearestField`]).
+    /// checks of poses still far off; see [`crate::search::field::NearestField`]).
     pub approximate: bool,
 }
 

@@ -1,8 +1,8 @@
 //! Reading meshes (STL binary and ASCII, PLY ASCII and binary, OBJ) and reading and writing
 //! PLY point clouds that MeshLab and CloudCompare open.
 
-use crate::cloud::Point;
 use crate::error::{Error, Result};
+use crate::geometry::Point;
 use crate::mesh::TriMesh;
 use nalgebra::Vector3;
 use std::collections::HashMap;
@@ -58,7 +58,7 @@ pub fn read_mesh(path: &Path) -> Result<TriMesh> {
         _ => parse_obj(&bytes),
     }
     .map_err(|problem| Error::bad_file(shown.clone(), problem))?;
-    if let Err(Error::NonFinite { index, .. }) = crate::cloud::check_finite("vertices", &mesh.vertices) {
+    if let Err(Error::NonFinite { index, .. }) = crate::geometry::check_finite("vertices", &mesh.vertices) {
         return Err(Error::bad_file(
             shown,
             format!("vertex {index} is not finite; the file is corrupt"),
@@ -496,7 +496,7 @@ pub fn read_ply(path: &Path) -> Result<PlyData> {
     if data.points.is_empty() {
         return Err(Error::bad_file(shown, "the PLY file holds no vertex"));
     }
-    if let Err(Error::NonFinite { index, .. }) = crate::cloud::check_finite("points", &data.points) {
+    if let Err(Error::NonFinite { index, .. }) = crate::geometry::check_finite("points", &data.points) {
         return Err(Error::bad_file(
             shown,
             format!("vertex {index} is not finite; the file is corrupt"),

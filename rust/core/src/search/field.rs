@@ -9,9 +9,9 @@
 //! true nearest (|q − p_c| ≤ |q − c| + |c − p*| ≤ 2|q − c| + |q − p*|), and the wavefront can
 //! add about as much again near the boundaries between points' regions — errors a coarse check
 //! does not feel. Refinement and verification use the exact search
-//! ([`super::corr_tree::CorrespondenceTree`]).
+//! ([`crate::search::corr_tree::CorrespondenceTree`]).
 
-use crate::cloud::Point;
+use crate::geometry::Point;
 use std::collections::VecDeque;
 
 /// Largest grid built (cells); beyond it the cells grow. Lookups are random, so the grid is

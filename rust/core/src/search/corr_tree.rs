@@ -7,11 +7,11 @@
 //! Small bounds are answered from a uniform grid whose cells hold their points contiguously
 //! (a few short linear scans, no branching descent); large ones from a KD-tree with points
 //! in leaf order. Both answers are exact. General queries (k-NN, radius) use
-//! [`crate::knn::KdIndex`] (kiddo); measured on 100k-point scans of CAD surfaces on this
+//! [`crate::search::KdIndex`] (kiddo); measured on 100k-point scans of CAD surfaces on this
 //! project's 2-core reference machine, a bounded search here answers in well under half the
 //! time of a general nearest-neighbour query, which is what ICP's inner loop needs.
 
-use crate::cloud::Point;
+use crate::geometry::Point;
 
 const LEAF_SIZE: usize = 12;
 /// Grid cell edge as a multiple of the median point spacing.

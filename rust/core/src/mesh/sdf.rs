@@ -4,7 +4,7 @@
 //! neighbouring cubes share face by face); the zero crossing on each tetrahedron edge becomes a
 //! vertex shared by every tetrahedron on that edge, so the surface closes without cracks.
 
-use crate::cloud::Point;
+use crate::geometry::Point;
 use crate::mesh::TriMesh;
 use nalgebra::Vector3;
 use rayon::prelude::*;

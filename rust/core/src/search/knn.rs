@@ -1,7 +1,7 @@
 //! Nearest-neighbour search over a fixed point set, backed by kiddo's immutable KD-tree.
 
-use crate::cloud::Point;
-use crate::registration::corr_tree::CorrespondenceTree;
+use super::corr_tree::CorrespondenceTree;
+use crate::geometry::Point;
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use std::sync::OnceLock;
 

@@ -1,42 +1,28 @@
-//! Detection of the instances of any rigid part in a scene: point-pair-feature voting →
-//! pose clustering → ICP refinement of every hypothesis → verification against the scan →
-//! non-maximum suppression → ranking by pickability.
+//! The PPF path: point-pair-feature voting → pose clustering → ICP refinement of every
+//! hypothesis → verification against the scan → non-maximum suppression → ranking by
+//! pickability; finds every instance it can confirm.
 //!
 //! The scene is taken at three resolutions: the points left after bin removal (the depth test's
 //! height map and the reported indices), a voxel grid at a third of the PPF step (normals and
 //! ICP), and an even subsample at the PPF step (voting).
 
-use crate::cloud::Point;
+use super::scene::{scene_indices, DetectionScene};
+use super::{CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
 use crate::error::{Error, Result};
-use crate::knn::KdIndex;
+use crate::geometry::Point;
 use crate::normals::{normals_at, Orientation};
-use crate::pose::{CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
 use crate::registration::ppf::{DetectConfig, PpfModel};
-use crate::registration::verify::{depth_evidence, Evidence, HeightMap};
+use crate::registration::verify::{depth_evidence, Evidence};
 use crate::registration::{icp, IcpConfig};
-use crate::segment::{remove_support_planes, Plane};
-use crate::voxel::{subsample, voxel_downsample};
-use nalgebra::{Isometry3, Vector3};
+use crate::search::KdIndex;
+use crate::voxel::subsample;
+use nalgebra::Isometry3;
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// The scene prepared for detection and judging.
-pub(crate) struct DetectionScene {
-    /// Voxel-grid points (mean of each voxel) and their KD-tree.
-    pub fine: Vec<Point>,
-    pub fine_index: KdIndex,
-    /// The height map of the whole scene.
-    pub heights: HeightMap,
-    /// Depth-test and inlier tolerance, mm.
-    pub tol: f64,
-    /// Support surfaces no part can pass through: the bin's floor and walls (from the bin box),
-    /// or the floor-like support planes removed without one; normals point to the free side.
-    pub supports: Vec<Plane>,
-}
-
 /// A refined, judged hypothesis.
 #[derive(Debug, Clone)]
-pub(crate) struct Judged {
+pub(super) struct Judged {
     pub t_scene_model: Isometry3<f64>,
     pub coarse: Isometry3<f64>,
     pub evidence: Evidence,
@@ -52,111 +38,7 @@ impl Judged {
     }
 }
 
-/// Tolerance of the depth test and of inliers for a PPF step (mm): 0.12 of the step, not below
-/// 1 mm (scan noise and the voxel means' bias on curved surfaces).
-fn tolerance(step: f64) -> f64 {
-    (0.12 * step).max(1.0)
-}
-
 impl DetectionScene {
-    /// Voxel grid and normals of `points` (the scene without the bin) for `ppf`, and the height
-    /// map of the whole scene (the bin's floor is evidence too: surface predicted above a
-    /// visible floor is surface where the sensor saw free space). Without a bin box, support
-    /// planes wider than the part are removed from the voxel grid.
-    pub fn new(
-        scene_all: &[Point],
-        points: &[Point],
-        model: &PoseModel,
-        ppf: &PpfModel,
-        cfg: &PoseConfig,
-    ) -> Result<Self> {
-        let step = ppf.step();
-        let voxel = (step / 3.0).max(0.5);
-        let mut fine = voxel_downsample(points, None, voxel)?.points;
-        let up = cfg.up.normalize();
-        let mut supports = Vec::new();
-        if let Some(bin) = &cfg.bin {
-            let (lo, hi) = (bin.min.coords, bin.max.coords);
-            supports.push(Plane {
-                normal: Vector3::z(),
-                offset: lo.z,
-            });
-            for k in 0..2 {
-                let e = Vector3::ith(k, 1.0);
-                supports.push(Plane {
-                    normal: e,
-                    offset: lo[k],
-                });
-                supports.push(Plane {
-                    normal: -e,
-                    offset: -hi[k],
-                });
-            }
-        } else if fine.len() >= 50 {
-            let (keep, planes) = remove_support_planes(&fine, model.diameter, (0.5 * voxel).max(1.0), 1);
-            fine = keep.iter().map(|&i| fine[i]).collect();
-            // Floors only (which side of a wall is free is not known without the bin), and only
-            // those with the scene above them: a bin's rim is a wide plane too, with parts below.
-            let tol = tolerance(step);
-            supports.extend(
-                planes
-                    .into_iter()
-                    .filter(|p| p.normal.dot(&up).abs() > 0.8)
-                    .map(|p| {
-                        if p.normal.dot(&up) > 0.0 {
-                            p
-                        } else {
-                            Plane {
-                                normal: -p.normal,
-                                offset: -p.offset,
-                            }
-                        }
-                    })
-                    .filter(|p| {
-                        fine.iter()
-                            .filter(|q| p.normal.dot(&q.coords) < p.offset - 2.0 * tol)
-                            .count()
-                            * 50
-                            < fine.len()
-                    }),
-            );
-        }
-        if fine.len() < 10 {
-            return Err(Error::NoObjectFound {
-                reason: format!(
-                    "only {} occupied {voxel:.1} mm voxels remain after removing the bin; the bin is empty",
-                    fine.len()
-                ),
-            });
-        }
-        let fine_index = KdIndex::new(&fine);
-        let heights = HeightMap::fitted(scene_all, &up, (0.5 * voxel).max(1.0));
-        Ok(DetectionScene {
-            fine,
-            fine_index,
-            heights,
-            tol: tolerance(step),
-            supports,
-        })
-    }
-
-    /// Probe stride over the model's dense points for about `n` probes.
-    fn probe_step(model: &PoseModel, n: usize) -> usize {
-        (model.target().points().len() / n.max(1)).max(1)
-    }
-
-    /// Judges a pose with the dense probe (about 2000 model points).
-    pub fn judge(&self, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> Evidence {
-        depth_evidence(
-            model.target(),
-            &self.heights,
-            t_scene_model,
-            Self::probe_step(model, 2000),
-            self.tol,
-            true,
-        )
-    }
-
     /// Indices of the voxel points within the model's reach around `t_scene_model`, at most
     /// `limit` of them (evenly thinned).
     fn local(&self, model: &PoseModel, step: f64, t_scene_model: &Isometry3<f64>, limit: usize) -> Vec<usize> {
@@ -263,32 +145,9 @@ fn accepted(e: &Evidence, cfg: &PoseConfig) -> bool {
         && e.supported_fraction() >= MIN_SUPPORTED
 }
 
-impl DetectionScene {
-    /// Whether the posed part stays on the free side of every support surface (a pose through
-    /// the bin's floor or walls is no pose), within twice the tolerance for 2 % of its surface.
-    fn physically_possible(&self, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> bool {
-        if self.supports.is_empty() {
-            return true;
-        }
-        let pts = model.target().points();
-        let step = (pts.len() / 500).max(1);
-        let inside = pts
-            .iter()
-            .step_by(step)
-            .filter(|p| {
-                let q = t_scene_model * *p;
-                self.supports
-                    .iter()
-                    .any(|s| s.normal.dot(&q.coords) < s.offset - 2.0 * self.tol)
-            })
-            .count();
-        (inside as f64) < 0.02 * pts.len().div_ceil(step) as f64
-    }
-}
-
 /// All instances found by PPF, most pickable first (at most `cfg.max_instances`), and the
 /// prepared scene (for judging other methods' poses on the same terms).
-pub(crate) fn detect(
+pub(super) fn detect(
     scene_all: &[Point],
     points: &[Point],
     model: &PoseModel,
@@ -429,30 +288,4 @@ fn rank(instances: Vec<Judged>, model: &PoseModel, cfg: &PoseConfig) -> Vec<(Jud
         .collect();
     ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
     ranked
-}
-
-/// Indices of `points` within `tol` of the posed model.
-pub(crate) fn scene_indices(
-    points: &[Point],
-    model: &PoseModel,
-    t_scene_model: &Isometry3<f64>,
-    tol: f64,
-) -> Vec<usize> {
-    let c = t_scene_model * model.symmetries.center;
-    let reach = model.radius + tol;
-    let t_model_scene = t_scene_model.inverse();
-    points
-        .iter()
-        .enumerate()
-        .filter(|(_, p)| (*p - c).norm_squared() <= reach * reach)
-        .filter(|(_, p)| {
-            let q = t_model_scene * *p;
-            model
-                .target()
-                .search()
-                .nearest_within(&[q.x, q.y, q.z], tol * tol)
-                .is_some()
-        })
-        .map(|(i, _)| i)
-        .collect()
 }

@@ -1,7 +1,7 @@
 //! A part model: its mesh in millimetres and a point cloud sampled evenly over its surface.
 
-use crate::cloud::Point;
 use crate::error::{Error, Result};
+use crate::geometry::Point;
 use crate::mesh::TriMesh;
 use crate::rng::Rng;
 use crate::voxel::DiskGrid;
@@ -174,7 +174,7 @@ mod tests {
             assert!(n.dot(&(p - c)) > 0.0);
         }
         // No two points closer than the disk radius.
-        let idx = crate::knn::KdIndex::new(&s.points);
+        let idx = crate::search::KdIndex::new(&s.points);
         for p in &s.points {
             let nn = idx.knn(p, 2);
             assert!(nn[1].distance_squared.sqrt() >= DISK_RATIO * 2.0 - 1e-9);

@@ -4,10 +4,10 @@
 //! in the frame of the paper's Fig. 6b: the origin where the branch axes meet, x along the run
 //! (the straight-through pipe), y along the side branch, z = x × y.
 
-use crate::cloud::Point;
 use crate::error::{Error, Result};
+use crate::geometry::Point;
+use crate::mesh::sdf::{capped_cylinder, elliptic_cylinder, mesh_sdf, sphere};
 use crate::mesh::TriMesh;
-use crate::sdf::{capped_cylinder, elliptic_cylinder, mesh_sdf, sphere};
 use nalgebra::Vector3;
 
 /// One cylindrical branch of a pipe fitting, as CCP needs it.

@@ -1,0 +1,13 @@
+//! Geometry every stage shares: the point type and its checks, statistics of clouds, rigid
+//! transforms, the one [`Plane`], the bin box and the one Kabsch solver.
+
+mod cloud;
+mod kabsch;
+mod plane;
+
+pub use cloud::{
+    centroid, check_count, check_finite, check_spread, covariance, covariance_of, extreme_axis, isometry_from_matrix,
+    principal_axes, spanned_dimensions, transform_points, Point,
+};
+pub use kabsch::kabsch;
+pub use plane::{BinBox, Plane};

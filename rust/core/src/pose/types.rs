@@ -1,0 +1,118 @@
+//! The pose pipeline's configuration and results: [`CoarseMethod`], [`PoseConfig`], [`PoseEstimate`].
+
+use crate::geometry::{BinBox, Point};
+use crate::registration::ccp::CcpConfig;
+use crate::registration::ppf::DetectConfig;
+use nalgebra::{Isometry3, Vector3};
+
+/// How the coarse pose is found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CoarseMethod {
+    /// The paper's CCP (needs a branch layout).
+    Ccp,
+    /// The paper's baseline: ICP started from the centroids with the model's own orientation.
+    Centroid,
+    /// Point-pair-feature detection: any rigid part, every instance of a pile.
+    Ppf,
+    /// PPF, and CCP too where the model has a branch layout; the verified winner is kept.
+    Auto,
+}
+
+impl CoarseMethod {
+    /// The method's name as the Python API spells it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            CoarseMethod::Ccp => "ccp",
+            CoarseMethod::Centroid => "centroid",
+            CoarseMethod::Ppf => "ppf",
+            CoarseMethod::Auto => "auto",
+        }
+    }
+}
+
+/// Parameters of [`estimate_pose`]; `None` fields take defaults derived from the scan's point
+/// spacing and the model's size.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PoseConfig {
+    /// The bin box in the scene frame; without it, support planes are found and removed.
+    pub bin: Option<BinBox>,
+    /// Direction toward the sensor (scene +z by default).
+    pub up: Vector3<f64>,
+    /// Coarse-pose method.
+    pub method: CoarseMethod,
+    /// d* of segmentation, mm (default: 3 × the scan's point spacing, at least 1.6 × the spacing
+    /// across scan lines).
+    pub d_star: Option<f64>,
+    /// Smallest object region, points (default: a tenth of the points the model's visible half
+    /// would give at the scan's sampling, at least 15).
+    pub min_points: Option<usize>,
+    /// Largest angle between neighbouring normals inside one object, radians.
+    pub max_normal_angle: f64,
+    /// Inlier distance for verification, mm (default: 2 × the model's sample spacing plus
+    /// 1.5 × the scan's, at least 1 mm — it judges scan points against the dense model).
+    pub inlier_distance: Option<f64>,
+    /// Smallest fraction of the object's points that must lie on the posed model (CCP, centroid).
+    pub min_fitness: f64,
+    /// PPF: smallest fraction of the posed model's sensor-facing surface, where the scan can judge
+    /// it, that the scan confirms (the rest it sees through).
+    pub min_coverage: f64,
+    /// CCP tuning.
+    pub ccp: CcpConfig,
+    /// PPF detection tuning.
+    pub detect: DetectConfig,
+    /// The sensor's position in the scene frame, mm, when known (orients the scan's normals;
+    /// otherwise they face `up`).
+    pub viewpoint: Option<Point>,
+    /// Instances returned by [`estimate_poses`].
+    pub max_instances: usize,
+    /// Worker threads; 0 = all cores.
+    pub num_threads: usize,
+}
+
+impl Default for PoseConfig {
+    fn default() -> Self {
+        PoseConfig {
+            bin: None,
+            up: Vector3::z(),
+            method: CoarseMethod::Auto,
+            d_star: None,
+            min_points: None,
+            max_normal_angle: 70f64.to_radians(),
+            inlier_distance: None,
+            min_fitness: 0.6,
+            min_coverage: 0.8,
+            ccp: CcpConfig::default(),
+            detect: DetectConfig::default(),
+            viewpoint: None,
+            max_instances: 1,
+            num_threads: 0,
+        }
+    }
+}
+
+/// A verified pose.
+#[derive(Debug, Clone)]
+pub struct PoseEstimate {
+    /// Model (mesh) frame → scene frame.
+    pub t_scene_model: Isometry3<f64>,
+    /// The coarse pose before ICP, model → scene.
+    pub t_scene_model_coarse: Isometry3<f64>,
+    /// Fraction of the object's points within the inlier distance of the posed model, in [0, 1].
+    pub score: f64,
+    /// RMS distance of those inliers, mm.
+    pub rmse: f64,
+    /// Scene indices of the points on the posed model.
+    pub indices: Vec<usize>,
+    /// Milliseconds per stage, in order.
+    pub timings: Vec<(&'static str, f64)>,
+    /// ICP iterations of the refinement.
+    pub iterations: usize,
+    /// The coarse method that found it.
+    pub method: CoarseMethod,
+    /// Fraction of the model's sensor-facing surface that the scan confirms (NaN where not judged).
+    pub visible_fraction: f64,
+    /// Fraction of the model's sensor-facing surface under other objects (NaN where not judged).
+    pub occluded_fraction: f64,
+    /// Pickability in [0, 1] among the instances found (height, visible share, nothing on top).
+    pub pickability: f64,
+}

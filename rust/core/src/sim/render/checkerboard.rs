@@ -1,0 +1,170 @@
+//! Rendering of a printed calibration checkerboard.
+
+use super::*;
+
+/// A printed calibration checkerboard. Its frame follows OpenCV: the origin at the first inner
+/// corner, x along the `cols` direction, y along `rows`, z into the board; inner corners at
+/// `(i·square, j·square, 0)` for `i < cols − 1`, `j < rows − 1`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Checkerboard {
+    /// Squares along x.
+    pub cols: usize,
+    /// Squares along y.
+    pub rows: usize,
+    /// Square edge, mm.
+    pub square: f64,
+    /// White border around the squares, mm.
+    pub margin: f64,
+}
+
+impl Default for Checkerboard {
+    fn default() -> Self {
+        Checkerboard {
+            cols: 10,
+            rows: 7,
+            square: 20.0,
+            margin: 15.0,
+        }
+    }
+}
+
+/// Renders a checkerboard at `t_camera_board` under `lighting` with `supersample`² samples per
+/// pixel, optionally with the laser line at an angle on it, and sensor noise: the images the
+/// camera and laser calibrations are computed from.
+pub fn render_checkerboard(
+    camera: &Camera,
+    board: &Checkerboard,
+    t_camera_board: &Isometry3<f64>,
+    lighting: &Lighting,
+    laser: Option<(&Laser, f64)>,
+    noise: &SensorNoise,
+    supersample: usize,
+    seed: u64,
+) -> Result<Vec<u8>> {
+    camera.validate()?;
+    noise.validate()?;
+    if board.cols < 2 || board.rows < 2 || !(board.square > 0.0) || !(board.margin >= 0.0) {
+        return Err(Error::invalid(
+            "board",
+            "needs at least 2 × 2 squares, a positive square size and a margin ≥ 0",
+        ));
+    }
+    if supersample == 0 || supersample > 16 {
+        return Err(Error::invalid(
+            "supersample",
+            format!("must be in 1..=16, got {supersample}"),
+        ));
+    }
+    if let Some((l, th)) = laser {
+        l.validate()?;
+        if !th.is_finite() {
+            return Err(Error::invalid("angle", "must be finite"));
+        }
+    }
+    let (w, h) = (camera.width, camera.height);
+    let table = camera.ray_table();
+    let n = t_camera_board.rotation * Vector3::z();
+    let p0 = Point::from(t_camera_board.translation.vector);
+    let t_board_camera = t_camera_board.inverse();
+    let lamp = lighting.lamp_direction.try_normalize(1e-12).unwrap_or_else(Vector3::z);
+    let shade = lighting.ambient + lighting.lamp * n.dot(&lamp).abs();
+    let (xmin, ymin) = (-board.square - board.margin, -board.square - board.margin);
+    let (xmax, ymax) = (
+        (board.cols - 1) as f64 * board.square + board.margin,
+        (board.rows - 1) as f64 * board.square + board.margin,
+    );
+    let laser_frame = laser.map(|(l, th)| {
+        let t = l.t_camera_laser(th);
+        let r = t.rotation.to_rotation_matrix().into_inner();
+        (
+            l,
+            Point::from(t.translation.vector),
+            r.column(0).into_owned(),
+            r.column(1).into_owned(),
+            r.column(2).into_owned(),
+        )
+    });
+    let k = supersample;
+    let img: Vec<[f32; 3]> = (0..h)
+        .into_par_iter()
+        .flat_map_iter(|v| {
+            let table = &table;
+            let laser_frame = &laser_frame;
+            (0..w).map(move |u| {
+                let at = |uu: usize, vv: usize| table[vv * w + uu];
+                let c = at(u, v);
+                let (u0, u1) = (u.saturating_sub(1), (u + 1).min(w - 1));
+                let (v0, v1) = (v.saturating_sub(1), (v + 1).min(h - 1));
+                let du = [
+                    (at(u1, v)[0] - at(u0, v)[0]) / (u1 - u0).max(1) as f64,
+                    (at(u1, v)[1] - at(u0, v)[1]) / (u1 - u0).max(1) as f64,
+                ];
+                let dv = [
+                    (at(u, v1)[0] - at(u, v0)[0]) / (v1 - v0).max(1) as f64,
+                    (at(u, v1)[1] - at(u, v0)[1]) / (v1 - v0).max(1) as f64,
+                ];
+                let mut acc = [0.0f64; 3];
+                for i in 0..k {
+                    for j in 0..k {
+                        let (su, sv) = ((i as f64 + 0.5) / k as f64 - 0.5, (j as f64 + 0.5) / k as f64 - 0.5);
+                        let r = Vector3::new(c[0] + su * du[0] + sv * dv[0], c[1] + su * du[1] + sv * dv[1], 1.0);
+                        let den = n.dot(&r);
+                        let tt = if den.abs() > 1e-12 {
+                            n.dot(&p0.coords) / den
+                        } else {
+                            -1.0
+                        };
+                        if tt <= 0.0 {
+                            for a in acc.iter_mut() {
+                                *a += lighting.background;
+                            }
+                            continue;
+                        }
+                        let x = Point::from(r * tt);
+                        let b = t_board_camera * x;
+                        if b.x < xmin || b.x > xmax || b.y < ymin || b.y > ymax {
+                            for a in acc.iter_mut() {
+                                *a += lighting.background;
+                            }
+                            continue;
+                        }
+                        let inside = b.x >= -board.square
+                            && b.x < (board.cols - 1) as f64 * board.square
+                            && b.y >= -board.square
+                            && b.y < (board.rows - 1) as f64 * board.square;
+                        let black = inside
+                            && ((b.x / board.square).floor() as i64 + (b.y / board.square).floor() as i64)
+                                .rem_euclid(2)
+                                == 0;
+                        let albedo = if black { 0.08 } else { 0.85 };
+                        let mut rgb = [albedo * shade; 3];
+                        if let Some((l, o, xl, yl, zl)) = laser_frame {
+                            let wv = x - o;
+                            let along = zl.dot(&wv);
+                            if along > 0.0 && yl.dot(&wv).abs() <= (l.fan_angle / 2.0).tan() * along {
+                                let d = xl.dot(&wv);
+                                let dist = wv.norm();
+                                let cos_i = n.dot(&(wv / dist)).abs();
+                                let e = l.power
+                                    * (-0.5 * d * d / (l.sheet_sigma * l.sheet_sigma)).exp()
+                                    * l.reference_distance
+                                    / dist
+                                    * cos_i
+                                    * albedo;
+                                for ch in 0..3 {
+                                    rgb[ch] += e * l.color[ch];
+                                }
+                            }
+                        }
+                        for ch in 0..3 {
+                            acc[ch] += rgb[ch];
+                        }
+                    }
+                }
+                let s = (k * k) as f64;
+                [(acc[0] / s) as f32, (acc[1] / s) as f32, (acc[2] / s) as f32]
+            })
+        })
+        .collect();
+    Ok(quantise(&img, w, noise, seed, 0xB0A2D))
+}

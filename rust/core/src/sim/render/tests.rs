@@ -1,0 +1,173 @@
+use super::*;
+
+fn plane_mesh(z: f64, half: f64) -> TriMesh {
+    TriMesh {
+        vertices: vec![
+            Point::new(-half, -half, z),
+            Point::new(half, -half, z),
+            Point::new(half, half, z),
+            Point::new(-half, half, z),
+        ],
+        faces: vec![[0, 1, 2], [0, 2, 3]],
+    }
+}
+
+fn small_camera() -> Camera {
+    Camera {
+        width: 160,
+        height: 120,
+        fx: 200.0,
+        fy: 200.0,
+        cx: 79.5,
+        cy: 59.5,
+        dist: [0.0; 5],
+    }
+}
+
+#[test]
+fn undistort_inverts_distort() {
+    let cam = Camera {
+        dist: [-0.2, 0.05, 0.001, -0.002, 0.01],
+        ..Default::default()
+    };
+    for &(x, y) in &[(0.1, -0.2), (0.3, 0.25), (-0.31, 0.0)] {
+        let (xd, yd) = cam.distort(x, y);
+        let (xu, yu) = cam.undistort(xd, yd);
+        assert!((xu - x).abs() < 1e-10 && (yu - y).abs() < 1e-10);
+    }
+}
+
+#[test]
+fn depth_of_a_plane_is_its_distance() {
+    let mut scene = Scene::new();
+    let m = scene.add_mesh(&plane_mesh(0.0, 1000.0), Material::default()).unwrap();
+    scene
+        .add_instance(m, Isometry3::translation(0.0, 0.0, 400.0), 5)
+        .unwrap();
+    let view = scene
+        .view(&small_camera(), &Isometry3::identity(), &Lighting::default())
+        .unwrap();
+    let depth = view.depth();
+    assert!(depth.iter().all(|d| (d - 400.0).abs() < 1e-3), "{:?}", &depth[..4]);
+    assert!(view.ids().iter().all(|&i| i == 5));
+}
+
+#[test]
+fn laser_line_lands_where_the_sheet_meets_the_plane() {
+    let mut scene = Scene::new();
+    let m = scene
+        .add_mesh(
+            &plane_mesh(0.0, 1000.0),
+            Material {
+                albedo: [0.8; 3],
+                ..Default::default()
+            },
+        )
+        .unwrap();
+    scene
+        .add_instance(m, Isometry3::translation(0.0, 0.0, 500.0), 0)
+        .unwrap();
+    let cam = small_camera();
+    let view = scene.view(&cam, &Isometry3::identity(), &Lighting::default()).unwrap();
+    let laser = Laser {
+        sheet_sigma: 1.5,
+        power: 150.0,
+        ..Default::default()
+    };
+    let on = view.frame(&laser, 0.02, &SensorNoise::none(), 1).unwrap();
+    let off = view
+        .frame(
+            &Laser {
+                power: 0.0,
+                ..laser.clone()
+            },
+            0.02,
+            &SensorNoise::none(),
+            1,
+        )
+        .unwrap();
+    // The sheet x_L = 0 meets z = 500 along a line of constant camera x (the laser's y axis is
+    // the camera's); find it and compare with the red centroid of the middle row.
+    let t = laser.t_camera_laser(0.02);
+    let (o, xl) = (t.translation.vector, t.rotation * Vector3::x());
+    // x such that xl · ((x, 0, 500) − o) = 0
+    let x = (xl.dot(&o) - xl.z * 500.0) / xl.x;
+    let u_expected = cam.fx * x / 500.0 + cam.cx;
+    let row = 60;
+    let (mut s, mut sw) = (0.0, 0.0);
+    for u in 0..cam.width {
+        let i = (row * cam.width + u) * 3;
+        let e = on[i] as f64 - off[i] as f64;
+        s += e * u as f64;
+        sw += e;
+    }
+    assert!(sw > 100.0, "the line is missing");
+    assert!((s / sw - u_expected).abs() < 0.05, "{} vs {u_expected}", s / sw);
+}
+
+#[test]
+fn nearest_surface_is_the_exact_mesh_distance() {
+    let mut scene = Scene::new();
+    assert_eq!(scene.nearest_surface(&[Point::origin()]), vec![(f64::INFINITY, -1)]);
+    let m = scene.add_mesh(&plane_mesh(0.0, 100.0), Material::default()).unwrap();
+    scene
+        .add_instance(m, Isometry3::translation(400.0, 0.0, 0.0), 7)
+        .unwrap();
+    scene
+        .add_instance(m, Isometry3::translation(400.0, 0.0, 30.0), 8)
+        .unwrap();
+    let got = scene.nearest_surface(&[
+        Point::new(410.0, 5.0, 3.25),
+        Point::new(390.0, 0.0, 20.0),
+        Point::new(650.0, 0.0, 0.0),
+    ]);
+    assert_eq!((got[0].1, got[1].1, got[2].1), (7, 8, 7));
+    assert!(
+        (got[0].0 - 3.25).abs() < 1e-4 && (got[1].0 - 10.0).abs() < 1e-4 && (got[2].0 - 150.0).abs() < 1e-3,
+        "{got:?}"
+    );
+}
+
+#[test]
+fn an_occluder_casts_a_laser_shadow() {
+    let mut scene = Scene::new();
+    let floor = scene.add_mesh(&plane_mesh(0.0, 1000.0), Material::default()).unwrap();
+    scene
+        .add_instance(floor, Isometry3::translation(0.0, 0.0, 500.0), 0)
+        .unwrap();
+    let cam = small_camera();
+    let laser = Laser {
+        sheet_sigma: 1.0,
+        ..Default::default()
+    };
+    let clear = scene
+        .view(&cam, &Isometry3::identity(), &Lighting::default())
+        .unwrap()
+        .frame(&laser, 0.0, &SensorNoise::none(), 0)
+        .unwrap();
+    // A small plate in front of the projector, out of the camera's view, hides the line.
+    let block = scene.add_mesh(&plane_mesh(0.0, 10.0), Material::default()).unwrap();
+    let t = laser.t_camera_laser(0.0);
+    scene
+        .add_instance(
+            block,
+            Isometry3::from_parts(
+                (t.translation.vector + t.rotation * Vector3::new(0.0, 0.0, 30.0)).into(),
+                t.rotation,
+            ),
+            1,
+        )
+        .unwrap();
+    let shadowed = scene
+        .view(&cam, &Isometry3::identity(), &Lighting::default())
+        .unwrap()
+        .frame(&laser, 0.0, &SensorNoise::none(), 0)
+        .unwrap();
+    let red = |img: &[u8]| img.chunks(3).map(|p| p[0] as u64).sum::<u64>();
+    assert!(
+        red(&clear) > red(&shadowed) + 1000,
+        "{} {}",
+        red(&clear),
+        red(&shadowed)
+    );
+}
