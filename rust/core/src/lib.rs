@@ -47,7 +47,10 @@ pub use mesh::parts::{self, Part};
 pub use mesh::{sample_surface, unit_scale, Density, SurfaceSamples, TriMesh};
 pub use normals::{estimate_normals, Orientation};
 pub use parallel::with_threads;
-pub use pose::{estimate_pose, estimate_poses, CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
+pub use pose::{
+    estimate_pose, estimate_poses, CcpPathParams, CheckIcpParams, CoarseMethod, FineIcpParams, PoseConfig,
+    PoseEstimate, PoseModel,
+};
 pub use registration::ccp::{BranchLayout, CcpConfig};
 pub use registration::ppf::{DetectConfig, PpfConfig, PpfModel};
 pub use registration::{icp, IcpConfig, IcpMethod, IcpResult, IcpTarget, RobustKernel};

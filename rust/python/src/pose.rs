@@ -4,7 +4,7 @@ use crate::convert::{indices_to_py, isometry_to_py, points, vectors};
 use crate::errors::{invalid, run};
 use crate::geometry::mesh_from_py;
 use binpick_core::{estimate_poses as core_estimate, CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
-use binpick_core::{BinBox, BranchLayout, CcpConfig, DetectConfig, PpfConfig, PpfModel};
+use binpick_core::{BinBox, BranchLayout, CcpConfig, CcpPathParams, DetectConfig, PpfConfig, PpfModel};
 use nalgebra::{Point3, Vector3};
 use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -183,9 +183,10 @@ fn estimate_to_py<'py>(py: Python<'py>, est: &PoseEstimate) -> PyResult<Bound<'p
     d.set_item("timings", t)?;
     d.set_item("iterations", est.iterations)?;
     d.set_item("method", est.method.name())?;
-    d.set_item("visible_fraction", est.visible_fraction)?;
-    d.set_item("occluded_fraction", est.occluded_fraction)?;
-    d.set_item("pickability", est.pickability)?;
+    // Python reads NaN where a fraction was not judged and 1.0 for an unranked pose.
+    d.set_item("visible_fraction", est.visible_fraction.unwrap_or(f64::NAN))?;
+    d.set_item("occluded_fraction", est.occluded_fraction.unwrap_or(f64::NAN))?;
+    d.set_item("pickability", est.pickability.unwrap_or(1.0))?;
     Ok(d)
 }
 
@@ -263,6 +264,7 @@ fn estimate_poses<'py>(
         min_fitness,
         min_coverage,
         ccp: CcpConfig { closer_radius, tau },
+        ccp_path: CcpPathParams::default(),
         detect,
         viewpoint,
         max_instances: max_instances.max(1),

@@ -1,10 +1,14 @@
 //! The paper's path: top-object segmentation (Table 2) → CCP (or the centroid baseline) →
-//! ICP → verification.
+//! coarse checks → ICP → verification.
+//!
+//! The coarse checks score every reading cheaply (object points on the model × expected-visible
+//! model points on the scene), give the best few a short ICP, and the winner is refined on all
+//! of the object's points. Their tunables are [`CcpPathParams`].
 
 use super::scene::scene_indices;
 use super::{CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
 use crate::error::{Error, Result};
-use crate::geometry::Point;
+use crate::geometry::{centroid, covariance, principal_axes, Point};
 use crate::normals::{estimate_normals, Orientation};
 use crate::registration::ccp::ccp;
 use crate::registration::verify::{coarse_inlier_fraction, depth_evidence, inlier_stats, HeightMap};
@@ -12,27 +16,171 @@ use crate::registration::{icp, IcpConfig, RobustKernel};
 use crate::search::KdIndex;
 use crate::segment::{scan_spacing, segment_top, SegmentConfig};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use std::f64::consts::PI;
 use std::time::Instant;
 
-/// CCP candidates (the best-prescored of distinct rotations) that get the stage-one ICP check.
-const STAGE_ONE: usize = 8;
+/// Tunables of the CCP and centroid path; the defaults are those the paper's tables were
+/// measured with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CcpPathParams {
+    /// Regions tried, top first, before the path gives up. Default 8.
+    pub max_regions: usize,
+    /// Object points the coarse checks judge a pose by (the probe; fewer than about 100 cannot
+    /// tell a wrong reading of a partial view from the right one). Default 150.
+    pub probe_points: usize,
+    /// Model points the coarse checks' depth test probes. Default 100.
+    pub model_probes: usize,
+    /// Object points the candidates that survive the quick check converge on. Default 160.
+    pub sample_points: usize,
+    /// Model points (about) the stage-two depth test probes. Default 4000.
+    pub fine_model_probes: usize,
+    /// Readings the cheap first tier of scoring (a third of the probe) passes on to the second
+    /// (the whole probe). Default 32.
+    pub second_tier: usize,
+    /// Distinct rotations, best-prescored first, that get the stage-one ICP check. Default 8.
+    pub stage_one: usize,
+    /// Stage-one leaders that converge in stage two. Default 3.
+    pub stage_two: usize,
+    /// A stage-one result converges in stage two only when it scores at least this fraction
+    /// of the leader's. Default 0.7.
+    pub stage_two_ratio: f64,
+    /// Tolerance of the coarse checks, as a fraction of the part's diameter (at least twice the
+    /// inlier distance). Default 0.08.
+    pub coarse_tolerance_ratio: f64,
+    /// Readings whose rotations differ by less than this, rad, and whose translations differ by
+    /// less than [`CcpPathParams::same_reading_shift`] are scored once. Default 5° (0.0873).
+    pub same_reading_angle: f64,
+    /// Translation part of the same-reading test, as a fraction of the diameter. Default 0.05.
+    pub same_reading_shift: f64,
+    /// Of the readings whose rotations lie within this angle, rad, only the best-ranked gets
+    /// the ICP checks. Default 15° (0.262).
+    pub cluster_angle: f64,
+    /// CCP: the best-ranked readings whose quarter and half turns about the model's axes join
+    /// the ICP checks (views of a part on its side are ambiguous up to such a turn). Default 2.
+    pub turned_readings: usize,
+    /// CCP: a half turn of the winner whose quick score is below this fraction of the winner's
+    /// is not converged. Default 0.8.
+    pub half_turn_drop: f64,
+    /// CCP: a half turn replaces the winner only when it scores this much more. Default 0.01.
+    pub half_turn_margin: f64,
+    /// ICP of the coarse checks.
+    pub check_icp: CheckIcpParams,
+    /// ICP of the final refinement.
+    pub fine_icp: FineIcpParams,
+}
 
-/// Readings the first, cheap tier of scoring passes on to the second.
-const SECOND_TIER: usize = 32;
+impl Default for CcpPathParams {
+    fn default() -> Self {
+        CcpPathParams {
+            max_regions: 8,
+            probe_points: 150,
+            model_probes: 100,
+            sample_points: 160,
+            fine_model_probes: 4000,
+            second_tier: 32,
+            stage_one: 8,
+            stage_two: 3,
+            stage_two_ratio: 0.7,
+            coarse_tolerance_ratio: 0.08,
+            same_reading_angle: 5f64.to_radians(),
+            same_reading_shift: 0.05,
+            cluster_angle: 15f64.to_radians(),
+            turned_readings: 2,
+            half_turn_drop: 0.8,
+            half_turn_margin: 0.01,
+            check_icp: CheckIcpParams::default(),
+            fine_icp: FineIcpParams::default(),
+        }
+    }
+}
 
-/// Object points the coarse checks judge a pose by (fewer than about 100 cannot tell a wrong
-/// reading of a partial view from the right one), and model points their depth test probes.
-const PROBE_POINTS: usize = 150;
-const MODEL_PROBES: usize = 100;
+/// The short point-to-plane ICP of the coarse checks (Tukey kernel, approximate search).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckIcpParams {
+    /// Correspondence distance as a fraction of the diameter (at least `min_tolerances` inlier
+    /// distances). Default 0.25.
+    pub reach_ratio: f64,
+    /// Tukey kernel width as a fraction of the diameter (at least `min_tolerances` inlier
+    /// distances). Default 0.1.
+    pub kernel_ratio: f64,
+    /// Lower bound of the distance and the kernel, in inlier distances. Default 3.
+    pub min_tolerances: f64,
+    /// Iterations in stage two and for the half turns. Default 12.
+    pub iterations: usize,
+    /// Iterations of the quick checks (stage one, the half turns' first look). Default 6.
+    pub quick_iterations: usize,
+    /// Stops once an update rotates less than this, rad. Default 1e-4.
+    pub rotation_tolerance: f64,
+    /// ... and moves less than this, mm. Default 1e-2.
+    pub translation_tolerance: f64,
+}
 
-/// Object points the candidates that survive the quick check converge on.
-const SAMPLE_POINTS: usize = 160;
+impl Default for CheckIcpParams {
+    fn default() -> Self {
+        CheckIcpParams {
+            reach_ratio: 0.25,
+            kernel_ratio: 0.1,
+            min_tolerances: 3.0,
+            iterations: 12,
+            quick_iterations: 6,
+            rotation_tolerance: 1e-4,
+            translation_tolerance: 1e-2,
+        }
+    }
+}
 
-/// Regions tried, top first, before the pipeline gives up.
-const MAX_REGIONS: usize = 8;
+/// The final point-to-plane refinement on all of the object's points.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FineIcpParams {
+    /// Correspondence distance and Tukey width, in inlier distances. Default 3.
+    pub reach_tolerances: f64,
+    /// Most iterations. Default 60.
+    pub iterations: usize,
+    /// Stops once an update rotates less than this, rad (default 1e-5, about 0.0006°) ...
+    pub rotation_tolerance: f64,
+    /// ... and moves less than this, mm (default 1e-3): far below what the scan can resolve.
+    pub translation_tolerance: f64,
+}
+
+impl Default for FineIcpParams {
+    fn default() -> Self {
+        FineIcpParams {
+            reach_tolerances: 3.0,
+            iterations: 60,
+            rotation_tolerance: 1e-5,
+            translation_tolerance: 1e-3,
+        }
+    }
+}
+
+/// Stage timings: each lap is the time since the previous one.
+struct Laps<'a> {
+    clock: Instant,
+    timings: &'a mut Vec<(&'static str, f64)>,
+}
+
+impl Laps<'_> {
+    fn lap(&mut self, name: &'static str) {
+        self.timings.push((name, self.clock.elapsed().as_secs_f64() * 1e3));
+        self.clock = Instant::now();
+    }
+}
+
+/// The scan's sampling: spacing along and across the scan lines, mm.
+#[derive(Clone, Copy)]
+struct Sampling {
+    along: f64,
+    across: f64,
+}
+
+/// A scored reading: score, `T_model_scene` it reached, and the coarse `T_scene_model` it came from.
+type Tried = (f64, Isometry3<f64>, Isometry3<f64>);
 
 /// The paper's path on the points left after bin removal: top-object segmentation → CCP (or
 /// the centroid baseline) → ICP → verification. Indices in the result refer to `pts`.
+///
+/// Table 2 with one addition: a region that no pose explains (a bin rim, a sliver of a part
+/// deep below others) is set aside and the next top region tried.
 pub(super) fn run(
     scene: &[Point],
     pts: &[Point],
@@ -41,262 +189,30 @@ pub(super) fn run(
     method: CoarseMethod,
     timings: &mut Vec<(&'static str, f64)>,
 ) -> Result<PoseEstimate> {
-    let mut clock = Instant::now();
-    let mut lap = |name: &'static str, timings: &mut Vec<(&'static str, f64)>| {
-        timings.push((name, clock.elapsed().as_secs_f64() * 1e3));
-        clock = Instant::now();
+    let mut laps = Laps {
+        clock: Instant::now(),
+        timings,
     };
     let up = cfg.up.normalize();
     let index = KdIndex::new(pts);
-    let sampling = scan_spacing(pts, &index);
-    let spacing = sampling.along.max(1e-3);
-    let across = sampling.across.max(spacing);
-    // Normals need neighbours from more than one scan line.
-    let k = ((8.0 * across / spacing).round() as usize).clamp(12, 64).min(pts.len());
-    let normals = estimate_normals(pts, &index, k, Orientation::TowardDirection(up))?;
-    lap("normals", timings);
-    let visible_points = (0.5 * model.area / (spacing * across)).max(1.0);
-    let seg_cfg = SegmentConfig {
-        d_star: cfg.d_star.unwrap_or((3.0 * spacing).max(1.6 * across)),
-        min_points: cfg.min_points.unwrap_or(((0.1 * visible_points) as usize).max(15)),
-        max_normal_angle: cfg.max_normal_angle,
-        max_extent: 1.1 * model.diameter,
-        up,
+    let spacing = scan_spacing(pts, &index);
+    let sampling = Sampling {
+        along: spacing.along.max(1e-3),
+        across: spacing.across.max(spacing.along.max(1e-3)),
     };
-    // Table 2 with one addition: a region that no pose explains (a bin rim, a sliver of a part
-    // deep below others) is set aside and the next top region tried.
+    let normals = scan_normals(pts, &index, sampling, up)?;
+    laps.lap("normals");
+    let seg_cfg = segment_config(model, cfg, sampling, up);
     let mut excluded = vec![false; pts.len()];
     let mut last_failure: Option<Error> = None;
-    for _ in 0..MAX_REGIONS {
-        let region = match segment_top(&pts, Some(&normals), &index, &seg_cfg, Some(&excluded)) {
+    for _ in 0..cfg.ccp_path.max_regions {
+        let region = match segment_top(pts, Some(&normals), &index, &seg_cfg, Some(&excluded)) {
             Ok(r) => r,
             Err(e) => return Err(last_failure.unwrap_or(e)),
         };
-        let mut fit = |timings: &mut Vec<(&'static str, f64)>| -> Result<PoseEstimate> {
-            let object: Vec<Point> = region.iter().map(|&i| pts[i]).collect();
-            lap("segmentation", timings);
-            // A flat region wider than the part (a bin rim, a wall left in the scan) is not the part.
-            let (_, cov) = crate::geometry::covariance(&object);
-            let (vals, axes) = crate::geometry::principal_axes(&cov);
-            let along: Vec<f64> = object.iter().map(|p| p.coords.dot(&axes[0])).collect();
-            let span = along.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
-                - along.iter().cloned().fold(f64::INFINITY, f64::min);
-            if span > 1.05 * model.diameter && vals[2].sqrt() < 0.02 * model.diameter {
-                return Err(Error::NoObjectFound {
-                    reason: format!(
-                        "the top region is flat and {span:.0} mm wide, wider than the part ({:.0} mm)",
-                        model.diameter
-                    ),
-                });
-            }
-
-            // Coarse pose candidates, model → scene.
-            let candidates: Vec<Isometry3<f64>> = match (method, &model.layout) {
-                (CoarseMethod::Ccp, Some(layout)) => {
-                    ccp(
-                        &object,
-                        layout,
-                        model.target.points(),
-                        model.target.normals().unwrap_or(&[]),
-                        Some(up),
-                        &cfg.ccp,
-                    )?
-                    .candidates
-                }
-                (CoarseMethod::Ccp, None) => {
-                    return Err(Error::invalid("model", "CCP needs the model's branch layout (cylindrical branches from a junction); declare branches on the Model or use method=\"centroid\""));
-                }
-                _ => {
-                    let c_obj = crate::geometry::centroid(&object);
-                    let c_model = crate::geometry::centroid(model.target.points());
-                    vec![Isometry3::from_parts(
-                        Translation3::from(c_obj - c_model),
-                        UnitQuaternion::identity(),
-                    )]
-                }
-            };
-            lap("coarse", timings);
-
-            // Score every candidate cheaply (object points on the model × expected-visible model points
-            // on the scene), check the best few with a short ICP, and refine the winner on all points.
-            let tol = cfg
-                .inlier_distance
-                .unwrap_or((2.0 * model.spacing + 1.5 * spacing.min(2.0 * model.spacing)).max(1.0));
-            let step = object.len().div_ceil(SAMPLE_POINTS);
-            let sample: Vec<Point> = object.iter().step_by(step).copied().collect();
-            let heights = HeightMap::new(scene, &up, (1.5 * across).max(0.5));
-            let coarse_model_step = model.target.points().len().div_ceil(MODEL_PROBES);
-            let fine_step = (model.target.points().len() / 4000).max(1);
-            let score_with = |t_model_scene: &Isometry3<f64>, probe: &[Point], tol: f64, model_step: usize| -> f64 {
-                let on_model = inlier_stats(probe, &model.target, t_model_scene, tol).0;
-                on_model
-                    * depth_evidence(
-                        &model.target,
-                        &heights,
-                        &t_model_scene.inverse(),
-                        model_step,
-                        tol,
-                        false,
-                    )
-                    .coverage()
-            };
-            let score_of = |t: &Isometry3<f64>, probe: &[Point], tol: f64| {
-                coarse_inlier_fraction(probe, &model.target, t, tol)
-                    * depth_evidence(&model.target, &heights, &t.inverse(), coarse_model_step, tol, false).coverage()
-            };
-            let coarse_tol = (0.08 * model.diameter).max(2.0 * tol);
-            let probe: Vec<Point> = object
-                .iter()
-                .step_by(object.len().div_ceil(PROBE_POINTS))
-                .copied()
-                .collect();
-            // Readings that give the same pose (within 5° and 5 % of the part) are scored once.
-            let same = 2.5f64.to_radians().cos();
-            let mut unique: Vec<Isometry3<f64>> = Vec::with_capacity(candidates.len());
-            for c in &candidates {
-                if !unique.iter().any(|u| {
-                    u.rotation.coords.dot(&c.rotation.coords).abs() > same
-                        && (u.translation.vector - c.translation.vector).norm() < 0.05 * model.diameter
-                }) {
-                    unique.push(*c);
-                }
-            }
-            // Two tiers: a third of the probe sorts out the readings that are plainly wrong, the
-            // whole probe ranks the rest.
-            let glance: Vec<Point> = probe.iter().step_by(3).copied().collect();
-            let mut ranked: Vec<(f64, Isometry3<f64>)> = unique
-                .iter()
-                .map(|c| (score_of(&c.inverse(), &glance, coarse_tol), *c))
-                .collect();
-            ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
-            ranked.truncate(SECOND_TIER);
-            for r in ranked.iter_mut() {
-                r.0 = score_of(&r.1.inverse(), &probe, coarse_tol);
-            }
-            ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
-            // Views of a part on its side leave the coarse pose ambiguous up to a quarter or half turn
-            // about one of the part's axes; add those turns of the best two candidates before the ICP check.
-            let c_model = crate::geometry::centroid(model.target.points()).coords;
-            let with_turns = if method == CoarseMethod::Ccp { 2 } else { 0 };
-            let flips: Vec<Isometry3<f64>> = ranked
-                .iter()
-                .take(with_turns)
-                .flat_map(|(_, c)| {
-                    let turns = [1.0, 0.5, -0.5].map(|k| k * std::f64::consts::PI);
-                    [Vector3::x(), Vector3::y(), Vector3::z()]
-                        .into_iter()
-                        .flat_map(move |axis| {
-                            turns.map(|angle| {
-                                let r = UnitQuaternion::from_scaled_axis(axis * angle);
-                                c * Isometry3::from_parts(Translation3::from(c_model - r * c_model), r)
-                            })
-                        })
-                })
-                .collect();
-            for f in flips {
-                ranked.push((score_of(&f.inverse(), &probe, coarse_tol), f));
-            }
-            ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
-            let short = IcpConfig {
-                kernel: RobustKernel::Tukey((0.1 * model.diameter).max(3.0 * tol)),
-                approximate: true,
-                ..IcpConfig::robust_plane((0.25 * model.diameter).max(3.0 * tol), 12, 1e-4, 1e-2)
-            };
-            // Many readings give nearly the same rotation; keep the best-ranked of each 15° cluster.
-            let mut distinct: Vec<(f64, Isometry3<f64>)> = Vec::with_capacity(ranked.len());
-            // Rotations within 15° have unit quaternions with |q₁·q₂| > cos 7.5°.
-            let near = 7.5f64.to_radians().cos();
-            for (sc, c) in ranked {
-                if !distinct
-                    .iter()
-                    .any(|(_, d)| d.rotation.coords.dot(&c.rotation.coords).abs() > near)
-                {
-                    distinct.push((sc, c));
-                }
-            }
-            let ranked = distinct;
-            // Stage one: the best-prescored hypotheses get a few ICP steps on a small probe (a coarse
-            // pose tens of degrees off still lands in the right basin, but cannot be judged before moving it).
-            let quick = IcpConfig {
-                max_iterations: 6,
-                ..short.clone()
-            };
-            let mut tried: Vec<(f64, Isometry3<f64>, Isometry3<f64>)> = Vec::with_capacity(ranked.len());
-            for (_, cand) in ranked.iter().take(STAGE_ONE) {
-                let r = icp(&probe, &model.target, &cand.inverse(), &quick)?;
-                tried.push((
-                    score_of(&r.t_target_source, &probe, coarse_tol),
-                    r.t_target_source,
-                    *cand,
-                ));
-            }
-            tried.sort_by(|a, b| b.0.total_cmp(&a.0));
-            let mut best: Option<(f64, Isometry3<f64>, Isometry3<f64>)> = None;
-            // Stage two: the best three converge on a larger sample and are judged at the inlier
-            // distance (those far behind the leader after stage one are not worth it).
-            let lead = tried[0].0;
-            for (_, t0, cand) in tried.iter().take(3).filter(|t| t.0 >= 0.7 * lead) {
-                let r = icp(&sample, &model.target, t0, &short)?;
-                let s = score_with(&r.t_target_source, &sample, tol, fine_step);
-                if best.as_ref().map_or(true, |b| s > b.0) {
-                    best = Some((s, r.t_target_source, *cand));
-                }
-            }
-            // A half turn about one of the part's axes can fit the seen surface almost as well (a tee
-            // whose boss is hidden); judge the winner against its three half turns with the dense
-            // depth test, which sees the surface each would put where the scan saw free space.
-            if method == CoarseMethod::Ccp {
-                let (s0, t0, cand) = best.expect("at least one candidate");
-                let t_scene_model0 = t0.inverse();
-                let mut winner = (s0, t0, cand);
-                // A turn that the quick check on the probe already puts well behind is dropped.
-                let quick_winner = score_of(&t0, &probe, coarse_tol);
-                for axis in [Vector3::x(), Vector3::y(), Vector3::z()] {
-                    let r = UnitQuaternion::from_scaled_axis(axis * std::f64::consts::PI);
-                    let turned = t_scene_model0 * Isometry3::from_parts(Translation3::from(c_model - r * c_model), r);
-                    let rough = icp(&probe, &model.target, &turned.inverse(), &quick)?;
-                    if score_of(&rough.t_target_source, &probe, coarse_tol) < 0.8 * quick_winner {
-                        continue;
-                    }
-                    let fit = icp(&sample, &model.target, &rough.t_target_source, &short)?;
-                    let s = score_with(&fit.t_target_source, &sample, tol, fine_step);
-                    if s > winner.0 + 0.01 {
-                        winner = (s, fit.t_target_source, turned);
-                    }
-                }
-                best = Some(winner);
-            }
-            let (_, t_model_scene0, coarse) = best.expect("at least one candidate");
-            // Stops at 0.0006° and a micrometre: far below what the scan can resolve.
-            let fine = IcpConfig::robust_plane(3.0 * tol, 60, 1e-5, 1e-3);
-            let refined = icp(&object, model.fine_target(), &t_model_scene0, &fine)?;
-            let t_model_scene = refined.t_target_source;
-            lap("icp", timings);
-
-            let (score, rmse) = inlier_stats(&object, model.fine_target(), &t_model_scene, tol);
-            if score < cfg.min_fitness {
-                return Err(Error::NoObjectFound {
-                reason: format!("the best pose explains only {:.0} % of the top object's {} points within {tol:.2} mm (need {:.0} %)", 100.0 * score, object.len(), 100.0 * cfg.min_fitness),
-            });
-            }
-            let t_scene_model = t_model_scene.inverse();
-            let indices = scene_indices(pts, model, &t_scene_model, tol);
-            lap("verification", timings);
-            Ok(PoseEstimate {
-                t_scene_model: model.symmetries.canonical(&t_scene_model),
-                t_scene_model_coarse: coarse,
-                score,
-                rmse,
-                indices,
-                timings: Vec::new(),
-                iterations: refined.iterations,
-                method,
-                visible_fraction: f64::NAN,
-                occluded_fraction: f64::NAN,
-                pickability: 1.0,
-            })
-        };
-        match fit(timings) {
+        let object: Vec<Point> = region.iter().map(|&i| pts[i]).collect();
+        laps.lap("segmentation");
+        match fit_region(scene, pts, &object, model, cfg, method, sampling, &mut laps) {
             Err(Error::NoObjectFound { reason }) => {
                 for &i in &region {
                     excluded[i] = true;
@@ -309,4 +225,373 @@ pub(super) fn run(
     Err(last_failure.unwrap_or(Error::NoObjectFound {
         reason: "no region could be matched".into(),
     }))
+}
+
+/// Normals of the scan, facing `up`, from neighbours of more than one scan line.
+fn scan_normals(pts: &[Point], index: &KdIndex, s: Sampling, up: Vector3<f64>) -> Result<Vec<Vector3<f64>>> {
+    let k = ((8.0 * s.across / s.along).round() as usize)
+        .clamp(12, 64)
+        .min(pts.len());
+    estimate_normals(pts, index, k, Orientation::TowardDirection(up))
+}
+
+/// Table 2's parameters, defaults derived from the scan's sampling and the model's size.
+fn segment_config(model: &PoseModel, cfg: &PoseConfig, s: Sampling, up: Vector3<f64>) -> SegmentConfig {
+    let visible_points = (0.5 * model.area / (s.along * s.across)).max(1.0);
+    SegmentConfig {
+        d_star: cfg.d_star.unwrap_or((3.0 * s.along).max(1.6 * s.across)),
+        min_points: cfg.min_points.unwrap_or(((0.1 * visible_points) as usize).max(15)),
+        max_normal_angle: cfg.max_normal_angle,
+        max_extent: 1.1 * model.diameter,
+        up,
+    }
+}
+
+/// The pose of one segmented region: coarse readings → coarse checks → refinement →
+/// verification; `NoObjectFound` when the region is not the part.
+#[allow(clippy::too_many_arguments)]
+fn fit_region(
+    scene: &[Point],
+    pts: &[Point],
+    object: &[Point],
+    model: &PoseModel,
+    cfg: &PoseConfig,
+    method: CoarseMethod,
+    sampling: Sampling,
+    laps: &mut Laps<'_>,
+) -> Result<PoseEstimate> {
+    reject_flat_region(object, model)?;
+    let candidates = coarse_readings(object, model, cfg, method)?;
+    laps.lap("coarse");
+    let checks = Checks::new(scene, object, model, cfg, sampling);
+    let ranked = checks.rank(&candidates, method);
+    let mut best = checks.converge(&ranked)?;
+    if method == CoarseMethod::Ccp {
+        best = checks.resolve_half_turns(best)?;
+    }
+    let (_, t_model_scene0, coarse) = best;
+    let fine = &cfg.ccp_path.fine_icp;
+    let fine_cfg = IcpConfig::robust_plane(
+        fine.reach_tolerances * checks.tol,
+        fine.iterations,
+        fine.rotation_tolerance,
+        fine.translation_tolerance,
+    );
+    let refined = icp(object, model.fine_target(), &t_model_scene0, &fine_cfg)?;
+    laps.lap("icp");
+    let t_model_scene = refined.t_target_source;
+    let (score, rmse) = verify(object, model, cfg, &t_model_scene, checks.tol)?;
+    let t_scene_model = t_model_scene.inverse();
+    let indices = scene_indices(pts, model, &t_scene_model, checks.tol);
+    laps.lap("verification");
+    Ok(PoseEstimate {
+        t_scene_model: model.symmetries.canonical(&t_scene_model),
+        t_scene_model_coarse: coarse,
+        score,
+        rmse,
+        indices,
+        timings: Vec::new(),
+        iterations: refined.iterations,
+        method,
+        visible_fraction: None,
+        occluded_fraction: None,
+        pickability: None,
+    })
+}
+
+/// A flat region wider than the part (a bin rim, a wall left in the scan) is not the part.
+fn reject_flat_region(object: &[Point], model: &PoseModel) -> Result<()> {
+    let (_, cov) = covariance(object);
+    let (vals, axes) = principal_axes(&cov);
+    let along: Vec<f64> = object.iter().map(|p| p.coords.dot(&axes[0])).collect();
+    let span =
+        along.iter().cloned().fold(f64::NEG_INFINITY, f64::max) - along.iter().cloned().fold(f64::INFINITY, f64::min);
+    if span > 1.05 * model.diameter && vals[2].sqrt() < 0.02 * model.diameter {
+        return Err(Error::NoObjectFound {
+            reason: format!(
+                "the top region is flat and {span:.0} mm wide, wider than the part ({:.0} mm)",
+                model.diameter
+            ),
+        });
+    }
+    Ok(())
+}
+
+/// Coarse pose readings, model → scene: CCP's, or the centroid baseline's one.
+fn coarse_readings(
+    object: &[Point],
+    model: &PoseModel,
+    cfg: &PoseConfig,
+    method: CoarseMethod,
+) -> Result<Vec<Isometry3<f64>>> {
+    match (method, &model.layout) {
+        (CoarseMethod::Ccp, Some(layout)) => {
+            let (points, normals) = (model.target.points(), model.target.normals().unwrap_or(&[]));
+            Ok(ccp(object, layout, points, normals, Some(cfg.up.normalize()), &cfg.ccp)?.candidates)
+        }
+        (CoarseMethod::Ccp, None) => Err(Error::invalid(
+            "model",
+            "CCP needs the model's branch layout (cylindrical branches from a junction); declare branches on the Model or use method=\"centroid\"",
+        )),
+        _ => {
+            let shift = centroid(object) - centroid(model.target.points());
+            Ok(vec![Isometry3::from_parts(Translation3::from(shift), UnitQuaternion::identity())])
+        }
+    }
+}
+
+/// What the coarse checks of one region judge a pose by.
+struct Checks<'a> {
+    model: &'a PoseModel,
+    params: &'a CcpPathParams,
+    heights: HeightMap,
+    /// Object points of the quick checks, and the larger sample stage two converges on.
+    probe: Vec<Point>,
+    sample: Vec<Point>,
+    /// Inlier distance and the coarse checks' wider tolerance, mm.
+    tol: f64,
+    coarse_tol: f64,
+    coarse_model_step: usize,
+    fine_step: usize,
+    short: IcpConfig,
+    quick: IcpConfig,
+    /// The model's centroid, about which the turns are taken.
+    c_model: Vector3<f64>,
+}
+
+impl<'a> Checks<'a> {
+    fn new(scene: &[Point], object: &[Point], model: &'a PoseModel, cfg: &'a PoseConfig, s: Sampling) -> Self {
+        let p = &cfg.ccp_path;
+        let tol = cfg
+            .inlier_distance
+            .unwrap_or((2.0 * model.spacing + 1.5 * s.along.min(2.0 * model.spacing)).max(1.0));
+        let sample = object
+            .iter()
+            .step_by(object.len().div_ceil(p.sample_points))
+            .copied()
+            .collect();
+        let probe = object
+            .iter()
+            .step_by(object.len().div_ceil(p.probe_points))
+            .copied()
+            .collect();
+        let n_model = model.target.points().len();
+        let c = &p.check_icp;
+        let short = IcpConfig {
+            kernel: RobustKernel::Tukey((c.kernel_ratio * model.diameter).max(c.min_tolerances * tol)),
+            approximate: true,
+            ..IcpConfig::robust_plane(
+                (c.reach_ratio * model.diameter).max(c.min_tolerances * tol),
+                c.iterations,
+                c.rotation_tolerance,
+                c.translation_tolerance,
+            )
+        };
+        let quick = IcpConfig {
+            max_iterations: c.quick_iterations,
+            ..short.clone()
+        };
+        Checks {
+            model,
+            params: p,
+            heights: HeightMap::new(scene, &cfg.up.normalize(), (1.5 * s.across).max(0.5)),
+            probe,
+            sample,
+            tol,
+            coarse_tol: (p.coarse_tolerance_ratio * model.diameter).max(2.0 * tol),
+            coarse_model_step: n_model.div_ceil(p.model_probes),
+            fine_step: (n_model / p.fine_model_probes).max(1),
+            short,
+            quick,
+            c_model: centroid(model.target.points()).coords,
+        }
+    }
+
+    /// The coarse score of `T_model_scene` on `probe`: object points near the model × model
+    /// points the scan confirms, both at the coarse tolerance.
+    fn coarse_score(&self, t: &Isometry3<f64>, probe: &[Point]) -> f64 {
+        let target = &self.model.target;
+        coarse_inlier_fraction(probe, target, t, self.coarse_tol)
+            * depth_evidence(
+                target,
+                &self.heights,
+                &t.inverse(),
+                self.coarse_model_step,
+                self.coarse_tol,
+                false,
+            )
+            .coverage()
+    }
+
+    /// The stage-two score of `T_model_scene`: the same product on the sample, at the inlier
+    /// distance, with the denser depth test.
+    fn fine_score(&self, t: &Isometry3<f64>) -> f64 {
+        let target = &self.model.target;
+        inlier_stats(&self.sample, target, t, self.tol).0
+            * depth_evidence(target, &self.heights, &t.inverse(), self.fine_step, self.tol, false).coverage()
+    }
+
+    /// `t_scene_model` turned by `angle` about `axis` through the model's centroid.
+    fn turned(&self, t_scene_model: &Isometry3<f64>, axis: Vector3<f64>, angle: f64) -> Isometry3<f64> {
+        let r = UnitQuaternion::from_scaled_axis(axis * angle);
+        t_scene_model * Isometry3::from_parts(Translation3::from(self.c_model - r * self.c_model), r)
+    }
+
+    /// The readings worth an ICP check, best first: duplicates scored once, two tiers of
+    /// coarse scores, CCP's turned readings added, one per rotation cluster.
+    fn rank(&self, candidates: &[Isometry3<f64>], method: CoarseMethod) -> Vec<(f64, Isometry3<f64>)> {
+        let p = self.params;
+        let unique = unique_readings(
+            candidates,
+            p.same_reading_angle,
+            p.same_reading_shift * self.model.diameter,
+        );
+        // A third of the probe sorts out the readings that are plainly wrong, the whole probe
+        // ranks the rest.
+        let glance: Vec<Point> = self.probe.iter().step_by(3).copied().collect();
+        let mut ranked: Vec<(f64, Isometry3<f64>)> = unique
+            .iter()
+            .map(|c| (self.coarse_score(&c.inverse(), &glance), *c))
+            .collect();
+        sort_best_first(&mut ranked);
+        ranked.truncate(p.second_tier);
+        for r in ranked.iter_mut() {
+            r.0 = self.coarse_score(&r.1.inverse(), &self.probe);
+        }
+        sort_best_first(&mut ranked);
+        let with_turns = if method == CoarseMethod::Ccp {
+            p.turned_readings
+        } else {
+            0
+        };
+        let turns: Vec<Isometry3<f64>> = ranked
+            .iter()
+            .take(with_turns)
+            .flat_map(|(_, c)| {
+                [Vector3::x(), Vector3::y(), Vector3::z()]
+                    .into_iter()
+                    .flat_map(move |axis| [1.0, 0.5, -0.5].map(|k| self.turned(c, axis, k * PI)))
+            })
+            .collect();
+        for t in turns {
+            ranked.push((self.coarse_score(&t.inverse(), &self.probe), t));
+        }
+        sort_best_first(&mut ranked);
+        distinct_rotations(ranked, p.cluster_angle)
+    }
+
+    /// Stage one: the best-ranked readings get a few ICP steps on the probe (a coarse pose tens
+    /// of degrees off still lands in the right basin, but cannot be judged before moving it).
+    /// Stage two: the leaders converge on the sample and are judged at the inlier distance.
+    fn converge(&self, ranked: &[(f64, Isometry3<f64>)]) -> Result<Tried> {
+        let target = &self.model.target;
+        let mut tried: Vec<Tried> = Vec::with_capacity(ranked.len());
+        for (_, cand) in ranked.iter().take(self.params.stage_one) {
+            let r = icp(&self.probe, target, &cand.inverse(), &self.quick)?;
+            tried.push((
+                self.coarse_score(&r.t_target_source, &self.probe),
+                r.t_target_source,
+                *cand,
+            ));
+        }
+        tried.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let lead = tried[0].0;
+        let mut best: Option<Tried> = None;
+        let leaders = tried
+            .iter()
+            .take(self.params.stage_two)
+            .filter(|t| t.0 >= self.params.stage_two_ratio * lead);
+        for (_, t0, cand) in leaders {
+            let r = icp(&self.sample, target, t0, &self.short)?;
+            let s = self.fine_score(&r.t_target_source);
+            if best.as_ref().is_none_or(|b| s > b.0) {
+                best = Some((s, r.t_target_source, *cand));
+            }
+        }
+        Ok(best.expect("at least one candidate"))
+    }
+
+    /// A half turn about one of the part's axes can fit the seen surface almost as well (a tee
+    /// whose boss is hidden): the winner is judged against its three half turns with the dense
+    /// depth test, which sees the surface each would put where the scan saw free space.
+    fn resolve_half_turns(&self, best: Tried) -> Result<Tried> {
+        let target = &self.model.target;
+        let t_scene_model0 = best.1.inverse();
+        // A turn that the quick check on the probe already puts well behind is dropped.
+        let quick_winner = self.coarse_score(&best.1, &self.probe);
+        let mut winner = best;
+        for axis in [Vector3::x(), Vector3::y(), Vector3::z()] {
+            let turned = self.turned(&t_scene_model0, axis, PI);
+            let rough = icp(&self.probe, target, &turned.inverse(), &self.quick)?;
+            if self.coarse_score(&rough.t_target_source, &self.probe) < self.params.half_turn_drop * quick_winner {
+                continue;
+            }
+            let fit = icp(&self.sample, target, &rough.t_target_source, &self.short)?;
+            let s = self.fine_score(&fit.t_target_source);
+            if s > winner.0 + self.params.half_turn_margin {
+                winner = (s, fit.t_target_source, turned);
+            }
+        }
+        Ok(winner)
+    }
+}
+
+/// Sorts scored readings, highest score first.
+fn sort_best_first(ranked: &mut [(f64, Isometry3<f64>)]) {
+    ranked.sort_by(|a, b| b.0.total_cmp(&a.0));
+}
+
+/// The readings with duplicates removed: rotations within `angle` (rad) and translations
+/// within `shift` (mm) of a kept one are the same pose.
+fn unique_readings(candidates: &[Isometry3<f64>], angle: f64, shift: f64) -> Vec<Isometry3<f64>> {
+    // Rotations within θ have unit quaternions with |q₁·q₂| > cos θ/2.
+    let same = (angle / 2.0).cos();
+    let mut unique: Vec<Isometry3<f64>> = Vec::with_capacity(candidates.len());
+    for c in candidates {
+        if !unique.iter().any(|u| {
+            u.rotation.coords.dot(&c.rotation.coords).abs() > same
+                && (u.translation.vector - c.translation.vector).norm() < shift
+        }) {
+            unique.push(*c);
+        }
+    }
+    unique
+}
+
+/// The best-ranked reading of each cluster of rotations within `angle` (rad) of each other.
+fn distinct_rotations(ranked: Vec<(f64, Isometry3<f64>)>, angle: f64) -> Vec<(f64, Isometry3<f64>)> {
+    let near = (angle / 2.0).cos();
+    let mut distinct: Vec<(f64, Isometry3<f64>)> = Vec::with_capacity(ranked.len());
+    for (sc, c) in ranked {
+        if !distinct
+            .iter()
+            .any(|(_, d)| d.rotation.coords.dot(&c.rotation.coords).abs() > near)
+        {
+            distinct.push((sc, c));
+        }
+    }
+    distinct
+}
+
+/// Fitness and inlier RMS of the refined pose, or `NoObjectFound` when too little of the
+/// object lies on the posed model.
+fn verify(
+    object: &[Point],
+    model: &PoseModel,
+    cfg: &PoseConfig,
+    t_model_scene: &Isometry3<f64>,
+    tol: f64,
+) -> Result<(f64, f64)> {
+    let (score, rmse) = inlier_stats(object, model.fine_target(), t_model_scene, tol);
+    if score < cfg.min_fitness {
+        return Err(Error::NoObjectFound {
+            reason: format!(
+                "the best pose explains only {:.0} % of the top object's {} points within {tol:.2} mm (need {:.0} %)",
+                100.0 * score,
+                object.len(),
+                100.0 * cfg.min_fitness
+            ),
+        });
+    }
+    Ok((score, rmse))
 }

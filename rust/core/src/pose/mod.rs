@@ -12,6 +12,7 @@ mod ppf_path;
 mod scene;
 mod types;
 
+pub use ccp_path::{CcpPathParams, CheckIcpParams, FineIcpParams};
 pub use model::PoseModel;
 pub use types::{CoarseMethod, PoseConfig, PoseEstimate};
 
@@ -123,13 +124,13 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
                 (Ok((mut found, prepared)), Ok(mut c)) => {
                     let e = prepared.judge(model, &c.t_scene_model);
                     let first = prepared.judge(model, &found[0].t_scene_model);
-                    c.visible_fraction = e.visible_fraction();
-                    c.occluded_fraction = e.occluded_fraction();
+                    c.visible_fraction = Some(e.visible_fraction());
+                    c.occluded_fraction = Some(e.occluded_fraction());
                     if e.quality() > first.quality() {
                         let gap = 0.5 * model.thickness;
                         let cc = c.t_scene_model * model.symmetries.center;
                         found.retain(|f| (f.t_scene_model * model.symmetries.center - cc).norm() > gap);
-                        c.pickability = found.first().map_or(1.0, |f| f.pickability);
+                        c.pickability = found.first().and_then(|f| f.pickability);
                         found.insert(0, c);
                         found.truncate(cfg.max_instances.max(1));
                     }

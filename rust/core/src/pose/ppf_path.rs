@@ -253,9 +253,9 @@ pub(super) fn detect(
             timings: Vec::new(),
             iterations: j.iterations,
             method: CoarseMethod::Ppf,
-            visible_fraction: j.evidence.visible_fraction(),
-            occluded_fraction: j.evidence.occluded_fraction(),
-            pickability: pick,
+            visible_fraction: Some(j.evidence.visible_fraction()),
+            occluded_fraction: Some(j.evidence.occluded_fraction()),
+            pickability: Some(pick),
         })
         .collect();
     for est in &mut out {

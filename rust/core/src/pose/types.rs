@@ -1,5 +1,6 @@
 //! The pose pipeline's configuration and results: [`CoarseMethod`], [`PoseConfig`], [`PoseEstimate`].
 
+use super::ccp_path::CcpPathParams;
 use crate::geometry::{BinBox, Point};
 use crate::registration::ccp::CcpConfig;
 use crate::registration::ppf::DetectConfig;
@@ -58,6 +59,8 @@ pub struct PoseConfig {
     pub min_coverage: f64,
     /// CCP tuning.
     pub ccp: CcpConfig,
+    /// Tunables of the CCP and centroid path's coarse checks and refinement.
+    pub ccp_path: CcpPathParams,
     /// PPF detection tuning.
     pub detect: DetectConfig,
     /// The sensor's position in the scene frame, mm, when known (orients the scan's normals;
@@ -82,6 +85,7 @@ impl Default for PoseConfig {
             min_fitness: 0.6,
             min_coverage: 0.8,
             ccp: CcpConfig::default(),
+            ccp_path: CcpPathParams::default(),
             detect: DetectConfig::default(),
             viewpoint: None,
             max_instances: 1,
@@ -109,10 +113,13 @@ pub struct PoseEstimate {
     pub iterations: usize,
     /// The coarse method that found it.
     pub method: CoarseMethod,
-    /// Fraction of the model's sensor-facing surface that the scan confirms (NaN where not judged).
-    pub visible_fraction: f64,
-    /// Fraction of the model's sensor-facing surface under other objects (NaN where not judged).
-    pub occluded_fraction: f64,
-    /// Pickability in [0, 1] among the instances found (height, visible share, nothing on top).
-    pub pickability: f64,
+    /// Fraction of the model's sensor-facing surface that the scan confirms; `None` where the
+    /// depth test did not judge the pose (the CCP and centroid path alone).
+    pub visible_fraction: Option<f64>,
+    /// Fraction of the model's sensor-facing surface under other objects; `None` where not judged.
+    pub occluded_fraction: Option<f64>,
+    /// Pickability in [0, 1] among the instances found (height, visible share, nothing on top);
+    /// `None` when the pose was not ranked against other instances (a single CCP or centroid
+    /// result, which is the most pickable by default).
+    pub pickability: Option<f64>,
 }
