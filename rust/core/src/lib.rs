@@ -20,25 +20,25 @@
 //! | `symmetry` | proper symmetries of a part, canonical poses, symmetry-aware pose errors |
 //! | `registration` | ICP and its configuration, CCP, verification evidence, point-pair features |
 //! | `pose` | [`estimate_poses`]: bin removal → coarse pose (CCP, PPF, centroid) → ICP → the one judge |
-//! | [`sim`] (feature `sim`) | rapier3d piles and the parry3d ray-cast renderer of the simulated cell |
+//! | `sim` (feature `sim`) | rapier3d piles and the parry3d ray-cast renderer of the simulated cell |
 //!
 //! The names below are the crate's front door; the modules behind them are internal.
 #![warn(missing_docs)]
 
-pub mod error;
-pub mod geometry;
-pub mod mesh;
-pub mod normals;
-pub mod parallel;
-pub mod pose;
-pub mod registration;
-pub mod rng;
-pub mod search;
-pub mod segment;
+mod error;
+mod geometry;
+mod mesh;
+mod normals;
+mod parallel;
+mod pose;
+mod registration;
+mod rng;
+mod search;
+mod segment;
 pub mod sim;
-pub mod symmetry;
-pub mod triangulate;
-pub mod voxel;
+mod symmetry;
+mod triangulate;
+mod voxel;
 
 pub use error::{Error, Result};
 pub use geometry::{centroid, isometry_from_matrix, transform_points, BinBox, Plane, Point};
@@ -51,13 +51,14 @@ pub use pose::{
     estimate_pose, estimate_poses, CcpPathParams, CheckIcpParams, CoarseMethod, FineIcpParams, PoseConfig,
     PoseEstimate, PoseModel,
 };
-pub use registration::ccp::{BranchLayout, CcpConfig};
+pub use registration::ccp::{ccp, BranchLayout, CcpConfig, CcpResult};
 pub use registration::ppf::{DetectConfig, PpfConfig, PpfModel};
 pub use registration::{icp, IcpConfig, IcpMethod, IcpResult, IcpTarget, RobustKernel};
 pub use rng::Rng;
-pub use search::KdIndex;
+pub use search::{KdIndex, Neighbour};
 pub use symmetry::{detect_symmetries, Symmetries, SymmetryConfig};
 pub use triangulate::{
-    pixel_rays, triangulate, triangulate_into, Camera, FramePose, PointStatus, RayTable, Sensor, Triangulation,
+    intersect_ray_plane, laser_plane, pixel_rays, triangulate, triangulate_into, Camera, FramePose, PointStatus,
+    RayTable, Sensor, Triangulation,
 };
 pub use voxel::{subsample, voxel_downsample, Downsampled};

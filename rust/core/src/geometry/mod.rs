@@ -7,7 +7,7 @@ mod plane;
 
 pub use cloud::{
     centroid, check_count, check_finite, check_spread, covariance, covariance_of, extreme_axis, isometry_from_matrix,
-    principal_axes, spanned_dimensions, transform_points, Point,
+    principal_axes, transform_points, Point,
 };
 pub use kabsch::kabsch;
 pub use plane::{BinBox, Plane};

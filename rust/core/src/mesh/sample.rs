@@ -103,33 +103,6 @@ pub fn sample_surface(mesh: &TriMesh, density: Density, seed: u64) -> Result<Sur
     }
 }
 
-/// A rigid part: its mesh (mm) and an even surface sample with outward normals.
-#[derive(Debug, Clone)]
-pub struct Model {
-    /// The mesh, in millimetres, in the frame of the file it came from.
-    pub mesh: TriMesh,
-    /// Surface samples.
-    pub points: Vec<Point>,
-    /// Outward unit normals of the samples.
-    pub normals: Vec<Vector3<f64>>,
-    /// Largest vertex-to-vertex distance, mm.
-    pub diameter: f64,
-}
-
-impl Model {
-    /// Samples the mesh and measures it.
-    pub fn new(mesh: TriMesh, density: Density, seed: u64) -> Result<Self> {
-        let s = sample_surface(&mesh, density, seed)?;
-        let diameter = mesh.diameter();
-        Ok(Model {
-            mesh,
-            points: s.points,
-            normals: s.normals,
-            diameter,
-        })
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

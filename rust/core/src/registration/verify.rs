@@ -112,11 +112,6 @@ impl HeightMap {
         }
     }
 
-    /// The cell size, mm.
-    pub fn cell(&self) -> f64 {
-        self.cell
-    }
-
     #[inline]
     fn key(&self, p: &Point) -> (Option<usize>, f64) {
         let v = p.coords;
@@ -326,7 +321,7 @@ mod tests {
         // A sparse scan (every third row) gets a coarser map without holes.
         let sparse: Vec<Point> = scan.iter().filter(|p| (p.y as i64) % 3 == 0).copied().collect();
         let fitted = HeightMap::fitted(&sparse, &Vector3::z(), 1.0);
-        assert!(fitted.cell() > 2.0, "{}", fitted.cell());
+        assert!(fitted.cell > 2.0, "{}", fitted.cell);
         let (fit, rmse) = inlier_stats(&scan, &target, &at(10.0).inverse(), 0.5);
         assert_eq!(fit, 1.0);
         assert!(rmse < 1e-9);

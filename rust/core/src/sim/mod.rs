@@ -5,9 +5,9 @@
 //! (400, 0); the camera about 500 mm above the pile looking down; the laser projector beside the
 //! camera on the flange, turned about its own y axis by the motor.
 
-pub mod convert;
-pub mod pile;
-pub mod render;
+mod convert;
+mod pile;
+mod render;
 
 pub use pile::{convex_decomposition, max_interpenetration, BinSpec, Pile, PileParams, SettleReport};
 pub use render::{render_checkerboard, Camera, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View};

@@ -23,7 +23,6 @@ mod cluster;
 mod table;
 mod vote;
 
-pub use cluster::Hypothesis;
 pub use table::{PpfConfig, PpfModel};
 pub use vote::{DetectConfig, Vote};
 
