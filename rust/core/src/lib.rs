@@ -35,6 +35,7 @@ mod registration;
 mod rng;
 mod search;
 mod segment;
+#[cfg(feature = "sim")]
 pub mod sim;
 mod symmetry;
 mod triangulate;
