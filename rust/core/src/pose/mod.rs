@@ -10,6 +10,8 @@ mod ccp_path;
 mod model;
 mod ppf_path;
 mod scene;
+#[cfg(test)]
+mod tests;
 mod types;
 
 pub use ccp_path::{CcpPathParams, CheckIcpParams, FineIcpParams};
