@@ -186,7 +186,7 @@ fn ransac_plane(
             .step_by(step)
             .filter(|&&i| (n.dot(&points[i].coords) - d).abs() < tol)
             .count();
-        if best.as_ref().map_or(true, |b| count > b.1) {
+        if best.as_ref().is_none_or(|b| count > b.1) {
             best = Some((Plane { normal: n, offset: d }, count));
         }
     }

@@ -239,6 +239,10 @@ fn sim_bin_mesh<'py>(
 type CameraArgs = (usize, usize, f64, f64, f64, f64, [f64; 5]);
 type LightingArgs = (f64, f64, [f64; 3], f64);
 type NoiseArgs = (f64, f64, f64, f64, f64);
+/// The laser of a checkerboard view, as `laser` takes it.
+type LaserArgs<'py> = Option<(PyReadonlyArray2<'py, f64>, f64, f64, f64, [f64; 3], f64)>;
+/// Distances to the nearest surface and its instance ids.
+type Nearest<'py> = (Bound<'py, numpy::PyArray1<f64>>, Bound<'py, numpy::PyArray1<i32>>);
 
 fn camera(c: CameraArgs) -> Camera {
     Camera {
@@ -355,11 +359,7 @@ impl PySimScene {
 
     /// (distances (N,) mm, ids (N,) int32): each point's (base frame) exact distance to the
     /// nearest surface and that surface's instance id; (inf, −1) in an empty scene.
-    fn nearest_surface<'py>(
-        &self,
-        py: Python<'py>,
-        points_base: PyReadonlyArray2<'py, f64>,
-    ) -> PyResult<(Bound<'py, numpy::PyArray1<f64>>, Bound<'py, numpy::PyArray1<i32>>)> {
+    fn nearest_surface<'py>(&self, py: Python<'py>, points_base: PyReadonlyArray2<'py, f64>) -> PyResult<Nearest<'py>> {
         let pts = points(&points_base, "points")?;
         let scene = self.inner.clone();
         let found = run(py, move || Ok::<_, Error>(scene.nearest_surface(&pts)))?;
@@ -511,7 +511,7 @@ fn sim_render_checkerboard<'py>(
     board: (usize, usize, f64, f64),
     t_camera_board: PyReadonlyArray2<'py, f64>,
     lighting_args: LightingArgs,
-    laser_args: Option<(PyReadonlyArray2<'py, f64>, f64, f64, f64, [f64; 3], f64)>,
+    laser_args: LaserArgs<'py>,
     angle: f64,
     noise_args: NoiseArgs,
     supersample: usize,

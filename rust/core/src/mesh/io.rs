@@ -435,7 +435,7 @@ fn parse_ply(bytes: &[u8]) -> std::result::Result<PlyData, String> {
                     Property::Scalar(_, t) => row[k] = next(*t)?,
                     Property::List(name, ct, it) => {
                         let n = next(*ct)?;
-                        if !(n >= 0.0 && n < 1e6) {
+                        if !(0.0..1e6).contains(&n) {
                             return Err(format!("a list of {n} items; the file is corrupt"));
                         }
                         let keep = is_face && (name == "vertex_indices" || name == "vertex_index");

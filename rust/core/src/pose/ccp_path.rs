@@ -6,7 +6,7 @@
 //! of the object's points. Their tunables are [`CcpPathParams`].
 
 use super::scene::scene_indices;
-use super::{CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
+use super::{CoarseMethod, Laps, PoseConfig, PoseEstimate, PoseModel, Timings};
 use crate::error::{Error, Result};
 use crate::geometry::{centroid, covariance, principal_axes, Point};
 use crate::normals::{estimate_normals, Orientation};
@@ -17,7 +17,6 @@ use crate::search::KdIndex;
 use crate::segment::{scan_spacing, segment_top, SegmentConfig};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::PI;
-use std::time::Instant;
 
 /// Tunables of the CCP and centroid path; the defaults are those the paper's tables were
 /// measured with.
@@ -153,19 +152,6 @@ impl Default for FineIcpParams {
     }
 }
 
-/// Stage timings: each lap is the time since the previous one.
-struct Laps<'a> {
-    clock: Instant,
-    timings: &'a mut Vec<(&'static str, f64)>,
-}
-
-impl Laps<'_> {
-    fn lap(&mut self, name: &'static str) {
-        self.timings.push((name, self.clock.elapsed().as_secs_f64() * 1e3));
-        self.clock = Instant::now();
-    }
-}
-
 /// The scan's sampling: spacing along and across the scan lines, mm.
 #[derive(Clone, Copy)]
 struct Sampling {
@@ -187,12 +173,9 @@ pub(super) fn run(
     model: &PoseModel,
     cfg: &PoseConfig,
     method: CoarseMethod,
-    timings: &mut Vec<(&'static str, f64)>,
+    timings: &mut Timings,
 ) -> Result<PoseEstimate> {
-    let mut laps = Laps {
-        clock: Instant::now(),
-        timings,
-    };
+    let mut laps = Laps::new(timings);
     let up = cfg.up.normalize();
     let index = KdIndex::new(pts);
     let spacing = scan_spacing(pts, &index);

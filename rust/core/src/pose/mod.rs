@@ -22,8 +22,31 @@ use crate::error::{Error, Result};
 use crate::geometry::Point;
 use ccp_path::run;
 use ppf_path::detect;
-use scene::{check_scene, remove_bin};
+use scene::{check_scene, remove_bin, DetectionScene};
 use std::time::Instant;
+
+/// Milliseconds per stage, in order.
+pub type Timings = Vec<(&'static str, f64)>;
+
+/// Stage timings: each lap is the time since the previous one.
+struct Laps<'a> {
+    clock: Instant,
+    timings: &'a mut Timings,
+}
+
+impl<'a> Laps<'a> {
+    fn new(timings: &'a mut Timings) -> Self {
+        Laps {
+            clock: Instant::now(),
+            timings,
+        }
+    }
+
+    fn lap(&mut self, name: &'static str) {
+        self.timings.push((name, self.clock.elapsed().as_secs_f64() * 1e3));
+        self.clock = Instant::now();
+    }
+}
 
 /// Estimates the pose of the top pickable object of `scene` (N×3, mm) against `model`.
 pub fn estimate_pose(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstimate> {
@@ -41,13 +64,18 @@ pub fn estimate_poses(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> R
     crate::parallel::with_threads(cfg.num_threads, || dispatch(scene, model, cfg))
 }
 
-fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<PoseEstimate>> {
-    check_scene(scene, model, cfg)?;
-    let method = match (cfg.method, &model.layout, &model.ppf) {
+/// The method a model can run: `Auto` is PPF without a branch layout, CCP without a table.
+fn resolve_method(method: CoarseMethod, model: &PoseModel) -> CoarseMethod {
+    match (method, &model.layout, &model.ppf) {
         (CoarseMethod::Auto, None, _) => CoarseMethod::Ppf,
         (CoarseMethod::Auto, Some(_), None) => CoarseMethod::Ccp,
         (m, _, _) => m,
-    };
+    }
+}
+
+fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<PoseEstimate>> {
+    check_scene(scene, model, cfg)?;
+    let method = resolve_method(cfg.method, model);
     // Bin removal: PPF removes support planes itself, on its voxel grid.
     let clock = Instant::now();
     let kept = remove_bin(
@@ -56,92 +84,111 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
         cfg,
         matches!(method, CoarseMethod::Ccp | CoarseMethod::Centroid),
     )?;
-    let bin_ms = clock.elapsed().as_secs_f64() * 1e3;
+    let mut timings = vec![("bin_removal", clock.elapsed().as_secs_f64() * 1e3)];
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
-    // Indices of the points a method saw (`kept` of the scene) become scene indices.
-    let reindex = |mut e: PoseEstimate, kept: &[usize]| {
-        e.indices = e.indices.iter().map(|&i| kept[i]).collect();
-        e
-    };
-    let with_timings = |found: Vec<PoseEstimate>, timings: &[(&'static str, f64)]| -> Vec<PoseEstimate> {
-        let mut all = vec![("bin_removal", bin_ms)];
-        all.extend_from_slice(timings);
-        found
-            .into_iter()
-            .map(|e| PoseEstimate {
-                timings: all.clone(),
-                ..e
-            })
-            .collect()
-    };
-    match method {
+    let found = match method {
         CoarseMethod::Ccp | CoarseMethod::Centroid => {
-            let mut timings = Vec::new();
-            let e = run(scene, &pts, model, cfg, method, &mut timings)?;
-            Ok(with_timings(vec![reindex(e, &kept)], &timings))
+            vec![reindex(run(scene, &pts, model, cfg, method, &mut timings)?, &kept)]
         }
-        CoarseMethod::Ppf | CoarseMethod::Auto => {
-            let ppf = model.ppf.as_ref().ok_or_else(|| {
-                Error::invalid(
-                    "model",
-                    "PPF needs the model's feature table; prepare the model with PPF (binpick builds it on first use)",
-                )
-            })?;
-            let mut timings = Vec::new();
-            let detected = detect(scene, &pts, model, ppf, cfg, &mut timings).map(|(found, prepared)| {
-                (
-                    found.into_iter().map(|e| reindex(e, &kept)).collect::<Vec<_>>(),
-                    prepared,
-                )
-            });
-            if method == CoarseMethod::Ppf {
-                return Ok(with_timings(detected?.0, &timings));
-            }
-            // Auto with a branch layout: CCP on the top object too; the verified winner leads.
-            let clock = Instant::now();
-            let ccp_kept = if cfg.bin.is_some() {
-                kept.clone()
-            } else {
-                remove_bin(scene, model, cfg, true)?
-            };
-            timings.push(("ccp_bin_removal", clock.elapsed().as_secs_f64() * 1e3));
-            let ccp_pts: Vec<Point> = ccp_kept.iter().map(|&i| scene[i]).collect();
-            let mut ccp_timings = Vec::new();
-            let by_ccp =
-                run(scene, &ccp_pts, model, cfg, CoarseMethod::Ccp, &mut ccp_timings).map(|e| reindex(e, &ccp_kept));
-            for (name, ms) in ccp_timings {
-                timings.push((
-                    match name {
-                        "icp" => "ccp_icp",
-                        "coarse" => "ccp_coarse",
-                        "normals" => "ccp_normals",
-                        "segmentation" => "ccp_segmentation",
-                        "verification" => "ccp_verification",
-                        other => other,
-                    },
-                    ms,
-                ));
-            }
-            match (detected, by_ccp) {
-                (Ok((mut found, prepared)), Ok(mut c)) => {
-                    let e = prepared.judge(model, &c.t_scene_model);
-                    let first = prepared.judge(model, &found[0].t_scene_model);
-                    c.visible_fraction = Some(e.visible_fraction());
-                    c.occluded_fraction = Some(e.occluded_fraction());
-                    if e.quality() > first.quality() {
-                        let gap = 0.5 * model.thickness;
-                        let cc = c.t_scene_model * model.symmetries.center;
-                        found.retain(|f| (f.t_scene_model * model.symmetries.center - cc).norm() > gap);
-                        c.pickability = found.first().and_then(|f| f.pickability);
-                        found.insert(0, c);
-                        found.truncate(cfg.max_instances.max(1));
-                    }
-                    Ok(with_timings(found, &timings))
-                }
-                (Ok((found, _)), Err(_)) => Ok(with_timings(found, &timings)),
-                (Err(_), Ok(c)) => Ok(with_timings(vec![c], &timings)),
-                (Err(e), Err(_)) => Err(e),
-            }
-        }
+        CoarseMethod::Ppf => detect_instances(scene, &pts, &kept, model, cfg, &mut timings)?.0,
+        CoarseMethod::Auto => auto(scene, &pts, &kept, model, cfg, &mut timings)?,
+    };
+    Ok(found
+        .into_iter()
+        .map(|e| PoseEstimate {
+            timings: timings.clone(),
+            ..e
+        })
+        .collect())
+}
+
+/// Indices of the points a method saw (`kept` of the scene) become scene indices.
+fn reindex(mut e: PoseEstimate, kept: &[usize]) -> PoseEstimate {
+    e.indices = e.indices.iter().map(|&i| kept[i]).collect();
+    e
+}
+
+/// PPF's instances with scene indices, and its prepared scene.
+fn detect_instances(
+    scene: &[Point],
+    pts: &[Point],
+    kept: &[usize],
+    model: &PoseModel,
+    cfg: &PoseConfig,
+    timings: &mut Timings,
+) -> Result<(Vec<PoseEstimate>, DetectionScene)> {
+    let ppf = model.ppf.as_ref().ok_or_else(|| {
+        Error::invalid(
+            "model",
+            "PPF needs the model's feature table; prepare the model with PPF (binpick builds it on first use)",
+        )
+    })?;
+    let (found, prepared) = detect(scene, pts, model, ppf, cfg, timings)?;
+    Ok((found.into_iter().map(|e| reindex(e, kept)).collect(), prepared))
+}
+
+/// Auto with a branch layout: PPF over the pile and CCP on the top object; the verified
+/// winner leads.
+fn auto(
+    scene: &[Point],
+    pts: &[Point],
+    kept: &[usize],
+    model: &PoseModel,
+    cfg: &PoseConfig,
+    timings: &mut Timings,
+) -> Result<Vec<PoseEstimate>> {
+    let detected = detect_instances(scene, pts, kept, model, cfg, timings);
+    let clock = Instant::now();
+    let ccp_kept = if cfg.bin.is_some() {
+        kept.to_vec()
+    } else {
+        remove_bin(scene, model, cfg, true)?
+    };
+    timings.push(("ccp_bin_removal", clock.elapsed().as_secs_f64() * 1e3));
+    let ccp_pts: Vec<Point> = ccp_kept.iter().map(|&i| scene[i]).collect();
+    let mut ccp_timings = Vec::new();
+    let by_ccp = run(scene, &ccp_pts, model, cfg, CoarseMethod::Ccp, &mut ccp_timings).map(|e| reindex(e, &ccp_kept));
+    timings.extend(ccp_timings.into_iter().map(|(name, ms)| (ccp_stage(name), ms)));
+    match (detected, by_ccp) {
+        (Ok((found, prepared)), Ok(c)) => Ok(arbitrate(found, c, &prepared, model, cfg.max_instances)),
+        (Ok((found, _)), Err(_)) => Ok(found),
+        (Err(_), Ok(c)) => Ok(vec![c]),
+        (Err(e), Err(_)) => Err(e),
     }
+}
+
+/// The name of a CCP stage when it runs beside PPF.
+fn ccp_stage(name: &'static str) -> &'static str {
+    match name {
+        "icp" => "ccp_icp",
+        "coarse" => "ccp_coarse",
+        "normals" => "ccp_normals",
+        "segmentation" => "ccp_segmentation",
+        "verification" => "ccp_verification",
+        other => other,
+    }
+}
+
+/// CCP's pose `c` leads when the one judge rates it above PPF's best; PPF's instances at its
+/// place are then dropped, and it takes the pickability of the best that remains.
+fn arbitrate(
+    mut found: Vec<PoseEstimate>,
+    mut c: PoseEstimate,
+    prepared: &DetectionScene,
+    model: &PoseModel,
+    max_instances: usize,
+) -> Vec<PoseEstimate> {
+    let e = prepared.judge(model, &c.t_scene_model);
+    let first = prepared.judge(model, &found[0].t_scene_model);
+    if e.quality() > first.quality() {
+        c.visible_fraction = Some(e.visible_fraction());
+        c.occluded_fraction = Some(e.occluded_fraction());
+        let gap = 0.5 * model.thickness;
+        let cc = c.t_scene_model * model.symmetries.center;
+        found.retain(|f| (f.t_scene_model * model.symmetries.center - cc).norm() > gap);
+        c.pickability = found.first().and_then(|f| f.pickability);
+        found.insert(0, c);
+        found.truncate(max_instances.max(1));
+    }
+    found
 }

@@ -7,18 +7,17 @@
 //! ICP), and an even subsample at the PPF step (voting).
 
 use super::scene::{scene_indices, DetectionScene};
-use super::{CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
+use super::{CoarseMethod, Laps, PoseConfig, PoseEstimate, PoseModel, Timings};
 use crate::error::{Error, Result};
 use crate::geometry::Point;
 use crate::normals::{normals_at, Orientation};
-use crate::registration::ppf::{DetectConfig, PpfModel};
+use crate::registration::ppf::{DetectConfig, Hypothesis, PpfModel};
 use crate::registration::verify::{depth_evidence, Evidence};
 use crate::registration::{icp, IcpConfig};
 use crate::search::KdIndex;
 use crate::voxel::subsample;
 use nalgebra::Isometry3;
 use rayon::prelude::*;
-use std::time::Instant;
 
 /// A refined, judged hypothesis.
 #[derive(Debug, Clone)]
@@ -153,17 +152,37 @@ pub(super) fn detect(
     model: &PoseModel,
     ppf: &PpfModel,
     cfg: &PoseConfig,
-    timings: &mut Vec<(&'static str, f64)>,
+    timings: &mut Timings,
 ) -> Result<(Vec<PoseEstimate>, DetectionScene)> {
-    let mut clock = Instant::now();
-    let mut lap = |name: &'static str, timings: &mut Vec<(&'static str, f64)>| {
-        timings.push((name, clock.elapsed().as_secs_f64() * 1e3));
-        clock = Instant::now();
-    };
+    let mut laps = Laps::new(timings);
     let scene = DetectionScene::new(scene_all, points, model, ppf, cfg)?;
-    lap("voxels", timings);
-    let step = ppf.step();
-    let keep = subsample(&scene.fine, step);
+    laps.lap("voxels");
+    let hypotheses = vote(&scene, model, ppf, cfg, &mut laps)?;
+    let judged = screen_and_polish(&scene, model, ppf.step(), &hypotheses, cfg, &mut laps);
+    let instances = one_pose_per_instance(judged, &scene, model, cfg);
+    if instances.is_empty() {
+        return Err(Error::NoObjectFound {
+            reason: format!(
+                "none of {} pose hypotheses was confirmed by the scan (need {:.0} % of the predicted visible surface seen, most of it over scanned cells, and no pose through the bin)",
+                hypotheses.len(),
+                100.0 * cfg.min_coverage
+            ),
+        });
+    }
+    let out = estimates(instances, points, model, cfg, scene.tol);
+    laps.lap("verification");
+    Ok((out, scene))
+}
+
+/// Pose hypotheses from the votes of the voxel grid's even subsample at the PPF step.
+fn vote(
+    scene: &DetectionScene,
+    model: &PoseModel,
+    ppf: &PpfModel,
+    cfg: &PoseConfig,
+    laps: &mut Laps<'_>,
+) -> Result<Vec<Hypothesis>> {
+    let keep = subsample(&scene.fine, ppf.step());
     let sparse: Vec<Point> = keep.iter().map(|&i| scene.fine[i]).collect();
     let orientation = match cfg.viewpoint {
         Some(v) => Orientation::TowardPoint(v),
@@ -172,27 +191,38 @@ pub(super) fn detect(
     // Only the voting samples need normals (ICP uses the model's).
     let sparse_normals = normals_at(&sparse, &scene.fine, &scene.fine_index, 10, orientation);
     let sparse_index = KdIndex::new(&sparse);
-    lap("normals", timings);
+    laps.lap("normals");
     let detect_cfg = DetectConfig {
         max_hypotheses: cfg.detect.max_hypotheses.max(8 * cfg.max_instances),
         ..cfg.detect
     };
     let votes = ppf.vote(&sparse, &sparse_normals, &sparse_index, &detect_cfg);
-    lap("voting", timings);
+    laps.lap("voting");
     let hypotheses = ppf.cluster(&votes, &model.symmetries, &detect_cfg);
-    lap("clustering", timings);
+    laps.lap("clustering");
     if hypotheses.is_empty() {
         return Err(Error::NoObjectFound {
             reason: format!("no point pair of the {} scene samples matched the model", sparse.len()),
         });
     }
-    // Screen every hypothesis; converge the most promising few.
+    Ok(hypotheses)
+}
+
+/// Screens every hypothesis and converges the most promising few, spread over distinct places
+/// (a pile's best hypotheses crowd on one part).
+fn screen_and_polish(
+    scene: &DetectionScene,
+    model: &PoseModel,
+    step: f64,
+    hypotheses: &[Hypothesis],
+    cfg: &PoseConfig,
+    laps: &mut Laps<'_>,
+) -> Vec<Judged> {
     let mut screened: Vec<Judged> = hypotheses
         .par_iter()
         .filter_map(|h| scene.screen(model, step, &h.t_scene_model))
         .collect();
     screened.sort_by(|a, b| b.evidence.quality().total_cmp(&a.evidence.quality()));
-    // The best few, spread over distinct places (a pile's best hypotheses crowd on one part).
     let polish_count = 2 * cfg.max_instances + 1;
     let min_gap = 0.5 * model.thickness;
     let mut chosen: Vec<&Judged> = Vec::with_capacity(polish_count);
@@ -208,15 +238,24 @@ pub(super) fn detect(
             chosen.push(j);
         }
     }
-    lap("screening", timings);
-    let mut judged: Vec<Judged> = chosen.par_iter().filter_map(|j| scene.polish(model, step, j)).collect();
-    lap("icp", timings);
-    // The pose that explains most of the scan, discounted for violations and for surface over
-    // cells without data, claims its points first.
+    laps.lap("screening");
+    let judged = chosen.par_iter().filter_map(|j| scene.polish(model, step, j)).collect();
+    laps.lap("icp");
+    judged
+}
+
+/// The accepted, physically possible poses, one per instance: the pose that explains most of
+/// the scan (discounted for violations and for surface over cells without data) claims its
+/// points first, and a pose whose points are mostly claimed already is the same instance (or
+/// a ghost made of its points).
+fn one_pose_per_instance(
+    mut judged: Vec<Judged>,
+    scene: &DetectionScene,
+    model: &PoseModel,
+    cfg: &PoseConfig,
+) -> Vec<Judged> {
     let claim = |j: &Judged| j.support.len() as f64 * (j.evidence.coverage() * j.evidence.supported_fraction()).powi(2);
     judged.sort_by(|a, b| claim(b).total_cmp(&claim(a)));
-    // One pose per instance: a pose whose explained points are mostly explained by a better
-    // pose already taken is the same instance (or a ghost made of its points).
     let mut owner = vec![false; scene.fine.len()];
     let mut instances: Vec<Judged> = Vec::new();
     for j in judged
@@ -232,37 +271,37 @@ pub(super) fn detect(
         }
         instances.push(j);
     }
-    if instances.is_empty() {
-        return Err(Error::NoObjectFound {
-            reason: format!(
-                "none of {} pose hypotheses was confirmed by the scan (need {:.0} % of the predicted visible surface seen, most of it over scanned cells, and no pose through the bin)",
-                hypotheses.len(),
-                100.0 * cfg.min_coverage
-            ),
-        });
-    }
-    let mut out: Vec<PoseEstimate> = rank(instances, model, cfg)
+    instances
+}
+
+/// The most pickable instances as estimates, with the indices of `points` on each.
+fn estimates(
+    instances: Vec<Judged>,
+    points: &[Point],
+    model: &PoseModel,
+    cfg: &PoseConfig,
+    tol: f64,
+) -> Vec<PoseEstimate> {
+    rank(instances, model, cfg)
         .into_iter()
         .take(cfg.max_instances.max(1))
-        .map(|(j, pick)| PoseEstimate {
-            t_scene_model: model.symmetries.canonical(&j.t_scene_model),
-            t_scene_model_coarse: j.coarse,
-            score: j.evidence.coverage(),
-            rmse: j.rmse,
-            indices: Vec::new(),
-            timings: Vec::new(),
-            iterations: j.iterations,
-            method: CoarseMethod::Ppf,
-            visible_fraction: Some(j.evidence.visible_fraction()),
-            occluded_fraction: Some(j.evidence.occluded_fraction()),
-            pickability: Some(pick),
+        .map(|(j, pick)| {
+            let t_scene_model = model.symmetries.canonical(&j.t_scene_model);
+            PoseEstimate {
+                indices: scene_indices(points, model, &t_scene_model, tol),
+                t_scene_model,
+                t_scene_model_coarse: j.coarse,
+                score: j.evidence.coverage(),
+                rmse: j.rmse,
+                timings: Vec::new(),
+                iterations: j.iterations,
+                method: CoarseMethod::Ppf,
+                visible_fraction: Some(j.evidence.visible_fraction()),
+                occluded_fraction: Some(j.evidence.occluded_fraction()),
+                pickability: Some(pick),
+            }
         })
-        .collect();
-    for est in &mut out {
-        est.indices = scene_indices(points, model, &est.t_scene_model, scene.tol);
-    }
-    lap("verification", timings);
-    Ok((out, scene))
+        .collect()
 }
 
 /// Pickability in [0, 1]: height among the instances (half), the confirmed share of the facing

@@ -3,7 +3,7 @@
 
 use super::{PoseConfig, PoseModel};
 use crate::error::{Error, Result};
-use crate::geometry::{check_finite, Plane, Point};
+use crate::geometry::{check_finite, BinBox, Plane, Point};
 use crate::registration::ppf::PpfModel;
 use crate::registration::verify::{depth_evidence, Evidence, HeightMap};
 use crate::search::KdIndex;
@@ -101,50 +101,11 @@ impl DetectionScene {
         let up = cfg.up.normalize();
         let mut supports = Vec::new();
         if let Some(bin) = &cfg.bin {
-            let (lo, hi) = (bin.min.coords, bin.max.coords);
-            supports.push(Plane {
-                normal: Vector3::z(),
-                offset: lo.z,
-            });
-            for k in 0..2 {
-                let e = Vector3::ith(k, 1.0);
-                supports.push(Plane {
-                    normal: e,
-                    offset: lo[k],
-                });
-                supports.push(Plane {
-                    normal: -e,
-                    offset: -hi[k],
-                });
-            }
+            supports = bin_walls(bin);
         } else if fine.len() >= 50 {
             let (keep, planes) = remove_support_planes(&fine, model.diameter, (0.5 * voxel).max(1.0), 1);
             fine = keep.iter().map(|&i| fine[i]).collect();
-            // Floors only (which side of a wall is free is not known without the bin), and only
-            // those with the scene above them: a bin's rim is a wide plane too, with parts below.
-            let tol = tolerance(step);
-            supports.extend(
-                planes
-                    .into_iter()
-                    .filter(|p| p.normal.dot(&up).abs() > 0.8)
-                    .map(|p| {
-                        if p.normal.dot(&up) > 0.0 {
-                            p
-                        } else {
-                            Plane {
-                                normal: -p.normal,
-                                offset: -p.offset,
-                            }
-                        }
-                    })
-                    .filter(|p| {
-                        fine.iter()
-                            .filter(|q| p.normal.dot(&q.coords) < p.offset - 2.0 * tol)
-                            .count()
-                            * 50
-                            < fine.len()
-                    }),
-            );
+            supports = floors_below(&fine, planes, &up, tolerance(step));
         }
         if fine.len() < 10 {
             return Err(Error::NoObjectFound {
@@ -202,6 +163,54 @@ impl DetectionScene {
             .count();
         (inside as f64) < 0.02 * pts.len().div_ceil(step) as f64
     }
+}
+
+/// The bin's floor and four walls, normals toward the inside.
+fn bin_walls(bin: &BinBox) -> Vec<Plane> {
+    let (lo, hi) = (bin.min.coords, bin.max.coords);
+    let mut walls = vec![Plane {
+        normal: Vector3::z(),
+        offset: lo.z,
+    }];
+    for k in 0..2 {
+        let e = Vector3::ith(k, 1.0);
+        walls.push(Plane {
+            normal: e,
+            offset: lo[k],
+        });
+        walls.push(Plane {
+            normal: -e,
+            offset: -hi[k],
+        });
+    }
+    walls
+}
+
+/// Of the removed support planes, the floors (which side of a wall is free is not known
+/// without the bin) with the scene above them (a bin's rim is a wide plane too, with parts
+/// below), normals toward `up`.
+fn floors_below(fine: &[Point], planes: Vec<Plane>, up: &Vector3<f64>, tol: f64) -> Vec<Plane> {
+    planes
+        .into_iter()
+        .filter(|p| p.normal.dot(up).abs() > 0.8)
+        .map(|p| {
+            if p.normal.dot(up) > 0.0 {
+                p
+            } else {
+                Plane {
+                    normal: -p.normal,
+                    offset: -p.offset,
+                }
+            }
+        })
+        .filter(|p| {
+            fine.iter()
+                .filter(|q| p.normal.dot(&q.coords) < p.offset - 2.0 * tol)
+                .count()
+                * 50
+                < fine.len()
+        })
+        .collect()
 }
 
 /// Indices of `points` within `tol` of the posed model.

@@ -108,7 +108,7 @@ pub struct PoseEstimate {
     /// Scene indices of the points on the posed model.
     pub indices: Vec<usize>,
     /// Milliseconds per stage, in order.
-    pub timings: Vec<(&'static str, f64)>,
+    pub timings: super::Timings,
     /// ICP iterations of the refinement.
     pub iterations: usize,
     /// The coarse method that found it.

@@ -152,7 +152,7 @@ pub fn ccp(
             let axis = e - pcc;
             let rel = e - p;
             let lambda = (rel - axis * (rel.dot(&axis) / axis.norm_squared())).norm();
-            if best.map_or(true, |b| lambda < b.1) {
+            if best.is_none_or(|b| lambda < b.1) {
                 best = Some((g, lambda));
             }
         }

@@ -203,10 +203,10 @@ impl Sums for PlaneSums {
         let c = q.cross(n);
         let j = [c.x, c.y, c.z, n.x, n.y, n.z];
         let mut k = 0;
-        for a in 0..6 {
-            let wa = w * j[a];
-            for b in a..6 {
-                self.h[k] += wa * j[b];
+        for (a, &ja) in j.iter().enumerate() {
+            let wa = w * ja;
+            for &jb in &j[a..] {
+                self.h[k] += wa * jb;
                 k += 1;
             }
         }

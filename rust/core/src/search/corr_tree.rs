@@ -243,8 +243,8 @@ impl CorrespondenceTree {
 #[inline(always)]
 fn box_dist2(n: &Node, q: &[f64; 3]) -> f64 {
     let mut d = 0.0;
-    for k in 0..3 {
-        let e = (n.lo[k] - q[k]).max(q[k] - n.hi[k]).max(0.0);
+    for ((lo, hi), qk) in n.lo.iter().zip(&n.hi).zip(q) {
+        let e = (lo - qk).max(qk - hi).max(0.0);
         d += e * e;
     }
     d

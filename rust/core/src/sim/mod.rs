@@ -1,5 +1,5 @@
-//! The simulated cell: physics piles of parts in a bin ([`pile`], rapier3d) and an eye-in-hand
-//! camera with a swept laser line projector, rendered by ray casting ([`render`], parry3d).
+//! The simulated cell: physics piles of parts in a bin (`pile`, rapier3d) and an eye-in-hand
+//! camera with a swept laser line projector, rendered by ray casting (`render`, parry3d).
 //!
 //! Default cell layout (base frame, +z up, mm): the bin's inner floor at z = 0, centred at
 //! (400, 0); the camera about 500 mm above the pile looking down; the laser projector beside the
@@ -9,5 +9,5 @@ mod convert;
 mod pile;
 mod render;
 
-pub use pile::{convex_decomposition, max_interpenetration, BinSpec, Pile, PileParams, SettleReport};
+pub use pile::{convex_decomposition, max_interpenetration, BinSpec, Hull, Pile, PileParams, SettleReport};
 pub use render::{render_checkerboard, Camera, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View};

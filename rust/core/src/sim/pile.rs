@@ -289,9 +289,12 @@ pub fn simplify(mesh: &TriMesh, cell: f64) -> TriMesh {
     TriMesh { vertices, faces }
 }
 
+/// A convex piece: its vertices and triangles.
+pub type Hull = (Vec<Point>, Vec<[u32; 3]>);
+
 /// Convex pieces (vertices, triangles) whose union encloses `mesh`: V-HACD on the simplified mesh,
 /// each piece the exact hull of the simplified triangles it covers.
-pub fn convex_decomposition(mesh: &TriMesh, params: &PileParams) -> Result<Vec<(Vec<Point>, Vec<[u32; 3]>)>> {
+pub fn convex_decomposition(mesh: &TriMesh, params: &PileParams) -> Result<Vec<Hull>> {
     params.validate()?;
     let shape = decomposition_shape(mesh, params)?;
     let compound = shape
@@ -646,7 +649,7 @@ impl Pile {
     }
 
     /// The convex pieces every part collides with, in the model frame.
-    pub fn collision_hulls(&self) -> Vec<(Vec<Point>, Vec<[u32; 3]>)> {
+    pub fn collision_hulls(&self) -> Vec<Hull> {
         let Some(c) = self.hull_shape.as_compound() else {
             return Vec::new();
         };

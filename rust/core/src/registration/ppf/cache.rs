@@ -76,7 +76,7 @@ impl PpfModel {
             rotation_bins,
         };
         config.validate().map_err(|_| bad("invalid parameters"))?;
-        if !(diameter.is_finite() && diameter > 0.0) || n < 4 || n > 60_000 || m > n * n {
+        if !(diameter.is_finite() && diameter > 0.0 && (4..=60_000).contains(&n)) || m > n * n {
             return Err(bad("invalid sizes"));
         }
         let mut points = Vec::with_capacity(n);

@@ -23,6 +23,7 @@ mod cluster;
 mod table;
 mod vote;
 
+pub use cluster::Hypothesis;
 pub use table::{PpfConfig, PpfModel};
 pub use vote::{DetectConfig, Vote};
 

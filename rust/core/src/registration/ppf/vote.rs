@@ -182,7 +182,7 @@ impl PpfModel {
                     continue;
                 }
                 best.push((v, c));
-                best.sort_by(|a, b| b.0.cmp(&a.0));
+                best.sort_by_key(|b| std::cmp::Reverse(b.0));
                 best.truncate(cfg.peaks_per_reference);
             }
         }

@@ -31,6 +31,7 @@ impl Default for Checkerboard {
 /// Renders a checkerboard at `t_camera_board` under `lighting` with `supersample`² samples per
 /// pixel, optionally with the laser line at an angle on it, and sensor noise: the images the
 /// camera and laser calibrations are computed from.
+#[allow(clippy::too_many_arguments)]
 pub fn render_checkerboard(
     camera: &Camera,
     board: &Checkerboard,
@@ -151,8 +152,8 @@ pub fn render_checkerboard(
                                     / dist
                                     * cos_i
                                     * albedo;
-                                for ch in 0..3 {
-                                    rgb[ch] += e * l.color[ch];
+                                for (v, c) in rgb.iter_mut().zip(&l.color) {
+                                    *v += e * c;
                                 }
                             }
                         }

@@ -45,10 +45,12 @@ impl Scene {
         if mesh.faces.is_empty() {
             return Err(Error::invalid("faces", "the mesh has no faces"));
         }
-        if !material.albedo.iter().all(|a| a.is_finite() && (0.0..=1.0).contains(a))
-            || !(material.specular.is_finite() && material.specular >= 0.0)
-            || !(material.shininess.is_finite() && material.shininess > 0.0)
-        {
+        let valid = material.albedo.iter().all(|a| a.is_finite() && (0.0..=1.0).contains(a))
+            && material.specular.is_finite()
+            && material.specular >= 0.0
+            && material.shininess.is_finite()
+            && material.shininess > 0.0;
+        if !valid {
             return Err(Error::invalid(
                 "material",
                 "albedo must be in [0, 1], specular ≥ 0 and shininess > 0",

@@ -168,8 +168,8 @@ impl View {
                     if noise.speckle > 0.0 {
                         gain = (1.0 + noise.speckle * fast_normal(&mut rng) as f64).max(0.0);
                     }
-                    for c in 0..3 {
-                        px[c] += (irradiance * gain * laser.color[c] * (m.albedo[c] * cos_i + spec)) as f32;
+                    for (c, p) in px.iter_mut().enumerate() {
+                        *p += (irradiance * gain * laser.color[c] * (m.albedo[c] * cos_i + spec)) as f32;
                     }
                     if noise.reflections > 0.0 && m.specular > 0.0 {
                         lit_here.push((row * w + u, irradiance * gain));
