@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 
 import binpick
+from binpick.transforms import pose_error
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_PARTS = HERE.parent.parent / "shared" / "data" / "parts"
@@ -36,11 +37,6 @@ def rigid(axis: np.ndarray, angle: float, shift: np.ndarray) -> np.ndarray:
     t[:3, :3] = np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
     t[:3, 3] = shift
     return t
-
-
-def errors(t_est: np.ndarray, t_true: np.ndarray) -> tuple[float, float]:
-    d = t_true[:3, :3].T @ t_est[:3, :3]
-    return float(np.degrees(np.arccos(np.clip((np.trace(d) - 1) / 2, -1, 1)))), float(np.linalg.norm(t_est[:3, 3] - t_true[:3, 3]))
 
 
 def surfaces(parts_dir: Path, n: int):
@@ -164,7 +160,7 @@ def main(argv=None) -> int:
                     est = reg.TransformationEstimationPointToPlane() if plane else reg.TransformationEstimationPointToPoint()
                     per_it = o3d_seconds_per_iteration(o3d, reg, source, target, est, plane, normals)
                 rows[name]["per_it"].append(per_it if per_it is not None else elapsed / max(its or 1, 1))
-                rot, trans = errors(t_est, truth)
+                rot, trans = pose_error(t_est, truth)
                 r = rows[name]
                 r["time"].append(elapsed)
                 r["its"].append(its)

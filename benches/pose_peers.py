@@ -63,6 +63,7 @@ from typing import Callable, Optional
 import numpy as np
 
 import binpick
+from binpick.transforms import inverse, rotation_about, rotation_angle_deg
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_DATA = HERE.parent.parent / "shared" / "data" / "sample"
@@ -94,19 +95,6 @@ METHOD_NAMES = ("binpick", "open3d", "opencv", "centroid")
 # geometry and judging
 
 
-def rotation_about(axis, degrees: float) -> np.ndarray:
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a)
-    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    t = np.radians(degrees)
-    return np.eye(3) + np.sin(t) * k + (1 - np.cos(t)) * k @ k
-
-
-def rotation_angle_deg(r: np.ndarray) -> np.ndarray:
-    """Angle of rotation matrices (..., 3, 3), degrees."""
-    return np.degrees(np.arccos(np.clip((np.trace(r, axis1=-2, axis2=-1) - 1) / 2, -1, 1)))
-
-
 def symmetries(name: str) -> np.ndarray:
     if name not in SYMMETRIES:
         print(f"note: no symmetry known for part {name!r}; judging it as asymmetric", file=sys.stderr)
@@ -114,14 +102,7 @@ def symmetries(name: str) -> np.ndarray:
     if sym is None:
         return np.eye(3)[None]
     axis, angles = sym
-    return np.stack([rotation_about(axis, a) for a in angles])
-
-
-def rigid_inverse(t: np.ndarray) -> np.ndarray:
-    inv = np.eye(4)
-    inv[:3, :3] = t[:3, :3].T
-    inv[:3, 3] = -t[:3, :3].T @ t[:3, 3]
-    return inv
+    return np.stack([rotation_about(axis, np.radians(a)) for a in angles])
 
 
 @dataclass
@@ -401,7 +382,7 @@ class CentroidIcp(Method):
         # The scan's points onto the whole model (every scanned point has a counterpart there), then inverted.
         r = binpick.icp(pts, model.points, target_normals=model.normals, init=init, method="point_to_plane",
                         max_correspondence_distance=0.1 * model.diameter, max_iterations=50, num_threads=1)
-        return [rigid_inverse(r.T_target_source)]
+        return [inverse(r.T_target_source)]
 
 
 FACTORIES: dict[str, Callable[[bool], Method]] = {

@@ -1,5 +1,5 @@
 """Geometry helpers the tests share: meshes and clouds they make themselves, mesh-file writers,
-random rigid transforms and pose errors."""
+random rigid transforms, and pose errors (the library's :func:`binpick.transforms.pose_error`)."""
 
 from __future__ import annotations
 
@@ -7,6 +7,8 @@ import struct
 from pathlib import Path
 
 import numpy as np
+
+from binpick.transforms import pose_error
 
 
 def box_mesh(size=(20.0, 30.0, 40.0)) -> tuple[np.ndarray, np.ndarray]:
@@ -83,13 +85,6 @@ def random_rigid(rng: np.random.Generator, max_angle: float, max_shift: float) -
 
 def apply(t: np.ndarray, pts: np.ndarray) -> np.ndarray:
     return pts @ t[:3, :3].T + t[:3, 3]
-
-
-def pose_error(t_est: np.ndarray, t_true: np.ndarray) -> tuple[float, float]:
-    """(rotation error in degrees, translation error in mm)."""
-    d = t_true[:3, :3].T @ t_est[:3, :3]
-    ang = np.degrees(np.arccos(np.clip((np.trace(d) - 1) / 2, -1, 1)))
-    return float(ang), float(np.linalg.norm(t_est[:3, 3] - t_true[:3, 3]))
 
 
 def _ear_clip(poly: np.ndarray) -> list[tuple[int, int, int]]:
@@ -179,20 +174,16 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
 
 def symmetric_pose_error(t_est: np.ndarray, t_true: np.ndarray, rotations, center=(0.0, 0.0, 0.0), continuous_axis=None) -> tuple[float, float]:
     """(rotation deg, translation mm) of ``t_est`` against ``t_true`` minimised over symmetry
-    rotations about ``center`` (model frame), a continuous axis sampled at 1°."""
+    rotations about ``center`` (model frame) and a continuous axis through it: the library's
+    :func:`binpick.transforms.pose_error` with the group written as 4×4 maps."""
     c = np.asarray(center, float)
-    group = [np.asarray(r, float) for r in rotations]
-    if continuous_axis is not None:
-        group = [g @ rot(continuous_axis, np.radians(d)) for g in group for d in range(360)]
-    best = (np.inf, np.inf)
-    for s in group:
+    maps = []
+    for s in rotations:
         t = np.eye(4)
-        t[:3, :3] = s
-        t[:3, 3] = c - s @ c
-        e = pose_error(t_est, t_true @ t)
-        if e[0] + e[1] < best[0] + best[1]:
-            best = e
-    return best
+        t[:3, :3] = np.asarray(s, float)
+        t[:3, 3] = c - t[:3, :3] @ c
+        maps.append(t)
+    return pose_error(t_est, t_true, maps, continuous_axis=continuous_axis, center=c)
 
 
 def camera_cloud(view, cell, step: int, seed: int = 0, noise: float = 0.15) -> tuple[np.ndarray, np.ndarray]:

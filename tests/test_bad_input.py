@@ -3,6 +3,8 @@ or foreign exception escapes the native core."""
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -110,10 +112,18 @@ arrays = st.one_of(
 )
 
 
+@functools.lru_cache(maxsize=None)
+def _random_input_target() -> np.ndarray:
+    """The target cloud of the random-input test, built once (not in each of its 150 examples)."""
+    points = binpick.parts.cross(count=300, seed=1).points
+    points.flags.writeable = False
+    return points
+
+
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(source=arrays, method=st.sampled_from(["point_to_point", "point_to_plane"]))
 def test_random_input_raises_only_binpick_errors(source, method):
-    target = binpick.parts.cross(count=300, seed=1).points
+    target = _random_input_target()
     try:
         res = binpick.icp(source, target, method=method, max_correspondence_distance=5.0, max_iterations=5)
     except binpick.BinpickError as exc:

@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 import binpick
-from _geometry import apply, pose_error, random_rigid
+from _geometry import apply, random_rigid
+
+from binpick.transforms import pose_error
 
 
 @pytest.mark.parametrize("method", ["point_to_point", "point_to_plane"])

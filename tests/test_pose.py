@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 import binpick
-from _geometry import pile_view, pose_error, random_rotation
+from _geometry import pile_view, random_rotation
+
+from binpick.transforms import pose_error
 
 
 def rot_about(axis, angle) -> np.ndarray:

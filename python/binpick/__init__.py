@@ -17,13 +17,14 @@ from .poses import IcpResult, PoseResult, estimate_pose, estimate_poses, grasp_p
 __version__ = _core.__version__
 
 # Subpackages and names that pull in OpenCV, serial I/O or the simulator load on first use.
-_LAZY_MODULES = ("calibration", "cell", "devices", "scan", "sim", "vision", "viz")
+_LAZY_MODULES = ("calibration", "camera", "cell", "devices", "scan", "sim", "transforms", "vision", "viz")
 _LAZY_NAMES = {
     "Cloud": "vision",
     "extract_line": "vision",
     "triangulate": "vision",
     "reconstruct": "vision",
-    "CameraIntrinsics": "calibration",
+    "CameraIntrinsics": "camera",
+    "pose_error": "transforms",
     "CellCalibration": "calibration",
     "Scan": "scan",
     "load_scan": "scan",
@@ -31,7 +32,7 @@ _LAZY_NAMES = {
     "Cell": "cell",
     "CellConfig": "cell",
     "PickRecord": "cell",
-    "simulated_cell": "cell",
+    "simulated_cell": "sim",
 }
 
 

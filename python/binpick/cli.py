@@ -95,7 +95,8 @@ def _pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> List[Path]
 # --------------------------------------------------------------------------- demo
 
 def _demo(args: argparse.Namespace) -> int:
-    from .cell import ProgressPrinter, SimulatedCell
+    from .cell import ProgressPrinter
+    from .sim import SimulatedCell
 
     if args.picks < 1 or args.count < 1 or args.frames < 2:
         raise _Usage("--picks and --count must be at least 1, --frames at least 2")

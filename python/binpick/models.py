@@ -13,6 +13,7 @@ import numpy as np
 
 from . import _core
 from ._validate import as_points, as_transform, as_vector, count, positive
+from .transforms import pose_error
 from .errors import InvalidInputError
 
 __all__ = ["Model", "Branch", "PpfParams", "Symmetries", "read_ply", "write_ply", "estimate_normals", "voxel_downsample"]
@@ -258,8 +259,14 @@ class Model:
     def pose_error(self, T_estimate: Any, T_truth: Any) -> tuple[float, float]:
         """Rotation (degrees) and translation (mm) error of a pose against the truth, minimised
         over the part's symmetries (as the BOP benchmark judges)."""
-        rot, trans = self.prepared().pose_error(as_transform(T_estimate, "T_estimate"), as_transform(T_truth, "T_truth"))
-        return float(np.degrees(rot)), float(trans)
+        sym = self.symmetries
+        maps = []
+        for R in sym.rotations:
+            S = np.eye(4)
+            S[:3, :3] = R
+            S[:3, 3] = sym.center - R @ sym.center
+            maps.append(S)
+        return pose_error(T_estimate, T_truth, maps, continuous_axis=sym.continuous_axis, center=sym.center)
 
     def add_grasp(self, name: str, T_gripper_object: Any) -> None:
         """Declares a grasp: the object's pose in the gripper frame when the gripper holds it."""

@@ -24,7 +24,7 @@ import numpy as np
 
 from ._validate import as_transform
 from .calibration import CellCalibration
-from .calibration._checks import as_angles, as_image
+from ._validate import as_angles, as_image
 from .errors import FileWriteError, InvalidInputError, MeshFileNotFoundError, ScanFormatError
 
 __all__ = ["SCAN_VERSION", "Scan", "ScanFrame", "load_scan", "save_scan"]

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 import binpick
-from binpick.cell import CellConfig, SimulatedCell, check_static_poses, sim_limits
+from binpick.cell import CellConfig, check_static_poses
 from binpick.errors import SafetyError
+from binpick.sim import SimulatedCell, sim_limits
 
 # The estimator's default segmentation distance follows the along-line spacing; with 60 frames the
 # lines lie ~5 mm apart, so the tests give d* and the smallest region explicitly.

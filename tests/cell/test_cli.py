@@ -45,8 +45,8 @@ def test_pick_example_prints_a_cell_file(capsys):
 
 
 def test_pick_dry_run_against_emulators(tmp_path, capsys):
-    from binpick.cell import SIM_ARM, sim_limits
     from binpick.devices.emulators import DynamixelEmulator, GripperEmulator, RobotEmulator, RobotEmulatorConfig
+    from binpick.sim import SIM_ARM, sim_limits
     from binpick.sim import Cell as Layout
 
     layout = Layout()

@@ -10,8 +10,8 @@ import numpy as np
 
 from .._validate import positive
 from ..errors import CalibrationError, InvalidInputError
-from ._checks import as_image
-from ._file import CameraIntrinsics
+from .._validate import as_image
+from ..camera import CameraIntrinsics
 
 __all__ = ["CameraCalibration", "board_object_points", "board_pose", "calibrate_camera", "find_checkerboard"]
 

@@ -11,15 +11,15 @@ import numpy as np
 
 from .._validate import as_points, as_transform, positive
 from ..errors import CalibrationError, SingularGeometryError
-from ._checks import as_angles
-from ._file import CameraIntrinsics
+from .._validate import as_angles
+from ..camera import CameraIntrinsics
 
 __all__ = ["LaserCalibration", "fit_plane", "laser_points_on_board"]
 
 
 def laser_points_on_board(pixels: np.ndarray, camera: CameraIntrinsics, T_camera_board: np.ndarray) -> np.ndarray:
     """The 3-D points (camera frame, mm) where the rays through ``pixels`` meet the board plane."""
-    from ..vision import pixel_rays  # vision depends on calibration's file types, not the reverse
+    from ..vision._triangulate import pixel_rays  # vision depends on calibration's file types, not the reverse
 
     T = as_transform(T_camera_board, "T_camera_board")
     rays = pixel_rays(pixels, camera)

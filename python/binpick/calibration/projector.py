@@ -10,7 +10,7 @@ import numpy as np
 
 from .._validate import as_float_array, as_transform, check_finite
 from ..errors import CalibrationError, ShapeError, SingularGeometryError
-from ._checks import as_angles
+from .._validate import as_angles
 
 __all__ = ["ProjectorCalibration", "axis_depth", "calibrate_projector"]
 

@@ -28,7 +28,8 @@ from typing import Tuple, Union
 import serial
 
 from ..errors import InvalidInputError, ProtocolError
-from ._link import SerialLink, SerialSettings, check_int, check_number, with_retries
+from .._validate import check_int, check_number
+from ._link import SerialLink, SerialSettings, with_retries
 from .motor import LaserMotor, MotorRange
 
 __all__ = ["MODE_STATUS", "MODE_PASSIVE", "encode_request", "decode_reply", "AiMotorConfig", "AiMotor"]

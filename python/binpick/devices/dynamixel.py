@@ -41,7 +41,8 @@ from ..errors import (
     TruncatedReplyError,
     UnknownReplyError,
 )
-from ._link import SerialLink, SerialSettings, check_int, raise_after_stop, with_retries
+from .._validate import check_int
+from ._link import SerialLink, SerialSettings, raise_after_stop, with_retries
 from .motor import LaserMotor, MotorRange
 
 __all__ = [

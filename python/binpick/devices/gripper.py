@@ -42,7 +42,8 @@ from ..errors import (
     TruncatedReplyError,
     UnknownReplyError,
 )
-from ._link import SerialLink, SerialSettings, check_int, check_number, raise_after_stop, with_retries
+from .._validate import check_int, check_number
+from ._link import SerialLink, SerialSettings, raise_after_stop, with_retries
 
 __all__ = [
     "Gripper",
@@ -70,7 +71,19 @@ FAULT_NAMES = {0x05: "action delayed: activation must complete first", 0x07: "ac
 
 
 class Gripper(abc.ABC):
-    """What the pick sequence needs of a gripper."""
+    """What the pick sequence needs of a gripper: :meth:`open` and :meth:`close`, and
+    :meth:`activate`, :meth:`open_for_grasp` and :meth:`close_port` where the device has them
+    (their defaults do nothing, or open fully)."""
+
+    def activate(self) -> Any:
+        """Makes the gripper ready to move (a reset and activation where the device needs one); nothing by default."""
+
+    def open_for_grasp(self, width_mm: float) -> None:
+        """Opens the fingers at least ``width_mm`` apart for a grasp; fully by default."""
+        self.open()
+
+    def close_port(self) -> None:
+        """Releases the gripper's own connection, if it has one; nothing by default."""
 
     @abc.abstractmethod
     def open(self, *, wait: bool = True) -> None:
@@ -354,6 +367,10 @@ class ModbusGripper(Gripper):
     def open(self, *, wait: bool = True) -> None:
         """Opens fully."""
         self.move_to_width(self.config.stroke_mm, wait=wait)
+
+    def open_for_grasp(self, width_mm: float) -> None:
+        """Opens to ``width_mm`` (at most the stroke)."""
+        self.move_to_width(min(float(width_mm), float(self.config.stroke_mm)))
 
     def close(self, *, wait: bool = True) -> Optional[bool]:
         """Closes fully; with ``wait`` returns whether an object stopped the fingers."""

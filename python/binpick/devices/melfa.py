@@ -58,7 +58,9 @@ from ..errors import (
     SafetyError,
     UnknownReplyError,
 )
-from ._link import SerialLink, SerialSettings, check_int, check_number, raise_after_stop, restate, with_retries
+from .._validate import check_int, check_number
+from ._link import SerialLink, SerialSettings, raise_after_stop, restate, with_retries
+from .robot import Robot
 from .safety import CellLimits, check_linear_speed, check_move, check_override, check_pose, check_sequence
 from .xyzabc import transform_from_xyzabc, xyzabc_from_transform, xyzabc_from_wire, xyzabc_to_wire
 
@@ -276,7 +278,7 @@ class MelfaConfig:
         check_number(self.arrival_tolerance_mm, "MelfaConfig.arrival_tolerance_mm", low=0.0, unit="mm")
 
 
-class MelfaRobot:
+class MelfaRobot(Robot):
     """A MELFA arm driven over R3; every motion is checked against ``limits`` before it is sent.
 
     Use as a context manager to open and close the session::

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 from typing import Any, Optional
 
 from ..errors import DeviceTimeout, InvalidInputError, SafetyError
-from ._link import SerialLink, check_number
+from .._validate import check_number
+from ._link import SerialLink
 
 __all__ = ["MotorRange", "LaserMotor"]
 

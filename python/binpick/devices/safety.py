@@ -24,7 +24,7 @@ from typing import Any, Sequence, Tuple
 import numpy as np
 
 from ..errors import InvalidInputError, SafetyError
-from ._link import check_number, check_transform
+from .._validate import check_number, check_transform
 
 __all__ = ["CellLimits", "check_pose", "check_move", "check_sequence", "check_override", "check_linear_speed"]
 

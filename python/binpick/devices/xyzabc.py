@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InvalidInputError, ShapeError
-from ._link import check_transform
+from .._validate import check_transform
 
 __all__ = [
     "transform_from_xyzabc",

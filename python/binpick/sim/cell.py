@@ -16,28 +16,18 @@ import numpy as np
 
 from .. import _core
 from .._validate import as_transform, as_vector, count, non_negative, positive
+from ..camera import CameraIntrinsics, pinhole_matrix
 from ..errors import InvalidInputError
+from ..transforms import laser_sweep, look_down, rot_y
 
 __all__ = ["Camera", "Laser", "Lighting", "SensorNoise", "Bin", "Cell", "rot_y", "look_down"]
 
 
-def rot_y(angle: float) -> np.ndarray:
-    """4×4 rotation about y by ``angle`` radians."""
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, 0, s, 0], [0, 1, 0, 0], [-s, 0, c, 0], [0, 0, 0, 1.0]])
-
-
-def look_down(x: float, y: float, z: float) -> np.ndarray:
-    """A pose at (x, y, z) whose z axis points straight down (−z of the base) and x axis along base +x."""
-    T = np.eye(4)
-    T[:3, :3] = np.diag([1.0, -1.0, -1.0])
-    T[:3, 3] = (x, y, z)
-    return T
-
-
 @dataclass(frozen=True)
 class Camera:
-    """OpenCV pinhole camera: size (px), focal lengths and principal point (px), ``dist = [k1, k2, p1, p2, k3]``.
+    """The simulated camera's optics as the renderer takes them: size (px), focal lengths and principal
+    point (px), ``dist = [k1, k2, p1, p2, k3]``; :meth:`intrinsics` gives the same camera as the
+    one intrinsics model of :mod:`binpick.camera`.
     The default is the paper's 1032 × 778 camera with an 8 mm-class lens and mild barrel distortion."""
 
     width: int = 1032
@@ -59,7 +49,11 @@ class Camera:
     @property
     def K(self) -> np.ndarray:
         """The 3×3 intrinsic matrix."""
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
+        return pinhole_matrix(self.fx, self.fy, self.cx, self.cy)
+
+    def intrinsics(self) -> CameraIntrinsics:
+        """This camera as the measuring chain's :class:`binpick.camera.CameraIntrinsics`."""
+        return CameraIntrinsics(width=self.width, height=self.height, K=self.K, dist=np.array(self.dist))
 
     def _args(self) -> tuple:
         return (int(self.width), int(self.height), float(self.fx), float(self.fy), float(self.cx), float(self.cy), list(self.dist))
@@ -199,26 +193,16 @@ class Cell:
 
     def calibration(self):
         """The cell's exact calibration as a ``binpick.calibration.CellCalibration``."""
-        from ..calibration import CameraIntrinsics, CellCalibration
+        from ..calibration import CellCalibration
 
-        cam = CameraIntrinsics(width=self.camera.width, height=self.camera.height, K=self.camera.K, dist=np.array(self.camera.dist))
-        return CellCalibration(camera=cam, T_camera_laser=self.laser.T_camera_laser0, T_flange_camera=self.T_flange_camera)
+        return CellCalibration(camera=self.camera.intrinsics(), T_camera_laser=self.laser.T_camera_laser0, T_flange_camera=self.T_flange_camera)
 
     def sweep(self, frames: int = 90, margin: float = 10.0) -> np.ndarray:
         """``frames`` motor angles (rad), evenly spaced, whose laser sheets cover the bin's inner
         floor from wall to wall (plus ``margin`` mm) at the scan pose."""
-        count(frames, "frames", 1)
-        T_camera_base = np.linalg.inv(self.T_base_camera)
+        n = count(frames, "frames", 1)
         lo, hi = self.bin.bounds
-        corners = np.array([[x, y, lo[2]] for x in (lo[0] - margin, hi[0] + margin) for y in (lo[1], hi[1])] + [[x, y, hi[2]] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])])
-        pts = (T_camera_base[:3, :3] @ corners.T).T + T_camera_base[:3, 3]
-        T0 = self.laser.T_camera_laser0
-        local = (T0[:3, :3].T @ (pts - T0[:3, 3]).T).T
-        # The sheet at angle θ is x_L cos θ − z_L sin θ = 0: it passes through a point at θ = atan2(x, z).
-        theta = np.arctan2(local[:, 0], local[:, 2])
-        if frames == 1:
-            return np.array([float(theta.mean())])
-        return np.linspace(theta.min(), theta.max(), frames)
+        return laser_sweep(self.T_base_camera @ self.laser.T_camera_laser0, lo, hi, n, margin)
 
 
 def _flange_camera() -> np.ndarray:

@@ -8,7 +8,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ..calibration._checks import as_image
+from .._validate import as_image
 from ..errors import InvalidInputError
 
 __all__ = ["extract_line", "laser_mask", "red_excess"]

@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import List, Optional, Tuple
 
-from .._link import check_int, check_number
+from ..._validate import check_int, check_number
 from ..aimotor import MODE_PASSIVE, MODE_STATUS
 from ._pty import Fault, PtyEmulator
 from .motor import LinearAxis

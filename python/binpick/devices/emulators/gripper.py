@@ -13,7 +13,7 @@ import struct
 from dataclasses import dataclass
 from typing import Any, List, Optional
 
-from .._link import check_int, check_number
+from ..._validate import check_int, check_number
 from ..gripper import (
     ACT,
     COMMAND_REGISTER,

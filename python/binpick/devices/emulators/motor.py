@@ -14,7 +14,7 @@ import struct
 from dataclasses import dataclass
 from typing import Any, List, Optional, Union
 
-from .._link import check_int, check_number
+from ..._validate import check_int, check_number
 from ..dynamixel import (
     ADDR_GOAL_POSITION,
     ADDR_MOVING,

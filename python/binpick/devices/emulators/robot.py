@@ -27,7 +27,7 @@ from typing import Any, Dict, List, Optional, Tuple
 import numpy as np
 
 from ...errors import InvalidInputError
-from .._link import check_number
+from ..._validate import check_number
 from ..xyzabc import rotation_from_abc, xyzabc_from_transform
 from ._pty import Fault, PtyEmulator, monotonic
 
