@@ -4,8 +4,9 @@ Case (issue 2): 100k-point source and target, two independent samplings of the s
 each with 0.2 mm Gaussian noise; the source starts 5° and 10 mm off (random axis and direction
 per trial). Surfaces: the real CAD parts in ../shared/data/parts that have no continuous
 symmetry (the bunny and the ring screw; the gear shaft's rotation about its axis is not
-observable, so no method's rotation error means anything there), else binpick's built-in tee. Reports, per method: median wall time per ICP, iterations, time per point per
-iteration, and the final rotation and translation errors (median and worst over the trials).
+observable, so no method's rotation error means anything there), else binpick's built-in tee.
+Reports, per method: median wall time per ICP, iterations, time per point per iteration, and the
+final rotation and translation errors (median and worst over the trials).
 
     python benches/icp_peers.py [--points 100000] [--trials 5] [--parts DIR]
 
@@ -15,7 +16,6 @@ Peers that are not installed are skipped with a message (pip install open3d smal
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import sys
 import time
@@ -168,8 +168,8 @@ def main(argv=None) -> int:
                 r["trans"].append(trans)
                 print(f"{part} trial {trial}: {name:24s} {elapsed * 1e3:8.1f} ms  its {its}  {rot:.4f}°  {trans:.4f} mm", file=sys.stderr, flush=True)
     n = args.points
-    print(f"\n### ICP, {n} points, 0.2 mm noise, start 5° / 10 mm off, one thread (median over {len(rows['binpick point_to_point']['time'])} cases)\n")
-    print("| method | time per ICP (ms) | iterations | µs per point-iteration | rot. error ° (median / max) | transl. error mm (median / max) |")
+    print(f"\n### ICP, {n} points, 0.2 mm noise, start 5° / 10 mm off, one thread " f"(median over {len(rows['binpick point_to_point']['time'])} cases)\n")
+    print("| method | time per ICP (ms) | iterations | µs per point-iteration " "| rot. error ° (median / max) | transl. error mm (median / max) |")
     print("|---|---|---|---|---|---|")
     per_pt = {}
     for name, r in rows.items():
@@ -178,12 +178,15 @@ def main(argv=None) -> int:
         it = statistics.median(its) if its else None
         per = statistics.median([p / n * 1e6 for p in r["per_it"]])
         per_pt[name] = per
-        print(f"| {name} | {t * 1e3:.0f} | {it if it is not None else 'n/a'} | {per:.3f} | {statistics.median(r['rot']):.4f} / {max(r['rot']):.4f} | {statistics.median(r['trans']):.4f} / {max(r['trans']):.4f} |")
+        rot = f"{statistics.median(r['rot']):.4f} / {max(r['rot']):.4f}"
+        trans = f"{statistics.median(r['trans']):.4f} / {max(r['trans']):.4f}"
+        print(f"| {name} | {t * 1e3:.0f} | {it if it is not None else 'n/a'} | {per:.3f} | {rot} | {trans} |")
     ours = per_pt["binpick point_to_point"]
     for peer in ("small_gicp ICP", "Open3D point_to_point"):
         if per_pt.get(peer):
             print(f"\nbinpick point_to_point is {per_pt[peer] / ours:.2f}× faster per point-iteration than {peer}", end="")
-            print(f"; {statistics.median(rows[peer]['time']) / statistics.median(rows['binpick point_to_point']['time']):.2f}× per ICP")
+            ratio = statistics.median(rows[peer]["time"]) / statistics.median(rows["binpick point_to_point"]["time"])
+            print(f"; {ratio:.2f}× per ICP")
     return 0
 
 

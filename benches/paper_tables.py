@@ -128,7 +128,7 @@ def angle_of(d_rot) -> float:
 
 def tables_3_4() -> None:
     print("### Tables 3 and 4: tee, ICP alone vs CCP + ICP (binpick; the paper's CCP + ICP in brackets)\n")
-    print("| case | n_m | n_d | initial pos (mm) | initial rot (deg) | method | pos. error x, y, z (mm) | rot. error θx, θy, θz (deg) | time (ms) |")
+    print("| case | n_m | n_d | initial pos (mm) | initial rot (deg) | method | " "pos. error x, y, z (mm) | rot. error θx, θy, θz (deg) | time (ms) |")
     print("|---|---|---|---|---|---|---|---|---|")
     worst = (0.0, 0.0, 0.0)
     for i, (n_m, n_d, pos, rot) in enumerate(CASES, 1):
@@ -170,13 +170,13 @@ def sweeps(trials: int, out: Path) -> None:
         for k in rates:
             rates[k].append(ok[k] / trials)
         print(f"±{a:3d}°: " + "  ".join(f"{m} {meth}: {rates[(m, meth)][-1] * 100:5.1f} %" for m, meth in rates), file=sys.stderr, flush=True)
-    print(f"### Tables 5 and 6 as sweeps: pick-grade success (< 5°, < 3 mm), {trials} random trials per angle, random position within ±200 mm\n")
+    print("### Tables 5 and 6 as sweeps: pick-grade success (< 5°, < 3 mm), " f"{trials} random trials per angle, random position within ±200 mm\n")
     print("| rotation | " + " | ".join(f"{m}, {meth}" for m, meth in rates) + " |")
     print("|---|" + "---|" * len(rates))
     for i, a in enumerate(angles):
         print(f"| ±{a}° | " + " | ".join(f"{rates[k][i] * 100:.0f} %" for k in rates) + " |")
     allowed = {k: max([a for a, r in zip(angles, v) if all(x >= 0.99 for x in v[: angles.index(a) + 1])] or [0]) for k, v in rates.items()}
-    print("\nLargest rotation up to which every angle succeeded in ≥ 99 % (the paper: ICP ±30° on one axis, ±15° on three; CCP + ICP ±180°):")
+    print("\nLargest rotation up to which every angle succeeded in ≥ 99 % " "(the paper: ICP ±30° on one axis, ±15° on three; CCP + ICP ±180°):")
     for k, a in allowed.items():
         print(f"- {k[0]}, {k[1]}: ±{a}°")
     overall = statistics.mean(rates[("3 axes", "CCP + ICP")])

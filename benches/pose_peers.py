@@ -236,7 +236,7 @@ def sim_scenes(count: int, parts: Optional[list[str]]) -> list[Scene]:
             points=np.ascontiguousarray(cloud.points, dtype=np.float64), truths=np.asarray(gt["T_base_object"], dtype=np.float64),
             viewpoint=camera, bin=np.asarray(gt["bin"], dtype=np.float64),
         ))
-        print(f"simulated {scenes[-1].name}: {len(gt['T_base_object'])} parts, {len(cloud)} points, {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+        print(f"simulated {scenes[-1].name}: {len(gt['T_base_object'])} parts, " f"{len(cloud)} points, {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
     return scenes
 
 
@@ -343,7 +343,7 @@ class OpenCVPPF(Method):
             import cv2
             self.ppf = cv2.ppf_match_3d
         except (ImportError, AttributeError) as exc:
-            raise Unavailable(f"no cv2.ppf_match_3d ({exc}); pip install opencv-contrib-python-headless==5.0.0.93 in a venv of its own") from None
+            raise Unavailable(f"no cv2.ppf_match_3d ({exc}); pip install " "opencv-contrib-python-headless==5.0.0.93 in a venv of its own") from None
         if one_thread:
             cv2.setNumThreads(1)
         self.models: dict[str, tuple] = {}
@@ -408,7 +408,7 @@ class Runner:
     prepare_ms: dict = field(default_factory=dict)  # part name -> ms, once per part
 
     @classmethod
-    def of(cls, name: str, one_thread: bool) -> "Runner":
+    def of(cls, name: str, one_thread: bool) -> Runner:
         try:
             method = FACTORIES[name](one_thread)
         except Unavailable as exc:
@@ -520,7 +520,7 @@ def markdown(rows: list[dict], labels: dict[str, str], threads: str) -> str:
             ratio = f"{r['ratio_to_binpick']:.2f}×" if r["ratio_to_binpick"] else ""
             top3 = f" {r['top3_pct']:.0f} % | {r['top_part_pct']:.0f} % |" if piles else ""
             errors = f" ({r['errors']} failed)" if r["errors"] else ""
-            out.append(f"| {name} | {labels[r['method']]} | {r['scenes']}{errors} | {r['pick_pct']:.0f} % | {r['mssd_pct']:.0f} % |{top3} "
+            out.append(f"| {name} | {labels[r['method']]} | {r['scenes']}{errors} " f"| {r['pick_pct']:.0f} % | {r['mssd_pct']:.0f} % |{top3} "
                        f"{ms(r['median_ms'])} | {ms(r['max_ms'])} | {ratio} |")
     return "\n".join(out)
 

@@ -97,16 +97,16 @@ def _ear_clip(poly: np.ndarray) -> list[tuple[int, int, int]]:
 
     while len(idx) > 3:
         for k in range(len(idx)):
-            i, j, l = idx[k - 1], idx[k], idx[(k + 1) % len(idx)]
-            a, b, c = poly[i], poly[j], poly[l]
+            i, j, n = idx[k - 1], idx[k], idx[(k + 1) % len(idx)]
+            a, b, c = poly[i], poly[j], poly[n]
             if cross(a, b, c) <= 0:
                 continue
             inside = any(
                 cross(a, b, poly[m]) >= 0 and cross(b, c, poly[m]) >= 0 and cross(c, a, poly[m]) >= 0
-                for m in idx if m not in (i, j, l)
+                for m in idx if m not in (i, j, n)
             )
             if not inside:
-                tris.append((i, j, l))
+                tris.append((i, j, n))
                 idx.pop(k)
                 break
         else:

@@ -7,7 +7,6 @@ import pytest
 
 import binpick
 from _geometry import apply, random_rigid
-
 from binpick.transforms import pose_error
 
 

@@ -7,7 +7,7 @@ import ast
 import subprocess
 import sys
 from pathlib import Path
-from typing import Dict, List, Optional, Set
+from typing import Optional
 
 import pytest
 
@@ -26,7 +26,7 @@ def _module_name(path: Path) -> str:
     return ".".join(parts)
 
 
-def _modules() -> Dict[str, Path]:
+def _modules() -> dict[str, Path]:
     return {_module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
 
 
@@ -40,10 +40,10 @@ def _is_type_checking(node: ast.If) -> bool:
     )
 
 
-def _import_nodes(tree: ast.AST, *, lazy_getattr: bool) -> List[ast.stmt]:
+def _import_nodes(tree: ast.AST, *, lazy_getattr: bool) -> list[ast.stmt]:
     """Every import statement, top-level or inside functions; not those under ``if TYPE_CHECKING:``
     (never run) nor, in ``binpick/__init__.py``, those of the lazy ``__getattr__``."""
-    found: List[ast.stmt] = []
+    found: list[ast.stmt] = []
 
     def visit(node: ast.AST) -> None:
         for child in ast.iter_child_nodes(node):
@@ -67,13 +67,13 @@ def _resolve(module: str, is_package: bool, node: ast.ImportFrom) -> str:
     return ".".join(base + ([node.module] if node.module else []))
 
 
-def import_graph() -> Dict[str, Set[str]]:
+def import_graph() -> dict[str, set[str]]:
     """module → the binpick modules it imports (a ``from X import Y`` of a submodule Y is an edge to X.Y)."""
     modules = _modules()
-    graph: Dict[str, Set[str]] = {}
+    graph: dict[str, set[str]] = {}
     for name, path in modules.items():
         tree = ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
-        edges: Set[str] = set()
+        edges: set[str] = set()
         for node in _import_nodes(tree, lazy_getattr=(name == "binpick")):
             if isinstance(node, ast.Import):
                 targets = [alias.name for alias in node.names]
@@ -86,12 +86,12 @@ def import_graph() -> Dict[str, Set[str]]:
     return graph
 
 
-def find_cycle(graph: Dict[str, Set[str]]) -> Optional[List[str]]:
+def find_cycle(graph: dict[str, set[str]]) -> Optional[list[str]]:
     """One import cycle as a list of modules (first repeated at the end), or None."""
-    state: Dict[str, int] = {}
-    stack: List[str] = []
+    state: dict[str, int] = {}
+    stack: list[str] = []
 
-    def visit(node: str) -> Optional[List[str]]:
+    def visit(node: str) -> Optional[list[str]]:
         state[node] = 1
         stack.append(node)
         for nxt in sorted(graph.get(node, ())):
@@ -144,7 +144,7 @@ def test_the_real_pick_loop_loads_neither_the_emulators_nor_the_simulator():
     assert out == [], f"importing binpick.cell.loop loaded {out}"
 
 
-def _oversized(root: str) -> List[str]:
+def _oversized(root: str) -> list[str]:
     files = [p for p in (ROOT / root).rglob("*") if p.is_file() and p.suffix in SOURCE_SUFFIXES and "target" not in p.parts]
     counts = {p: len(p.read_text(encoding="utf-8", errors="replace").splitlines()) for p in files}
     return [f"{p.relative_to(ROOT)}: {n} lines" for p, n in sorted(counts.items()) if n > MAX_LINES]

@@ -8,7 +8,6 @@ import pytest
 
 import binpick
 from _geometry import pile_view, random_rotation
-
 from binpick.transforms import pose_error
 
 

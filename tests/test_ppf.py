@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import binpick
-from binpick import sim
 from _geometry import camera_cloud, extruded_mesh, pile_view, random_rotation, revolved_mesh, rot, symmetric_pose_error
+from binpick import sim
 
 # An L-bracket with unequal legs: no proper symmetry.
 L_BRACKET = [(0, 0), (80, 0), (80, 12), (12, 12), (12, 50), (0, 50)]
@@ -211,8 +211,8 @@ def test_bad_requests_raise_clear_errors(parts):
 def test_estimate_command_reads_a_mesh_file_and_reports_instances(parts, tmp_path, capsys):
     import json
 
-    from binpick.cli import main
     from _geometry import write_stl_binary
+    from binpick.cli import main
 
     v, f = extruded_mesh(L_BRACKET, 30.0)
     write_stl_binary(tmp_path / "bracket.stl", v, f)

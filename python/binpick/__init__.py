@@ -7,8 +7,7 @@ Lengths are millimetres, angles radians; transforms are 4×4 arrays named ``T_to
 
 from __future__ import annotations
 
-from . import _core
-from . import parts
+from . import _core, parts
 from .errors import *  # noqa: F401,F403 - the exception classes are public API
 from .errors import __all__ as _error_names
 from .models import Branch, Model, PpfParams, Symmetries, estimate_normals, read_ply, voxel_downsample, write_ply

@@ -204,7 +204,7 @@ def as_image(value: Any, name: str, *, shape: tuple[int, int] | None = None, col
         value = value[:, :, 0]
     if value.ndim == 2:
         if color:
-            raise ShapeError(f"{name}: a grey image of shape {value.shape}; the laser line is found by colour, pass the BGR frame (H, W, 3)")
+            raise ShapeError(f"{name}: a grey image of shape {value.shape}; the laser " "line is found by colour, pass the BGR frame (H, W, 3)")
     elif value.ndim == 3 and value.shape[2] == 3:
         if color is False:
             raise ShapeError(f"{name}: expected a single-channel image, got shape {value.shape}")

@@ -20,8 +20,9 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, List, Optional, Sequence
+from typing import Any, Optional
 
 from .errors import BinpickError, InvalidInputError
 
@@ -66,10 +67,10 @@ def _print_table(records: Sequence[Any], out: Any = None) -> None:
             print(f"pick {r.index}: {r.error}", file=out)
 
 
-def _pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> List[Path]:
+def _pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> list[Path]:
     from . import viz
 
-    written: List[Path] = []
+    written: list[Path] = []
     scan = report.last_scan
     if scan is not None and scan.frames:
         written.append(viz.save_contact_sheet(out / "scan_contact_sheet.png", [scan.frames[k] for k in sorted(scan.frames)]))
@@ -104,7 +105,7 @@ def _demo(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     model = _model(args.part, args.unit)
     progress = ProgressPrinter()
-    progress("demo", f"{args.count} {model.name} parts, {args.picks} picks, {args.frames} frames per scan, seed {args.seed}, pictures into {out}")
+    progress("demo", f"{args.count} {model.name} parts, {args.picks} picks, {args.frames} " f"frames per scan, seed {args.seed}, pictures into {out}")
     with SimulatedCell(model, count=args.count, seed=args.seed, frames=args.frames, progress=progress,
                        estimate_options=_estimate_options(args)) as sim:
         report = sim.cell.run(args.picks)
@@ -306,7 +307,8 @@ def _parser() -> argparse.ArgumentParser:
     e.set_defaults(forward="emulate")
 
     t = sub.add_parser("estimate", help="estimate a part's pose in a scene cloud",
-                       description="Reads a scene (PLY, or NPY of shape (N, 3), mm) and a part, prints the pose as JSON and writes a picture.")
+                       description="Reads a scene (PLY, or NPY of shape (N, 3), mm) and a part, prints the pose as JSON "
+                       "and writes a picture.")
     t.add_argument("scene", help="scene cloud: .ply or .npy (N, 3), mm")
     t.add_argument("model", help="built-in part (tee, elbow, cross) or a mesh file")
     t.add_argument("--unit", default="mm", help="unit of a mesh file (mm, cm, m, in)")
@@ -366,7 +368,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 1
 
 
-def _forward(entry: Any, argv: List[str]) -> int:
+def _forward(entry: Any, argv: list[str]) -> int:
     try:
         return int(entry(argv) or 0)
     except SystemExit as exc:

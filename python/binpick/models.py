@@ -5,16 +5,17 @@ from __future__ import annotations
 import hashlib
 import os
 import warnings
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any, Optional
 
 import numpy as np
 
 from . import _core
 from ._validate import as_points, as_transform, as_vector, count, positive
-from .transforms import pose_error
 from .errors import InvalidInputError
+from .transforms import pose_error
 
 __all__ = ["Model", "Branch", "PpfParams", "Symmetries", "read_ply", "write_ply", "estimate_normals", "voxel_downsample"]
 
@@ -139,14 +140,14 @@ class Model:
     @classmethod
     def from_mesh(
         cls,
-        path: "str | os.PathLike[str]",
+        path: str | os.PathLike[str],
         *,
         unit: str = "mm",
         spacing: Optional[float] = None,
         count: Optional[int] = None,
         seed: int = 0,
         name: Optional[str] = None,
-    ) -> "Model":
+    ) -> Model:
         """Reads a mesh (binary/ASCII STL, ASCII/binary PLY, OBJ), converts ``unit`` (mm, cm, m, in)
         to millimetres and samples its surface: evenly at ``spacing`` mm, or ``count`` points.
         With neither, the spacing is 1/100 of the bounding-box diagonal."""
@@ -170,7 +171,7 @@ class Model:
         name: str = "part",
         branches: Sequence[Branch] = (),
         special_direction: Optional[Sequence[float]] = None,
-    ) -> "Model":
+    ) -> Model:
         """A model from a vertex array (V, 3) in ``unit`` and a face index array (F, 3)."""
         v = as_points(vertices, "vertices", min_points=3)
         f = np.asarray(faces)
@@ -307,12 +308,12 @@ def _unit_scale(unit: Any) -> float:
     return _UNITS[unit.strip().lower()]
 
 
-def read_ply(path: "str | os.PathLike[str]") -> tuple[np.ndarray, Optional[np.ndarray]]:
+def read_ply(path: str | os.PathLike[str]) -> tuple[np.ndarray, Optional[np.ndarray]]:
     """Reads a PLY point cloud (ASCII or binary): ``(points, normals or None)``, in the file's units."""
     return _core.read_ply(os.fspath(path))
 
 
-def write_ply(path: "str | os.PathLike[str]", points: Any, normals: Any = None, *, ascii: bool = False) -> None:
+def write_ply(path: str | os.PathLike[str], points: Any, normals: Any = None, *, ascii: bool = False) -> None:
     """Writes points (and normals) as PLY that MeshLab and CloudCompare open (binary by default)."""
     pts = as_points(points, "points", min_points=0)
     nrm = None if normals is None else as_points(normals, "normals", min_points=0)

@@ -10,7 +10,7 @@ import numpy as np
 
 from . import _core
 from ._validate import as_float_array, as_points, as_transform, as_vector, check_finite, count, non_negative, positive
-from .errors import InvalidInputError, NoObjectFound
+from .errors import InvalidInputError
 from .models import Model, estimate_normals
 
 __all__ = ["IcpResult", "icp", "PoseResult", "estimate_pose", "estimate_poses", "grasp_pose"]
@@ -158,8 +158,8 @@ class PoseResult:
     def __repr__(self) -> str:
         t = self.T_scene_model[:3, 3]
         return (
-            f"PoseResult(method={self.method!r}, score={self.score:.3f}, rmse={self.rmse:.3f} mm, points={len(self.indices)}, "
-            f"t=[{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] mm, pickability={self.pickability:.2f}, total={sum(self.timings.values()):.1f} ms)"
+            f"PoseResult(method={self.method!r}, score={self.score:.3f}, " f"rmse={self.rmse:.3f} mm, points={len(self.indices)}, "
+            f"t=[{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] mm, " f"pickability={self.pickability:.2f}, total={sum(self.timings.values()):.1f} ms)"
         )
 
 
@@ -221,7 +221,7 @@ def estimate_poses(
     if m not in _METHODS:
         raise InvalidInputError(f"method: unknown method {method!r}; use 'auto', 'ppf', 'ccp' or 'centroid'")
     if m == "ccp" and not model.branches:
-        raise InvalidInputError("method: 'ccp' needs the model's cylindrical branches; declare them with Model.declare_branches, or use method='ppf'")
+        raise InvalidInputError("method: 'ccp' needs the model's cylindrical branches; " "declare them with Model.declare_branches, or use method='ppf'")
     box = None
     if bin is not None:
         box = as_float_array(bin, "bin")

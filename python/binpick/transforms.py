@@ -8,7 +8,8 @@ vocabulary.
 from __future__ import annotations
 
 import math
-from typing import Any, Optional, Sequence, Tuple
+from collections.abc import Sequence
+from typing import Any, Optional
 
 import numpy as np
 
@@ -93,7 +94,7 @@ def pose_error(
     *,
     continuous_axis: Optional[Any] = None,
     center: Any = (0.0, 0.0, 0.0),
-) -> Tuple[float, float]:
+) -> tuple[float, float]:
     """(rotation error in degrees, translation error in mm) of ``T_est`` against ``T_true``, the
     smallest over the part's symmetries.
 

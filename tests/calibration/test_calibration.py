@@ -20,9 +20,8 @@ from binpick.calibration import (
 )
 from binpick.calibration._file import CameraIntrinsics
 from binpick.errors import CalibrationError, InvalidInputError, SingularGeometryError
-from binpick.vision import extract_line
 from binpick.vision import _synthetic as syn
-
+from binpick.vision import extract_line
 from conftest import PATTERN, SQUARE, Rig, rotation_angle_deg
 
 

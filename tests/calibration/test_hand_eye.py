@@ -10,7 +10,6 @@ import pytest
 from binpick.calibration import HAND_EYE_METHODS, calibrate_hand_eye
 from binpick.errors import CalibrationError
 from binpick.vision._synthetic import pose
-
 from conftest import rotation_angle_deg
 
 TRUTH = pose(0.02, -0.01, 0.3, (30.0, -10.0, 90.0))

@@ -10,8 +10,7 @@ import pytest
 import binpick
 from binpick.cell.grasp import GraspMatcher, branch_grasps
 from binpick.poses import grasp_pose
-from binpick.transforms import pose_error
-from binpick.transforms import rotation_about
+from binpick.transforms import pose_error, rotation_about
 
 
 @pytest.fixture(scope="module")

@@ -6,8 +6,6 @@ import math
 
 import pytest
 
-from binpick.errors import DeviceError
-
 from binpick.devices import (
     AiMotor,
     AiMotorConfig,
@@ -28,6 +26,7 @@ from binpick.devices.emulators import (
     RobotEmulator,
     RobotEmulatorConfig,
 )
+from binpick.errors import DeviceError
 
 FAST_ROBOT = MelfaConfig(
     serial=SerialSettings(baudrate=9600, parity="E", stopbits=2, timeout_s=0.3, retries=2),

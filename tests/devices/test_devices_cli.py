@@ -6,7 +6,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-
 import binpick
 from binpick.devices import DynamixelConfig, DynamixelMotor, MelfaConfig, MelfaRobot, SerialSettings
 from binpick.devices.cli import emulate_main

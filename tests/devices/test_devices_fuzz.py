@@ -6,8 +6,16 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from binpick.devices import AiMotor, AiMotorConfig, DynamixelBus, ModbusGripper, GripperConfig, SerialSettings
-from binpick.devices import MelfaConfig, MelfaRobot
+from binpick.devices import (
+    AiMotor,
+    AiMotorConfig,
+    DynamixelBus,
+    GripperConfig,
+    MelfaConfig,
+    MelfaRobot,
+    ModbusGripper,
+    SerialSettings,
+)
 from binpick.devices.aimotor import decode_reply
 from binpick.devices.dynamixel import HEADER, decode_packet, decode_status
 from binpick.devices.emulators import PtyEmulator

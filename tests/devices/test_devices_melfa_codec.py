@@ -3,7 +3,14 @@
 import numpy as np
 import pytest
 
-from binpick.devices.melfa import encode_command, format_position, parse_joints, parse_position, parse_reply, parse_state
+from binpick.devices.melfa import (
+    encode_command,
+    format_position,
+    parse_joints,
+    parse_position,
+    parse_reply,
+    parse_state,
+)
 from binpick.errors import InvalidInputError, ProtocolError, UnknownReplyError
 
 # reply lines in the format RV-2A/CR1 integrations record from the controller

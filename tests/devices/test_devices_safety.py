@@ -5,7 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from binpick.devices.safety import CellLimits, check_linear_speed, check_move, check_override, check_pose, check_sequence
+from binpick.devices.safety import (
+    CellLimits,
+    check_linear_speed,
+    check_move,
+    check_override,
+    check_pose,
+    check_sequence,
+)
 from binpick.devices.xyzabc import transform_from_xyzabc
 from binpick.errors import InvalidInputError, SafetyError
 

@@ -112,7 +112,8 @@ def test_checkerboard_corners_are_found_where_they_project():
     proj, _ = cv2.projectPoints(obj, cv2.Rodrigues(T[:3, :3])[0], T[:3, 3], cam.K, np.array(cam.dist))
     d = np.linalg.norm(corners[:, 0, :] - proj[:, 0, :], axis=1)
     d_rev = np.linalg.norm(corners[::-1, 0, :] - proj[:, 0, :], axis=1)
-    # Measured 0.15 px worst with 8×8 supersampling (cornerSubPix bias on sharp edges, not yet separated from renderer error).
+    # Measured 0.15 px worst with 8×8 supersampling (cornerSubPix bias on sharp edges, not yet
+    # separated from renderer error).
     assert min(d.max(), d_rev.max()) < 0.2
 
 

@@ -7,9 +7,15 @@ import cv2
 import numpy as np
 import pytest
 
-from binpick.calibration import CellCalibration
-from binpick.calibration import CameraIntrinsics
-from binpick.errors import CalibrationError, InvalidInputError, NonFiniteError, ScanFormatError, ShapeError, SingularGeometryError
+from binpick.calibration import CameraIntrinsics, CellCalibration
+from binpick.errors import (
+    CalibrationError,
+    InvalidInputError,
+    NonFiniteError,
+    ScanFormatError,
+    ShapeError,
+    SingularGeometryError,
+)
 from binpick.scan import load_scan, save_scan
 from binpick.vision import _synthetic as syn
 from binpick.vision import pixel_rays, reconstruct, triangulate

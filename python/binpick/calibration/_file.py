@@ -17,8 +17,8 @@ except ModuleNotFoundError:  # Python < 3.11
 
 from .._validate import calibration_matrix, check_rigid, frozen_copy
 from ..camera import CameraIntrinsics
-from ..transforms import rot_y
 from ..errors import CalibrationError, FileWriteError
+from ..transforms import rot_y
 
 #: The calibration file format this code writes and reads.
 FORMAT_VERSION = 1
@@ -86,7 +86,7 @@ class CellCalibration:
         )
 
     @classmethod
-    def from_toml(cls, text: str, *, source: str = "calibration") -> "CellCalibration":
+    def from_toml(cls, text: str, *, source: str = "calibration") -> CellCalibration:
         """Parses TOML text; ``source`` names the file in error messages."""
         try:
             doc = tomllib.loads(text)
@@ -95,7 +95,7 @@ class CellCalibration:
         return cls.from_dict(doc, source=source)
 
     @classmethod
-    def from_dict(cls, doc: dict, *, source: str = "calibration") -> "CellCalibration":
+    def from_dict(cls, doc: dict, *, source: str = "calibration") -> CellCalibration:
         """Builds a calibration from the parsed TOML document, checking every field."""
 
         def get(table: str, key: str) -> Any:
@@ -134,7 +134,7 @@ class CellCalibration:
         return path
 
     @classmethod
-    def load(cls, path: str | os.PathLike) -> "CellCalibration":
+    def load(cls, path: str | os.PathLike) -> CellCalibration:
         """Reads a calibration file; a missing or inconsistent field raises ``CalibrationError`` naming it."""
         path = Path(path)
         try:

@@ -8,10 +8,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .._validate import positive
-from ..errors import CalibrationError, InvalidInputError
-from .._validate import as_image
+from .._validate import as_image, positive
 from ..camera import CameraIntrinsics
+from ..errors import CalibrationError, InvalidInputError
 
 __all__ = ["CameraCalibration", "board_object_points", "board_pose", "calibrate_camera", "find_checkerboard"]
 

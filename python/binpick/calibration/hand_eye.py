@@ -83,7 +83,7 @@ def calibrate_hand_eye(
     axes = [cv2.Rodrigues(r[:3, :3])[0].ravel() for r in rel]
     big = [a / np.linalg.norm(a) for a in axes if np.linalg.norm(a) > np.radians(2)]
     if len(big) < 2 or np.linalg.svd(np.array(big))[1][1] < 0.1:
-        raise CalibrationError("T_base_flanges: the flange rotations between stations share one axis (or are tiny); tilt the hand about at least two different axes")
+        raise CalibrationError("T_base_flanges: the flange rotations between stations share one " "axis (or are tiny); tilt the hand about at least two different axes")
     names = list(HAND_EYE_METHODS) if method == "best" else [method]
     transforms, residuals = {}, {}
     for name in names:

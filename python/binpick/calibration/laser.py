@@ -9,10 +9,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_points, as_transform, positive
-from ..errors import CalibrationError, SingularGeometryError
-from .._validate import as_angles
+from .._validate import as_angles, as_points, as_transform, positive
 from ..camera import CameraIntrinsics
+from ..errors import CalibrationError, SingularGeometryError
 
 __all__ = ["LaserCalibration", "fit_plane", "laser_points_on_board"]
 
@@ -83,7 +82,7 @@ class LaserCalibration:
         return f"LaserCalibration({len(self.angles)} angles, rms={self.rms:.4f} mm)"
 
     @classmethod
-    def fit(cls, angles: Sequence[float], points: Sequence[np.ndarray], *, inlier_distance: float = 0.5) -> "LaserCalibration":
+    def fit(cls, angles: Sequence[float], points: Sequence[np.ndarray], *, inlier_distance: float = 0.5) -> LaserCalibration:
         """Fits the projector from the sheet's points at each motor angle.
 
         ``points[k]`` (N_k, 3) are lit points in the camera frame (from :func:`laser_points_on_board`

@@ -8,9 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_float_array, as_transform, check_finite
+from .._validate import as_angles, as_float_array, as_transform, check_finite
 from ..errors import CalibrationError, ShapeError, SingularGeometryError
-from .._validate import as_angles
 
 __all__ = ["ProjectorCalibration", "axis_depth", "calibrate_projector"]
 
@@ -66,10 +65,10 @@ def calibrate_projector(distances, angles) -> ProjectorCalibration:
         raise CalibrationError(f"distances: {len(d)} observations; at least 3 are needed to solve p_x, p_z and see a residual")
     if (np.abs(np.sin(theta)) < _MIN_SINE).any():
         i = int(np.argmax(np.abs(np.sin(theta)) < _MIN_SINE))
-        raise SingularGeometryError(f"angles: element {i} is {theta[i]:g} rad; at angle 0 the sheet is parallel to the optical axis and cannot cross it")
+        raise SingularGeometryError(f"angles: element {i} is {theta[i]:g} rad; at angle 0 the " "sheet is parallel to the optical axis and cannot cross it")
     A = np.stack([-1.0 / np.tan(theta), np.ones_like(theta)], axis=1)
     if np.ptp(d) < 1e-6 or np.linalg.cond(A) > 1e8:
-        raise SingularGeometryError("distances: all observations at one distance do not separate p_x from p_z; move the camera along its z axis between steps")
+        raise SingularGeometryError("distances: all observations at one distance do not separate " "p_x from p_z; move the camera along its z axis between steps")
     (p_x, p_z), *_ = np.linalg.lstsq(A, d, rcond=None)
     residuals = d - A @ np.array([p_x, p_z])
     return ProjectorCalibration(p_x=float(p_x), p_z=float(p_z), residuals=residuals, rms=float(np.sqrt(np.mean(residuals**2))))

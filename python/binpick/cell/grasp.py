@@ -10,8 +10,9 @@ direction, the origin the TCP between the fingertips. Lengths in mm, transforms 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from types import MappingProxyType
-from typing import TYPE_CHECKING, Any, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import TYPE_CHECKING, Any, Optional
 
 import numpy as np
 
@@ -37,14 +38,14 @@ __all__ = [
     "plan_grasp",
 ]
 
-Waypoint = Tuple[str, np.ndarray, bool]
+Waypoint = tuple[str, np.ndarray, bool]
 
 
 class NoGraspError(BinpickError):
     """The located part has no declared grasp that is reachable, collision-free and safe to approach."""
 
 
-def branch_grasps(model: Model, *, finger_width_mm: float = 20.0, steps: int = 72) -> Dict[str, np.ndarray]:
+def branch_grasps(model: Model, *, finger_width_mm: float = 20.0, steps: int = 72) -> dict[str, np.ndarray]:
     """Grasps across every cylindrical branch of ``model`` (``model.branches``): the TCP on the
     branch axis, ``finger_width_mm / 2 + 7`` mm in from the end face, the fingers closing across
     the axis, approached from ``steps`` directions around it (and each turned half a turn about
@@ -65,7 +66,7 @@ def branch_grasps(model: Model, *, finger_width_mm: float = 20.0, steps: int = 7
         )
     half = positive(finger_width_mm, "finger_width_mm") / 2.0
     n = count(steps, "steps", 1)
-    grasps: Dict[str, np.ndarray] = {}
+    grasps: dict[str, np.ndarray] = {}
     for i, b in enumerate(model.branches):
         d = np.asarray(b.direction, dtype=np.float64)
         d = d / np.linalg.norm(d)
@@ -90,7 +91,7 @@ def tool_tilt_deg(T_base_flange: np.ndarray) -> float:
 
 
 def pick_waypoints(T_base_flange: np.ndarray, T_base_gripper: np.ndarray, *, approach_distance_mm: float,
-                   clearance_z_mm: float, drop_pose: np.ndarray) -> List[Waypoint]:
+                   clearance_z_mm: float, drop_pose: np.ndarray) -> list[Waypoint]:
     """The motion of one pick as (name, T_base_flange, linear): above the approach, the straight
     approach along the gripper axis, the grasp, the lift straight up, the drop pose."""
     approach = T_base_flange.copy()
@@ -141,7 +142,7 @@ class GraspMatcher:
         self.tolerance_deg = positive(tolerance_deg, "tolerance_deg", "deg")
         self.tolerance_mm = positive(tolerance_mm, "tolerance_mm")
 
-    def error(self, T_gripper_object: np.ndarray) -> Tuple[float, float]:
+    def error(self, T_gripper_object: np.ndarray) -> tuple[float, float]:
         """(rotation error deg, translation error mm) against the nearest declared grasp."""
         B = self._stack
         A = np.asarray(T_gripper_object, dtype=np.float64)
@@ -153,16 +154,16 @@ class GraspMatcher:
         g = int(np.argmin(deg / self.tolerance_deg + mm / self.tolerance_mm))
         return float(deg[g]), float(mm[g])
 
-    def cost(self, error: Tuple[float, float]) -> float:
+    def cost(self, error: tuple[float, float]) -> float:
         """An error in units of the tolerances (≤ 2 when both are within them)."""
         return error[0] / self.tolerance_deg + error[1] / self.tolerance_mm
 
-    def within(self, error: Tuple[float, float]) -> bool:
+    def within(self, error: tuple[float, float]) -> bool:
         """Whether an error is within both tolerances."""
         return error[0] <= self.tolerance_deg and error[1] <= self.tolerance_mm
 
 
-def _tilted_candidates(config: CellConfig, T_base_object: np.ndarray, rejected: Dict[str, int]) -> list:
+def _tilted_candidates(config: CellConfig, T_base_object: np.ndarray, rejected: dict[str, int]) -> list:
     """(tilt, name, T_base_gripper, T_base_flange) of every grasp within the tool-tilt limit, most vertical first."""
     T_fg_inv = inverse(config.gripper.T_flange_gripper)
     candidates = []
@@ -178,8 +179,8 @@ def _tilted_candidates(config: CellConfig, T_base_object: np.ndarray, rejected: 
     return candidates
 
 
-def _refusal(config: CellConfig, waypoints: List[Waypoint], T_bg: np.ndarray, scene: np.ndarray, part: np.ndarray,
-             here: np.ndarray) -> Tuple[Optional[str], int]:
+def _refusal(config: CellConfig, waypoints: list[Waypoint], T_bg: np.ndarray, scene: np.ndarray, part: np.ndarray,
+             here: np.ndarray) -> tuple[Optional[str], int]:
     """Why a grasp cannot be used (None when it can), and the scene points inside the gripper."""
     if config.reachable is not None and not all(config.reachable(T) for _, T, _ in waypoints):
         return "reach", 0
@@ -195,7 +196,7 @@ def _refusal(config: CellConfig, waypoints: List[Waypoint], T_bg: np.ndarray, sc
     return None, hits
 
 
-def plan_grasp(config: CellConfig, T_base_object: np.ndarray, scene: np.ndarray, here: np.ndarray) -> Tuple[PickPlan, int]:
+def plan_grasp(config: CellConfig, T_base_object: np.ndarray, scene: np.ndarray, here: np.ndarray) -> tuple[PickPlan, int]:
     """The most vertical declared grasp of the part at ``T_base_object`` that is within the tilt
     limit, reachable, clear of the ``scene`` points (base frame, the part's own left out) and of
     the part's own model at that pose, and whose whole motion from the flange pose ``here``

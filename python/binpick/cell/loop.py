@@ -27,7 +27,7 @@ import sys
 import time
 from dataclasses import replace
 from types import MappingProxyType
-from typing import Any, Callable, Dict, List, Optional, TextIO, Tuple
+from typing import Any, Callable, Optional, TextIO
 
 import numpy as np
 
@@ -71,11 +71,11 @@ class _Sweep:
     """The frames of one scan as they come in: line pixels, frame index, motor angle, flange pose."""
 
     def __init__(self) -> None:
-        self.pixels: List[np.ndarray] = []
-        self.frame_of: List[np.ndarray] = []
-        self.angles: List[float] = []
-        self.poses: List[np.ndarray] = []
-        self.kept: Dict[int, np.ndarray] = {}
+        self.pixels: list[np.ndarray] = []
+        self.frame_of: list[np.ndarray] = []
+        self.angles: list[float] = []
+        self.poses: list[np.ndarray] = []
+        self.kept: dict[int, np.ndarray] = {}
 
     def add(self, uv: np.ndarray, angle: float, T_base_flange: np.ndarray, image: Optional[np.ndarray]) -> None:
         index = len(self.angles)
@@ -120,11 +120,11 @@ class Cell:
         self.camera = camera
         self.progress = progress or quiet
         self.truth = truth
-        self._empty_grips: List[np.ndarray] = []
+        self._empty_grips: list[np.ndarray] = []
         check_static_poses(config)
 
     # -- life cycle
-    def open(self) -> "Cell":
+    def open(self) -> Cell:
         """Opens the robot session, enables the laser motor, activates and opens the gripper."""
         self.progress("connect", "robot session, laser motor torque, gripper activation")
         self.robot.open_session()
@@ -146,7 +146,7 @@ class Cell:
             except (DeviceError, OSError):
                 pass
 
-    def __enter__(self) -> "Cell":
+    def __enter__(self) -> Cell:
         try:
             return self.open()
         except BaseException:
@@ -179,7 +179,7 @@ class Cell:
     def scan(self) -> ScanResult:
         """Scans the bin from every scan pose; returns the cloud in the base frame."""
         cfg = self.config
-        timings: Dict[str, float] = {"move": 0.0, "sweep": 0.0, "extract": 0.0}
+        timings: dict[str, float] = {"move": 0.0, "sweep": 0.0, "extract": 0.0}
         sweep = _Sweep()
         for i, T_scan in enumerate(cfg.scan_poses):
             t0 = time.perf_counter()
@@ -246,10 +246,10 @@ class Cell:
         t = T[:3, 3]
         judged = "" if truth is None else (f"; vs truth {truth.rotation_error_deg:.2f}°, {truth.translation_error_mm:.2f} mm "
                                            f"({'pick-grade' if truth.pick_grade else 'NOT pick-grade'})")
-        self.progress("locate", f"{result.method} score {result.score:.2f}, rmse {result.rmse:.2f} mm, at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm "
+        self.progress("locate", f"{result.method} score {result.score:.2f}, rmse {result.rmse:.2f} " f"mm, at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm "
                                 f"in {sum(result.timings.values()):.0f} ms{judged}")
 
-    def locate_and_plan(self, scan: ScanResult) -> Tuple[Located, PickPlan]:
+    def locate_and_plan(self, scan: ScanResult) -> tuple[Located, PickPlan]:
         """Locates the top part and plans its pick; when no grasp of it can be used (or the gripper
         already closed on nothing there earlier in the run), leaves its points out and tries the
         next part, up to ``config.max_candidates`` parts."""
@@ -300,7 +300,7 @@ class Cell:
         Device faults and safety refusals stop the arm and are raised; a failed grip is a record
         with ``success=False``.
         """
-        times: Dict[str, float] = {}
+        times: dict[str, float] = {}
         t0 = time.perf_counter()
         if located is None:
             scan = self.scan()
@@ -326,7 +326,7 @@ class Cell:
                           method=getattr(res, "method", None), points=len(located.scan.points), grasp=plan.grasp, held=held,
                           truth=located.truth, picked_instance=picked, error=error, timings=MappingProxyType(times))
 
-    def _judge_pick(self, located: Located, held: Optional[bool], picked: Optional[int]) -> Tuple[bool, Optional[str]]:
+    def _judge_pick(self, located: Located, held: Optional[bool], picked: Optional[int]) -> tuple[bool, Optional[str]]:
         """Whether the pick succeeded, and why not; remembers where the gripper closed on nothing."""
         if held is False:
             self._empty_grips.append(located.T_base_object[:3, 3].copy())
@@ -365,11 +365,12 @@ class Cell:
 
     # -- run
     def run(self, n_picks: int) -> RunReport:
-        """Up to ``n_picks`` picks; stops early when nothing is found, no grasp fits, or a device faults (the arm is stopped)."""
+        """Up to ``n_picks`` picks; stops early when nothing is found, no grasp fits, or a device
+        faults (the arm is stopped)."""
         n = count(n_picks, "n_picks", 1)
         self._empty_grips = []
-        records: List[PickRecord] = []
-        self._last: Tuple[Optional[ScanResult], Optional[Located]] = (None, None)
+        records: list[PickRecord] = []
+        self._last: tuple[Optional[ScanResult], Optional[Located]] = (None, None)
         stopped: Optional[str] = None
         for i in range(1, n + 1):
             self.progress("pick", f"— pick {i} of {n} —")
@@ -380,7 +381,7 @@ class Cell:
         last_scan, last_located = self._last
         return RunReport(records=tuple(records), stopped=stopped, last_scan=last_scan, last_located=last_located)
 
-    def _cycle(self, i: int) -> Tuple[PickRecord, Optional[str]]:
+    def _cycle(self, i: int) -> tuple[PickRecord, Optional[str]]:
         """One pick of :meth:`run`: scan, locate and plan, pick; the record, and why the run stops (None to go on)."""
         t0 = time.perf_counter()
         scan: Optional[ScanResult] = None

@@ -3,8 +3,9 @@ a pick plan, a pick record and a run report. Lengths in mm, transforms 4×4 ``T_
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Optional, Tuple
+from typing import Any, Optional
 
 import numpy as np
 
@@ -63,7 +64,7 @@ class PickPlan:
     T_base_gripper: np.ndarray
     T_base_flange: np.ndarray
     tilt_deg: float
-    waypoints: Tuple[Tuple[str, np.ndarray, bool], ...]
+    waypoints: tuple[tuple[str, np.ndarray, bool], ...]
     considered: int
     rejected: Mapping[str, int]
 
@@ -122,9 +123,10 @@ class PickRecord:
 
 @dataclass(frozen=True, eq=False)
 class RunReport:
-    """The picks of :meth:`Cell.run`, why it stopped (None when every pick was tried), and the last scan and location."""
+    """The picks of :meth:`Cell.run`, why it stopped (None when every pick was tried), and the
+    last scan and location."""
 
-    records: Tuple[PickRecord, ...]
+    records: tuple[PickRecord, ...]
     stopped: Optional[str]
     last_scan: Optional[ScanResult] = None
     last_located: Optional[Located] = None

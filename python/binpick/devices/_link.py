@@ -9,9 +9,10 @@ a reply that stops part-way becomes :class:`~binpick.errors.TruncatedReplyError`
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Callable, Iterator, Optional, TypeVar, Union
+from typing import Callable, Optional, TypeVar, Union
 
 import serial
 
@@ -201,7 +202,8 @@ class SerialLink:
         return bytes(buf)
 
     def silence(self, what: str, got: bytes) -> None:
-        """Raises for a reply that did not (fully) come: DeviceTimeout when ``got`` is empty, else TruncatedReplyError."""
+        """Raises for a reply that did not (fully) come: DeviceTimeout when ``got`` is empty, else
+        TruncatedReplyError."""
         t = self.settings.timeout_s
         if got:
             raise TruncatedReplyError(f"{self.device}: {what} stopped after {len(got)} bytes ({got[:40]!r}) and "

@@ -23,12 +23,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Tuple, Union
+from typing import Union
 
 import serial
 
-from ..errors import InvalidInputError, ProtocolError
 from .._validate import check_int, check_number
+from ..errors import InvalidInputError, ProtocolError
 from ._link import SerialLink, SerialSettings, with_retries
 from .motor import LaserMotor, MotorRange
 
@@ -54,7 +54,7 @@ def encode_position(motor_id: int, position: int, *, torque_level: int = 2) -> b
     return encode_request((torque_level << 5) | motor_id, check_int(position, "position", 0, MAX_POSITION))
 
 
-def decode_reply(raw: bytes) -> Tuple[int, int]:
+def decode_reply(raw: bytes) -> tuple[int, int]:
     """(load, position) from a 2-byte reply; ProtocolError for anything else."""
     raw = bytes(raw)
     if len(raw) != 2:
@@ -110,8 +110,8 @@ class AiMotor(LaserMotor):
         self.range = config.range
         self._link = SerialLink(port, config.serial, device="ai-motor")
 
-    def _exchange(self, request: bytes, *, retry: bool) -> Tuple[int, int]:
-        def once() -> Tuple[int, int]:
+    def _exchange(self, request: bytes, *, retry: bool) -> tuple[int, int]:
+        def once() -> tuple[int, int]:
             self._link.discard_input()
             self._link.write(request)
             return decode_reply(self._link.read_exact(2, self._link.deadline(), what="reply"))

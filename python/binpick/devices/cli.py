@@ -11,7 +11,7 @@ import signal
 import sys
 import threading
 import time
-from typing import List, Optional
+from typing import Optional
 
 from ..errors import BinpickError
 from .emulators import PtyEmulator
@@ -54,7 +54,7 @@ def _build(args: argparse.Namespace) -> PtyEmulator:
     return DynamixelEmulator(config=DynamixelEmulatorConfig(motor_id=1 if args.id is None else args.id))
 
 
-def emulate_main(argv: Optional[List[str]] = None) -> int:
+def emulate_main(argv: Optional[list[str]] = None) -> int:
     """Runs ``binpick emulate`` with ``argv`` (without the program name); returns the exit code.
 
     0 after Ctrl-C (or when the emulated port closes), 2 for bad arguments or settings.

@@ -27,10 +27,11 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass
-from typing import Tuple, Union
+from typing import Union
 
 import serial
 
+from .._validate import check_int
 from ..errors import (
     ChecksumError,
     DeviceError,
@@ -41,7 +42,6 @@ from ..errors import (
     TruncatedReplyError,
     UnknownReplyError,
 )
-from .._validate import check_int
 from ._link import SerialLink, SerialSettings, raise_after_stop, with_retries
 from .motor import LaserMotor, MotorRange
 
@@ -88,7 +88,7 @@ ERROR_NAMES = {1: "result fail", 2: "instruction error", 3: "CRC error", 4: "dat
                5: "data length error", 6: "data limit error", 7: "access error"}
 
 
-def _crc_table() -> Tuple[int, ...]:
+def _crc_table() -> tuple[int, ...]:
     table = []
     for i in range(256):
         crc = i << 8
@@ -312,7 +312,7 @@ class DynamixelBus:
                               f"{status.describe_error()}")
         return status
 
-    def ping(self, motor_id: int) -> Tuple[int, int]:
+    def ping(self, motor_id: int) -> tuple[int, int]:
         """(model number, firmware version) of ``motor_id``."""
         st = self.transact(motor_id, INST_PING, retry=True)
         if len(st.params) != 3:

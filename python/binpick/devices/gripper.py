@@ -26,11 +26,13 @@ from __future__ import annotations
 import abc
 import struct
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Optional, Sequence, Tuple, Union
+from typing import Any, Optional, Union
 
 import serial
 
+from .._validate import check_int, check_number
 from ..errors import (
     ChecksumError,
     DeviceError,
@@ -42,7 +44,6 @@ from ..errors import (
     TruncatedReplyError,
     UnknownReplyError,
 )
-from .._validate import check_int, check_number
 from ._link import SerialLink, SerialSettings, raise_after_stop, with_retries
 
 __all__ = [
@@ -124,7 +125,7 @@ class MelfaHandGripper(Gripper):
 
 # --------------------------------------------------------------------------- Modbus RTU codec
 
-def _crc_table() -> Tuple[int, ...]:
+def _crc_table() -> tuple[int, ...]:
     table = []
     for i in range(256):
         crc = i
@@ -231,7 +232,7 @@ class GripperStatus:
     current: int
 
     @classmethod
-    def from_bytes(cls, data: bytes) -> "GripperStatus":
+    def from_bytes(cls, data: bytes) -> GripperStatus:
         """Parses the 6 status bytes; ProtocolError for another length."""
         if len(data) != 6:
             raise ProtocolError(f"gripper: status has 6 bytes, got {len(data)}")
@@ -306,7 +307,7 @@ class ModbusGripper(Gripper):
         """Closes the serial port."""
         self._link.close()
 
-    def __enter__(self) -> "ModbusGripper":
+    def __enter__(self) -> ModbusGripper:
         return self
 
     def __exit__(self, *exc: Any) -> None:

@@ -43,12 +43,14 @@ from __future__ import annotations
 import math
 import re
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Optional, Union
 
 import numpy as np
 import serial
 
+from .._validate import check_int, check_number
 from ..errors import (
     DeviceError,
     DeviceFault,
@@ -58,7 +60,6 @@ from ..errors import (
     SafetyError,
     UnknownReplyError,
 )
-from .._validate import check_int, check_number
 from ._link import SerialLink, SerialSettings, raise_after_stop, restate, with_retries
 from .robot import Robot
 from .safety import CellLimits, check_linear_speed, check_move, check_override, check_pose, check_sequence
@@ -178,7 +179,7 @@ def _number(text: str, what: str) -> float:
     return v
 
 
-def _named_values(data: str, names: Tuple[str, ...], what: str) -> Tuple[np.ndarray, list]:
+def _named_values(data: str, names: tuple[str, ...], what: str) -> tuple[np.ndarray, list]:
     """Values of ``name;value;`` pairs up to the first empty field, then the remaining fields."""
     fields = data.split(";")
     values = {}
@@ -194,7 +195,7 @@ def _named_values(data: str, names: Tuple[str, ...], what: str) -> Tuple[np.ndar
     return np.array([values[n] for n in names]), fields[i + 1:]
 
 
-def parse_position(data: str) -> Tuple[np.ndarray, Tuple[int, int]]:
+def parse_position(data: str) -> tuple[np.ndarray, tuple[int, int]]:
     """(X, Y, Z, A, B, C) in mm and degrees and the flags (FL1, FL2) from a PPOSF reply's data."""
     xyzabc, rest = _named_values(data, _POSE_NAMES, "PPOSF")
     m = re.fullmatch(r"(\d+),(-?\d+)", rest[0]) if rest else None
@@ -218,7 +219,7 @@ def parse_state(data: str) -> RobotState:
                       int(m.group(2) or 0))
 
 
-def format_position(number: int, xyzabc_deg: Any, flags: Tuple[int, int]) -> str:
+def format_position(number: int, xyzabc_deg: Any, flags: tuple[int, int]) -> str:
     """``P<n>=(X,Y,Z,A,B,C)(FL1,FL2)`` with two decimals, the body of an EXECP command."""
     check_int(number, "position number", 1, 999)
     v = [check_number(x, "xyzabc_deg", low=-99999.0, high=99999.0) for x in np.asarray(xyzabc_deg, dtype=float)]
@@ -255,7 +256,7 @@ class MelfaConfig:
     slot: int = 1
     client_name: str = "NARCUSR"
     position_variable: int = 1
-    default_flags: Tuple[int, int] = (7, 0)
+    default_flags: tuple[int, int] = (7, 0)
     initial_override_percent: float = 10.0
     initial_linear_speed_mm_s: float = 50.0
     servo_on_timeout_s: float = 5.0
@@ -304,7 +305,7 @@ class MelfaRobot(Robot):
         self._link = SerialLink(port, config.serial, device="robot")
 
     # -- life cycle
-    def __enter__(self) -> "MelfaRobot":
+    def __enter__(self) -> MelfaRobot:
         try:
             self.open_session()
         except BaseException:
@@ -378,7 +379,7 @@ class MelfaRobot(Robot):
         frame = encode_command(command, robot=self.config.robot_number, slot=self.config.slot)
         what = f"reply to {command!r}"
 
-        def once() -> Tuple[R3Reply, Any]:
+        def once() -> tuple[R3Reply, Any]:
             self._link.discard_input()
             self._link.write(frame)
             deadline = self._link.deadline()
@@ -430,7 +431,7 @@ class MelfaRobot(Robot):
         """Operation rights, servo power, running and alarm number (DSTATE)."""
         return self._send("DSTATE", retry=True, parse=parse_state)
 
-    def read_xyzabc(self) -> Tuple[np.ndarray, Tuple[int, int]]:
+    def read_xyzabc(self) -> tuple[np.ndarray, tuple[int, int]]:
         """The flange pose as (X, Y, Z, A, B, C) in mm and radians, and the posture flags (PPOSF)."""
         deg, flags = self._send("PPOSF", retry=True, parse=parse_position)
         return xyzabc_from_wire(deg), flags
@@ -486,7 +487,7 @@ class MelfaRobot(Robot):
                 raise DeviceTimeout(f"robot: the motion did not finish within {limit} s")
             time.sleep(self.config.poll_interval_s)
 
-    def move_to(self, T_base_flange: Any, *, linear: bool = False, flags: Optional[Tuple[int, int]] = None,
+    def move_to(self, T_base_flange: Any, *, linear: bool = False, flags: Optional[tuple[int, int]] = None,
                 wait: bool = True) -> None:
         """Moves the flange to ``T_base_flange`` (MOV, or MVS when ``linear``).
 
@@ -517,7 +518,7 @@ class MelfaRobot(Robot):
             except DeviceError as exc:
                 raise restate(exc, f"step {i + 1} of {len(checked)} failed, later steps were not sent: {exc}") from exc
 
-    def _execute(self, target: np.ndarray, linear: bool, flags: Tuple[int, int], wait: bool) -> None:
+    def _execute(self, target: np.ndarray, linear: bool, flags: tuple[int, int], wait: bool) -> None:
         n = self.config.position_variable
         self._send("EXEC" + format_position(n, xyzabc_to_wire(xyzabc_from_transform(target)), flags), retry=True)
         verb = "MVS" if linear else "MOV"

@@ -13,8 +13,8 @@ import time
 from dataclasses import dataclass
 from typing import Any, Optional
 
-from ..errors import DeviceTimeout, InvalidInputError, SafetyError
 from .._validate import check_number
+from ..errors import DeviceTimeout, InvalidInputError, SafetyError
 from ._link import SerialLink
 
 __all__ = ["MotorRange", "LaserMotor"]
@@ -131,7 +131,7 @@ class LaserMotor(abc.ABC):
         """Closes the serial port."""
         self._link.close()
 
-    def __enter__(self) -> "LaserMotor":
+    def __enter__(self) -> LaserMotor:
         return self
 
     def __exit__(self, *exc: Any) -> None:

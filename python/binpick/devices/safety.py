@@ -18,17 +18,18 @@ what to change. The rules, all in the robot's base frame on the flange pose ``T_
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence, Tuple
+from typing import Any
 
 import numpy as np
 
-from ..errors import InvalidInputError, SafetyError
 from .._validate import check_number, check_transform
+from ..errors import InvalidInputError, SafetyError
 
 __all__ = ["CellLimits", "check_pose", "check_move", "check_sequence", "check_override", "check_linear_speed"]
 
-Vec3 = Tuple[float, float, float]
+Vec3 = tuple[float, float, float]
 
 
 @dataclass(frozen=True)

@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import InvalidInputError, ShapeError
 from .._validate import check_transform
+from ..errors import InvalidInputError, ShapeError
 
 __all__ = [
     "transform_from_xyzabc",

@@ -16,11 +16,11 @@ and the digital twin (:class:`SimulatedCell`): the pick loop on emulated devices
 
 from __future__ import annotations
 
+from .camera import RenderedCamera, SimCamera
 from .cell import Bin, Camera, Cell, Laser, Lighting, SensorNoise, look_down, rot_y
 from .dataset import GLOSSY_PART_SPECULAR, SimulatedScan, contact_sheet, simulate_scan, write_scan
 from .pile import Pile, SettleReport, convex_decomposition, max_interpenetration
 from .render import BIN_ID, NO_SURFACE, TABLE_ID, View, World, render_checkerboard
-from .camera import RenderedCamera, SimCamera
 from .twin import SIM_ARM, SimulatedCell, sim_limits, simulated_cell
 
 __all__ = [

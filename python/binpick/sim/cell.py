@@ -103,7 +103,8 @@ class Laser:
 
 @dataclass(frozen=True)
 class Lighting:
-    """Ambient light: ``ambient`` and ``lamp`` DN on white, the lamp's direction in the base frame, ``background`` DN."""
+    """Ambient light: ``ambient`` and ``lamp`` DN on white, the lamp's direction in the base frame,
+    ``background`` DN."""
 
     ambient: float = 55.0
     lamp: float = 45.0
@@ -136,7 +137,7 @@ class SensorNoise:
             non_negative(getattr(self, name), name)
 
     @classmethod
-    def none(cls, blur: float = 0.6) -> "SensorNoise":
+    def none(cls, blur: float = 0.6) -> SensorNoise:
         """An ideal sensor: no noise, speckle or reflections (the optics blur stays)."""
         return cls(read_noise=0.0, shot_noise=0.0, speckle=0.0, reflections=0.0, blur=blur)
 
@@ -146,7 +147,8 @@ class SensorNoise:
 
 @dataclass(frozen=True)
 class Bin:
-    """An open box on the floor: inner ``size`` (x, y, height) mm, inner floor centre ``center`` (x, y), floor height ``floor_z``."""
+    """An open box on the floor: inner ``size`` (x, y, height) mm, inner floor centre ``center``
+    (x, y), floor height ``floor_z``."""
 
     size: tuple[float, float, float] = (300.0, 200.0, 80.0)
     center: tuple[float, float] = (400.0, 0.0)

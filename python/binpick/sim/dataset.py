@@ -96,7 +96,7 @@ def contact_sheet(frames: np.ndarray, *, picks: int = 6, columns: int = 3, width
     return sheet
 
 
-def write_scan(scan: SimulatedScan, directory: "str | os.PathLike[str]") -> Path:
+def write_scan(scan: SimulatedScan, directory: str | os.PathLike[str]) -> Path:
     """Writes ``scan`` as a scan folder binpick reads like a real one (``binpick.scan.load_scan``):
     frames/NNN.png, scan.json, calibration.toml, ground_truth.json, contact_sheet.png."""
     import cv2

@@ -16,7 +16,8 @@ __all__ = ["Pile", "SettleReport", "max_interpenetration", "convex_decomposition
 
 
 class SettleReport:
-    """What one settling did: ``steps``, ``simulated_time`` (s), ``settled`` (all parts at rest), ``max_speed`` (mm/s)."""
+    """What one settling did: ``steps``, ``simulated_time`` (s), ``settled`` (all parts at rest),
+    ``max_speed`` (mm/s)."""
 
     __slots__ = ("steps", "simulated_time", "settled", "max_speed")
 
@@ -24,7 +25,10 @@ class SettleReport:
         self.steps, self.simulated_time, self.settled, self.max_speed = int(raw[0]), float(raw[1]), bool(raw[2]), float(raw[3])
 
     def __repr__(self) -> str:
-        return f"SettleReport(settled={self.settled}, steps={self.steps}, simulated_time={self.simulated_time:.3f} s, max_speed={self.max_speed:.3g} mm/s)"
+        return (
+            f"SettleReport(settled={self.settled}, steps={self.steps}, "
+            f"simulated_time={self.simulated_time:.3f} s, max_speed={self.max_speed:.3g} mm/s)"
+        )
 
 
 def _model(model: Any) -> Model:

@@ -9,7 +9,8 @@ ground truth; instance ids are the pile's part ids (≥ 0), −2 for the bin, �
 
 from __future__ import annotations
 
-from typing import Any, Optional, Sequence
+from collections.abc import Sequence
+from typing import Any, Optional
 
 import numpy as np
 
@@ -45,7 +46,7 @@ class World:
         self._meshes: dict[int, int] = {}
 
     @classmethod
-    def of_pile(cls, pile: Any, *, bin: Bin | None = None, table: bool = True, part_specular: float = 0.0) -> "World":
+    def of_pile(cls, pile: Any, *, bin: Bin | None = None, table: bool = True, part_specular: float = 0.0) -> World:
         """The bin, a table under it, and every part of ``pile`` (a :class:`binpick.sim.Pile`) at its pose."""
         w = cls()
         b = bin if bin is not None else pile.bin
@@ -108,7 +109,7 @@ class World:
         pts = as_points(points, "points", min_points=0)
         return self._scene.nearest_surface(np.ascontiguousarray(pts, dtype=np.float64))
 
-    def view(self, cell: Cell, T_base_flange: Optional[Any] = None, *, num_threads: int = 0) -> "View":
+    def view(self, cell: Cell, T_base_flange: Optional[Any] = None, *, num_threads: int = 0) -> View:
         """Casts the camera's rays at robot pose ``T_base_flange`` (default: the cell's scan pose)."""
         if not isinstance(cell, Cell):
             raise InvalidInputError(f"cell: expected a binpick.sim.Cell, got {type(cell).__name__}")

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any, Callable, List, Optional, Tuple
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -134,7 +134,7 @@ class SimulatedCell:
         t0 = time.perf_counter()
         self.pile = Pile(model, count, bin=self.layout.bin, seed=seed)
         self.progress("pile", f"{len(self.pile)} {model.name} parts dropped and settled in {time.perf_counter() - t0:.1f} s")
-        self.removed: List[int] = []
+        self.removed: list[int] = []
         self._held: Optional[int] = None
         self._release_pending: Optional[int] = None
         self._picked: Optional[int] = None
@@ -143,7 +143,7 @@ class SimulatedCell:
         self.robot_emulator = self.motor_emulator = self.gripper_emulator = None
 
     # -- life cycle
-    def __enter__(self) -> "SimulatedCell":
+    def __enter__(self) -> SimulatedCell:
         try:
             self.start()
         except BaseException:
@@ -188,7 +188,7 @@ class SimulatedCell:
                 emu.close()
 
     @property
-    def emulator_failures(self) -> List[str]:
+    def emulator_failures(self) -> list[str]:
         """Exceptions the emulators raised while serving (an emulator bug; should stay empty)."""
         return [f for emu in (self.robot_emulator, self.motor_emulator, self.gripper_emulator) if emu is not None for f in emu.failures]
 
@@ -212,7 +212,7 @@ class SimulatedCell:
                                          tolerance_mm=self.grip_tolerance_mm)
         return self._matcher
 
-    def grip_check(self) -> Optional[Tuple[int, float]]:
+    def grip_check(self) -> Optional[tuple[int, float]]:
         """The part between the fingers now, if any, and its width across them (mm): the part
         nearest the TCP whose pose in the gripper is within the grip tolerance of a declared grasp."""
         self.settle_pending()

@@ -90,7 +90,7 @@ class Checkerboard(Plane):
     square: float = 20.0
 
     @classmethod
-    def at(cls, T_base_board: np.ndarray, pattern: tuple[int, int] = (9, 6), square: float = 20.0) -> "Checkerboard":
+    def at(cls, T_base_board: np.ndarray, pattern: tuple[int, int] = (9, 6), square: float = 20.0) -> Checkerboard:
         T = np.asarray(T_base_board, float)
         return cls(point=T[:3, 3], normal=T[:3, 2], T_base_board=T, pattern=pattern, square=square)
 

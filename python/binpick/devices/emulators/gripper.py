@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
-from typing import Any, List, Optional
+from typing import Any, Optional
 
 from ..._validate import check_int, check_number
 from ..gripper import (
@@ -101,7 +101,7 @@ class GripperEmulator(PtyEmulator):
             self.axis.set_goal(goal)
 
     # -- protocol
-    def _take_requests(self, buf: bytearray) -> List[bytes]:
+    def _take_requests(self, buf: bytearray) -> list[bytes]:
         out = []
         while len(buf) >= 8:
             need = 9 + buf[6] if buf[1] == FC_WRITE_MULTIPLE else 8

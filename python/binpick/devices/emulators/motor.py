@@ -12,9 +12,10 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass
-from typing import Any, List, Optional, Union
+from typing import Any, Optional, Union
 
 from ..._validate import check_int, check_number
+from ...errors import ChecksumError, ProtocolError
 from ..dynamixel import (
     ADDR_GOAL_POSITION,
     ADDR_MOVING,
@@ -31,7 +32,6 @@ from ..dynamixel import (
     decode_packet,
     encode_packet,
 )
-from ...errors import ChecksumError, ProtocolError
 from ._pty import PtyEmulator, monotonic
 
 __all__ = ["LinearAxis", "DynamixelEmulatorConfig", "DynamixelEmulator", "CrcFailure"]
@@ -136,8 +136,8 @@ class DynamixelEmulator(PtyEmulator):
         return bool(self.table[ADDR_TORQUE_ENABLE])
 
     # -- protocol
-    def _take_requests(self, buf: bytearray) -> List[Union[Packet, CrcFailure]]:
-        out: List[Union[Packet, CrcFailure]] = []
+    def _take_requests(self, buf: bytearray) -> list[Union[Packet, CrcFailure]]:
+        out: list[Union[Packet, CrcFailure]] = []
         while True:
             start = buf.find(HEADER)
             if start < 0:
