@@ -24,17 +24,15 @@ from pathlib import Path
 import numpy as np
 
 import binpick
-from binpick.transforms import pose_error
+from binpick.transforms import pose_error, rotation_about
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_PARTS = HERE.parent.parent / "shared" / "data" / "parts"
 
 
 def rigid(axis: np.ndarray, angle: float, shift: np.ndarray) -> np.ndarray:
-    axis = axis / np.linalg.norm(axis)
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     t = np.eye(4)
-    t[:3, :3] = np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+    t[:3, :3] = rotation_about(axis, angle)
     t[:3, 3] = shift
     return t
 

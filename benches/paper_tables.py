@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 import binpick
+from binpick.transforms import rotation_angle_deg
 
 # Table 3 cases: (n_m, n_d, position mm, rotation deg (θx, θy, θz)); Table 4's CCP + ICP rows.
 CASES = [
@@ -122,8 +123,7 @@ def run_case(model, model_cloud, data, pos, rot_deg, repeats=1):
 
 
 def angle_of(d_rot) -> float:
-    r = rot_xyz(d_rot)
-    return float(np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1, 1))))
+    return rotation_angle_deg(rot_xyz(d_rot))
 
 
 def tables_3_4() -> None:

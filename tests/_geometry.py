@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from binpick.transforms import pose_error
+from binpick.transforms import pose_error, rotation_about
 
 
 def box_mesh(size=(20.0, 30.0, 40.0)) -> tuple[np.ndarray, np.ndarray]:
@@ -71,14 +71,11 @@ def write_ply_mesh(path: Path, v: np.ndarray, f: np.ndarray, binary: bool) -> No
 def random_rigid(rng: np.random.Generator, max_angle: float, max_shift: float) -> np.ndarray:
     """A random 4×4 rigid transform: rotation up to ``max_angle`` rad, shift up to ``max_shift`` mm."""
     axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
     ang = rng.uniform(0, max_angle)
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    rot = np.eye(3) + np.sin(ang) * k + (1 - np.cos(ang)) * k @ k
     shift = rng.normal(size=3)
     shift *= rng.uniform(0, max_shift) / np.linalg.norm(shift)
     t = np.eye(4)
-    t[:3, :3] = rot
+    t[:3, :3] = rotation_about(axis, ang)
     t[:3, 3] = shift
     return t
 
@@ -156,9 +153,7 @@ def revolved_mesh(profile, segments: int = 96) -> tuple[np.ndarray, np.ndarray]:
 
 def rot(axis, angle) -> np.ndarray:
     """3×3 rotation about ``axis`` by ``angle`` rad."""
-    a = np.asarray(axis, float) / np.linalg.norm(axis)
-    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+    return rotation_about(axis, angle)
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from binpick import transforms
 from binpick.calibration import CameraIntrinsics, CellCalibration
 from binpick.vision import _synthetic as syn
 from binpick.vision._synthetic import pose
@@ -16,8 +17,7 @@ SQUARE = 25.0
 
 def rotation_angle_deg(A: np.ndarray, B: np.ndarray) -> float:
     """The angle (degrees) of the rotation between the rotation parts of ``A`` and ``B``."""
-    c = (np.trace(A[:3, :3].T @ B[:3, :3]) - 1) / 2
-    return float(np.degrees(np.arccos(np.clip(c, -1, 1))))
+    return transforms.rotation_angle_deg(A[:3, :3].T @ B[:3, :3])
 
 
 class Rig:

@@ -111,7 +111,7 @@ class Cell:
             raise InvalidInputError(f"config: expected a CellConfig, got {type(config).__name__}")
         if not isinstance(camera, FrameSource):
             raise InvalidInputError(f"camera: expected a binpick.cell.FrameSource, got {type(camera).__name__}")
-        if getattr(robot, "limits", config.limits) != config.limits:
+        if robot.limits is not None and robot.limits != config.limits:
             raise InvalidInputError("robot: the driver's CellLimits differ from config.limits; open the robot with limits=config.limits")
         self.config = config
         self.robot = robot

@@ -4,7 +4,7 @@ implements (:class:`~binpick.devices.melfa.MelfaRobot` is the one shipped)."""
 from __future__ import annotations
 
 import abc
-from typing import Any
+from typing import Any, Optional
 
 import numpy as np
 
@@ -20,7 +20,8 @@ class Robot(abc.ABC):
     anything is sent (:class:`~binpick.errors.SafetyError`).
     """
 
-    limits: CellLimits
+    limits: Optional[CellLimits] = None
+    """The rules the driver enforces; None for a driver that checks nothing itself."""
 
     def open_session(self) -> None:
         """Prepares the arm for motion (a controller session, servo power); none by default."""
