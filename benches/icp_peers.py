@@ -66,10 +66,18 @@ MAX_ITERS = 100
 def run_binpick(method):
     def run(source, target, normals):
         r = binpick.icp(
-            source, target, target_normals=normals, method=method, max_correspondence_distance=MAX_DIST,
-            max_iterations=MAX_ITERS, rotation_tolerance=1e-5, translation_tolerance=1e-4, num_threads=1,
+            source,
+            target,
+            target_normals=normals,
+            method=method,
+            max_correspondence_distance=MAX_DIST,
+            max_iterations=MAX_ITERS,
+            rotation_tolerance=1e-5,
+            translation_tolerance=1e-4,
+            num_threads=1,
         )
         return r.T_target_source, r.iterations
+
     return run
 
 
@@ -92,6 +100,7 @@ def peers():
                 crit = reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7, max_iteration=MAX_ITERS)
                 r = reg.registration_icp(ps, pt, MAX_DIST, np.eye(4), estimation, crit)
                 return np.asarray(r.transformation), None
+
             return run
 
         out["Open3D point_to_point"] = o3d_run(reg.TransformationEstimationPointToPoint(), False)
@@ -108,9 +117,17 @@ def peers():
                 if kind == "PLANE_ICP":
                     small_gicp.estimate_normals(tgt, num_threads=1)
                 tree = small_gicp.KdTree(tgt, num_threads=1)
-                r = small_gicp.align(tgt, small_gicp.PointCloud(source), tree, registration_type=kind,
-                                     max_correspondence_distance=MAX_DIST, num_threads=1, max_iterations=MAX_ITERS)
+                r = small_gicp.align(
+                    tgt,
+                    small_gicp.PointCloud(source),
+                    tree,
+                    registration_type=kind,
+                    max_correspondence_distance=MAX_DIST,
+                    num_threads=1,
+                    max_iterations=MAX_ITERS,
+                )
                 return r.T_target_source, r.iterations
+
             return run
 
         out["small_gicp ICP"] = sg_run("ICP")
@@ -138,7 +155,10 @@ def main(argv=None) -> int:
     ap.add_argument("--trials", type=int, default=3)
     ap.add_argument("--parts", type=Path, default=DEFAULT_PARTS)
     args = ap.parse_args(argv)
-    methods = {"binpick point_to_point": run_binpick("point_to_point"), "binpick point_to_plane": run_binpick("point_to_plane")}
+    methods = {
+        "binpick point_to_point": run_binpick("point_to_point"),
+        "binpick point_to_plane": run_binpick("point_to_plane"),
+    }
     extra = peers()
     fixed = extra.pop("_o3d_fixed", None)
     methods.update(extra)
@@ -155,7 +175,11 @@ def main(argv=None) -> int:
                 if its is None and fixed is not None:
                     o3d, reg = fixed
                     plane = name.endswith("plane")
-                    est = reg.TransformationEstimationPointToPlane() if plane else reg.TransformationEstimationPointToPoint()
+                    est = (
+                        reg.TransformationEstimationPointToPlane()
+                        if plane
+                        else reg.TransformationEstimationPointToPoint()
+                    )
                     per_it = o3d_seconds_per_iteration(o3d, reg, source, target, est, plane, normals)
                 rows[name]["per_it"].append(per_it if per_it is not None else elapsed / max(its or 1, 1))
                 rot, trans = pose_error(t_est, truth)
@@ -164,10 +188,20 @@ def main(argv=None) -> int:
                 r["its"].append(its)
                 r["rot"].append(rot)
                 r["trans"].append(trans)
-                print(f"{part} trial {trial}: {name:24s} {elapsed * 1e3:8.1f} ms  its {its}  {rot:.4f}°  {trans:.4f} mm", file=sys.stderr, flush=True)
+                print(
+                    f"{part} trial {trial}: {name:24s} {elapsed * 1e3:8.1f} ms  its {its}  {rot:.4f}°  {trans:.4f} mm",
+                    file=sys.stderr,
+                    flush=True,
+                )
     n = args.points
-    print(f"\n### ICP, {n} points, 0.2 mm noise, start 5° / 10 mm off, one thread " f"(median over {len(rows['binpick point_to_point']['time'])} cases)\n")
-    print("| method | time per ICP (ms) | iterations | µs per point-iteration " "| rot. error ° (median / max) | transl. error mm (median / max) |")
+    print(
+        f"\n### ICP, {n} points, 0.2 mm noise, start 5° / 10 mm off, one thread "
+        f"(median over {len(rows['binpick point_to_point']['time'])} cases)\n"
+    )
+    print(
+        "| method | time per ICP (ms) | iterations | µs per point-iteration "
+        "| rot. error ° (median / max) | transl. error mm (median / max) |"
+    )
     print("|---|---|---|---|---|---|")
     per_pt = {}
     for name, r in rows.items():
@@ -182,7 +216,9 @@ def main(argv=None) -> int:
     ours = per_pt["binpick point_to_point"]
     for peer in ("small_gicp ICP", "Open3D point_to_point"):
         if per_pt.get(peer):
-            print(f"\nbinpick point_to_point is {per_pt[peer] / ours:.2f}× faster per point-iteration than {peer}", end="")
+            print(
+                f"\nbinpick point_to_point is {per_pt[peer] / ours:.2f}× faster per point-iteration than {peer}", end=""
+            )
             ratio = statistics.median(rows[peer]["time"]) / statistics.median(rows["binpick point_to_point"]["time"])
             print(f"; {ratio:.2f}× per ICP")
     return 0

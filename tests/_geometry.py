@@ -16,8 +16,20 @@ def box_mesh(size=(20.0, 30.0, 40.0)) -> tuple[np.ndarray, np.ndarray]:
     sx, sy, sz = size
     v = np.array([[x, y, z] for z in (0, sz) for y in (0, sy) for x in (0, sx)], dtype=float)
     f = np.array(
-        [[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
-         [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]]
+        [
+            [0, 2, 1],
+            [1, 2, 3],
+            [4, 5, 6],
+            [5, 7, 6],
+            [0, 1, 4],
+            [1, 5, 4],
+            [2, 6, 3],
+            [3, 6, 7],
+            [0, 4, 2],
+            [2, 4, 6],
+            [1, 3, 5],
+            [3, 7, 5],
+        ]
     )
     return v, f
 
@@ -100,7 +112,8 @@ def _ear_clip(poly: np.ndarray) -> list[tuple[int, int, int]]:
                 continue
             inside = any(
                 cross(a, b, poly[m]) >= 0 and cross(b, c, poly[m]) >= 0 and cross(c, a, poly[m]) >= 0
-                for m in idx if m not in (i, j, n)
+                for m in idx
+                if m not in (i, j, n)
             )
             if not inside:
                 tris.append((i, j, n))
@@ -160,14 +173,18 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
     """A uniformly random 3×3 rotation."""
     q = rng.normal(size=4)
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
-def symmetric_pose_error(t_est: np.ndarray, t_true: np.ndarray, rotations, center=(0.0, 0.0, 0.0), continuous_axis=None) -> tuple[float, float]:
+def symmetric_pose_error(
+    t_est: np.ndarray, t_true: np.ndarray, rotations, center=(0.0, 0.0, 0.0), continuous_axis=None
+) -> tuple[float, float]:
     """(rotation deg, translation mm) of ``t_est`` against ``t_true`` minimised over symmetry
     rotations about ``center`` (model frame) and a continuous axis through it: the library's
     :func:`binpick.transforms.pose_error` with the group written as 4×4 maps."""

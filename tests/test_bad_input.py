@@ -95,7 +95,10 @@ def test_unknown_unit_and_mesh_errors(tmp_path):
     (tmp_path / "flat.obj").write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
     with pytest.raises(errors.MeshFileError, match="non-zero area"):
         binpick.Model.from_mesh(tmp_path / "flat.obj")
-    (tmp_path / "trunc.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 10\nproperty " b"float x\nproperty float y\nproperty float z\nend_header\n\x00\x00")
+    (tmp_path / "trunc.ply").write_bytes(
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 10\nproperty "
+        b"float x\nproperty float y\nproperty float z\nend_header\n\x00\x00"
+    )
     with pytest.raises(errors.MeshFileError, match="truncated"):
         binpick.read_ply(tmp_path / "trunc.ply")
     with pytest.raises(errors.MeshFileError, match="extension"):

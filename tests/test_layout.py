@@ -96,7 +96,7 @@ def find_cycle(graph: dict[str, set[str]]) -> Optional[list[str]]:
         stack.append(node)
         for nxt in sorted(graph.get(node, ())):
             if state.get(nxt) == 1:
-                return stack[stack.index(nxt):] + [nxt]
+                return stack[stack.index(nxt) :] + [nxt]
             if nxt not in state:
                 cycle = visit(nxt)
                 if cycle:
@@ -145,7 +145,9 @@ def test_the_real_pick_loop_loads_neither_the_emulators_nor_the_simulator():
 
 
 def _oversized(root: str) -> list[str]:
-    files = [p for p in (ROOT / root).rglob("*") if p.is_file() and p.suffix in SOURCE_SUFFIXES and "target" not in p.parts]
+    files = [
+        p for p in (ROOT / root).rglob("*") if p.is_file() and p.suffix in SOURCE_SUFFIXES and "target" not in p.parts
+    ]
     counts = {p: len(p.read_text(encoding="utf-8", errors="replace").splitlines()) for p in files}
     return [f"{p.relative_to(ROOT)}: {n} lines" for p, n in sorted(counts.items()) if n > MAX_LINES]
 

@@ -160,8 +160,15 @@ def test_a_sparse_model_cloud_is_refined_on_its_mesh_to_the_paper_table_targets(
     mi = np.flatnonzero(dense_m.normals[:, 2] > 0)[:300]
     di = np.flatnonzero(dense_d.normals[:, 2] > 0)[:100]
     model = binpick.Model(
-        mesh.vertices.copy(), mesh.faces.copy(), dense_m.points[mi], dense_m.normals[mi], spacing=None,
-        diameter=mesh.diameter, area=mesh.area, name="tee-300", branches=mesh.branches,
+        mesh.vertices.copy(),
+        mesh.faces.copy(),
+        dense_m.points[mi],
+        dense_m.normals[mi],
+        spacing=None,
+        diameter=mesh.diameter,
+        area=mesh.area,
+        name="tee-300",
+        branches=mesh.branches,
         special_direction=mesh.special_direction,
     )
     worst = (0.0, 0.0)

@@ -96,7 +96,9 @@ def non_negative(value: Any, name: str, unit: str = "") -> float:
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: must be a number{(' (' + unit + ')') if unit else ''}, got {value!r}") from None
+        raise InvalidInputError(
+            f"{name}: must be a number{(' (' + unit + ')') if unit else ''}, got {value!r}"
+        ) from None
     if not np.isfinite(v) or v < 0:
         raise InvalidInputError(f"{name}: must be a finite number ≥ 0, got {value!r}")
     return v
@@ -113,8 +115,10 @@ def count(value: Any, name: str, minimum: int = 0) -> int:
 
 # --------------------------------------------------------------------------- devices
 
-def check_number(value: Any, name: str, *, low: Optional[float] = None, high: Optional[float] = None,
-                 unit: str = "") -> float:
+
+def check_number(
+    value: Any, name: str, *, low: Optional[float] = None, high: Optional[float] = None, unit: str = ""
+) -> float:
     """``value`` as a finite float within [low, high], or InvalidInputError naming ``name``."""
     if isinstance(value, bool):
         raise InvalidInputError(f"{name}: must be a number{_unit(unit)}, got the boolean {value!r}")
@@ -125,8 +129,10 @@ def check_number(value: Any, name: str, *, low: Optional[float] = None, high: Op
     if not math.isfinite(v):
         raise InvalidInputError(f"{name}: must be finite, got {v}")
     if (low is not None and v < low) or (high is not None and v > high):
-        raise InvalidInputError(f"{name}: {v:g}{unit and ' ' + unit} is outside [{low}, {high}]{_unit(unit)}; "
-                                "pass a value inside that range")
+        raise InvalidInputError(
+            f"{name}: {v:g}{unit and ' ' + unit} is outside [{low}, {high}]{_unit(unit)}; "
+            "pass a value inside that range"
+        )
     return v
 
 
@@ -146,7 +152,9 @@ def check_transform(value: Any, name: str) -> np.ndarray:
     try:
         arr = np.array(value, dtype=np.float64)
     except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: cannot be read as a 4×4 numeric array; pass a numpy (4, 4) float array") from None
+        raise InvalidInputError(
+            f"{name}: cannot be read as a 4×4 numeric array; pass a numpy (4, 4) float array"
+        ) from None
     if arr.shape != (4, 4):
         raise ShapeError(f"{name}: expected a (4, 4) homogeneous transform, got shape {arr.shape}")
     if not np.isfinite(arr).all():
@@ -204,7 +212,10 @@ def as_image(value: Any, name: str, *, shape: tuple[int, int] | None = None, col
         value = value[:, :, 0]
     if value.ndim == 2:
         if color:
-            raise ShapeError(f"{name}: a grey image of shape {value.shape}; the laser " "line is found by colour, pass the BGR frame (H, W, 3)")
+            raise ShapeError(
+                f"{name}: a grey image of shape {value.shape}; the laser "
+                "line is found by colour, pass the BGR frame (H, W, 3)"
+            )
     elif value.ndim == 3 and value.shape[2] == 3:
         if color is False:
             raise ShapeError(f"{name}: expected a single-channel image, got shape {value.shape}")

@@ -64,7 +64,11 @@ class CameraIntrinsics:
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, CameraIntrinsics):
             return NotImplemented
-        return (self.width, self.height) == (other.width, other.height) and np.array_equal(self.K, other.K) and np.array_equal(self.dist, other.dist)
+        return (
+            (self.width, self.height) == (other.width, other.height)
+            and np.array_equal(self.K, other.K)
+            and np.array_equal(self.dist, other.dist)
+        )
 
     def __repr__(self) -> str:
         K = self.K

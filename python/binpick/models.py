@@ -17,7 +17,16 @@ from ._validate import as_points, as_transform, as_vector, count, positive
 from .errors import InvalidInputError
 from .transforms import pose_error
 
-__all__ = ["Model", "Branch", "PpfParams", "Symmetries", "read_ply", "write_ply", "estimate_normals", "voxel_downsample"]
+__all__ = [
+    "Model",
+    "Branch",
+    "PpfParams",
+    "Symmetries",
+    "read_ply",
+    "write_ply",
+    "estimate_normals",
+    "voxel_downsample",
+]
 
 
 @dataclass(frozen=True)
@@ -189,8 +198,18 @@ class Model:
         if count is not None:
             count = _count(count)
         pts, nrm, diameter, area = _core.sample_mesh(v, f, spacing, count, int(seed))
-        return cls(v, f, pts, nrm, spacing=spacing, diameter=diameter, area=area, name=name, branches=branches,
-                   special_direction=special_direction)
+        return cls(
+            v,
+            f,
+            pts,
+            nrm,
+            spacing=spacing,
+            diameter=diameter,
+            area=area,
+            name=name,
+            branches=branches,
+            special_direction=special_direction,
+        )
 
     def declare_branches(self, branches: Sequence[Branch], special_direction: Optional[Sequence[float]] = None) -> None:
         """Declares the part's cylindrical branches (and special feature) so that CCP can be used.
@@ -215,7 +234,9 @@ class Model:
         if not isinstance(params, PpfParams):
             raise InvalidInputError(f"ppf: expected binpick.PpfParams, got {type(params).__name__}")
         if self._prepared is None or self._prepared[0] != params:
-            rows = np.array([[*b.direction, b.length, b.radius] for b in self.branches], dtype=np.float64).reshape(-1, 5)
+            rows = np.array([[*b.direction, b.length, b.radius] for b in self.branches], dtype=np.float64).reshape(
+                -1, 5
+            )
             special = None if self.special_direction is None else np.asarray(self.special_direction, dtype=np.float64)
             key = (float(params.sampling_ratio), int(params.angle_bins), int(params.rotation_bins))
             path = self._cache_path(key)
@@ -225,7 +246,17 @@ class Model:
                     cached = path.read_bytes()
                 except OSError:
                     cached = None
-            native = _core.PreparedModel(self.points, self.normals, self.diameter, self.area, rows if len(rows) else None, special, key, cached, (self.vertices, self.faces))
+            native = _core.PreparedModel(
+                self.points,
+                self.normals,
+                self.diameter,
+                self.area,
+                rows if len(rows) else None,
+                special,
+                key,
+                cached,
+                (self.vertices, self.faces),
+            )
             if path is not None and not native.ppf_from_cache():
                 _write_atomically(path, native.ppf_bytes())
             self._prepared = (params, native)
@@ -290,7 +321,11 @@ def _write_atomically(path: Path, data: Optional[bytes]) -> None:
         tmp.write_bytes(data)
         os.replace(tmp, path)
     except OSError as exc:
-        warnings.warn(f"binpick: cannot write the PPF cache {path} ({exc}); set BINPICK_CACHE_DIR to a writable folder", RuntimeWarning, stacklevel=3)
+        warnings.warn(
+            f"binpick: cannot write the PPF cache {path} ({exc}); set BINPICK_CACHE_DIR to a writable folder",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 def _count(value: Any) -> int:
@@ -339,7 +374,9 @@ def estimate_normals(
     return _core.estimate_normals(pts, k, vp, d, count(num_threads, "num_threads"))
 
 
-def voxel_downsample(points: Any, voxel_size: float, normals: Any = None) -> tuple[np.ndarray, Optional[np.ndarray], np.ndarray]:
+def voxel_downsample(
+    points: Any, voxel_size: float, normals: Any = None
+) -> tuple[np.ndarray, Optional[np.ndarray], np.ndarray]:
     """One point per occupied ``voxel_size`` mm cube (the mean of its points):
     ``(points, normals or None, index of each voxel's first input point)``."""
     pts = as_points(points, "points", min_points=0)

@@ -120,7 +120,9 @@ def pose_error(
     return min(errors, key=lambda e: e[0] / 5.0 + e[1] / 3.0)
 
 
-def laser_sweep(T_base_laser: np.ndarray, lo: np.ndarray, hi: np.ndarray, frames: int, margin: float = 10.0) -> np.ndarray:
+def laser_sweep(
+    T_base_laser: np.ndarray, lo: np.ndarray, hi: np.ndarray, frames: int, margin: float = 10.0
+) -> np.ndarray:
     """``frames`` motor angles (rad), evenly spaced, whose laser sheets sweep the box ``lo``..``hi``
     (floor corners widened by ``margin`` mm along x, and the rim), for the laser at motor angle 0
     posed at ``T_base_laser`` (inputs already checked)."""

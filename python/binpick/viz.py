@@ -51,8 +51,16 @@ def _thin(points: np.ndarray, limit: int, seed: int = 0) -> np.ndarray:
     return points[np.random.default_rng(seed).choice(len(points), limit, replace=False)]
 
 
-def save_cloud(path: str | os.PathLike[str], points: Any, *, model: Any = None, T_base_object: Any = None,
-               highlight: Any = None, bin_bounds: Any = None, title: str = "") -> Path:
+def save_cloud(
+    path: str | os.PathLike[str],
+    points: Any,
+    *,
+    model: Any = None,
+    T_base_object: Any = None,
+    highlight: Any = None,
+    bin_bounds: Any = None,
+    title: str = "",
+) -> Path:
     """Writes the cloud (N, 3, mm) seen from above (x, y coloured by z) and in 3-D.
 
     With ``model`` (a :class:`binpick.Model`) and ``T_base_object``, the model's surface points at
@@ -154,14 +162,18 @@ def save_pick_summary(path: str | os.PathLike[str], records: Sequence[Any], *, t
     return _save(fig, path)
 
 
-def save_contact_sheet(path: str | os.PathLike[str], frames_bgr: Sequence[np.ndarray], *, columns: int = 3, width: int = 1200) -> Path:
+def save_contact_sheet(
+    path: str | os.PathLike[str], frames_bgr: Sequence[np.ndarray], *, columns: int = 3, width: int = 1200
+) -> Path:
     """Writes frames (uint8 BGR, as grabbed, all of one size) tiled ``columns`` wide."""
     import cv2
 
     from .sim import contact_sheet
 
     frames = [np.asarray(f) for f in frames_bgr]
-    if not frames or any(f.ndim != 3 or f.shape[2] != 3 or f.dtype != np.uint8 or f.shape != frames[0].shape for f in frames):
+    if not frames or any(
+        f.ndim != 3 or f.shape[2] != 3 or f.dtype != np.uint8 or f.shape != frames[0].shape for f in frames
+    ):
         raise InvalidInputError("frames_bgr: expected one or more uint8 BGR images (H, W, 3) of one size")
     sheet = contact_sheet(np.stack([f[:, :, ::-1] for f in frames]), picks=len(frames), columns=columns, width=width)
     p = Path(path)

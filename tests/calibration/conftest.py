@@ -23,12 +23,21 @@ def rotation_angle_deg(A: np.ndarray, B: np.ndarray) -> float:
 class Rig:
     def __init__(self, width: int = 1032, height: int = 778) -> None:
         s = width / 1032
-        cam = CameraIntrinsics(width, height, [[1210.0 * s, 0, 521.0 * s], [0, 1205.0 * s, 384.0 * s], [0, 0, 1]], [-0.1, 0.08, 0.0005, -0.0003, 0.0])
-        self.calibration = CellCalibration(cam, pose(0.01, -0.02, 0.015, (-150.0, 2.0, 5.0)), pose(0.02, -0.01, 0.3, (30.0, -10.0, 90.0)))
+        cam = CameraIntrinsics(
+            width,
+            height,
+            [[1210.0 * s, 0, 521.0 * s], [0, 1205.0 * s, 384.0 * s], [0, 0, 1]],
+            [-0.1, 0.08, 0.0005, -0.0003, 0.0],
+        )
+        self.calibration = CellCalibration(
+            cam, pose(0.01, -0.02, 0.015, (-150.0, 2.0, 5.0)), pose(0.02, -0.01, 0.3, (30.0, -10.0, 90.0))
+        )
         self.board = syn.Checkerboard.at(pose(0, 0, 0.05, (-100.0, -70.0, 0.0)), PATTERN, SQUARE)
         self.table = syn.Plane(np.array([0, 0, -0.5]), np.array([0, 0, 1.0]), albedo=0.3)
         self.rays = syn.camera_rays(cam)
-        self.centre = self.board.T_base_board[:3, :3] @ np.array([4 * SQUARE, 2.5 * SQUARE, 0]) + self.board.T_base_board[:3, 3]
+        self.centre = (
+            self.board.T_base_board[:3, :3] @ np.array([4 * SQUARE, 2.5 * SQUARE, 0]) + self.board.T_base_board[:3, 3]
+        )
 
     def flange_for_camera(self, T_base_camera: np.ndarray) -> np.ndarray:
         return T_base_camera @ np.linalg.inv(self.calibration.T_flange_camera)
@@ -41,9 +50,19 @@ class Rig:
         T[:3, 3] = self.centre - R[:, 2] * distance
         return self.flange_for_camera(T)
 
-    def image(self, T_base_flange: np.ndarray, *, angle: float | None = None, seed: int = 0, noise: float = 2.0) -> np.ndarray:
-        return syn.render(self.calibration, [self.board, self.table], T_base_flange, angle=angle,
-                          rng=np.random.default_rng(seed), noise=noise, ambient=200.0, rays=self.rays)
+    def image(
+        self, T_base_flange: np.ndarray, *, angle: float | None = None, seed: int = 0, noise: float = 2.0
+    ) -> np.ndarray:
+        return syn.render(
+            self.calibration,
+            [self.board, self.table],
+            T_base_flange,
+            angle=angle,
+            rng=np.random.default_rng(seed),
+            noise=noise,
+            ambient=200.0,
+            rays=self.rays,
+        )
 
 
 @pytest.fixture(scope="session")
@@ -55,5 +74,8 @@ def rig() -> Rig:
 def board_views(rig):
     """Ten stations around the board (flange poses) and their rendered frames."""
     rng = np.random.default_rng(5)
-    stations = [rig.looking_at_board(*rng.uniform(-0.35, 0.35, 2), rng.uniform(-0.6, 0.6), rng.uniform(420, 560)) for _ in range(10)]
+    stations = [
+        rig.looking_at_board(*rng.uniform(-0.35, 0.35, 2), rng.uniform(-0.6, 0.6), rng.uniform(420, 560))
+        for _ in range(10)
+    ]
     return stations, [rig.image(T, seed=i) for i, T in enumerate(stations)]

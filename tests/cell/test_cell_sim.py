@@ -59,7 +59,13 @@ def test_config_checks_scan_pose_below_the_approach_height(tee):
     limits = sim_limits(sim.layout)
     low = sim.layout.T_base_flange.copy()
     low[2, 3] = limits.approach_height_mm - 10.0
-    config = CellConfig(calibration=sim.layout.calibration(), model=tee, bin_bounds=sim.layout.bin.bounds, scan_poses=(low,),
-                        drop_pose=sim.drop_pose, limits=limits)
+    config = CellConfig(
+        calibration=sim.layout.calibration(),
+        model=tee,
+        bin_bounds=sim.layout.bin.bounds,
+        scan_poses=(low,),
+        drop_pose=sim.drop_pose,
+        limits=limits,
+    )
     with pytest.raises(SafetyError, match="approach height"):
         check_static_poses(config)

@@ -38,7 +38,9 @@ def test_a_tilted_branch_has_a_grasp_within_half_a_step_of_its_elevation(tee, el
             T[:3, :3] = R @ rotation_about(h, math.radians(elevation_deg))
             elev = math.degrees(math.asin(abs((T[:3, :3] @ d)[2])))
             assert elev == pytest.approx(elevation_deg, abs=1e-6)
-            best = min(_tilt_deg(grasp_pose(T, G)) for name, G in grasps.items() if name.startswith(f"branch{b_index}/"))
+            best = min(
+                _tilt_deg(grasp_pose(T, G)) for name, G in grasps.items() if name.startswith(f"branch{b_index}/")
+            )
             assert elev - 1e-6 <= best <= elev + 2.5 + 1e-6
 
 

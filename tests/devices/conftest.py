@@ -70,8 +70,10 @@ def dxl_emulator():
 
 @pytest.fixture
 def dxl_motor(dxl_emulator):
-    m = DynamixelMotor(dxl_emulator.slave_path, config=DynamixelConfig(
-        serial=SerialSettings(baudrate=57600, timeout_s=0.1), range=FAST_RANGE))
+    m = DynamixelMotor(
+        dxl_emulator.slave_path,
+        config=DynamixelConfig(serial=SerialSettings(baudrate=57600, timeout_s=0.1), range=FAST_RANGE),
+    )
     yield m
     m.close()
 
@@ -83,9 +85,13 @@ def ai_emulator():
 
 @pytest.fixture
 def ai_motor(ai_emulator):
-    m = AiMotor(ai_emulator.slave_path, config=AiMotorConfig(
-        serial=SerialSettings(baudrate=57600, timeout_s=0.1),
-        range=MotorRange(tolerance_rad=math.radians(1.5), move_timeout_s=2.0, poll_interval_s=0.005)))
+    m = AiMotor(
+        ai_emulator.slave_path,
+        config=AiMotorConfig(
+            serial=SerialSettings(baudrate=57600, timeout_s=0.1),
+            range=MotorRange(tolerance_rad=math.radians(1.5), move_timeout_s=2.0, poll_interval_s=0.005),
+        ),
+    )
     yield m
     m.close()
 
@@ -97,7 +103,11 @@ def gripper_emulator():
 
 @pytest.fixture
 def gripper(gripper_emulator):
-    g = ModbusGripper(gripper_emulator.slave_path, config=GripperConfig(
-        serial=SerialSettings(baudrate=115200, timeout_s=0.1), poll_interval_s=0.005, move_timeout_s=2.0))
+    g = ModbusGripper(
+        gripper_emulator.slave_path,
+        config=GripperConfig(
+            serial=SerialSettings(baudrate=115200, timeout_s=0.1), poll_interval_s=0.005, move_timeout_s=2.0
+        ),
+    )
     yield g
     g.close_port()

@@ -27,8 +27,9 @@ def test_inside_box_pointing_down_passes():
     check_pose(down(300, 0, 300), LIMITS)
 
 
-@pytest.mark.parametrize("xyz,axis", [((50, 0, 300), "x"), ((300, 400, 300), "y"), ((300, 0, -5), "z"),
-                                      ((300, 0, 600), "z")])
+@pytest.mark.parametrize(
+    "xyz,axis", [((50, 0, 300), "x"), ((300, 400, 300), "y"), ((300, 0, -5), "z"), ((300, 0, 600), "z")]
+)
 def test_outside_box_is_refused(xyz, axis):
     with pytest.raises(SafetyError, match=f"{axis} = .* outside the cell's workspace"):
         check_pose(down(*xyz), LIMITS)

@@ -45,7 +45,9 @@ class CellCalibration:
         if not isinstance(self.camera, CameraIntrinsics):
             raise CalibrationError(f"camera: expected a CameraIntrinsics, got {type(self.camera).__name__}")
         object.__setattr__(self, "T_camera_laser", frozen_copy(_rigid(self.T_camera_laser, "laser.T_camera_laser")))
-        object.__setattr__(self, "T_flange_camera", frozen_copy(_rigid(self.T_flange_camera, "hand_eye.T_flange_camera")))
+        object.__setattr__(
+            self, "T_flange_camera", frozen_copy(_rigid(self.T_flange_camera, "hand_eye.T_flange_camera"))
+        )
 
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, CellCalibration):
@@ -101,24 +103,39 @@ class CellCalibration:
         def get(table: str, key: str) -> Any:
             sect = doc.get(table)
             if not isinstance(sect, dict):
-                raise CalibrationError(f"{source}: the [{table}] table is missing; a version-1 file needs [camera], [laser] and [hand_eye]")
+                raise CalibrationError(
+                    f"{source}: the [{table}] table is missing; a version-1 file needs [camera], [laser] and [hand_eye]"
+                )
             if key not in sect:
                 raise CalibrationError(f"{source}: field {table}.{key} is missing")
             return sect[key]
 
         version = doc.get("version")
         if version is None:
-            raise CalibrationError(f"{source}: field version is missing; a calibration file starts with 'version = {FORMAT_VERSION}'")
+            raise CalibrationError(
+                f"{source}: field version is missing; a calibration file starts with 'version = {FORMAT_VERSION}'"
+            )
         if version != FORMAT_VERSION:
-            raise CalibrationError(f"{source}: field version is {version!r}; this binpick reads version {FORMAT_VERSION} only")
+            raise CalibrationError(
+                f"{source}: field version is {version!r}; this binpick reads version {FORMAT_VERSION} only"
+            )
         axis = get("laser", "axis")
         if axis != "y":
-            raise CalibrationError(f'{source}: field laser.axis is {axis!r}; the projector turns about its own y axis, write axis = "y"')
+            raise CalibrationError(
+                f'{source}: field laser.axis is {axis!r}; the projector turns about its own y axis, write axis = "y"'
+            )
         try:
             camera = CameraIntrinsics(
-                width=get("camera", "width"), height=get("camera", "height"), K=get("camera", "K"), dist=get("camera", "dist")
+                width=get("camera", "width"),
+                height=get("camera", "height"),
+                K=get("camera", "K"),
+                dist=get("camera", "dist"),
             )
-            return cls(camera=camera, T_camera_laser=get("laser", "T_camera_laser"), T_flange_camera=get("hand_eye", "T_flange_camera"))
+            return cls(
+                camera=camera,
+                T_camera_laser=get("laser", "T_camera_laser"),
+                T_flange_camera=get("hand_eye", "T_flange_camera"),
+            )
         except CalibrationError as exc:
             if str(exc).startswith(source):
                 raise

@@ -139,14 +139,22 @@ def load_cell_file(path: Any) -> CellFile:
     return CellFile(path=p, doc=doc)
 
 
-def cell_from_file(cell_file: CellFile, *, progress: Optional[Callable[[str, str], None]] = None, num_threads: int = 0) -> Cell:
+def cell_from_file(
+    cell_file: CellFile, *, progress: Optional[Callable[[str, str], None]] = None, num_threads: int = 0
+) -> Cell:
     """Builds the drivers, camera and :class:`CellConfig` a cell file describes (nothing is sent
     yet: open the returned cell as a context manager)."""
     config = config_from_file(cell_file, num_threads=num_threads)
     check_static_poses(config)  # before any port is opened
     robot = _robot(cell_file, config.limits)
-    return Cell(config, robot=robot, motor=_motor(cell_file), gripper=_gripper(cell_file, robot),
-                camera=_camera(cell_file, config.model, num_threads), progress=progress)
+    return Cell(
+        config,
+        robot=robot,
+        motor=_motor(cell_file),
+        gripper=_gripper(cell_file, robot),
+        camera=_camera(cell_file, config.model, num_threads),
+        progress=progress,
+    )
 
 
 def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig:
@@ -154,17 +162,24 @@ def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig
     f = cell_file
     here = os.path.dirname(os.path.abspath(f.path))
     name = str(f.get("part", "model"))
-    model = getattr(parts, name)() if name in ("tee", "elbow", "cross") else Model.from_mesh(
-        os.path.join(here, name), unit=str(f.get("part", "unit", "mm")))
+    model = (
+        getattr(parts, name)()
+        if name in ("tee", "elbow", "cross")
+        else Model.from_mesh(os.path.join(here, name), unit=str(f.get("part", "unit", "mm")))
+    )
     calibration = CellCalibration.load(os.path.join(here, str(f.get("cell", "calibration"))))
     tool = _pose_deg(f.get("cell", "tool", [0, 0, 150, 0, 0, 0]), f"{f.path}: [cell] tool")
     return CellConfig(
-        calibration=calibration, model=model,
+        calibration=calibration,
+        model=model,
         bin_bounds=(f.get("cell", "bin_min_mm"), f.get("cell", "bin_max_mm")),
         scan_poses=(_pose_deg(f.get("cell", "scan_pose"), f"{f.path}: [cell] scan_pose"),),
         drop_pose=_pose_deg(f.get("cell", "drop_pose"), f"{f.path}: [cell] drop_pose"),
-        frames=int(f.get("cell", "frames", 90)), gripper=GripperGeometry(T_flange_gripper=tool), limits=_limits(f),
-        num_threads=num_threads, estimate_options=dict(f.doc.get("estimate", {})),
+        frames=int(f.get("cell", "frames", 90)),
+        gripper=GripperGeometry(T_flange_gripper=tool),
+        limits=_limits(f),
+        num_threads=num_threads,
+        estimate_options=dict(f.doc.get("estimate", {})),
     )
 
 
@@ -183,27 +198,45 @@ def _limits(f: CellFile) -> safety.CellLimits:
 
 
 def _robot(f: CellFile, limits: safety.CellLimits) -> MelfaRobot:
-    return MelfaRobot(str(f.get("robot", "port")), limits=limits, config=MelfaConfig(
-        serial=SerialSettings(baudrate=int(f.get("robot", "baudrate", 9600)), parity="E", stopbits=2, timeout_s=2.0),
-        initial_override_percent=float(f.get("robot", "override_percent", 10.0)),
-        initial_linear_speed_mm_s=float(f.get("robot", "linear_speed_mm_s", 50.0))))
+    return MelfaRobot(
+        str(f.get("robot", "port")),
+        limits=limits,
+        config=MelfaConfig(
+            serial=SerialSettings(
+                baudrate=int(f.get("robot", "baudrate", 9600)), parity="E", stopbits=2, timeout_s=2.0
+            ),
+            initial_override_percent=float(f.get("robot", "override_percent", 10.0)),
+            initial_linear_speed_mm_s=float(f.get("robot", "linear_speed_mm_s", 50.0)),
+        ),
+    )
 
 
 def _motor(f: CellFile) -> LaserMotor:
     protocol = str(f.get("motor", "protocol", "dynamixel"))
     motor_serial = SerialSettings(baudrate=int(f.get("motor", "baudrate", 57600)), timeout_s=0.2)
     if protocol == "dynamixel":
-        return DynamixelMotor(str(f.get("motor", "port")), config=DynamixelConfig(motor_id=int(f.get("motor", "id", 1)), serial=motor_serial))
+        return DynamixelMotor(
+            str(f.get("motor", "port")),
+            config=DynamixelConfig(motor_id=int(f.get("motor", "id", 1)), serial=motor_serial),
+        )
     if protocol == "aimotor":
-        return AiMotor(str(f.get("motor", "port")), config=AiMotorConfig(motor_id=int(f.get("motor", "id", 0)), serial=motor_serial))
+        return AiMotor(
+            str(f.get("motor", "port")),
+            config=AiMotorConfig(motor_id=int(f.get("motor", "id", 0)), serial=motor_serial),
+        )
     raise InvalidInputError(f"{f.path}: [motor] protocol = {protocol!r}; use 'dynamixel' or 'aimotor'")
 
 
 def _gripper(f: CellFile, robot: MelfaRobot) -> Gripper:
     kind = str(f.get("gripper", "kind", "modbus"))
     if kind == "modbus":
-        return ModbusGripper(str(f.get("gripper", "port")), config=GripperConfig(
-            slave=int(f.get("gripper", "slave", 9)), serial=SerialSettings(baudrate=int(f.get("gripper", "baudrate", 115200)), timeout_s=0.3)))
+        return ModbusGripper(
+            str(f.get("gripper", "port")),
+            config=GripperConfig(
+                slave=int(f.get("gripper", "slave", 9)),
+                serial=SerialSettings(baudrate=int(f.get("gripper", "baudrate", 115200)), timeout_s=0.3),
+            ),
+        )
     if kind == "hand":
         return MelfaHandGripper(robot, hand=int(f.get("gripper", "hand", 1)))
     raise InvalidInputError(f"{f.path}: [gripper] kind = {kind!r}; use 'modbus' or 'hand'")
@@ -216,5 +249,7 @@ def _camera(f: CellFile, model: Model, num_threads: int) -> FrameSource:
     if source == "simulated":
         from ..sim.camera import RenderedCamera  # the simulator loads only when a cell file asks for it
 
-        return RenderedCamera(model, count=int(f.get("camera", "count", 8)), seed=int(f.get("camera", "seed", 0)), num_threads=num_threads)
+        return RenderedCamera(
+            model, count=int(f.get("camera", "count", 8)), seed=int(f.get("camera", "seed", 0)), num_threads=num_threads
+        )
     raise InvalidInputError(f"{f.path}: [camera] source = {source!r}; use 'opencv' or 'simulated'")

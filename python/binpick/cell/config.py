@@ -53,8 +53,14 @@ class GripperGeometry:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "T_flange_gripper", as_transform(self.T_flange_gripper, "T_flange_gripper"))
-        for name in ("open_width_mm", "finger_length_mm", "finger_width_mm", "finger_thickness_mm",
-                     "body_radius_mm", "body_length_mm"):
+        for name in (
+            "open_width_mm",
+            "finger_length_mm",
+            "finger_width_mm",
+            "finger_thickness_mm",
+            "body_radius_mm",
+            "body_length_mm",
+        ):
             positive(getattr(self, name), name)
         non_negative(self.tip_depth_mm, "tip_depth_mm", "mm")
 
@@ -64,16 +70,25 @@ class GripperGeometry:
         top = self.tip_depth_mm - self.finger_length_mm
         in_z = (z <= self.tip_depth_mm) & (z >= top)
         offset = self.open_width_mm / 2 + self.finger_thickness_mm / 2
-        finger = in_z & (np.abs(y) <= self.finger_width_mm / 2) & (
-            (np.abs(x - offset) <= self.finger_thickness_mm / 2) | (np.abs(x + offset) <= self.finger_thickness_mm / 2))
+        finger = (
+            in_z
+            & (np.abs(y) <= self.finger_width_mm / 2)
+            & (
+                (np.abs(x - offset) <= self.finger_thickness_mm / 2)
+                | (np.abs(x + offset) <= self.finger_thickness_mm / 2)
+            )
+        )
         body = (z < top) & (z >= top - self.body_length_mm) & (np.hypot(x, y) <= self.body_radius_mm)
         return finger | body
 
     def between_fingers(self, points_gripper: np.ndarray) -> np.ndarray:
         """Which points (N, 3, in the gripper frame) lie in the slab the closing fingers sweep."""
         _, y, z = points_gripper.T
-        return ((np.abs(y) <= self.finger_width_mm / 2) & (z <= self.tip_depth_mm)
-                & (z >= self.tip_depth_mm - self.finger_length_mm))
+        return (
+            (np.abs(y) <= self.finger_width_mm / 2)
+            & (z <= self.tip_depth_mm)
+            & (z >= self.tip_depth_mm - self.finger_length_mm)
+        )
 
 
 @dataclass(frozen=True)
@@ -137,8 +152,9 @@ class CellConfig:
             object.__setattr__(self, "clearance_z_mm", float(self.limits.approach_height_mm) + 20.0)
         count(self.max_collision_points, "max_collision_points")
         count(self.max_candidates, "max_candidates", 1)
-        object.__setattr__(self, "symmetries",
-                           tuple(as_transform(S, f"symmetries[{i}]") for i, S in enumerate(self.symmetries)))
+        object.__setattr__(
+            self, "symmetries", tuple(as_transform(S, f"symmetries[{i}]") for i, S in enumerate(self.symmetries))
+        )
         non_negative(self.min_score, "min_score")
         count(self.keep_frames, "keep_frames")
         count(self.num_threads, "num_threads")
@@ -146,10 +162,12 @@ class CellConfig:
             raise InvalidInputError("reachable: expected a function T_base_flange -> bool, or None")
 
     def _check_types(self) -> None:
-        for name, kind, what in (("calibration", CellCalibration, "a CellCalibration"),
-                                 ("model", Model, "a binpick.Model"),
-                                 ("gripper", GripperGeometry, "a GripperGeometry"),
-                                 ("limits", safety.CellLimits, "a binpick.devices.CellLimits")):
+        for name, kind, what in (
+            ("calibration", CellCalibration, "a CellCalibration"),
+            ("model", Model, "a binpick.Model"),
+            ("gripper", GripperGeometry, "a GripperGeometry"),
+            ("limits", safety.CellLimits, "a binpick.devices.CellLimits"),
+        ):
             value = getattr(self, name)
             if not isinstance(value, kind):
                 raise InvalidInputError(f"{name}: expected {what}, got {type(value).__name__}")
@@ -164,16 +182,24 @@ class CellConfig:
         if self.scan_angles is not None:
             angles = tuple(np.asarray(a, dtype=np.float64).ravel() for a in self.scan_angles)
             if len(angles) != len(self.scan_poses) or any(len(a) == 0 or not np.isfinite(a).all() for a in angles):
-                raise InvalidInputError("scan_angles: give one non-empty list of finite motor angles (rad) per scan pose")
+                raise InvalidInputError(
+                    "scan_angles: give one non-empty list of finite motor angles (rad) per scan pose"
+                )
             object.__setattr__(self, "scan_angles", angles)
 
     def _set_grasps(self) -> None:
-        grasps = self.grasps if self.grasps is not None else (
-            self.model.grasps or branch_grasps(self.model, finger_width_mm=self.gripper.finger_width_mm))
+        grasps = (
+            self.grasps
+            if self.grasps is not None
+            else (self.model.grasps or branch_grasps(self.model, finger_width_mm=self.gripper.finger_width_mm))
+        )
         if not grasps:
-            raise InvalidInputError(f"grasps: the part {self.model.name!r} has no grasps; declare some with model.add_grasp")
-        object.__setattr__(self, "grasps", MappingProxyType(
-            {str(k): as_transform(v, f"grasps[{k!r}]") for k, v in grasps.items()}))
+            raise InvalidInputError(
+                f"grasps: the part {self.model.name!r} has no grasps; declare some with model.add_grasp"
+            )
+        object.__setattr__(
+            self, "grasps", MappingProxyType({str(k): as_transform(v, f"grasps[{k!r}]") for k, v in grasps.items()})
+        )
 
     def angles_for(self, i: int) -> np.ndarray:
         """The motor angles (rad) of scan pose ``i``."""
@@ -184,8 +210,9 @@ class CellConfig:
         return laser_sweep(T_base_laser, self.bin_bounds[0], self.bin_bounds[1], self.frames)
 
 
-def sweep_angles(calibration: CellCalibration, T_base_flange: Any, bin_bounds: Any, frames: int, *,
-                 margin: float = 10.0) -> np.ndarray:
+def sweep_angles(
+    calibration: CellCalibration, T_base_flange: Any, bin_bounds: Any, frames: int, *, margin: float = 10.0
+) -> np.ndarray:
     """``frames`` motor angles (rad), evenly spaced, whose laser sheets sweep the bin box
     ``bin_bounds`` (floor corners widened by ``margin`` mm along x, and the rim) seen from ``T_base_flange``."""
     if not isinstance(calibration, CellCalibration):
@@ -203,12 +230,18 @@ def check_static_poses(config: CellConfig) -> None:
     for i, T in enumerate(config.scan_poses):
         safety.check_pose(T, lim, name=f"scan_poses[{i}]")
         if T[2, 3] < lim.approach_height_mm:
-            raise SafetyError(f"scan_poses[{i}]: z = {T[2, 3]:.1f} mm is below the approach height {lim.approach_height_mm:g} mm; "
-                              "nothing was sent — scan from above the approach height")
+            raise SafetyError(
+                f"scan_poses[{i}]: z = {T[2, 3]:.1f} mm is below the approach height {lim.approach_height_mm:g} mm; "
+                "nothing was sent — scan from above the approach height"
+            )
     safety.check_pose(config.drop_pose, lim, name="drop_pose")
     if config.drop_pose[2, 3] < lim.approach_height_mm:
-        raise SafetyError(f"drop_pose: z = {config.drop_pose[2, 3]:.1f} mm is below the approach height "
-                          f"{lim.approach_height_mm:g} mm; nothing was sent — drop from above the approach height")
+        raise SafetyError(
+            f"drop_pose: z = {config.drop_pose[2, 3]:.1f} mm is below the approach height "
+            f"{lim.approach_height_mm:g} mm; nothing was sent — drop from above the approach height"
+        )
     if not lim.approach_height_mm <= config.clearance_z_mm <= lim.workspace_max_mm[2]:
-        raise SafetyError(f"clearance_z_mm: {config.clearance_z_mm:g} mm must lie between the approach height "
-                          f"{lim.approach_height_mm:g} mm and the workspace top {lim.workspace_max_mm[2]:g} mm; nothing was sent")
+        raise SafetyError(
+            f"clearance_z_mm: {config.clearance_z_mm:g} mm must lie between the approach height "
+            f"{lim.approach_height_mm:g} mm and the workspace top {lim.workspace_max_mm[2]:g} mm; nothing was sent"
+        )

@@ -43,14 +43,18 @@ class OpenCVCamera(FrameSource):
             after the motor arrived (drivers keep a small buffer).
     """
 
-    def __init__(self, device: Any = 0, *, width: Optional[int] = None, height: Optional[int] = None, flush: int = 2) -> None:
+    def __init__(
+        self, device: Any = 0, *, width: Optional[int] = None, height: Optional[int] = None, flush: int = 2
+    ) -> None:
         import cv2
 
         self.device = device
         self.flush = count(flush, "flush")
         self._cap = cv2.VideoCapture(device)
         if not self._cap.isOpened():
-            raise DeviceError(f"camera: cannot open {device!r}; check the device index or path and that no other program holds it")
+            raise DeviceError(
+                f"camera: cannot open {device!r}; check the device index or path and that no other program holds it"
+            )
         if width is not None:
             self._cap.set(cv2.CAP_PROP_FRAME_WIDTH, int(width))
         if height is not None:

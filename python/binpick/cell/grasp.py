@@ -90,8 +90,14 @@ def tool_tilt_deg(T_base_flange: np.ndarray) -> float:
     return math.degrees(math.acos(max(-1.0, min(1.0, -float(T_base_flange[2, 2])))))
 
 
-def pick_waypoints(T_base_flange: np.ndarray, T_base_gripper: np.ndarray, *, approach_distance_mm: float,
-                   clearance_z_mm: float, drop_pose: np.ndarray) -> list[Waypoint]:
+def pick_waypoints(
+    T_base_flange: np.ndarray,
+    T_base_gripper: np.ndarray,
+    *,
+    approach_distance_mm: float,
+    clearance_z_mm: float,
+    drop_pose: np.ndarray,
+) -> list[Waypoint]:
     """The motion of one pick as (name, T_base_flange, linear): above the approach, the straight
     approach along the gripper axis, the grasp, the lift straight up, the drop pose."""
     approach = T_base_flange.copy()
@@ -100,8 +106,13 @@ def pick_waypoints(T_base_flange: np.ndarray, T_base_gripper: np.ndarray, *, app
     above[2, 3] = max(clearance_z_mm, approach[2, 3])
     lift = T_base_flange.copy()
     lift[2, 3] = max(clearance_z_mm, T_base_flange[2, 3])
-    return [("above", above, False), ("approach", approach, True), ("grasp", T_base_flange, True),
-            ("lift", lift, True), ("drop", drop_pose, False)]
+    return [
+        ("above", above, False),
+        ("approach", approach, True),
+        ("grasp", T_base_flange, True),
+        ("lift", lift, True),
+        ("drop", drop_pose, False),
+    ]
 
 
 def points_in_gripper(gripper: GripperGeometry, points_base: np.ndarray, T_base_gripper: np.ndarray) -> int:
@@ -134,7 +145,9 @@ class GraspMatcher:
         tolerance_mm: … and in translation, mm.
     """
 
-    def __init__(self, grasps: Any, symmetries: Sequence[Any] = (), *, tolerance_deg: float, tolerance_mm: float) -> None:
+    def __init__(
+        self, grasps: Any, symmetries: Sequence[Any] = (), *, tolerance_deg: float, tolerance_mm: float
+    ) -> None:
         values = list(grasps.values()) if isinstance(grasps, Mapping) else list(grasps)
         stack = np.stack([np.asarray(T, dtype=np.float64) for T in values])
         syms = np.stack([np.eye(4), *[np.asarray(S, dtype=np.float64) for S in symmetries]])
@@ -179,8 +192,14 @@ def _tilted_candidates(config: CellConfig, T_base_object: np.ndarray, rejected: 
     return candidates
 
 
-def _refusal(config: CellConfig, waypoints: list[Waypoint], T_bg: np.ndarray, scene: np.ndarray, part: np.ndarray,
-             here: np.ndarray) -> tuple[Optional[str], int]:
+def _refusal(
+    config: CellConfig,
+    waypoints: list[Waypoint],
+    T_bg: np.ndarray,
+    scene: np.ndarray,
+    part: np.ndarray,
+    here: np.ndarray,
+) -> tuple[Optional[str], int]:
     """Why a grasp cannot be used (None when it can), and the scene points inside the gripper."""
     if config.reachable is not None and not all(config.reachable(T) for _, T, _ in waypoints):
         return "reach", 0
@@ -196,7 +215,9 @@ def _refusal(config: CellConfig, waypoints: list[Waypoint], T_bg: np.ndarray, sc
     return None, hits
 
 
-def plan_grasp(config: CellConfig, T_base_object: np.ndarray, scene: np.ndarray, here: np.ndarray) -> tuple[PickPlan, int]:
+def plan_grasp(
+    config: CellConfig, T_base_object: np.ndarray, scene: np.ndarray, here: np.ndarray
+) -> tuple[PickPlan, int]:
     """The most vertical declared grasp of the part at ``T_base_object`` that is within the tilt
     limit, reachable, clear of the ``scene`` points (base frame, the part's own left out) and of
     the part's own model at that pose, and whose whole motion from the flange pose ``here``
@@ -207,14 +228,26 @@ def plan_grasp(config: CellConfig, T_base_object: np.ndarray, scene: np.ndarray,
     # pose, which also covers the part's unseen underside.
     part = np.asarray(config.model.points) @ T_base_object[:3, :3].T + T_base_object[:3, 3]
     for tilt, name, T_bg, T_bf in _tilted_candidates(config, T_base_object, rejected):
-        waypoints = pick_waypoints(T_bf, T_bg, approach_distance_mm=config.approach_distance_mm,
-                                   clearance_z_mm=config.clearance_z_mm, drop_pose=config.drop_pose)
+        waypoints = pick_waypoints(
+            T_bf,
+            T_bg,
+            approach_distance_mm=config.approach_distance_mm,
+            clearance_z_mm=config.clearance_z_mm,
+            drop_pose=config.drop_pose,
+        )
         why, hits = _refusal(config, waypoints, T_bg, scene, part, here)
         if why is not None:
             rejected[why] += 1
             continue
-        plan = PickPlan(grasp=name, T_base_gripper=T_bg, T_base_flange=T_bf, tilt_deg=tilt, waypoints=tuple(waypoints),
-                        considered=len(config.grasps), rejected=MappingProxyType(dict(rejected)))
+        plan = PickPlan(
+            grasp=name,
+            T_base_gripper=T_bg,
+            T_base_flange=T_bf,
+            tilt_deg=tilt,
+            waypoints=tuple(waypoints),
+            considered=len(config.grasps),
+            rejected=MappingProxyType(dict(rejected)),
+        )
         return plan, hits
     raise NoGraspError(
         f"none of the {len(config.grasps)} grasps of the located {config.model.name} can be used (rejected: "

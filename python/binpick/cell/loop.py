@@ -105,14 +105,25 @@ class Cell:
     """A part located within this distance of where the gripper closed on nothing earlier in the
     run is passed over: the same (wrong) pose would most likely be found and tried again."""
 
-    def __init__(self, config: CellConfig, *, robot: Robot, motor: LaserMotor, gripper: Gripper, camera: FrameSource,
-                 progress: Optional[Callable[[str, str], None]] = None, truth: Any = None) -> None:
+    def __init__(
+        self,
+        config: CellConfig,
+        *,
+        robot: Robot,
+        motor: LaserMotor,
+        gripper: Gripper,
+        camera: FrameSource,
+        progress: Optional[Callable[[str, str], None]] = None,
+        truth: Any = None,
+    ) -> None:
         if not isinstance(config, CellConfig):
             raise InvalidInputError(f"config: expected a CellConfig, got {type(config).__name__}")
         if not isinstance(camera, FrameSource):
             raise InvalidInputError(f"camera: expected a binpick.cell.FrameSource, got {type(camera).__name__}")
         if robot.limits is not None and robot.limits != config.limits:
-            raise InvalidInputError("robot: the driver's CellLimits differ from config.limits; open the robot with limits=config.limits")
+            raise InvalidInputError(
+                "robot: the driver's CellLimits differ from config.limits; open the robot with limits=config.limits"
+            )
         self.config = config
         self.robot = robot
         self.motor = motor
@@ -192,22 +203,43 @@ class Cell:
             extract_s = self._sweep_laser(sweep, wanted, T_bf)
             timings["sweep"] += (time.perf_counter() - t1 - extract_s) * 1e3
             timings["extract"] += extract_s * 1e3
-            done = sweep.angles[-len(wanted):]
-            self.progress("scan", f"{len(wanted)} frames from flange ({T_bf[0, 3]:.1f}, {T_bf[1, 3]:.1f}, {T_bf[2, 3]:.1f}) mm, "
-                                  f"laser {math.degrees(min(done)):.1f}°..{math.degrees(max(done)):.1f}°")
+            done = sweep.angles[-len(wanted) :]
+            self.progress(
+                "scan",
+                f"{len(wanted)} frames from flange ({T_bf[0, 3]:.1f}, {T_bf[1, 3]:.1f}, {T_bf[2, 3]:.1f}) mm, "
+                f"laser {math.degrees(min(done)):.1f}°..{math.degrees(max(done)):.1f}°",
+            )
         t2 = time.perf_counter()
-        cloud = triangulate(np.concatenate(sweep.pixels), np.concatenate(sweep.frame_of), np.array(sweep.angles),
-                            np.stack(sweep.poses), cfg.calibration, num_threads=cfg.num_threads)
+        cloud = triangulate(
+            np.concatenate(sweep.pixels),
+            np.concatenate(sweep.frame_of),
+            np.array(sweep.angles),
+            np.stack(sweep.poses),
+            cfg.calibration,
+            num_threads=cfg.num_threads,
+        )
         timings["triangulate"] = _ms_since(t2)
-        self.progress("cloud", f"{len(cloud)} points (extract {timings['extract']:.0f} ms, triangulate {timings['triangulate']:.0f} ms)")
-        return ScanResult(cloud=cloud, angles=np.array(sweep.angles), T_base_flanges=np.stack(sweep.poses),
-                          frames=MappingProxyType(sweep.kept), timings=MappingProxyType(timings))
+        self.progress(
+            "cloud",
+            f"{len(cloud)} points (extract {timings['extract']:.0f} ms, triangulate {timings['triangulate']:.0f} ms)",
+        )
+        return ScanResult(
+            cloud=cloud,
+            angles=np.array(sweep.angles),
+            T_base_flanges=np.stack(sweep.poses),
+            frames=MappingProxyType(sweep.kept),
+            timings=MappingProxyType(timings),
+        )
 
     def _sweep_laser(self, sweep: _Sweep, wanted: np.ndarray, T_bf: np.ndarray) -> float:
         """Turns the laser through ``wanted`` at flange pose ``T_bf``, a frame per angle into
         ``sweep``; returns the seconds spent extracting lines."""
         keep_n = self.config.keep_frames
-        keep = set(np.unique(np.linspace(0, len(wanted) - 1, min(keep_n, len(wanted))).round().astype(int)).tolist()) if keep_n else set()
+        keep = (
+            set(np.unique(np.linspace(0, len(wanted) - 1, min(keep_n, len(wanted))).round().astype(int)).tolist())
+            if keep_n
+            else set()
+        )
         self.camera.begin(T_bf)
         extract_s = 0.0
         for k, a in enumerate(wanted):
@@ -235,19 +267,33 @@ class Cell:
         options.setdefault("viewpoint", (np.asarray(scan.T_base_flanges[0]) @ cfg.calibration.T_flange_camera)[:3, 3])
         result = estimate_pose(scan.points[keep], cfg.model, bin=cfg.bin_bounds, **options)
         if result.score < cfg.min_score:
-            raise NoObjectFound(f"the best pose scores {result.score:.2f}, below the cell's min_score {cfg.min_score:.2f}")
+            raise NoObjectFound(
+                f"the best pose scores {result.score:.2f}, below the cell's min_score {cfg.min_score:.2f}"
+            )
         T = np.asarray(result.T_scene_model, dtype=np.float64)
         truth = self.truth.judge(T) if self.truth is not None else None
         self._report_located(result, T, truth)
         idx = np.asarray(result.indices, dtype=np.int64)
-        return Located(scan=scan, result=result, T_base_object=T, indices=keep[idx[(idx >= 0) & (idx < len(keep))]], truth=truth)
+        return Located(
+            scan=scan, result=result, T_base_object=T, indices=keep[idx[(idx >= 0) & (idx < len(keep))]], truth=truth
+        )
 
     def _report_located(self, result: Any, T: np.ndarray, truth: Optional[PoseTruth]) -> None:
         t = T[:3, 3]
-        judged = "" if truth is None else (f"; vs truth {truth.rotation_error_deg:.2f}°, {truth.translation_error_mm:.2f} mm "
-                                           f"({'pick-grade' if truth.pick_grade else 'NOT pick-grade'})")
-        self.progress("locate", f"{result.method} score {result.score:.2f}, rmse {result.rmse:.2f} " f"mm, at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm "
-                                f"in {sum(result.timings.values()):.0f} ms{judged}")
+        judged = (
+            ""
+            if truth is None
+            else (
+                f"; vs truth {truth.rotation_error_deg:.2f}°, {truth.translation_error_mm:.2f} mm "
+                f"({'pick-grade' if truth.pick_grade else 'NOT pick-grade'})"
+            )
+        )
+        self.progress(
+            "locate",
+            f"{result.method} score {result.score:.2f}, rmse {result.rmse:.2f} "
+            f"mm, at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm "
+            f"in {sum(result.timings.values()):.0f} ms{judged}",
+        )
 
     def locate_and_plan(self, scan: ScanResult) -> tuple[Located, PickPlan]:
         """Locates the top part and plans its pick; when no grasp of it can be used (or the gripper
@@ -277,8 +323,10 @@ class Cell:
     def _refuse_empty_grip_spot(self, located: Located) -> None:
         t = located.T_base_object[:3, 3]
         if any(np.linalg.norm(t - spot) < self.EMPTY_GRIP_RADIUS_MM for spot in self._empty_grips):
-            raise NoGraspError(f"the gripper closed on nothing at this located {self.config.model.name} "
-                               f"({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm in an earlier pick of this run")
+            raise NoGraspError(
+                f"the gripper closed on nothing at this located {self.config.model.name} "
+                f"({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm in an earlier pick of this run"
+            )
 
     def plan(self, located: Located) -> PickPlan:
         """The most vertical declared grasp that is within the tilt limit, reachable, clear of the
@@ -289,8 +337,11 @@ class Cell:
         others[located.indices] = False
         plan, hits = plan_grasp(self.config, located.T_base_object, pts[others], self.robot.read_pose())
         rejected = ", ".join(f"{v} {k}" for k, v in plan.rejected.items() if v) or "none rejected"
-        self.progress("plan", f"grasp {plan.grasp}, tool tilt {plan.tilt_deg:.1f}°, {hits} scene points in the gripper "
-                              f"({plan.considered} grasps: {rejected})")
+        self.progress(
+            "plan",
+            f"grasp {plan.grasp}, tool tilt {plan.tilt_deg:.1f}°, {hits} scene points in the gripper "
+            f"({plan.considered} grasps: {rejected})",
+        )
         return plan
 
     # -- pick
@@ -320,11 +371,28 @@ class Cell:
         picked = self.truth.take_picked() if self.truth is not None else None
         ok, error = self._judge_pick(located, held, picked)
         times["total"] = _ms_since(t0)
-        self.progress("pick", ("picked" if ok else "FAILED") + (f" part {picked}" if picked is not None else "")
-                      + f" with grasp {plan.grasp} in {times['motion'] / 1e3:.1f} s" + (f" — {error}" if error else ""))
-        return PickRecord(index=index, success=ok, T_base_object=located.T_base_object, score=float(res.score), rmse=float(res.rmse),
-                          method=getattr(res, "method", None), points=len(located.scan.points), grasp=plan.grasp, held=held,
-                          truth=located.truth, picked_instance=picked, error=error, timings=MappingProxyType(times))
+        self.progress(
+            "pick",
+            ("picked" if ok else "FAILED")
+            + (f" part {picked}" if picked is not None else "")
+            + f" with grasp {plan.grasp} in {times['motion'] / 1e3:.1f} s"
+            + (f" — {error}" if error else ""),
+        )
+        return PickRecord(
+            index=index,
+            success=ok,
+            T_base_object=located.T_base_object,
+            score=float(res.score),
+            rmse=float(res.rmse),
+            method=getattr(res, "method", None),
+            points=len(located.scan.points),
+            grasp=plan.grasp,
+            held=held,
+            truth=located.truth,
+            picked_instance=picked,
+            error=error,
+            timings=MappingProxyType(times),
+        )
 
     def _judge_pick(self, located: Located, held: Optional[bool], picked: Optional[int]) -> tuple[bool, Optional[str]]:
         """Whether the pick succeeded, and why not; remembers where the gripper closed on nothing."""
@@ -339,8 +407,10 @@ class Cell:
             return True, None
         if picked is None:
             return False, "no part left the bin"
-        return False, (f"part {picked} left the bin, but the located pose was not pick-grade or belonged to part "
-                       f"{None if truth is None else truth.instance}")
+        return False, (
+            f"part {picked} left the bin, but the located pose was not pick-grade or belonged to part "
+            f"{None if truth is None else truth.instance}"
+        )
 
     def _execute(self, plan: PickPlan) -> Optional[bool]:
         """Runs the plan; returns what the gripper said about holding. Faults stop the arm and are raised."""
@@ -404,10 +474,20 @@ class Cell:
             return self._failed(i, scan, located, exc, t0, fault=True), f"pick {i}: {type(exc).__name__}: {exc}"
 
     @staticmethod
-    def _failed(i: int, scan: Optional[ScanResult], loc: Optional[Located], exc: BaseException, t0: float, *, fault: bool) -> PickRecord:
+    def _failed(
+        i: int, scan: Optional[ScanResult], loc: Optional[Located], exc: BaseException, t0: float, *, fault: bool
+    ) -> PickRecord:
         res = None if loc is None else loc.result
-        return PickRecord(index=i, success=False, T_base_object=None if loc is None else loc.T_base_object,
-                          score=None if res is None else float(res.score), rmse=None if res is None else float(res.rmse),
-                          method=None if res is None else res.method, points=0 if scan is None else len(scan.points),
-                          truth=None if loc is None else loc.truth, error=str(exc), fault=fault,
-                          timings=MappingProxyType({"total": _ms_since(t0)}))
+        return PickRecord(
+            index=i,
+            success=False,
+            T_base_object=None if loc is None else loc.T_base_object,
+            score=None if res is None else float(res.score),
+            rmse=None if res is None else float(res.rmse),
+            method=None if res is None else res.method,
+            points=0 if scan is None else len(scan.points),
+            truth=None if loc is None else loc.truth,
+            error=str(exc),
+            fault=fault,
+            timings=MappingProxyType({"total": _ms_since(t0)}),
+        )

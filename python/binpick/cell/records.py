@@ -112,9 +112,14 @@ class PickRecord:
             "points": self.points,
             "grasp": self.grasp,
             "held": self.held,
-            "truth": None if self.truth is None else {
-                "instance": self.truth.instance, "rotation_error_deg": self.truth.rotation_error_deg,
-                "translation_error_mm": self.truth.translation_error_mm, "pick_grade": self.truth.pick_grade},
+            "truth": None
+            if self.truth is None
+            else {
+                "instance": self.truth.instance,
+                "rotation_error_deg": self.truth.rotation_error_deg,
+                "translation_error_mm": self.truth.translation_error_mm,
+                "pick_grade": self.truth.pick_grade,
+            },
             "picked_instance": self.picked_instance,
             "error": self.error,
             "timings_ms": dict(self.timings),

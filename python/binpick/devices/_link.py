@@ -41,8 +41,13 @@ E = TypeVar("E", bound=BaseException)
 
 _SLICE_S = 0.01  # the port's read timeout: reads return at least this often to check their deadline
 
-_PARITIES = {"N": serial.PARITY_NONE, "E": serial.PARITY_EVEN, "O": serial.PARITY_ODD,
-             "M": serial.PARITY_MARK, "S": serial.PARITY_SPACE}
+_PARITIES = {
+    "N": serial.PARITY_NONE,
+    "E": serial.PARITY_EVEN,
+    "O": serial.PARITY_ODD,
+    "M": serial.PARITY_MARK,
+    "S": serial.PARITY_SPACE,
+}
 
 
 @dataclass(frozen=True)
@@ -82,6 +87,7 @@ class SerialSettings:
 
 # --------------------------------------------------------------------------- link
 
+
 class SerialLink:
     """One open serial port read against deadlines.
 
@@ -101,16 +107,23 @@ class SerialLink:
             try:
                 port.timeout = _SLICE_S
             except (*_PORT_ERRORS, ValueError) as exc:
-                raise PortClosedError(f"{device}: cannot set the read timeout of {self.port_name} ({exc}); "
-                                      "pass a port path instead and let the driver open it") from None
+                raise PortClosedError(
+                    f"{device}: cannot set the read timeout of {self.port_name} ({exc}); "
+                    "pass a port path instead and let the driver open it"
+                ) from None
             return
         if not isinstance(port, str) or not port:
             raise InvalidInputError(f"{device}: port must be a device path such as '/dev/ttyUSB0', got {port!r}")
         self.port_name = port
         try:
             self._ser = serial.Serial(
-                port, baudrate=settings.baudrate, bytesize=settings.bytesize, parity=_PARITIES[settings.parity],
-                stopbits=settings.stopbits, timeout=_SLICE_S, write_timeout=settings.write_timeout_s,
+                port,
+                baudrate=settings.baudrate,
+                bytesize=settings.bytesize,
+                parity=_PARITIES[settings.parity],
+                stopbits=settings.stopbits,
+                timeout=_SLICE_S,
+                write_timeout=settings.write_timeout_s,
             )
         except (serial.SerialException, OSError, ValueError) as exc:
             raise PortClosedError(
@@ -162,8 +175,10 @@ class SerialLink:
                 self._ser.write(data)
                 self._ser.flush()
             except serial.SerialTimeoutException:
-                raise DeviceTimeout(f"{self.device}: writing to {self.port_name} did not finish in "
-                                    f"{self.settings.write_timeout_s} s; check the line and flow control") from None
+                raise DeviceTimeout(
+                    f"{self.device}: writing to {self.port_name} did not finish in "
+                    f"{self.settings.write_timeout_s} s; check the line and flow control"
+                ) from None
 
     def read_some(self, n: int, deadline: float) -> bytes:
         """Up to ``n`` bytes: whatever arrives first, or b'' once the deadline has passed.
@@ -193,8 +208,10 @@ class SerialLink:
         buf = bytearray()
         while not buf.endswith(terminator):
             if len(buf) >= max_bytes:
-                raise ProtocolError(f"{self.device}: {what} ran past {max_bytes} bytes without its terminator "
-                                    f"{terminator!r}: {bytes(buf[:40])!r}…")
+                raise ProtocolError(
+                    f"{self.device}: {what} ran past {max_bytes} bytes without its terminator "
+                    f"{terminator!r}: {bytes(buf[:40])!r}…"
+                )
             chunk = self.read_some(1, deadline)
             if not chunk:
                 self.silence(what, bytes(buf))
@@ -206,10 +223,14 @@ class SerialLink:
         TruncatedReplyError."""
         t = self.settings.timeout_s
         if got:
-            raise TruncatedReplyError(f"{self.device}: {what} stopped after {len(got)} bytes ({got[:40]!r}) and "
-                                      f"the rest did not come within {t} s; check the cable and line settings")
-        raise DeviceTimeout(f"{self.device}: no {what} on {self.port_name} within {t} s; check power, cable, "
-                            "baud rate and the device's address")
+            raise TruncatedReplyError(
+                f"{self.device}: {what} stopped after {len(got)} bytes ({got[:40]!r}) and "
+                f"the rest did not come within {t} s; check the cable and line settings"
+            )
+        raise DeviceTimeout(
+            f"{self.device}: no {what} on {self.port_name} within {t} s; check power, cable, "
+            "baud rate and the device's address"
+        )
 
 
 def with_retries(attempts: int, action: Callable[[], T]) -> T:

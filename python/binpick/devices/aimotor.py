@@ -142,6 +142,8 @@ class AiMotor(LaserMotor):
     def _send_goal(self, angle_rad: float) -> None:
         unit = self._unit(angle_rad)
         if not 0 <= unit <= MAX_POSITION:
-            raise InvalidInputError(f"angle_rad: {math.degrees(angle_rad):.1f}° maps to position {unit}, outside 0–254; "
-                                    "narrow MotorRange or fix AiMotorConfig.centre_unit")
+            raise InvalidInputError(
+                f"angle_rad: {math.degrees(angle_rad):.1f}° maps to position {unit}, outside 0–254; "
+                "narrow MotorRange or fix AiMotorConfig.centre_unit"
+            )
         self._exchange(encode_position(self.config.motor_id, unit, torque_level=self.config.torque_level), retry=False)

@@ -91,6 +91,7 @@ BIT_SERVO = 0x20
 
 # --------------------------------------------------------------------------- codec
 
+
 @dataclass(frozen=True)
 class R3Reply:
     """One parsed reply line.
@@ -151,8 +152,10 @@ def parse_reply(raw: bytes) -> R3Reply:
         raise InvalidInputError(f"raw: expected bytes, got {type(raw).__name__}")
     body = bytes(raw[:-1] if raw.endswith(b"\r") else raw)
     if any(b < 0x20 or b > 0x7E for b in body):
-        raise ProtocolError(f"robot: garbled reply {bytes(raw[:60])!r} (bytes outside printable ASCII); "
-                            "check baud rate, parity (even) and stop bits (2)")
+        raise ProtocolError(
+            f"robot: garbled reply {bytes(raw[:60])!r} (bytes outside printable ASCII); "
+            "check baud rate, parity (even) and stop bits (2)"
+        )
     text = body.decode("ascii")
     if len(text) < 3:
         raise ProtocolError(f"robot: reply {text!r} is too short to hold a status (QoK/QeR…)")
@@ -192,7 +195,7 @@ def _named_values(data: str, names: tuple[str, ...], what: str) -> tuple[np.ndar
     missing = [n for n in names if n not in values]
     if missing:
         raise ProtocolError(f"robot: {what} reply {data[:80]!r} lacks {', '.join(missing)}")
-    return np.array([values[n] for n in names]), fields[i + 1:]
+    return np.array([values[n] for n in names]), fields[i + 1 :]
 
 
 def parse_position(data: str) -> tuple[np.ndarray, tuple[int, int]]:
@@ -215,8 +218,7 @@ def parse_state(data: str) -> RobotState:
     if not m:
         raise ProtocolError(f"robot: DSTATE reply {data[:40]!r} does not start with two hex status digits")
     bits = int(m.group(1), 16)
-    return RobotState(bool(bits & BIT_CONTROL), bool(bits & BIT_RUNNING), bool(bits & BIT_SERVO),
-                      int(m.group(2) or 0))
+    return RobotState(bool(bits & BIT_CONTROL), bool(bits & BIT_RUNNING), bool(bits & BIT_SERVO), int(m.group(2) or 0))
 
 
 def format_position(number: int, xyzabc_deg: Any, flags: tuple[int, int]) -> str:
@@ -226,11 +228,12 @@ def format_position(number: int, xyzabc_deg: Any, flags: tuple[int, int]) -> str
     if len(v) != 6:
         raise InvalidInputError(f"xyzabc_deg: expected six numbers, got {len(v)}")
     fl1 = check_int(flags[0], "FL1", 0, 7)
-    fl2 = check_int(flags[1], "FL2", -(2 ** 31), 2 ** 31 - 1)
+    fl2 = check_int(flags[1], "FL2", -(2**31), 2**31 - 1)
     return f"P{number}=(" + ",".join(f"{x:.2f}" for x in v) + f")({fl1},{fl2})"
 
 
 # --------------------------------------------------------------------------- driver
+
 
 @dataclass(frozen=True)
 class MelfaConfig:
@@ -293,8 +296,13 @@ class MelfaRobot(Robot):
         limits: the cell's workspace, approach and speed rules.
     """
 
-    def __init__(self, port: Union[str, serial.SerialBase], *, config: MelfaConfig = MelfaConfig(),
-                 limits: CellLimits = CellLimits()) -> None:
+    def __init__(
+        self,
+        port: Union[str, serial.SerialBase],
+        *,
+        config: MelfaConfig = MelfaConfig(),
+        limits: CellLimits = CellLimits(),
+    ) -> None:
         if not isinstance(config, MelfaConfig):
             raise InvalidInputError(f"config: expected MelfaConfig, got {type(config).__name__}")
         if not isinstance(limits, CellLimits):
@@ -336,8 +344,10 @@ class MelfaRobot(Robot):
         deadline = time.monotonic() + cfg.servo_on_timeout_s
         while not self.state().servo_on:
             if time.monotonic() > deadline:
-                raise DeviceTimeout(f"robot: servo power not on {cfg.servo_on_timeout_s} s after SRVON; check the "
-                                    "emergency stop, the door switch and the controller's display")
+                raise DeviceTimeout(
+                    f"robot: servo power not on {cfg.servo_on_timeout_s} s after SRVON; check the "
+                    "emergency stop, the door switch and the controller's display"
+                )
             time.sleep(cfg.poll_interval_s)
         self.set_override(cfg.initial_override_percent)
         self.set_linear_speed(cfg.initial_linear_speed_mm_s)
@@ -366,8 +376,10 @@ class MelfaRobot(Robot):
         if not isinstance(command, str):
             raise InvalidInputError(f"command: expected a string such as 'PPOSF', got {type(command).__name__}")
         if _UNCHECKED_MOTION.match(command.upper()):
-            raise SafetyError(f"command: {command!r} moves the arm or changes its speed without the cell's checks; "
-                              "nothing was sent — use move_to, set_override or set_linear_speed")
+            raise SafetyError(
+                f"command: {command!r} moves the arm or changes its speed without the cell's checks; "
+                "nothing was sent — use move_to, set_override or set_linear_speed"
+            )
         return self._send(command, retry=retry)
 
     def _send(self, command: str, *, retry: bool = False, parse: Optional[Callable[[str], Any]] = None) -> Any:
@@ -487,8 +499,9 @@ class MelfaRobot(Robot):
                 raise DeviceTimeout(f"robot: the motion did not finish within {limit} s")
             time.sleep(self.config.poll_interval_s)
 
-    def move_to(self, T_base_flange: Any, *, linear: bool = False, flags: Optional[tuple[int, int]] = None,
-                wait: bool = True) -> None:
+    def move_to(
+        self, T_base_flange: Any, *, linear: bool = False, flags: Optional[tuple[int, int]] = None, wait: bool = True
+    ) -> None:
         """Moves the flange to ``T_base_flange`` (MOV, or MVS when ``linear``).
 
         The target is checked against the cell's limits (SafetyError, nothing sent), then the
@@ -529,8 +542,10 @@ class MelfaRobot(Robot):
                 reached = self.read_pose()
                 miss = float(np.linalg.norm(reached[:3, 3] - target[:3, 3]))
                 if miss > self.config.arrival_tolerance_mm:
-                    raise DeviceFault(f"robot: the arm stopped {miss:.2f} mm from the target (tolerance "
-                                      f"{self.config.arrival_tolerance_mm} mm)")
+                    raise DeviceFault(
+                        f"robot: the arm stopped {miss:.2f} mm from the target (tolerance "
+                        f"{self.config.arrival_tolerance_mm} mm)"
+                    )
         except DeviceError as exc:
             raise_after_stop(exc, self._stop_after_fault())
 

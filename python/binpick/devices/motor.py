@@ -101,9 +101,11 @@ class LaserMotor(abc.ABC):
         a = check_number(angle_rad, "angle_rad", unit="rad")
         r = self.range
         if not r.min_angle_rad <= a <= r.max_angle_rad:
-            raise SafetyError(f"laser motor: goal {math.degrees(a):.2f}° is outside the allowed range "
-                              f"[{math.degrees(r.min_angle_rad):.2f}°, {math.degrees(r.max_angle_rad):.2f}°]; "
-                              "nothing was sent — choose an angle inside MotorRange")
+            raise SafetyError(
+                f"laser motor: goal {math.degrees(a):.2f}° is outside the allowed range "
+                f"[{math.degrees(r.min_angle_rad):.2f}°, {math.degrees(r.max_angle_rad):.2f}°]; "
+                "nothing was sent — choose an angle inside MotorRange"
+            )
         self._send_goal(a)
         self._goal = a
         return self.wait_until_reached() if wait else a
@@ -119,8 +121,10 @@ class LaserMotor(abc.ABC):
             if abs(angle - self._goal) <= self.range.tolerance_rad and not self._still_moving():
                 return angle
             if time.monotonic() > deadline:
-                raise DeviceTimeout(f"laser motor: still at {math.degrees(angle):.2f}° {limit} s after the goal "
-                                    f"{math.degrees(self._goal):.2f}° was sent; check torque, load and the speed limit")
+                raise DeviceTimeout(
+                    f"laser motor: still at {math.degrees(angle):.2f}° {limit} s after the goal "
+                    f"{math.degrees(self._goal):.2f}° was sent; check torque, load and the speed limit"
+                )
             time.sleep(self.range.poll_interval_s)
 
     def _still_moving(self) -> bool:

@@ -41,7 +41,9 @@ class SimCamera(FrameSource):
 
     def grab(self) -> np.ndarray:
         if self._view is None:
-            raise InvalidInputError("camera: call begin(T_base_flange) before grab(); the cell does this at each scan pose")
+            raise InvalidInputError(
+                "camera: call begin(T_base_flange) before grab(); the cell does this at each scan pose"
+            )
         angle = self.sim.laser_angle()
         rgb = self._view.frame(angle, seed=self.seed + self._frame)
         self._frame += 1
@@ -52,7 +54,9 @@ class RenderedCamera(FrameSource):
     """A simulated camera for trying a cell configuration without one: a pile of ``model``
     rendered from the flange pose and laser angle the drivers report (``begin``/``laser_at``)."""
 
-    def __init__(self, model: Model, *, count: int = 8, seed: int = 0, layout: Any = None, num_threads: int = 0) -> None:
+    def __init__(
+        self, model: Model, *, count: int = 8, seed: int = 0, layout: Any = None, num_threads: int = 0
+    ) -> None:
         self.layout = layout if layout is not None else Layout()
         self.pile = Pile(model, count, bin=self.layout.bin, seed=seed)
         self.world = World.of_pile(self.pile)
@@ -63,14 +67,18 @@ class RenderedCamera(FrameSource):
         self._frame = 0
 
     def begin(self, T_base_flange: np.ndarray) -> None:
-        self._view = self.world.view(self.layout, as_transform(T_base_flange, "T_base_flange"), num_threads=self.num_threads)
+        self._view = self.world.view(
+            self.layout, as_transform(T_base_flange, "T_base_flange"), num_threads=self.num_threads
+        )
 
     def laser_at(self, angle: float) -> None:
         self._angle = float(angle)
 
     def grab(self) -> np.ndarray:
         if self._view is None:
-            raise InvalidInputError("camera: call begin(T_base_flange) before grab(); the cell does this at each scan pose")
+            raise InvalidInputError(
+                "camera: call begin(T_base_flange) before grab(); the cell does this at each scan pose"
+            )
         rgb = self._view.frame(self._angle, seed=self.seed + self._frame)
         self._frame += 1
         return np.ascontiguousarray(rgb[:, :, ::-1])

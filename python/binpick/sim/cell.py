@@ -56,7 +56,15 @@ class Camera:
         return CameraIntrinsics(width=self.width, height=self.height, K=self.K, dist=np.array(self.dist))
 
     def _args(self) -> tuple:
-        return (int(self.width), int(self.height), float(self.fx), float(self.fy), float(self.cx), float(self.cy), list(self.dist))
+        return (
+            int(self.width),
+            int(self.height),
+            float(self.fx),
+            float(self.fy),
+            float(self.cx),
+            float(self.cy),
+            list(self.dist),
+        )
 
 
 # The default projector is defined once, in the Rust core (``Laser::default``); its pose and
@@ -98,7 +106,14 @@ class Laser:
         return self.T_camera_laser0 @ rot_y(angle)
 
     def _args(self) -> tuple:
-        return (self.T_camera_laser0, float(self.sheet_sigma), float(self.power), float(self.fan_angle), list(self.color), float(self.reference_distance))
+        return (
+            self.T_camera_laser0,
+            float(self.sheet_sigma),
+            float(self.power),
+            float(self.fan_angle),
+            list(self.color),
+            float(self.reference_distance),
+        )
 
 
 @dataclass(frozen=True)
@@ -115,7 +130,9 @@ class Lighting:
         non_negative(self.ambient, "ambient", "DN")
         non_negative(self.lamp, "lamp", "DN")
         non_negative(self.background, "background", "DN")
-        object.__setattr__(self, "lamp_direction", tuple(float(v) for v in as_vector(self.lamp_direction, "lamp_direction", 3)))
+        object.__setattr__(
+            self, "lamp_direction", tuple(float(v) for v in as_vector(self.lamp_direction, "lamp_direction", 3))
+        )
 
     def _args(self) -> tuple:
         return (float(self.ambient), float(self.lamp), list(self.lamp_direction), float(self.background))
@@ -142,7 +159,13 @@ class SensorNoise:
         return cls(read_noise=0.0, shot_noise=0.0, speckle=0.0, reflections=0.0, blur=blur)
 
     def _args(self) -> tuple:
-        return (float(self.read_noise), float(self.shot_noise), float(self.speckle), float(self.reflections), float(self.blur))
+        return (
+            float(self.read_noise),
+            float(self.shot_noise),
+            float(self.speckle),
+            float(self.reflections),
+            float(self.blur),
+        )
 
 
 @dataclass(frozen=True)
@@ -158,7 +181,9 @@ class Bin:
     def __post_init__(self) -> None:
         s = as_vector(self.size, "size", 3)
         if (s <= 0).any():
-            raise InvalidInputError(f"size: the bin's inner length, width and height must be positive mm, got {s.tolist()}")
+            raise InvalidInputError(
+                f"size: the bin's inner length, width and height must be positive mm, got {s.tolist()}"
+            )
         object.__setattr__(self, "size", tuple(float(v) for v in s))
         object.__setattr__(self, "center", tuple(float(v) for v in as_vector(self.center, "center", 2)))
         object.__setattr__(self, "floor_z", float(as_vector([self.floor_z], "floor_z", 1)[0]))
@@ -197,7 +222,11 @@ class Cell:
         """The cell's exact calibration as a ``binpick.calibration.CellCalibration``."""
         from ..calibration import CellCalibration
 
-        return CellCalibration(camera=self.camera.intrinsics(), T_camera_laser=self.laser.T_camera_laser0, T_flange_camera=self.T_flange_camera)
+        return CellCalibration(
+            camera=self.camera.intrinsics(),
+            T_camera_laser=self.laser.T_camera_laser0,
+            T_flange_camera=self.T_flange_camera,
+        )
 
     def sweep(self, frames: int = 90, margin: float = 10.0) -> np.ndarray:
         """``frames`` motor angles (rad), evenly spaced, whose laser sheets cover the bin's inner

@@ -32,7 +32,10 @@ TABLE_ALBEDO = (0.45, 0.40, 0.33)
 
 
 def _box(lo: Sequence[float], hi: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
-    v = np.array([[hi[0] if i & 1 else lo[0], hi[1] if i & 2 else lo[1], hi[2] if i & 4 else lo[2]] for i in range(8)], dtype=np.float64)
+    v = np.array(
+        [[hi[0] if i & 1 else lo[0], hi[1] if i & 2 else lo[1], hi[2] if i & 4 else lo[2]] for i in range(8)],
+        dtype=np.float64,
+    )
     quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]]
     f = np.array([t for q in quads for t in ([q[0], q[1], q[2]], [q[0], q[2], q[3]])], dtype=np.int64)
     return v, f
@@ -66,11 +69,21 @@ class World:
             t = self._scene.add_mesh(tv, tf, list(TABLE_ALBEDO), 0.0, 10.0)
             self._scene.add_instance(t, np.eye(4), TABLE_ID)
 
-    def add_mesh(self, vertices: Any, faces: Any, *, albedo: Sequence[float] = PART_ALBEDO, specular: float = 0.0, shininess: float = 20.0) -> int:
+    def add_mesh(
+        self,
+        vertices: Any,
+        faces: Any,
+        *,
+        albedo: Sequence[float] = PART_ALBEDO,
+        specular: float = 0.0,
+        shininess: float = 20.0,
+    ) -> int:
         """Adds a mesh (mm, its own frame) and returns its index for :meth:`add_instance`."""
         v = np.ascontiguousarray(vertices, dtype=np.float64)
         f = np.ascontiguousarray(faces, dtype=np.int64)
-        return int(self._scene.add_mesh(v, f, [float(a) for a in albedo], float(specular), positive(shininess, "shininess")))
+        return int(
+            self._scene.add_mesh(v, f, [float(a) for a in albedo], float(specular), positive(shininess, "shininess"))
+        )
 
     def add_instance(self, mesh: int, T_base_object: Any, id: int) -> None:
         """Places mesh ``mesh`` at ``T_base_object`` under instance id ``id``."""
@@ -147,18 +160,30 @@ class View:
         """(H, W, 3) float32 camera-facing unit normals in the camera frame."""
         return self._raw.normals()
 
-    def frame(self, angle: float, *, seed: int = 0, laser: Optional[Laser] = None, noise: Optional[SensorNoise] = None) -> np.ndarray:
+    def frame(
+        self, angle: float, *, seed: int = 0, laser: Optional[Laser] = None, noise: Optional[SensorNoise] = None
+    ) -> np.ndarray:
         """The RGB frame (H, W, 3) uint8 the camera grabs with the laser at motor angle ``angle`` (rad)."""
         return self.frames([angle], seed=seed, laser=laser, noise=noise)[0]
 
-    def frames(self, angles: Sequence[float], *, seed: int = 0, laser: Optional[Laser] = None, noise: Optional[SensorNoise] = None, num_threads: int = 0) -> np.ndarray:
+    def frames(
+        self,
+        angles: Sequence[float],
+        *,
+        seed: int = 0,
+        laser: Optional[Laser] = None,
+        noise: Optional[SensorNoise] = None,
+        num_threads: int = 0,
+    ) -> np.ndarray:
         """(K, H, W, 3) uint8 RGB frames, one per motor angle; frame k's noise is seeded by ``seed + k``."""
         laser = self.cell.laser if laser is None else laser
         noise = self.cell.noise if noise is None else noise
         a = np.asarray(angles, dtype=np.float64).ravel()
         if not np.isfinite(a).all():
             raise InvalidInputError("angles: must be finite radians")
-        return self._raw.frames(*laser._args(), a.tolist(), noise._args(), count(seed, "seed"), count(num_threads, "num_threads"))
+        return self._raw.frames(
+            *laser._args(), a.tolist(), noise._args(), count(seed, "seed"), count(num_threads, "num_threads")
+        )
 
     def ambient_frame(self, *, seed: int = 0, noise: Optional[SensorNoise] = None) -> np.ndarray:
         """The RGB frame without the laser."""

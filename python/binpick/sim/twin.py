@@ -48,8 +48,14 @@ __all__ = ["SimulatedCell", "simulated_cell", "sim_limits", "SIM_ARM"]
 def _sim_arm() -> ArmModel:
     # A larger arm than the emulator's default RV-1A class, so that the simulated cell's scan pose
     # 620 mm above the bin floor and every corner of the bin are within reach.
-    return ArmModel(base_height_mm=250.0, upper_arm_mm=400.0, forearm_mm=450.0, flange_mm=90.0,
-                    workspace_min_mm=(-900.0, -900.0, -200.0), workspace_max_mm=(900.0, 900.0, 1100.0))
+    return ArmModel(
+        base_height_mm=250.0,
+        upper_arm_mm=400.0,
+        forearm_mm=450.0,
+        flange_mm=90.0,
+        workspace_min_mm=(-900.0, -900.0, -200.0),
+        workspace_max_mm=(900.0, 900.0, 1100.0),
+    )
 
 
 SIM_ARM = _sim_arm()
@@ -111,10 +117,23 @@ class SimulatedCell:
         config_overrides: fields of :class:`CellConfig` to set (e.g. ``estimate_options``).
     """
 
-    def __init__(self, model: Model, *, count: int = 12, seed: int = 0, frames: int = 90, layout: Any = None,
-                 gripper: Optional[GripperGeometry] = None, drop_pose: Any = None, grip_tolerance_mm: float = 6.0,
-                 grip_tolerance_deg: float = 12.0, speed_scale: float = 10.0, progress: Optional[Callable[[str, str], None]] = None,
-                 num_threads: int = 0, **config_overrides: Any) -> None:
+    def __init__(
+        self,
+        model: Model,
+        *,
+        count: int = 12,
+        seed: int = 0,
+        frames: int = 90,
+        layout: Any = None,
+        gripper: Optional[GripperGeometry] = None,
+        drop_pose: Any = None,
+        grip_tolerance_mm: float = 6.0,
+        grip_tolerance_deg: float = 12.0,
+        speed_scale: float = 10.0,
+        progress: Optional[Callable[[str, str], None]] = None,
+        num_threads: int = 0,
+        **config_overrides: Any,
+    ) -> None:
         if not isinstance(model, Model):
             raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}")
         self.layout = layout if layout is not None else Layout()
@@ -130,10 +149,14 @@ class SimulatedCell:
         self.count = count
         self.config_overrides = config_overrides
         lo, hi = self.layout.bin.bounds
-        self.drop_pose = drop_pose if drop_pose is not None else look_down(float(lo[0] + hi[0]) / 2, float(lo[1]) - 150.0, 350.0)
+        self.drop_pose = (
+            drop_pose if drop_pose is not None else look_down(float(lo[0] + hi[0]) / 2, float(lo[1]) - 150.0, 350.0)
+        )
         t0 = time.perf_counter()
         self.pile = Pile(model, count, bin=self.layout.bin, seed=seed)
-        self.progress("pile", f"{len(self.pile)} {model.name} parts dropped and settled in {time.perf_counter() - t0:.1f} s")
+        self.progress(
+            "pile", f"{len(self.pile)} {model.name} parts dropped and settled in {time.perf_counter() - t0:.1f} s"
+        )
         self.removed: list[int] = []
         self._held: Optional[int] = None
         self._release_pending: Optional[int] = None
@@ -156,26 +179,59 @@ class SimulatedCell:
 
     def start(self) -> Cell:
         """Starts the emulators, opens the drivers on their ptys and the cell; returns the cell."""
-        self.robot_emulator = RobotEmulator(config=RobotEmulatorConfig(arm=SIM_ARM, speed_scale=self.speed_scale)).start()
+        self.robot_emulator = RobotEmulator(
+            config=RobotEmulatorConfig(arm=SIM_ARM, speed_scale=self.speed_scale)
+        ).start()
         self.motor_emulator = DynamixelEmulator().start()
         self.gripper_emulator = _SimGripperEmulator(self).start()
         limits = self.config_overrides.pop("limits", None) or sim_limits(self.layout, self.gripper_geometry)
-        config = CellConfig(calibration=self.layout.calibration(), model=self.model, bin_bounds=self.layout.bin.bounds,
-                            scan_poses=(self.layout.T_base_flange,), drop_pose=self.drop_pose, frames=self.frames,
-                            gripper=self.gripper_geometry, limits=limits, reachable=_Reach(SIM_ARM),
-                            num_threads=self.num_threads, **self.config_overrides)
-        robot = MelfaRobot(self.robot_emulator.slave_path, limits=limits, config=MelfaConfig(
-            serial=SerialSettings(baudrate=9600, parity="E", stopbits=2, timeout_s=1.0, retries=2),
-            initial_override_percent=min(50.0, limits.max_override_percent),
-            initial_linear_speed_mm_s=min(250.0, limits.max_linear_speed_mm_s), poll_interval_s=0.01, motion_timeout_s=30.0))
-        motor = DynamixelMotor(self.motor_emulator.slave_path, config=DynamixelConfig(
-            serial=SerialSettings(baudrate=57600, timeout_s=0.2), range=MotorRange(max_speed_rad_s=2 * math.pi, poll_interval_s=0.002)))
+        config = CellConfig(
+            calibration=self.layout.calibration(),
+            model=self.model,
+            bin_bounds=self.layout.bin.bounds,
+            scan_poses=(self.layout.T_base_flange,),
+            drop_pose=self.drop_pose,
+            frames=self.frames,
+            gripper=self.gripper_geometry,
+            limits=limits,
+            reachable=_Reach(SIM_ARM),
+            num_threads=self.num_threads,
+            **self.config_overrides,
+        )
+        robot = MelfaRobot(
+            self.robot_emulator.slave_path,
+            limits=limits,
+            config=MelfaConfig(
+                serial=SerialSettings(baudrate=9600, parity="E", stopbits=2, timeout_s=1.0, retries=2),
+                initial_override_percent=min(50.0, limits.max_override_percent),
+                initial_linear_speed_mm_s=min(250.0, limits.max_linear_speed_mm_s),
+                poll_interval_s=0.01,
+                motion_timeout_s=30.0,
+            ),
+        )
+        motor = DynamixelMotor(
+            self.motor_emulator.slave_path,
+            config=DynamixelConfig(
+                serial=SerialSettings(baudrate=57600, timeout_s=0.2),
+                range=MotorRange(max_speed_rad_s=2 * math.pi, poll_interval_s=0.002),
+            ),
+        )
         self._gripper_config = GripperConfig(serial=SerialSettings(baudrate=115200, timeout_s=0.3), speed=255)
         gripper = ModbusGripper(self.gripper_emulator.slave_path, config=self._gripper_config)
-        self.progress("emulate", f"robot on {self.robot_emulator.slave_path}, laser motor on {self.motor_emulator.slave_path}, "
-                                 f"gripper on {self.gripper_emulator.slave_path}")
-        self.cell = Cell(config, robot=robot, motor=motor, gripper=gripper, camera=SimCamera(self, seed=self.seed),
-                         progress=self.progress, truth=self)
+        self.progress(
+            "emulate",
+            f"robot on {self.robot_emulator.slave_path}, laser motor on {self.motor_emulator.slave_path}, "
+            f"gripper on {self.gripper_emulator.slave_path}",
+        )
+        self.cell = Cell(
+            config,
+            robot=robot,
+            motor=motor,
+            gripper=gripper,
+            camera=SimCamera(self, seed=self.seed),
+            progress=self.progress,
+            truth=self,
+        )
         self.cell.open()
         return self.cell
 
@@ -190,7 +246,12 @@ class SimulatedCell:
     @property
     def emulator_failures(self) -> list[str]:
         """Exceptions the emulators raised while serving (an emulator bug; should stay empty)."""
-        return [f for emu in (self.robot_emulator, self.motor_emulator, self.gripper_emulator) if emu is not None for f in emu.failures]
+        return [
+            f
+            for emu in (self.robot_emulator, self.motor_emulator, self.gripper_emulator)
+            if emu is not None
+            for f in emu.failures
+        ]
 
     # -- the physical world
     def laser_angle(self) -> float:
@@ -208,8 +269,9 @@ class SimulatedCell:
         if self._matcher is None:
             assert self.cell is not None
             cfg = self.cell.config
-            self._matcher = GraspMatcher(cfg.grasps, cfg.symmetries, tolerance_deg=self.grip_tolerance_deg,
-                                         tolerance_mm=self.grip_tolerance_mm)
+            self._matcher = GraspMatcher(
+                cfg.grasps, cfg.symmetries, tolerance_deg=self.grip_tolerance_deg, tolerance_mm=self.grip_tolerance_mm
+            )
         return self._matcher
 
     def grip_check(self) -> Optional[tuple[int, float]]:
@@ -266,8 +328,11 @@ class SimulatedCell:
             report = self.pile.remove(pid)
             self.removed.append(pid)
             self._picked = pid
-            self.progress("physics", f"part {pid} left the bin; {len(self.pile)} remain, settled in {time.perf_counter() - t0:.1f} s "
-                                     f"({report.steps} steps)")
+            self.progress(
+                "physics",
+                f"part {pid} left the bin; {len(self.pile)} remain, settled in {time.perf_counter() - t0:.1f} s "
+                f"({report.steps} steps)",
+            )
 
     # -- ground truth
     def judge(self, T_base_object: np.ndarray) -> PoseTruth:

@@ -114,8 +114,9 @@ class PtyEmulator:
         with self._lock:
             return list(self._requests)
 
-    def inject(self, fault: Fault, *, times: int = 1, when: Optional[Callable[[Any], bool]] = None,
-               delay_s: float = 0.5) -> None:
+    def inject(
+        self, fault: Fault, *, times: int = 1, when: Optional[Callable[[Any], bool]] = None, delay_s: float = 0.5
+    ) -> None:
         """Plays ``fault`` on the next ``times`` requests for which ``when(request)`` is true (all if None)."""
         if not isinstance(fault, Fault):
             raise InvalidInputError(f"fault: expected a Fault, got {fault!r}")

@@ -138,7 +138,7 @@ class GripperEmulator(PtyEmulator):
                     return self._exception(fc, 2)
                 if nbytes != 2 * count:
                     return self._exception(fc, 3)
-                self.command[: 2 * count] = frame[7:7 + nbytes]
+                self.command[: 2 * count] = frame[7 : 7 + nbytes]
                 self._apply()
                 return self._reply(frame[:6])
             return self._exception(fc, 1)

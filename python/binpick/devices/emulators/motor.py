@@ -191,7 +191,7 @@ class DynamixelEmulator(PtyEmulator):
             if addr + n > TABLE_SIZE:
                 return self._status(_ERR_ACCESS)
             self._refresh()
-            return self._status(0, bytes(self.table[addr:addr + n]))
+            return self._status(0, bytes(self.table[addr : addr + n]))
         if p.instruction == INST_WRITE:
             if len(p.params) < 3:
                 return self._status(_ERR_LENGTH)
@@ -221,8 +221,9 @@ class DynamixelEmulator(PtyEmulator):
         self.axis.enabled = bool(self.table[ADDR_TORQUE_ENABLE])
         velocity = struct.unpack_from("<I", self.table, ADDR_PROFILE_VELOCITY)[0]
         rpm_to_ticks = 4096 / 60.0
-        self.axis.speed = (velocity * 0.229 * rpm_to_ticks if velocity
-                           else self.config.max_speed_rad_s * 4096 / (2 * math.pi))
+        self.axis.speed = (
+            velocity * 0.229 * rpm_to_ticks if velocity else self.config.max_speed_rad_s * 4096 / (2 * math.pi)
+        )
         self.axis.set_goal(struct.unpack_from("<i", self.table, ADDR_GOAL_POSITION)[0])
 
     # -- fault hooks

@@ -222,11 +222,13 @@ def _quat(R: np.ndarray) -> np.ndarray:
 
 def _quat_matrix(q: np.ndarray) -> np.ndarray:
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def _straight_path(T0: np.ndarray, T1: np.ndarray, steps: int) -> list[np.ndarray]:
@@ -390,9 +392,15 @@ class RobotEmulator(PtyEmulator):
             return self.config.model_name
         if not self._opened and not cmd.startswith("ERRORMES"):
             raise _Refused(ERR_NOT_OPEN)
-        simple = {"CLOSE": self._close_session, "CNTLON": lambda: setattr(self, "_control", True),
-                  "CNTLOFF": lambda: setattr(self, "_control", False), "SRVON": self._servo_on,
-                  "SRVOFF": self._servo_off, "RSTALRM": lambda: setattr(self, "_alarm", 0), "STOP": self._halt}
+        simple = {
+            "CLOSE": self._close_session,
+            "CNTLON": lambda: setattr(self, "_control", True),
+            "CNTLOFF": lambda: setattr(self, "_control", False),
+            "SRVON": self._servo_on,
+            "SRVOFF": self._servo_off,
+            "RSTALRM": lambda: setattr(self, "_alarm", 0),
+            "STOP": self._halt,
+        }
         if cmd in simple:
             simple[cmd]()
             return ""
