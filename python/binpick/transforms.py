@@ -106,7 +106,7 @@ def pose_error(
     A = as_transform(T_est, "T_est")
     B = as_transform(T_true, "T_true")
     axis = None if continuous_axis is None else as_vector(continuous_axis, "continuous_axis", 3)
-    c = as_vector(center, "center", 3)
+    c = None if axis is None else as_vector(center, "center", 3)
     errors = []
     for S in [np.eye(4), *symmetries]:
         S = np.asarray(S, dtype=np.float64)
