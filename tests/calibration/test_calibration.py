@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from calibration_rig import PATTERN, SQUARE, Rig, rotation_angle_deg
 
 from binpick.calibration import (
     HAND_EYE_METHODS,
@@ -22,7 +23,6 @@ from binpick.calibration._file import CameraIntrinsics
 from binpick.errors import CalibrationError, InvalidInputError, SingularGeometryError
 from binpick.vision import _synthetic as syn
 from binpick.vision import extract_line
-from conftest import PATTERN, SQUARE, Rig, rotation_angle_deg
 
 
 def test_camera_intrinsics_from_rendered_checkerboards(rig, board_views):

@@ -6,11 +6,11 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from calibration_rig import rotation_angle_deg
 
 from binpick.calibration import HAND_EYE_METHODS, calibrate_hand_eye
 from binpick.errors import CalibrationError
 from binpick.vision._synthetic import pose
-from conftest import rotation_angle_deg
 
 TRUTH = pose(0.02, -0.01, 0.3, (30.0, -10.0, 90.0))
 T_BASE_BOARD = pose(0.0, 0.0, 0.05, (400.0, -70.0, 0.0))

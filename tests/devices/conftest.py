@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
+from device_settings import FAST_ROBOT
 
 from binpick.devices import (
     AiMotor,
@@ -13,7 +14,6 @@ from binpick.devices import (
     DynamixelConfig,
     DynamixelMotor,
     GripperConfig,
-    MelfaConfig,
     MelfaRobot,
     ModbusGripper,
     MotorRange,
@@ -28,13 +28,6 @@ from binpick.devices.emulators import (
 )
 from binpick.errors import DeviceError
 
-FAST_ROBOT = MelfaConfig(
-    serial=SerialSettings(baudrate=9600, parity="E", stopbits=2, timeout_s=0.3, retries=2),
-    initial_override_percent=50,
-    initial_linear_speed_mm_s=200,
-    poll_interval_s=0.005,
-    motion_timeout_s=5.0,
-)
 FAST_RANGE = MotorRange(max_speed_rad_s=30.0, move_timeout_s=2.0, poll_interval_s=0.005)
 
 

@@ -6,6 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from device_settings import FAST_ROBOT
 
 from binpick.devices import MelfaConfig, MelfaHandGripper, MelfaRobot, SerialSettings
 from binpick.devices.emulators import Fault, RobotEmulator, RobotEmulatorConfig
@@ -21,7 +22,6 @@ from binpick.errors import (
     TruncatedReplyError,
     UnknownReplyError,
 )
-from conftest import FAST_ROBOT
 
 
 def down(x, y, z):
