@@ -7,6 +7,7 @@ A leaf module: it imports nothing from binpick but the errors and the validation
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -55,6 +56,46 @@ class CameraIntrinsics:
             )
         object.__setattr__(self, "K", frozen_copy(K))
         object.__setattr__(self, "dist", frozen_copy(dist))
+
+    @classmethod
+    def pinhole(
+        cls,
+        width: int,
+        height: int,
+        fx: float,
+        fy: float,
+        cx: float,
+        cy: float,
+        dist: Sequence[float] = (0.0, 0.0, 0.0, 0.0, 0.0),
+        skew: float = 0.0,
+    ) -> CameraIntrinsics:
+        """A camera from its pinhole parameters (pixels) and ``dist = [k1, k2, p1, p2, k3]``."""
+        return cls(width=width, height=height, K=pinhole_matrix(fx, fy, cx, cy, skew), dist=dist)
+
+    @property
+    def fx(self) -> float:
+        """Focal length along x, px."""
+        return float(self.K[0, 0])
+
+    @property
+    def fy(self) -> float:
+        """Focal length along y, px."""
+        return float(self.K[1, 1])
+
+    @property
+    def cx(self) -> float:
+        """Principal point x, px."""
+        return float(self.K[0, 2])
+
+    @property
+    def cy(self) -> float:
+        """Principal point y, px."""
+        return float(self.K[1, 2])
+
+    @property
+    def skew(self) -> float:
+        """The skew term K[0, 1], px (0 for the cameras OpenCV calibrates)."""
+        return float(self.K[0, 1])
 
     @property
     def shape(self) -> tuple[int, int]:

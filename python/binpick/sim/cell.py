@@ -10,61 +10,33 @@ sheet at motor angle 0 crossing the optical axis 520 mm out; the sweep covers th
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .. import _core
 from .._validate import as_transform, as_vector, count, non_negative, positive
-from ..camera import CameraIntrinsics, pinhole_matrix
+from ..camera import CameraIntrinsics
 from ..errors import InvalidInputError
 from ..transforms import laser_sweep, look_down, rot_y
 
 __all__ = ["Camera", "Laser", "Lighting", "SensorNoise", "Bin", "Cell", "rot_y", "look_down"]
 
 
-@dataclass(frozen=True)
-class Camera:
-    """The simulated camera's optics as the renderer takes them: size (px), focal lengths and principal
-    point (px), ``dist = [k1, k2, p1, p2, k3]``; :meth:`intrinsics` gives the same camera as the
-    one intrinsics model of :mod:`binpick.camera`.
-    The default is the paper's 1032 × 778 camera with an 8 mm-class lens and mild barrel distortion."""
-
-    width: int = 1032
-    height: int = 778
-    fx: float = 1600.0
-    fy: float = 1600.0
-    cx: float = 515.5
-    cy: float = 388.5
-    dist: tuple[float, float, float, float, float] = (-0.04, 0.01, 0.0, 0.0, 0.0)
-
-    def __post_init__(self) -> None:
-        count(self.width, "width", 2)
-        count(self.height, "height", 2)
-        positive(self.fx, "fx", "px")
-        positive(self.fy, "fy", "px")
-        d = as_vector(self.dist, "dist", 5)
-        object.__setattr__(self, "dist", tuple(float(v) for v in d))
-
-    @property
-    def K(self) -> np.ndarray:
-        """The 3×3 intrinsic matrix."""
-        return pinhole_matrix(self.fx, self.fy, self.cx, self.cy)
-
-    def intrinsics(self) -> CameraIntrinsics:
-        """This camera as the measuring chain's :class:`binpick.camera.CameraIntrinsics`."""
-        return CameraIntrinsics(width=self.width, height=self.height, K=self.K, dist=np.array(self.dist))
-
-    def _args(self) -> tuple:
-        return (
-            int(self.width),
-            int(self.height),
-            float(self.fx),
-            float(self.fy),
-            float(self.cx),
-            float(self.cy),
-            list(self.dist),
-        )
+def Camera(  # named like a class: it builds the simulated camera, as binpick.sim.Camera(...) always has
+    width: int = 1032,
+    height: int = 778,
+    fx: float = 1600.0,
+    fy: float = 1600.0,
+    cx: float = 515.5,
+    cy: float = 388.5,
+    dist: Sequence[float] = (-0.04, 0.01, 0.0, 0.0, 0.0),
+) -> CameraIntrinsics:
+    """The simulated cell's camera, as the one camera model (:class:`binpick.camera.CameraIntrinsics`):
+    size (px), focal lengths and principal point (px), ``dist = [k1, k2, p1, p2, k3]``. The default
+    is the paper's 1032 × 778 camera with an 8 mm-class lens and mild barrel distortion."""
+    return CameraIntrinsics.pinhole(width, height, fx, fy, cx, cy, dist)
 
 
 # The default projector is defined once, in the Rust core (``Laser::default``); its pose and
@@ -201,7 +173,7 @@ class Cell:
     """The whole simulated cell: camera, laser, hand-eye ``T_flange_camera``, bin, lighting and noise,
     and the robot pose ``T_base_flange`` it scans from."""
 
-    camera: Camera = field(default_factory=Camera)
+    camera: CameraIntrinsics = field(default_factory=Camera)
     laser: Laser = field(default_factory=Laser)
     T_flange_camera: np.ndarray = field(default_factory=lambda: _flange_camera())
     bin: Bin = field(default_factory=Bin)
@@ -223,7 +195,7 @@ class Cell:
         from ..calibration import CellCalibration
 
         return CellCalibration(
-            camera=self.camera.intrinsics(),
+            camera=self.camera,
             T_camera_laser=self.laser.T_camera_laser0,
             T_flange_camera=self.T_flange_camera,
         )
