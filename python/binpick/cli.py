@@ -181,7 +181,7 @@ def _estimate_options(args: argparse.Namespace) -> dict:
 
 
 def _pick(args: argparse.Namespace) -> int:
-    from .cell import CELL_FILE_EXAMPLE, ProgressPrinter, RunReport, cell_from_file, load_cell_file
+    from .cell import CELL_FILE_EXAMPLE, ProgressPrinter, cell_from_file, load_cell_file
 
     if args.example:
         print(CELL_FILE_EXAMPLE, end="")
@@ -195,31 +195,7 @@ def _pick(args: argparse.Namespace) -> int:
     out = Path(args.out)
     with cell:
         if args.dry_run:
-            scan = cell.scan()
-            try:
-                located = cell.locate(scan)
-            except BinpickError as exc:
-                report = RunReport(records=(), stopped=str(exc), last_scan=scan)
-                _pictures(out, report, cell.config.model, cell.config.bin_bounds)
-                print(f"binpick pick --dry-run: {exc}", file=sys.stderr)
-                return 1
-            report = RunReport(records=(), stopped="dry run", last_scan=scan, last_located=located)
-            written = _pictures(out, report, cell.config.model, cell.config.bin_bounds)
-            pose = located.T_base_object
-            print(
-                json.dumps(
-                    {
-                        "T_base_object": pose.round(4).tolist(),
-                        "score": located.result.score,
-                        "rmse_mm": located.result.rmse,
-                        "points": len(scan.points),
-                    },
-                    indent=1,
-                )
-            )
-            for p in written:
-                print(f"wrote {p}")
-            return 0
+            return _dry_run(cell, out)
         report = cell.run(args.picks)
     written = _pictures(out, report, cell.config.model, cell.config.bin_bounds)
     _print_table(report.records)
@@ -228,6 +204,37 @@ def _pick(args: argparse.Namespace) -> int:
     if report.successes == 0:
         print("binpick pick: no part was picked — " + (report.stopped or "see the table"), file=sys.stderr)
         return 1
+    return 0
+
+
+def _dry_run(cell: Any, out: Path) -> int:
+    """``binpick pick --dry-run``: scan and locate once, write the pictures, print the pose."""
+    from .cell import RunReport
+
+    scan = cell.scan()
+    try:
+        located = cell.locate(scan)
+    except BinpickError as exc:
+        report = RunReport(records=(), stopped=str(exc), last_scan=scan)
+        _pictures(out, report, cell.config.model, cell.config.bin_bounds)
+        print(f"binpick pick --dry-run: {exc}", file=sys.stderr)
+        return 1
+    report = RunReport(records=(), stopped="dry run", last_scan=scan, last_located=located)
+    written = _pictures(out, report, cell.config.model, cell.config.bin_bounds)
+    pose = located.T_base_object
+    print(
+        json.dumps(
+            {
+                "T_base_object": pose.round(4).tolist(),
+                "score": located.result.score,
+                "rmse_mm": located.result.rmse,
+                "points": len(scan.points),
+            },
+            indent=1,
+        )
+    )
+    for p in written:
+        print(f"wrote {p}")
     return 0
 
 
@@ -360,15 +367,21 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="binpick", description="Eye-in-hand laser-line bin picking.")
     p.add_argument("--version", action="version", version=f"binpick {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    for add in (_add_demo, _add_pick, _add_forwarded, _add_estimate, _add_calibrate, _add_bench):
+        add(sub)
+    return p
 
-    def pose_options(q: argparse.ArgumentParser) -> None:
-        q.add_argument(
-            "--d-star", type=float, default=None, help="segmentation distance d* (mm); default: the estimator's"
-        )
-        q.add_argument(
-            "--min-points", type=int, default=None, help="fewest points of a part region; default: the estimator's"
-        )
 
+def _pose_options(q: argparse.ArgumentParser) -> None:
+    """The options of a pose request that the demo and estimate commands share."""
+    q.add_argument("--d-star", type=float, default=None, help="segmentation distance d* (mm); default: the estimator's")
+    q.add_argument(
+        "--min-points", type=int, default=None, help="fewest points of a part region; default: the estimator's"
+    )
+
+
+def _add_demo(sub: Any) -> None:
+    """``binpick demo``."""
     d = sub.add_parser(
         "demo",
         help="the whole simulated cell picking parts over emulated serial devices",
@@ -382,9 +395,12 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--seed", type=int, default=0, help="seed of the pile and the sensor noise (default 0)")
     d.add_argument("--frames", type=int, default=90, help="laser frames per scan (default 90)")
     d.add_argument("--out", default="binpick-demo", help="folder for the pictures (default ./binpick-demo)")
-    pose_options(d)
+    _pose_options(d)
     d.set_defaults(run=_demo)
 
+
+def _add_pick(sub: Any) -> None:
+    """``binpick pick``."""
     k = sub.add_parser(
         "pick",
         help="pick parts in the real cell described by a cell file",
@@ -401,6 +417,9 @@ def _parser() -> argparse.ArgumentParser:
     k.add_argument("--example", action="store_true", help="print an example cell file and exit")
     k.set_defaults(run=_pick)
 
+
+def _add_forwarded(sub: Any) -> None:
+    """``binpick simulate`` and ``binpick emulate``: their own parsers read the rest."""
     s = sub.add_parser(
         "simulate", help="render a simulated scan to a scan folder (see `binpick simulate --help`)", add_help=False
     )
@@ -412,6 +431,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     e.set_defaults(forward="emulate")
 
+
+def _add_estimate(sub: Any) -> None:
+    """``binpick estimate``."""
     t = sub.add_parser(
         "estimate",
         help="estimate a part's pose in a scene cloud",
@@ -438,9 +460,12 @@ def _parser() -> argparse.ArgumentParser:
         help="bin box in the scene frame, mm",
     )
     t.add_argument("--png", default="estimate.png", help="picture to write (default estimate.png)")
-    pose_options(t)
+    _pose_options(t)
     t.set_defaults(run=_estimate)
 
+
+def _add_calibrate(sub: Any) -> None:
+    """``binpick calibrate``."""
     c = sub.add_parser(
         "calibrate",
         help="camera intrinsics from checkerboard images",
@@ -451,11 +476,13 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--square", type=float, default=20.0, help="square size, mm (default 20)")
     c.set_defaults(run=_calibrate)
 
+
+def _add_bench(sub: Any) -> None:
+    """``binpick bench``."""
     b = sub.add_parser("bench", help="run the benchmarks of a source checkout")
     b.add_argument("names", nargs="*", help="benches to run (default all)")
     b.add_argument("--list", action="store_true", help="list the benches")
     b.set_defaults(run=_bench)
-    return p
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

@@ -353,16 +353,7 @@ class Cell:
         """
         times: dict[str, float] = {}
         t0 = time.perf_counter()
-        if located is None:
-            scan = self.scan()
-            times.update({f"scan.{k}": v for k, v in scan.timings.items()})
-            t1 = time.perf_counter()
-            located, plan = self.locate_and_plan(scan)
-            times["locate+plan"] = _ms_since(t1)
-        elif plan is None:
-            t1 = time.perf_counter()
-            plan = self.plan(located)
-            times["plan"] = _ms_since(t1)
+        located, plan = self._located_and_planned(located, plan, times)
         res = located.result
         times.update({f"estimate.{k}": float(v) for k, v in dict(getattr(res, "timings", {})).items()})
         t3 = time.perf_counter()
@@ -393,6 +384,23 @@ class Cell:
             error=error,
             timings=MappingProxyType(times),
         )
+
+    def _located_and_planned(
+        self, located: Optional[Located], plan: Optional[PickPlan], times: dict[str, float]
+    ) -> tuple[Located, PickPlan]:
+        """What :meth:`pick` was given, completed: a scan, location and plan when ``located`` is
+        None, a plan when only ``plan`` is; their timings go into ``times``."""
+        if located is None:
+            scan = self.scan()
+            times.update({f"scan.{k}": v for k, v in scan.timings.items()})
+            t1 = time.perf_counter()
+            located, plan = self.locate_and_plan(scan)
+            times["locate+plan"] = _ms_since(t1)
+        elif plan is None:
+            t1 = time.perf_counter()
+            plan = self.plan(located)
+            times["plan"] = _ms_since(t1)
+        return located, plan
 
     def _judge_pick(self, located: Located, held: Optional[bool], picked: Optional[int]) -> tuple[bool, Optional[str]]:
         """Whether the pick succeeded, and why not; remembers where the gripper closed on nothing."""

@@ -179,13 +179,37 @@ class SimulatedCell:
 
     def start(self) -> Cell:
         """Starts the emulators, opens the drivers on their ptys and the cell; returns the cell."""
+        self._start_emulators()
+        limits = self.config_overrides.pop("limits", None) or sim_limits(self.layout, self.gripper_geometry)
+        config = self._config(limits)
+        robot, motor, gripper = self._drivers(limits)
+        self.cell = Cell(
+            config,
+            robot=robot,
+            motor=motor,
+            gripper=gripper,
+            camera=SimCamera(self, seed=self.seed),
+            progress=self.progress,
+            truth=self,
+        )
+        self.cell.open()
+        return self.cell
+
+    def _start_emulators(self) -> None:
         self.robot_emulator = RobotEmulator(
             config=RobotEmulatorConfig(arm=SIM_ARM, speed_scale=self.speed_scale)
         ).start()
         self.motor_emulator = DynamixelEmulator().start()
         self.gripper_emulator = _SimGripperEmulator(self).start()
-        limits = self.config_overrides.pop("limits", None) or sim_limits(self.layout, self.gripper_geometry)
-        config = CellConfig(
+        self.progress(
+            "emulate",
+            f"robot on {self.robot_emulator.slave_path}, laser motor on {self.motor_emulator.slave_path}, "
+            f"gripper on {self.gripper_emulator.slave_path}",
+        )
+
+    def _config(self, limits: safety.CellLimits) -> CellConfig:
+        """The pick loop's view of the simulated cell: its exact calibration, bin, scan pose and arm."""
+        return CellConfig(
             calibration=self.layout.calibration(),
             model=self.model,
             bin_bounds=self.layout.bin.bounds,
@@ -198,6 +222,9 @@ class SimulatedCell:
             num_threads=self.num_threads,
             **self.config_overrides,
         )
+
+    def _drivers(self, limits: safety.CellLimits) -> tuple[MelfaRobot, DynamixelMotor, ModbusGripper]:
+        """The real drivers opened on the emulators' ptys, with timings for an emulated cell."""
         robot = MelfaRobot(
             self.robot_emulator.slave_path,
             limits=limits,
@@ -217,23 +244,7 @@ class SimulatedCell:
             ),
         )
         self._gripper_config = GripperConfig(serial=SerialSettings(baudrate=115200, timeout_s=0.3), speed=255)
-        gripper = ModbusGripper(self.gripper_emulator.slave_path, config=self._gripper_config)
-        self.progress(
-            "emulate",
-            f"robot on {self.robot_emulator.slave_path}, laser motor on {self.motor_emulator.slave_path}, "
-            f"gripper on {self.gripper_emulator.slave_path}",
-        )
-        self.cell = Cell(
-            config,
-            robot=robot,
-            motor=motor,
-            gripper=gripper,
-            camera=SimCamera(self, seed=self.seed),
-            progress=self.progress,
-            truth=self,
-        )
-        self.cell.open()
-        return self.cell
+        return robot, motor, ModbusGripper(self.gripper_emulator.slave_path, config=self._gripper_config)
 
     def close(self) -> None:
         """Closes the cell and stops the emulators."""
