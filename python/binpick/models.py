@@ -290,7 +290,8 @@ class Model:
 
     def pose_error(self, T_estimate: Any, T_truth: Any) -> tuple[float, float]:
         """Rotation (degrees) and translation (mm) error of a pose against the truth, minimised
-        over the part's symmetries (as the BOP benchmark judges)."""
+        over the part's symmetries (as the BOP benchmark judges): :func:`binpick.transforms.pose_error`
+        with this part's symmetry group (its continuous axis, if any, exactly)."""
         sym = self.symmetries
         maps = []
         for R in sym.rotations:
