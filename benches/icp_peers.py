@@ -4,8 +4,9 @@ Case (issue 2): 100k-point source and target, two independent samplings of the s
 each with 0.2 mm Gaussian noise; the source starts 5° and 10 mm off (random axis and direction
 per trial). Surfaces: the real CAD parts in ../shared/data/parts that have no continuous
 symmetry (the bunny and the ring screw; the gear shaft's rotation about its axis is not
-observable, so no method's rotation error means anything there), else binpick's built-in tee. Reports, per method: median wall time per ICP, iterations, time per point per
-iteration, and the final rotation and translation errors (median and worst over the trials).
+observable, so no method's rotation error means anything there), else binpick's built-in tee.
+Reports, per method: median wall time per ICP, iterations, time per point per iteration, and the
+final rotation and translation errors (median and worst over the trials).
 
     python benches/icp_peers.py [--points 100000] [--trials 5] [--parts DIR]
 
@@ -15,7 +16,6 @@ Peers that are not installed are skipped with a message (pip install open3d smal
 from __future__ import annotations
 
 import argparse
-import os
 import statistics
 import sys
 import time
@@ -24,23 +24,17 @@ from pathlib import Path
 import numpy as np
 
 import binpick
+from binpick.transforms import pose_error, rotation_about
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_PARTS = HERE.parent.parent / "shared" / "data" / "parts"
 
 
 def rigid(axis: np.ndarray, angle: float, shift: np.ndarray) -> np.ndarray:
-    axis = axis / np.linalg.norm(axis)
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
     t = np.eye(4)
-    t[:3, :3] = np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+    t[:3, :3] = rotation_about(axis, angle)
     t[:3, 3] = shift
     return t
-
-
-def errors(t_est: np.ndarray, t_true: np.ndarray) -> tuple[float, float]:
-    d = t_true[:3, :3].T @ t_est[:3, :3]
-    return float(np.degrees(np.arccos(np.clip((np.trace(d) - 1) / 2, -1, 1)))), float(np.linalg.norm(t_est[:3, 3] - t_true[:3, 3]))
 
 
 def surfaces(parts_dir: Path, n: int):
@@ -72,10 +66,18 @@ MAX_ITERS = 100
 def run_binpick(method):
     def run(source, target, normals):
         r = binpick.icp(
-            source, target, target_normals=normals, method=method, max_correspondence_distance=MAX_DIST,
-            max_iterations=MAX_ITERS, rotation_tolerance=1e-5, translation_tolerance=1e-4, num_threads=1,
+            source,
+            target,
+            target_normals=normals,
+            method=method,
+            max_correspondence_distance=MAX_DIST,
+            max_iterations=MAX_ITERS,
+            rotation_tolerance=1e-5,
+            translation_tolerance=1e-4,
+            num_threads=1,
         )
         return r.T_target_source, r.iterations
+
     return run
 
 
@@ -98,6 +100,7 @@ def peers():
                 crit = reg.ICPConvergenceCriteria(relative_fitness=1e-7, relative_rmse=1e-7, max_iteration=MAX_ITERS)
                 r = reg.registration_icp(ps, pt, MAX_DIST, np.eye(4), estimation, crit)
                 return np.asarray(r.transformation), None
+
             return run
 
         out["Open3D point_to_point"] = o3d_run(reg.TransformationEstimationPointToPoint(), False)
@@ -114,9 +117,17 @@ def peers():
                 if kind == "PLANE_ICP":
                     small_gicp.estimate_normals(tgt, num_threads=1)
                 tree = small_gicp.KdTree(tgt, num_threads=1)
-                r = small_gicp.align(tgt, small_gicp.PointCloud(source), tree, registration_type=kind,
-                                     max_correspondence_distance=MAX_DIST, num_threads=1, max_iterations=MAX_ITERS)
+                r = small_gicp.align(
+                    tgt,
+                    small_gicp.PointCloud(source),
+                    tree,
+                    registration_type=kind,
+                    max_correspondence_distance=MAX_DIST,
+                    num_threads=1,
+                    max_iterations=MAX_ITERS,
+                )
                 return r.T_target_source, r.iterations
+
             return run
 
         out["small_gicp ICP"] = sg_run("ICP")
@@ -144,7 +155,10 @@ def main(argv=None) -> int:
     ap.add_argument("--trials", type=int, default=3)
     ap.add_argument("--parts", type=Path, default=DEFAULT_PARTS)
     args = ap.parse_args(argv)
-    methods = {"binpick point_to_point": run_binpick("point_to_point"), "binpick point_to_plane": run_binpick("point_to_plane")}
+    methods = {
+        "binpick point_to_point": run_binpick("point_to_point"),
+        "binpick point_to_plane": run_binpick("point_to_plane"),
+    }
     extra = peers()
     fixed = extra.pop("_o3d_fixed", None)
     methods.update(extra)
@@ -161,19 +175,33 @@ def main(argv=None) -> int:
                 if its is None and fixed is not None:
                     o3d, reg = fixed
                     plane = name.endswith("plane")
-                    est = reg.TransformationEstimationPointToPlane() if plane else reg.TransformationEstimationPointToPoint()
+                    est = (
+                        reg.TransformationEstimationPointToPlane()
+                        if plane
+                        else reg.TransformationEstimationPointToPoint()
+                    )
                     per_it = o3d_seconds_per_iteration(o3d, reg, source, target, est, plane, normals)
                 rows[name]["per_it"].append(per_it if per_it is not None else elapsed / max(its or 1, 1))
-                rot, trans = errors(t_est, truth)
+                rot, trans = pose_error(t_est, truth)
                 r = rows[name]
                 r["time"].append(elapsed)
                 r["its"].append(its)
                 r["rot"].append(rot)
                 r["trans"].append(trans)
-                print(f"{part} trial {trial}: {name:24s} {elapsed * 1e3:8.1f} ms  its {its}  {rot:.4f}°  {trans:.4f} mm", file=sys.stderr, flush=True)
+                print(
+                    f"{part} trial {trial}: {name:24s} {elapsed * 1e3:8.1f} ms  its {its}  {rot:.4f}°  {trans:.4f} mm",
+                    file=sys.stderr,
+                    flush=True,
+                )
     n = args.points
-    print(f"\n### ICP, {n} points, 0.2 mm noise, start 5° / 10 mm off, one thread (median over {len(rows['binpick point_to_point']['time'])} cases)\n")
-    print("| method | time per ICP (ms) | iterations | µs per point-iteration | rot. error ° (median / max) | transl. error mm (median / max) |")
+    print(
+        f"\n### ICP, {n} points, 0.2 mm noise, start 5° / 10 mm off, one thread "
+        f"(median over {len(rows['binpick point_to_point']['time'])} cases)\n"
+    )
+    print(
+        "| method | time per ICP (ms) | iterations | µs per point-iteration "
+        "| rot. error ° (median / max) | transl. error mm (median / max) |"
+    )
     print("|---|---|---|---|---|---|")
     per_pt = {}
     for name, r in rows.items():
@@ -182,12 +210,17 @@ def main(argv=None) -> int:
         it = statistics.median(its) if its else None
         per = statistics.median([p / n * 1e6 for p in r["per_it"]])
         per_pt[name] = per
-        print(f"| {name} | {t * 1e3:.0f} | {it if it is not None else 'n/a'} | {per:.3f} | {statistics.median(r['rot']):.4f} / {max(r['rot']):.4f} | {statistics.median(r['trans']):.4f} / {max(r['trans']):.4f} |")
+        rot = f"{statistics.median(r['rot']):.4f} / {max(r['rot']):.4f}"
+        trans = f"{statistics.median(r['trans']):.4f} / {max(r['trans']):.4f}"
+        print(f"| {name} | {t * 1e3:.0f} | {it if it is not None else 'n/a'} | {per:.3f} | {rot} | {trans} |")
     ours = per_pt["binpick point_to_point"]
     for peer in ("small_gicp ICP", "Open3D point_to_point"):
         if per_pt.get(peer):
-            print(f"\nbinpick point_to_point is {per_pt[peer] / ours:.2f}× faster per point-iteration than {peer}", end="")
-            print(f"; {statistics.median(rows[peer]['time']) / statistics.median(rows['binpick point_to_point']['time']):.2f}× per ICP")
+            print(
+                f"\nbinpick point_to_point is {per_pt[peer] / ours:.2f}× faster per point-iteration than {peer}", end=""
+            )
+            ratio = statistics.median(rows[peer]["time"]) / statistics.median(rows["binpick point_to_point"]["time"])
+            print(f"; {ratio:.2f}× per ICP")
     return 0
 
 

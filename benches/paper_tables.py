@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 import binpick
+from binpick.transforms import rotation_angle_deg
 
 # Table 3 cases: (n_m, n_d, position mm, rotation deg (θx, θy, θz)); Table 4's CCP + ICP rows.
 CASES = [
@@ -44,7 +45,14 @@ PAPER_CCP = [  # position error x, y, z (mm), rotation error θx, θy, θz (deg)
     (-0.05, 1.55, 1.6, -0.63, 0.01, -0.6, 1.46),
 ]
 THREADS = 1  # worker threads of both methods (the paper ran one)
-PAPER_ICP_ROT = [(142.69, -66.39, -155.21), (-214.61, -39.01, 69.89), (0.13, 0.36, 0.1), (0.1, 0.43, -0.1), (113.26, 59.88, 15), (134.19, -93.45, -113.3)]
+PAPER_ICP_ROT = [
+    (142.69, -66.39, -155.21),
+    (-214.61, -39.01, 69.89),
+    (0.13, 0.36, 0.1),
+    (0.1, 0.43, -0.1),
+    (113.26, 59.88, 15),
+    (134.19, -93.45, -113.3),
+]
 
 
 def rot_xyz(deg) -> np.ndarray:
@@ -57,7 +65,9 @@ def rot_xyz(deg) -> np.ndarray:
 
 def euler_xyz(r: np.ndarray) -> tuple[float, float, float]:
     """(θx, θy, θz) in degrees with r = Rz·Ry·Rx."""
-    return tuple(np.degrees([np.arctan2(r[2, 1], r[2, 2]), -np.arcsin(np.clip(r[2, 0], -1, 1)), np.arctan2(r[1, 0], r[0, 0])]))
+    return tuple(
+        np.degrees([np.arctan2(r[2, 1], r[2, 2]), -np.arcsin(np.clip(r[2, 0], -1, 1)), np.arctan2(r[1, 0], r[0, 0])])
+    )
 
 
 def half(model: binpick.Model) -> np.ndarray:
@@ -75,8 +85,15 @@ def tee_clouds(n_m: int, n_d: int, seed: int):
     # Both methods register onto the paper's model cloud: n_m points of the visible half, with
     # their mesh normals (binpick.estimate_pose on a Model whose samples are those points).
     model = binpick.Model(
-        mesh.vertices.copy(), mesh.faces.copy(), dense_m.points[mi], dense_m.normals[mi], spacing=None,
-        diameter=mesh.diameter, area=mesh.area, name="tee-300", branches=mesh.branches,
+        mesh.vertices.copy(),
+        mesh.faces.copy(),
+        dense_m.points[mi],
+        dense_m.normals[mi],
+        spacing=None,
+        diameter=mesh.diameter,
+        area=mesh.area,
+        name="tee-300",
+        branches=mesh.branches,
         special_direction=mesh.special_direction,
     )
     data = dense_d.points[di] + rng.normal(0, 0.3, (len(di), 3))
@@ -94,12 +111,21 @@ def run_case(model, model_cloud, data, pos, rot_deg, repeats=1):
     model.prepared()  # once per part (search structures, symmetries, PPF table): not part of a case's time
 
     def by_icp():
-        icp = binpick.icp(scene, model_cloud, method="point_to_point", max_correspondence_distance=1000.0, max_iterations=200, num_threads=THREADS)
+        icp = binpick.icp(
+            scene,
+            model_cloud,
+            method="point_to_point",
+            max_correspondence_distance=1000.0,
+            max_iterations=200,
+            num_threads=THREADS,
+        )
         return np.linalg.inv(icp.T_target_source)
 
     def by_ccp():
         try:
-            return binpick.estimate_pose(scene, model, method="ccp", up=up, num_threads=THREADS, min_fitness=0.5).T_scene_model
+            return binpick.estimate_pose(
+                scene, model, method="ccp", up=up, num_threads=THREADS, min_fitness=0.5
+            ).T_scene_model
         except binpick.NoObjectFound:
             return None
 
@@ -122,13 +148,15 @@ def run_case(model, model_cloud, data, pos, rot_deg, repeats=1):
 
 
 def angle_of(d_rot) -> float:
-    r = rot_xyz(d_rot)
-    return float(np.degrees(np.arccos(np.clip((np.trace(r) - 1) / 2, -1, 1))))
+    return rotation_angle_deg(rot_xyz(d_rot))
 
 
 def tables_3_4() -> None:
     print("### Tables 3 and 4: tee, ICP alone vs CCP + ICP (binpick; the paper's CCP + ICP in brackets)\n")
-    print("| case | n_m | n_d | initial pos (mm) | initial rot (deg) | method | pos. error x, y, z (mm) | rot. error θx, θy, θz (deg) | time (ms) |")
+    print(
+        "| case | n_m | n_d | initial pos (mm) | initial rot (deg) | method | "
+        "pos. error x, y, z (mm) | rot. error θx, θy, θz (deg) | time (ms) |"
+    )
     print("|---|---|---|---|---|---|---|---|---|")
     worst = (0.0, 0.0, 0.0)
     for i, (n_m, n_d, pos, rot) in enumerate(CASES, 1):
@@ -141,7 +169,11 @@ def tables_3_4() -> None:
             else:
                 cells = f"{dp[0]:.2f}, {dp[1]:.2f}, {dp[2]:.2f} | {dr[0]:.2f}, {dr[1]:.2f}, {dr[2]:.2f}"
                 if method == "CCP + ICP":
-                    worst = (max(worst[0], float(np.linalg.norm(dp))), max(worst[1], angle_of(dr)), max(worst[2], el * 1e3))
+                    worst = (
+                        max(worst[0], float(np.linalg.norm(dp))),
+                        max(worst[1], angle_of(dr)),
+                        max(worst[2], el * 1e3),
+                    )
             if paper:
                 cells_p = f" [{paper[0]}, {paper[1]}, {paper[2]}] | "
                 cells = cells.replace(" | ", cells_p, 1) + f" [{paper[3]}, {paper[4]}, {paper[5]}]"
@@ -149,7 +181,9 @@ def tables_3_4() -> None:
             else:
                 t = f"{el * 1e3:.1f}"
             print(f"| {i} | {n_m} | {n_d} | {pos} | {rot} | {method} | {cells} | {t} |")
-    print(f"\nCCP + ICP worst case: {worst[0]:.2f} mm, {worst[1]:.2f}°, {worst[2]:.1f} ms (targets: 0.5 mm, 0.5°, 5 ms)\n")
+    print(
+        f"\nCCP + ICP worst case: {worst[0]:.2f} mm, {worst[1]:.2f}°, {worst[2]:.1f} ms (targets: 0.5 mm, 0.5°, 5 ms)\n"
+    )
 
 
 def sweeps(trials: int, out: Path) -> None:
@@ -169,14 +203,27 @@ def sweeps(trials: int, out: Path) -> None:
                         ok[(mode, method)] += 1
         for k in rates:
             rates[k].append(ok[k] / trials)
-        print(f"±{a:3d}°: " + "  ".join(f"{m} {meth}: {rates[(m, meth)][-1] * 100:5.1f} %" for m, meth in rates), file=sys.stderr, flush=True)
-    print(f"### Tables 5 and 6 as sweeps: pick-grade success (< 5°, < 3 mm), {trials} random trials per angle, random position within ±200 mm\n")
+        print(
+            f"±{a:3d}°: " + "  ".join(f"{m} {meth}: {rates[(m, meth)][-1] * 100:5.1f} %" for m, meth in rates),
+            file=sys.stderr,
+            flush=True,
+        )
+    print(
+        "### Tables 5 and 6 as sweeps: pick-grade success (< 5°, < 3 mm), "
+        f"{trials} random trials per angle, random position within ±200 mm\n"
+    )
     print("| rotation | " + " | ".join(f"{m}, {meth}" for m, meth in rates) + " |")
     print("|---|" + "---|" * len(rates))
     for i, a in enumerate(angles):
         print(f"| ±{a}° | " + " | ".join(f"{rates[k][i] * 100:.0f} %" for k in rates) + " |")
-    allowed = {k: max([a for a, r in zip(angles, v) if all(x >= 0.99 for x in v[: angles.index(a) + 1])] or [0]) for k, v in rates.items()}
-    print("\nLargest rotation up to which every angle succeeded in ≥ 99 % (the paper: ICP ±30° on one axis, ±15° on three; CCP + ICP ±180°):")
+    allowed = {
+        k: max([a for a, r in zip(angles, v) if all(x >= 0.99 for x in v[: angles.index(a) + 1])] or [0])
+        for k, v in rates.items()
+    }
+    print(
+        "\nLargest rotation up to which every angle succeeded in ≥ 99 % "
+        "(the paper: ICP ±30° on one axis, ±15° on three; CCP + ICP ±180°):"
+    )
     for k, a in allowed.items():
         print(f"- {k[0]}, {k[1]}: ±{a}°")
     overall = statistics.mean(rates[("3 axes", "CCP + ICP")])
@@ -189,7 +236,9 @@ def sweeps(trials: int, out: Path) -> None:
 
         fig, ax = plt.subplots(figsize=(7, 4))
         for (mode, meth), v in rates.items():
-            ax.plot(angles, np.array(v) * 100, marker="o", linestyle="-" if meth != "ICP" else "--", label=f"{meth}, {mode}")
+            ax.plot(
+                angles, np.array(v) * 100, marker="o", linestyle="-" if meth != "ICP" else "--", label=f"{meth}, {mode}"
+            )
         ax.set_xlabel("initial rotation (±deg)")
         ax.set_ylabel("pick-grade success (%)")
         ax.set_title("Tee, n_m = n_d = 300: ICP alone vs CCP + ICP")

@@ -63,6 +63,7 @@ from typing import Callable, Optional
 import numpy as np
 
 import binpick
+from binpick.transforms import inverse, rotation_about, rotation_angle_deg
 
 HERE = Path(__file__).resolve().parent
 DEFAULT_DATA = HERE.parent.parent / "shared" / "data" / "sample"
@@ -94,19 +95,6 @@ METHOD_NAMES = ("binpick", "open3d", "opencv", "centroid")
 # geometry and judging
 
 
-def rotation_about(axis, degrees: float) -> np.ndarray:
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a)
-    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    t = np.radians(degrees)
-    return np.eye(3) + np.sin(t) * k + (1 - np.cos(t)) * k @ k
-
-
-def rotation_angle_deg(r: np.ndarray) -> np.ndarray:
-    """Angle of rotation matrices (..., 3, 3), degrees."""
-    return np.degrees(np.arccos(np.clip((np.trace(r, axis1=-2, axis2=-1) - 1) / 2, -1, 1)))
-
-
 def symmetries(name: str) -> np.ndarray:
     if name not in SYMMETRIES:
         print(f"note: no symmetry known for part {name!r}; judging it as asymmetric", file=sys.stderr)
@@ -114,14 +102,7 @@ def symmetries(name: str) -> np.ndarray:
     if sym is None:
         return np.eye(3)[None]
     axis, angles = sym
-    return np.stack([rotation_about(axis, a) for a in angles])
-
-
-def rigid_inverse(t: np.ndarray) -> np.ndarray:
-    inv = np.eye(4)
-    inv[:3, :3] = t[:3, :3].T
-    inv[:3, 3] = -t[:3, :3].T @ t[:3, 3]
-    return inv
+    return np.stack([rotation_about(axis, np.radians(a)) for a in angles])
 
 
 @dataclass
@@ -144,7 +125,14 @@ class Judgement:
     truth: int = 0  # index of the ground-truth instance judged against
 
     def as_dict(self) -> dict:
-        return {"rot_deg": self.rotation, "trans_mm": self.translation, "mssd_mm": self.mssd, "pick": self.pick, "mssd_ok": self.mssd_ok, "truth": self.truth}
+        return {
+            "rot_deg": self.rotation,
+            "trans_mm": self.translation,
+            "mssd_mm": self.mssd,
+            "pick": self.pick,
+            "mssd_ok": self.mssd_ok,
+            "truth": self.truth,
+        }
 
 
 def judge(t_est: np.ndarray, truths: np.ndarray, part: Part) -> Judgement:
@@ -158,10 +146,21 @@ def judge(t_est: np.ndarray, truths: np.ndarray, part: Part) -> Judgement:
     est = v @ t_est[:3, :3].T + t_est[:3, 3]
     # max over vertices of |T_est v − T_gt S v|, minimised over S (chunked: a continuous symmetry has 360 S)
     mssd = min(
-        float(np.linalg.norm(est[None] - (np.einsum("sij,vj->svi", r_sym[i:i + 32], v) + t_gt[:3, 3]), axis=2).max(axis=1).min())
+        float(
+            np.linalg.norm(est[None] - (np.einsum("sij,vj->svi", r_sym[i : i + 32], v) + t_gt[:3, 3]), axis=2)
+            .max(axis=1)
+            .min()
+        )
         for i in range(0, len(r_sym), 32)
     )
-    return Judgement(rot, trans, mssd, rot < PICK_ROTATION and trans < PICK_TRANSLATION, mssd < MSSD_FRACTION * part.model.diameter, nearest)
+    return Judgement(
+        rot,
+        trans,
+        mssd,
+        rot < PICK_ROTATION and trans < PICK_TRANSLATION,
+        mssd < MSSD_FRACTION * part.model.diameter,
+        nearest,
+    )
 
 
 # ---------------------------------------------------------------------------------------------
@@ -217,15 +216,26 @@ def sample_scenes(root: Path, kinds: list[str], parts: Optional[list[str]], limi
                 digest = hashlib.sha1(mesh.read_bytes()).hexdigest()
                 if name not in cache:
                     model = binpick.Model.from_mesh(mesh, name=name)
-                    cache[name] = digest, make_part(name, model, binpick.Model.from_mesh(mesh, spacing=DENSE_SPACING, name=name))
+                    cache[name] = (
+                        digest,
+                        make_part(name, model, binpick.Model.from_mesh(mesh, spacing=DENSE_SPACING, name=name)),
+                    )
                 elif cache[name][0] != digest:
-                    raise SystemExit(f"{mesh}: differs from the {name} mesh read before; one mesh per part name, please")
+                    raise SystemExit(
+                        f"{mesh}: differs from the {name} mesh read before; one mesh per part name, please"
+                    )
                 per_part[name] = per_part.get(name, 0) + 1
-                scenes.append(Scene(
-                    name=f"{kind}/{f.stem}", kind=kind, part=cache[name][1], points=np.ascontiguousarray(d["scene"], dtype=np.float64),
-                    truths=np.asarray(d["T_scene_model"], dtype=np.float64), viewpoint=np.array(SAMPLE_CAMERA),
-                    bin=np.asarray(d["bin"], dtype=np.float64) if "bin" in d.files else None,
-                ))
+                scenes.append(
+                    Scene(
+                        name=f"{kind}/{f.stem}",
+                        kind=kind,
+                        part=cache[name][1],
+                        points=np.ascontiguousarray(d["scene"], dtype=np.float64),
+                        truths=np.asarray(d["T_scene_model"], dtype=np.float64),
+                        viewpoint=np.array(SAMPLE_CAMERA),
+                        bin=np.asarray(d["bin"], dtype=np.float64) if "bin" in d.files else None,
+                    )
+                )
     return scenes
 
 
@@ -250,12 +260,23 @@ def sim_scenes(count: int, parts: Optional[list[str]]) -> list[Scene]:
             cloud = reconstruct(scan)
         gt = scan.ground_truth
         camera = (scan.T_base_flanges[0] @ scan.calibration.T_flange_camera)[:3, 3]
-        scenes.append(Scene(
-            name=f"sim/{name}_{k:03d}", kind="sim", part=by_name[name],
-            points=np.ascontiguousarray(cloud.points, dtype=np.float64), truths=np.asarray(gt["T_base_object"], dtype=np.float64),
-            viewpoint=camera, bin=np.asarray(gt["bin"], dtype=np.float64),
-        ))
-        print(f"simulated {scenes[-1].name}: {len(gt['T_base_object'])} parts, {len(cloud)} points, {time.perf_counter() - start:.1f} s", file=sys.stderr, flush=True)
+        scenes.append(
+            Scene(
+                name=f"sim/{name}_{k:03d}",
+                kind="sim",
+                part=by_name[name],
+                points=np.ascontiguousarray(cloud.points, dtype=np.float64),
+                truths=np.asarray(gt["T_base_object"], dtype=np.float64),
+                viewpoint=camera,
+                bin=np.asarray(gt["bin"], dtype=np.float64),
+            )
+        )
+        print(
+            f"simulated {scenes[-1].name}: {len(gt['T_base_object'])} parts, "
+            f"{len(cloud)} points, {time.perf_counter() - start:.1f} s",
+            file=sys.stderr,
+            flush=True,
+        )
     return scenes
 
 
@@ -294,7 +315,10 @@ class BinpickPPF(Method):
         args = dict(bin=scene.bin, method="ppf", num_threads=1)
         try:
             if k > 1 and hasattr(binpick, "estimate_poses"):
-                return [r.T_scene_model for r in binpick.estimate_poses(scene.points, scene.part.model, max_instances=k, **args)]
+                return [
+                    r.T_scene_model
+                    for r in binpick.estimate_poses(scene.points, scene.part.model, max_instances=k, **args)
+                ]
             return [binpick.estimate_pose(scene.points, scene.part.model, **args).T_scene_model]
         except binpick.NoObjectFound:
             return []
@@ -327,7 +351,9 @@ class Open3DFeatures(Method):
         return pc
 
     def _fpfh(self, pc):
-        return self.reg.compute_fpfh_feature(pc, self.o3d.geometry.KDTreeSearchParamHybrid(radius=5 * VOXEL, max_nn=100))
+        return self.reg.compute_fpfh_feature(
+            pc, self.o3d.geometry.KDTreeSearchParamHybrid(radius=5 * VOXEL, max_nn=100)
+        )
 
     def prepare(self, part: Part) -> None:
         pc = self._cloud(*model_cloud(part, VOXEL))
@@ -335,18 +361,36 @@ class Open3DFeatures(Method):
 
     def estimate(self, scene: Scene, k: int) -> list[np.ndarray]:
         model, model_fpfh = self.models[scene.part.name]
-        self.o3d.utility.random.seed(RANSAC_SEED)  # RANSAC draws from a global generator: the same per scene, whatever ran before
+        self.o3d.utility.random.seed(
+            RANSAC_SEED
+        )  # RANSAC draws from a global generator: the same per scene, whatever ran before
         pc = self._cloud(scene.cropped()).voxel_down_sample(VOXEL)
         pc.estimate_normals(self.o3d.geometry.KDTreeSearchParamHybrid(radius=2 * VOXEL, max_nn=30))
         pc.orient_normals_towards_camera_location(scene.viewpoint)
         reg = self.reg
         coarse = reg.registration_ransac_based_on_feature_matching(
-            model, pc, model_fpfh, self._fpfh(pc), mutual_filter=True, max_correspondence_distance=1.5 * VOXEL,
-            estimation_method=reg.TransformationEstimationPointToPoint(False), ransac_n=3,
-            checkers=[reg.CorrespondenceCheckerBasedOnEdgeLength(0.9), reg.CorrespondenceCheckerBasedOnDistance(1.5 * VOXEL)],
+            model,
+            pc,
+            model_fpfh,
+            self._fpfh(pc),
+            mutual_filter=True,
+            max_correspondence_distance=1.5 * VOXEL,
+            estimation_method=reg.TransformationEstimationPointToPoint(False),
+            ransac_n=3,
+            checkers=[
+                reg.CorrespondenceCheckerBasedOnEdgeLength(0.9),
+                reg.CorrespondenceCheckerBasedOnDistance(1.5 * VOXEL),
+            ],
             criteria=reg.RANSACConvergenceCriteria(100000, 0.999),
         )
-        fine = reg.registration_icp(model, pc, VOXEL, coarse.transformation, reg.TransformationEstimationPointToPlane(), reg.ICPConvergenceCriteria(max_iteration=50))
+        fine = reg.registration_icp(
+            model,
+            pc,
+            VOXEL,
+            coarse.transformation,
+            reg.TransformationEstimationPointToPlane(),
+            reg.ICPConvergenceCriteria(max_iteration=50),
+        )
         return [np.asarray(fine.transformation)]
 
 
@@ -360,9 +404,13 @@ class OpenCVPPF(Method):
     def __init__(self, one_thread: bool) -> None:
         try:
             import cv2
+
             self.ppf = cv2.ppf_match_3d
         except (ImportError, AttributeError) as exc:
-            raise Unavailable(f"no cv2.ppf_match_3d ({exc}); pip install opencv-contrib-python-headless==5.0.0.93 in a venv of its own") from None
+            raise Unavailable(
+                f"no cv2.ppf_match_3d ({exc}); pip install "
+                "opencv-contrib-python-headless==5.0.0.93 in a venv of its own"
+            ) from None
         if one_thread:
             cv2.setNumThreads(1)
         self.models: dict[str, tuple] = {}
@@ -399,9 +447,17 @@ class CentroidIcp(Method):
         init = np.eye(4)
         init[:3, 3] = model.points.mean(axis=0) - pts.mean(axis=0)
         # The scan's points onto the whole model (every scanned point has a counterpart there), then inverted.
-        r = binpick.icp(pts, model.points, target_normals=model.normals, init=init, method="point_to_plane",
-                        max_correspondence_distance=0.1 * model.diameter, max_iterations=50, num_threads=1)
-        return [rigid_inverse(r.T_target_source)]
+        r = binpick.icp(
+            pts,
+            model.points,
+            target_normals=model.normals,
+            init=init,
+            method="point_to_plane",
+            max_correspondence_distance=0.1 * model.diameter,
+            max_iterations=50,
+            num_threads=1,
+        )
+        return [inverse(r.T_target_source)]
 
 
 FACTORIES: dict[str, Callable[[bool], Method]] = {
@@ -427,7 +483,7 @@ class Runner:
     prepare_ms: dict = field(default_factory=dict)  # part name -> ms, once per part
 
     @classmethod
-    def of(cls, name: str, one_thread: bool) -> "Runner":
+    def of(cls, name: str, one_thread: bool) -> Runner:
         try:
             method = FACTORIES[name](one_thread)
         except Unavailable as exc:
@@ -475,7 +531,10 @@ def progress(i: int, n: int, scene: Scene, recs: list[dict]) -> str:
         if r.get("unavailable"):
             cells.append(f"{r['method']} n/a")
         elif r.get("first") is None:
-            cells.append(f"{r['method']} {r.get('time_ms') or 0:.0f} ms none" + (f" ({r['error'][:60]})" if r.get("error") else ""))
+            cells.append(
+                f"{r['method']} {r.get('time_ms') or 0:.0f} ms none"
+                + (f" ({r['error'][:60]})" if r.get("error") else "")
+            )
         else:
             f = r["first"]
             mark = "ok" if r["pick"] else ("top3" if r["top3"] else "--")
@@ -502,16 +561,24 @@ def summarise(records: list[dict], methods: list[str]) -> list[dict]:
                     continue
                 times = [r["time_ms"] for r in rs if r.get("time_ms") is not None]
                 row = {
-                    "kind": kind, "part": part, "method": m, "available": True, "scenes": len(rs),
-                    "pick_pct": pct([r["pick"] for r in rs]), "mssd_pct": pct([r["mssd_ok"] for r in rs]),
+                    "kind": kind,
+                    "part": part,
+                    "method": m,
+                    "available": True,
+                    "scenes": len(rs),
+                    "pick_pct": pct([r["pick"] for r in rs]),
+                    "mssd_pct": pct([r["mssd_ok"] for r in rs]),
                     "top3_pct": pct([r["top3"] for r in rs]) if kind != "views" else None,
                     "top_part_pct": pct([r["top_part"] for r in rs]) if kind != "views" else None,
-                    "median_ms": statistics.median(times) if times else None, "max_ms": max(times) if times else None,
+                    "median_ms": statistics.median(times) if times else None,
+                    "max_ms": max(times) if times else None,
                     "errors": sum(1 for r in rs if r.get("error")),
                 }
                 if m == "binpick":
                     base = row["median_ms"]
-                row["ratio_to_binpick"] = row["median_ms"] / base if base and row["median_ms"] and m != "binpick" else None
+                row["ratio_to_binpick"] = (
+                    row["median_ms"] / base if base and row["median_ms"] and m != "binpick" else None
+                )
                 rows.append(row)
     return rows
 
@@ -520,7 +587,11 @@ def ms(value: Optional[float]) -> str:
     return "—" if value is None else f"{value:.0f}"
 
 
-KIND_TITLES = {"views": "sample views (one part alone)", "piles": "sample piles (4–10 parts in a bin)", "sim": "binpick simulator piles (reconstructed scans)"}
+KIND_TITLES = {
+    "views": "sample views (one part alone)",
+    "piles": "sample piles (4–10 parts in a bin)",
+    "sim": "binpick simulator piles (reconstructed scans)",
+}
 
 
 def markdown(rows: list[dict], labels: dict[str, str], threads: str) -> str:
@@ -529,18 +600,27 @@ def markdown(rows: list[dict], labels: dict[str, str], threads: str) -> str:
         piles = kind != "views"
         n = next((r["scenes"] for r in rows if r["kind"] == kind and r["part"] == "all" and r["available"]), 0)
         out.append(f"\n### {KIND_TITLES[kind]}: {n} scene{'' if n == 1 else 's'}, {threads}\n")
-        head = "| part | method | scenes | pick-grade | MSSD |" + (" top-3 pick | first on a top-3 part |" if piles else "") + " median ms | max ms | time / binpick |"
+        head = (
+            "| part | method | scenes | pick-grade | MSSD |"
+            + (" top-3 pick | first on a top-3 part |" if piles else "")
+            + " median ms | max ms | time / binpick |"
+        )
         out += [head, "|" + "---|" * (head.count("|") - 1)]
         for r in (r for r in rows if r["kind"] == kind):
             name = f"**{r['part']}**" if r["part"] == "all" else r["part"]
             if not r["available"]:
-                out.append(f"| {name} | {labels[r['method']]} | — | unavailable | |" + (" | |" if piles else "") + " | | |")
+                out.append(
+                    f"| {name} | {labels[r['method']]} | — | unavailable | |" + (" | |" if piles else "") + " | | |"
+                )
                 continue
             ratio = f"{r['ratio_to_binpick']:.2f}×" if r["ratio_to_binpick"] else ""
             top3 = f" {r['top3_pct']:.0f} % | {r['top_part_pct']:.0f} % |" if piles else ""
             errors = f" ({r['errors']} failed)" if r["errors"] else ""
-            out.append(f"| {name} | {labels[r['method']]} | {r['scenes']}{errors} | {r['pick_pct']:.0f} % | {r['mssd_pct']:.0f} % |{top3} "
-                       f"{ms(r['median_ms'])} | {ms(r['max_ms'])} | {ratio} |")
+            out.append(
+                f"| {name} | {labels[r['method']]} | {r['scenes']}{errors} "
+                f"| {r['pick_pct']:.0f} % | {r['mssd_pct']:.0f} % |{top3} "
+                f"{ms(r['median_ms'])} | {ms(r['max_ms'])} | {ratio} |"
+            )
     return "\n".join(out)
 
 
@@ -574,9 +654,13 @@ def plot(rows: list[dict], labels: dict[str, str], path: Path) -> None:
         ax.set_ylabel("success (%)")
         ax.set_title(KIND_TITLES[kind], fontsize=10)
         ax.grid(True, which="both", alpha=0.3)
-    handles = [Line2D([], [], color=colours[m], marker="o", linestyle="", label=labels[m]) for m in METHOD_NAMES if m in shown]
-    handles += [Line2D([], [], color="grey", marker="o", linestyle="", label="pick-grade (< 5°, < 3 mm)"),
-                Line2D([], [], color="grey", marker="^", markerfacecolor="none", linestyle="", label="MSSD < 0.1 × diameter")]
+    handles = [
+        Line2D([], [], color=colours[m], marker="o", linestyle="", label=labels[m]) for m in METHOD_NAMES if m in shown
+    ]
+    handles += [
+        Line2D([], [], color="grey", marker="o", linestyle="", label="pick-grade (< 5°, < 3 mm)"),
+        Line2D([], [], color="grey", marker="^", markerfacecolor="none", linestyle="", label="MSSD < 0.1 × diameter"),
+    ]
     fig.legend(handles=handles, loc="lower center", ncol=3, fontsize=8, frameon=False)
     fig.suptitle("Pose estimation: success vs time per scene")
     fig.tight_layout(rect=(0, 0.12, 1, 0.95))
@@ -588,7 +672,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="the sample folder (views/, piles/)")
     ap.add_argument("--methods", default=",".join(METHOD_NAMES), help=f"comma-separated, of {', '.join(METHOD_NAMES)}")
-    ap.add_argument("--parts", default=None, help="comma-separated part names (case-insensitive substrings), e.g. gear,tee")
+    ap.add_argument(
+        "--parts", default=None, help="comma-separated part names (case-insensitive substrings), e.g. gear,tee"
+    )
     ap.add_argument("--limit", type=int, default=None, help="scenes per part and kind")
     only = ap.add_mutually_exclusive_group()
     only.add_argument("--views", action="store_true", help="views only")
@@ -626,13 +712,30 @@ def main(argv=None) -> int:
         print(progress(i, len(scenes), scene, recs), file=sys.stderr, flush=True)
 
     rows = summarise(records, names)
-    print(markdown(rows, labels, "one thread each" if args.peer_threads == "1" else "binpick one thread, peers their default threading"))
+    print(
+        markdown(
+            rows,
+            labels,
+            "one thread each" if args.peer_threads == "1" else "binpick one thread, peers their default threading",
+        )
+    )
     args.out.mkdir(parents=True, exist_ok=True)
     doc = {
-        "config": {"voxel_mm": VOXEL, "crop_margin_mm": CROP_MARGIN, "pick_grade": [PICK_ROTATION, PICK_TRANSLATION],
-                   "mssd_fraction": MSSD_FRACTION, "top_k": TOP_K, "peer_threads": args.peer_threads, "binpick_threads": 1,
-                   "binpick_version": binpick.__version__, "data": str(args.data), "sim_piles": sum(s.kind == "sim" for s in scenes)},
-        "methods": {r.name: {"label": r.label, "unavailable": r.unavailable, "prepare_ms": r.prepare_ms} for r in runners},
+        "config": {
+            "voxel_mm": VOXEL,
+            "crop_margin_mm": CROP_MARGIN,
+            "pick_grade": [PICK_ROTATION, PICK_TRANSLATION],
+            "mssd_fraction": MSSD_FRACTION,
+            "top_k": TOP_K,
+            "peer_threads": args.peer_threads,
+            "binpick_threads": 1,
+            "binpick_version": binpick.__version__,
+            "data": str(args.data),
+            "sim_piles": sum(s.kind == "sim" for s in scenes),
+        },
+        "methods": {
+            r.name: {"label": r.label, "unavailable": r.unavailable, "prepare_ms": r.prepare_ms} for r in runners
+        },
         "summary": rows,
         "scenes": records,
     }

@@ -15,8 +15,10 @@ def main() -> None:
     t0 = time.perf_counter()
     pile = sim.Pile(tee, 20, seed=3)
     t1 = time.perf_counter()
-    print(f"pile of 20 tees ({len(tee.faces)} faces): settled={pile.last_settle.settled} in {t1 - t0:.2f} s "
-          f"(sim time {pile.last_settle.simulated_time:.2f} s), interpenetration {pile.max_interpenetration():.3f} mm")
+    print(
+        f"pile of 20 tees ({len(tee.faces)} faces): settled={pile.last_settle.settled} in {t1 - t0:.2f} s "
+        f"(sim time {pile.last_settle.simulated_time:.2f} s), interpenetration {pile.max_interpenetration():.3f} mm"
+    )
     cell = sim.Cell()
     world = sim.World.of_pile(sim.Pile(tee, 12, seed=3))
     t0 = time.perf_counter()
@@ -25,8 +27,10 @@ def main() -> None:
     angles = cell.sweep(90)
     frames = view.frames(angles, seed=3, num_threads=1)
     t2 = time.perf_counter()
-    print(f"view (ray cast {cell.camera.width}x{cell.camera.height}): {t1 - t0:.2f} s; "
-          f"90 frames: {t2 - t1:.2f} s ({90 / (t2 - t1):.1f} fps); scan total {t2 - t0:.2f} s; {frames.shape}")
+    print(
+        f"view (ray cast {cell.camera.width}x{cell.camera.height}): {t1 - t0:.2f} s; "
+        f"90 frames: {t2 - t1:.2f} s ({90 / (t2 - t1):.1f} fps); scan total {t2 - t0:.2f} s; {frames.shape}"
+    )
 
 
 if __name__ == "__main__":

@@ -1,5 +1,5 @@
 """Geometry helpers the tests share: meshes and clouds they make themselves, mesh-file writers,
-random rigid transforms and pose errors."""
+random rigid transforms, and pose errors (the library's :func:`binpick.transforms.pose_error`)."""
 
 from __future__ import annotations
 
@@ -8,14 +8,28 @@ from pathlib import Path
 
 import numpy as np
 
+from binpick.transforms import pose_error, rotation_about
+
 
 def box_mesh(size=(20.0, 30.0, 40.0)) -> tuple[np.ndarray, np.ndarray]:
     """An axis-aligned box with one corner at the origin, outward-wound triangles."""
     sx, sy, sz = size
     v = np.array([[x, y, z] for z in (0, sz) for y in (0, sy) for x in (0, sx)], dtype=float)
     f = np.array(
-        [[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
-         [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]]
+        [
+            [0, 2, 1],
+            [1, 2, 3],
+            [4, 5, 6],
+            [5, 7, 6],
+            [0, 1, 4],
+            [1, 5, 4],
+            [2, 6, 3],
+            [3, 6, 7],
+            [0, 4, 2],
+            [2, 4, 6],
+            [1, 3, 5],
+            [3, 7, 5],
+        ]
     )
     return v, f
 
@@ -69,27 +83,17 @@ def write_ply_mesh(path: Path, v: np.ndarray, f: np.ndarray, binary: bool) -> No
 def random_rigid(rng: np.random.Generator, max_angle: float, max_shift: float) -> np.ndarray:
     """A random 4×4 rigid transform: rotation up to ``max_angle`` rad, shift up to ``max_shift`` mm."""
     axis = rng.normal(size=3)
-    axis /= np.linalg.norm(axis)
     ang = rng.uniform(0, max_angle)
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    rot = np.eye(3) + np.sin(ang) * k + (1 - np.cos(ang)) * k @ k
     shift = rng.normal(size=3)
     shift *= rng.uniform(0, max_shift) / np.linalg.norm(shift)
     t = np.eye(4)
-    t[:3, :3] = rot
+    t[:3, :3] = rotation_about(axis, ang)
     t[:3, 3] = shift
     return t
 
 
 def apply(t: np.ndarray, pts: np.ndarray) -> np.ndarray:
     return pts @ t[:3, :3].T + t[:3, 3]
-
-
-def pose_error(t_est: np.ndarray, t_true: np.ndarray) -> tuple[float, float]:
-    """(rotation error in degrees, translation error in mm)."""
-    d = t_true[:3, :3].T @ t_est[:3, :3]
-    ang = np.degrees(np.arccos(np.clip((np.trace(d) - 1) / 2, -1, 1)))
-    return float(ang), float(np.linalg.norm(t_est[:3, 3] - t_true[:3, 3]))
 
 
 def _ear_clip(poly: np.ndarray) -> list[tuple[int, int, int]]:
@@ -102,16 +106,17 @@ def _ear_clip(poly: np.ndarray) -> list[tuple[int, int, int]]:
 
     while len(idx) > 3:
         for k in range(len(idx)):
-            i, j, l = idx[k - 1], idx[k], idx[(k + 1) % len(idx)]
-            a, b, c = poly[i], poly[j], poly[l]
+            i, j, n = idx[k - 1], idx[k], idx[(k + 1) % len(idx)]
+            a, b, c = poly[i], poly[j], poly[n]
             if cross(a, b, c) <= 0:
                 continue
             inside = any(
                 cross(a, b, poly[m]) >= 0 and cross(b, c, poly[m]) >= 0 and cross(c, a, poly[m]) >= 0
-                for m in idx if m not in (i, j, l)
+                for m in idx
+                if m not in (i, j, n)
             )
             if not inside:
-                tris.append((i, j, l))
+                tris.append((i, j, n))
                 idx.pop(k)
                 break
         else:
@@ -161,38 +166,36 @@ def revolved_mesh(profile, segments: int = 96) -> tuple[np.ndarray, np.ndarray]:
 
 def rot(axis, angle) -> np.ndarray:
     """3×3 rotation about ``axis`` by ``angle`` rad."""
-    a = np.asarray(axis, float) / np.linalg.norm(axis)
-    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+    return rotation_about(axis, angle)
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
     """A uniformly random 3×3 rotation."""
     q = rng.normal(size=4)
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
-def symmetric_pose_error(t_est: np.ndarray, t_true: np.ndarray, rotations, center=(0.0, 0.0, 0.0), continuous_axis=None) -> tuple[float, float]:
+def symmetric_pose_error(
+    t_est: np.ndarray, t_true: np.ndarray, rotations, center=(0.0, 0.0, 0.0), continuous_axis=None
+) -> tuple[float, float]:
     """(rotation deg, translation mm) of ``t_est`` against ``t_true`` minimised over symmetry
-    rotations about ``center`` (model frame), a continuous axis sampled at 1°."""
+    rotations about ``center`` (model frame) and a continuous axis through it: the library's
+    :func:`binpick.transforms.pose_error` with the group written as 4×4 maps."""
     c = np.asarray(center, float)
-    group = [np.asarray(r, float) for r in rotations]
-    if continuous_axis is not None:
-        group = [g @ rot(continuous_axis, np.radians(d)) for g in group for d in range(360)]
-    best = (np.inf, np.inf)
-    for s in group:
+    maps = []
+    for s in rotations:
         t = np.eye(4)
-        t[:3, :3] = s
-        t[:3, 3] = c - s @ c
-        e = pose_error(t_est, t_true @ t)
-        if e[0] + e[1] < best[0] + best[1]:
-            best = e
-    return best
+        t[:3, :3] = np.asarray(s, float)
+        t[:3, 3] = c - t[:3, :3] @ c
+        maps.append(t)
+    return pose_error(t_est, t_true, maps, continuous_axis=continuous_axis, center=c)
 
 
 def camera_cloud(view, cell, step: int, seed: int = 0, noise: float = 0.15) -> tuple[np.ndarray, np.ndarray]:

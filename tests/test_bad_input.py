@@ -3,6 +3,8 @@ or foreign exception escapes the native core."""
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -93,7 +95,10 @@ def test_unknown_unit_and_mesh_errors(tmp_path):
     (tmp_path / "flat.obj").write_text("v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n")
     with pytest.raises(errors.MeshFileError, match="non-zero area"):
         binpick.Model.from_mesh(tmp_path / "flat.obj")
-    (tmp_path / "trunc.ply").write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 10\nproperty float x\nproperty float y\nproperty float z\nend_header\n\x00\x00")
+    (tmp_path / "trunc.ply").write_bytes(
+        b"ply\nformat binary_little_endian 1.0\nelement vertex 10\nproperty "
+        b"float x\nproperty float y\nproperty float z\nend_header\n\x00\x00"
+    )
     with pytest.raises(errors.MeshFileError, match="truncated"):
         binpick.read_ply(tmp_path / "trunc.ply")
     with pytest.raises(errors.MeshFileError, match="extension"):
@@ -110,10 +115,18 @@ arrays = st.one_of(
 )
 
 
+@functools.cache
+def _random_input_target() -> np.ndarray:
+    """The target cloud of the random-input test, built once (not in each of its 150 examples)."""
+    points = binpick.parts.cross(count=300, seed=1).points
+    points.flags.writeable = False
+    return points
+
+
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(source=arrays, method=st.sampled_from(["point_to_point", "point_to_plane"]))
 def test_random_input_raises_only_binpick_errors(source, method):
-    target = binpick.parts.cross(count=300, seed=1).points
+    target = _random_input_target()
     try:
         res = binpick.icp(source, target, method=method, max_correspondence_distance=5.0, max_iterations=5)
     except binpick.BinpickError as exc:

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 import binpick
-from _geometry import apply, pose_error, random_rigid
+from _geometry import apply, random_rigid
+from binpick.transforms import pose_error
 
 
 @pytest.mark.parametrize("method", ["point_to_point", "point_to_plane"])
@@ -17,8 +18,14 @@ def test_noiseless_transforms_recovered_to_1e6(tee_model, method):
         t_true = random_rigid(rng, np.radians(8), 5.0)
         source = apply(np.linalg.inv(t_true), target)
         res = binpick.icp(
-            source, target, target_normals=tee_model.normals, method=method, max_correspondence_distance=15.0,
-            max_iterations=300, rotation_tolerance=1e-11, translation_tolerance=1e-10,
+            source,
+            target,
+            target_normals=tee_model.normals,
+            method=method,
+            max_correspondence_distance=15.0,
+            max_iterations=300,
+            rotation_tolerance=1e-11,
+            translation_tolerance=1e-10,
         )
         rot, trans = pose_error(res.T_target_source, t_true)
         assert np.radians(rot) < 1e-6 and trans < 1e-6, (method, rot, trans, res)
@@ -46,13 +53,23 @@ def test_noisy_independent_samplings_within_the_noise(method):
 
 def test_init_is_used_and_threads_agree(tee_model):
     rng = np.random.default_rng(3)
-    t_true = np.array([[0.0, -1.0, 0.0, 30.0], [1.0, 0.0, 0.0, -20.0], [0.0, 0.0, 1.0, 40.0], [0, 0, 0, 1]])  # 90° about z
+    t_true = np.array(
+        [[0.0, -1.0, 0.0, 30.0], [1.0, 0.0, 0.0, -20.0], [0.0, 0.0, 1.0, 40.0], [0, 0, 0, 1]]
+    )  # 90° about z
     source = apply(np.linalg.inv(t_true), tee_model.points)
     far = binpick.icp(source, tee_model.points, method="point_to_point", max_correspondence_distance=5.0)
     assert pose_error(far.T_target_source, t_true)[0] > 10  # 90° away: no local convergence without init
     init = t_true @ random_rigid(rng, np.radians(3), 2.0)
     results = [
-        binpick.icp(source, tee_model.points, init=init, method="point_to_point", max_correspondence_distance=10.0, max_iterations=200, num_threads=n)
+        binpick.icp(
+            source,
+            tee_model.points,
+            init=init,
+            method="point_to_point",
+            max_correspondence_distance=10.0,
+            max_iterations=200,
+            num_threads=n,
+        )
         for n in (1, 2)
     ]
     for res in results:
@@ -61,7 +78,10 @@ def test_init_is_used_and_threads_agree(tee_model):
     np.testing.assert_allclose(results[0].T_target_source, results[1].T_target_source, atol=1e-7)
 
 
-@pytest.mark.parametrize("options", [{"kernel": "tukey", "kernel_scale": 3.0}, {"trim_fraction": 0.35}, {"kernel": "cauchy", "kernel_scale": 1.0}])
+@pytest.mark.parametrize(
+    "options",
+    [{"kernel": "tukey", "kernel_scale": 3.0}, {"trim_fraction": 0.35}, {"kernel": "cauchy", "kernel_scale": 1.0}],
+)
 def test_robust_options_resist_clutter(options):
     rng = np.random.default_rng(4)
     target_model = binpick.parts.tee(count=15000, seed=5, resolution=1.0)

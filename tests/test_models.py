@@ -33,7 +33,9 @@ def test_every_format_and_unit_reads_to_millimetres(tmp_path, name, unit, scale)
     assert 0.85 < len(model.points) / (model.area / 4.0) < 1.15
     centre = np.array([10.0, 15.0, 20.0])
     assert (np.einsum("ij,ij->i", model.points - centre, model.normals) > 0).all()
-    dist_to_faces = np.minimum.reduce([np.abs(model.points[:, k] - b) for k, b in [(0, 0), (0, 20), (1, 0), (1, 30), (2, 0), (2, 40)]])
+    dist_to_faces = np.minimum.reduce(
+        [np.abs(model.points[:, k] - b) for k, b in [(0, 0), (0, 20), (1, 0), (1, 30), (2, 0), (2, 40)]]
+    )
     assert dist_to_faces.max() < 1e-6
 
 

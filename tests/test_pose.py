@@ -7,20 +7,14 @@ import numpy as np
 import pytest
 
 import binpick
-from _geometry import pile_view, pose_error, random_rotation
-
-
-def rot_about(axis, angle) -> np.ndarray:
-    a = np.asarray(axis, float) / np.linalg.norm(axis)
-    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
-
+from _geometry import pile_view, random_rotation
+from binpick.transforms import pose_error, rotation_about
 
 SYMMETRIES = {
     "tee": [np.eye(3)],
-    "elbow": [np.eye(3), rot_about([1, 1, 0], np.pi)],
-    "cross": [rot_about([0, 0, 1], k * np.pi / 2) for k in range(4)]
-    + [rot_about(a, np.pi) for a in ([1, 0, 0], [0, 1, 0], [1, 1, 0], [1, -1, 0])],
+    "elbow": [np.eye(3), rotation_about([1, 1, 0], np.pi)],
+    "cross": [rotation_about([0, 0, 1], k * np.pi / 2) for k in range(4)]
+    + [rotation_about(a, np.pi) for a in ([1, 0, 0], [0, 1, 0], [1, 1, 0], [1, -1, 0])],
 }
 
 
@@ -71,7 +65,7 @@ def test_icp_alone_fails_where_ccp_succeeds():
     model = binpick.parts.tee(resolution=1.0)
     other = binpick.parts.tee(resolution=1.0, spacing=0.8, seed=4)
     T = np.eye(4)
-    T[:3, :3] = rot_about([0.3, 1, 0.2], np.radians(150))
+    T[:3, :3] = rotation_about([0.3, 1, 0.2], np.radians(150))
     T[:3, 3] = [50, -20, 100]
     scene = partial_view(model, other, T, rng)
     good = binpick.estimate_pose(scene, model, method="ccp")
@@ -143,7 +137,7 @@ def test_grasp_pose_is_eq_30():
     T_base_object[:3, :3] = random_rotation(rng)
     T_base_object[:3, 3] = [400, 20, 30]
     T_gripper_object = np.eye(4)
-    T_gripper_object[:3, :3] = rot_about([1, 0, 0], np.pi)
+    T_gripper_object[:3, :3] = rotation_about([1, 0, 0], np.pi)
     T_gripper_object[:3, 3] = [0, 0, 120]
     T_base_gripper = binpick.grasp_pose(T_base_object, T_gripper_object)
     np.testing.assert_allclose(T_base_gripper @ T_gripper_object, T_base_object, atol=1e-12)
@@ -166,8 +160,15 @@ def test_a_sparse_model_cloud_is_refined_on_its_mesh_to_the_paper_table_targets(
     mi = np.flatnonzero(dense_m.normals[:, 2] > 0)[:300]
     di = np.flatnonzero(dense_d.normals[:, 2] > 0)[:100]
     model = binpick.Model(
-        mesh.vertices.copy(), mesh.faces.copy(), dense_m.points[mi], dense_m.normals[mi], spacing=None,
-        diameter=mesh.diameter, area=mesh.area, name="tee-300", branches=mesh.branches,
+        mesh.vertices.copy(),
+        mesh.faces.copy(),
+        dense_m.points[mi],
+        dense_m.normals[mi],
+        spacing=None,
+        diameter=mesh.diameter,
+        area=mesh.area,
+        name="tee-300",
+        branches=mesh.branches,
         special_direction=mesh.special_direction,
     )
     worst = (0.0, 0.0)

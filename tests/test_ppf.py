@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import binpick
-from binpick import sim
 from _geometry import camera_cloud, extruded_mesh, pile_view, random_rotation, revolved_mesh, rot, symmetric_pose_error
+from binpick import sim
 
 # An L-bracket with unequal legs: no proper symmetry.
 L_BRACKET = [(0, 0), (80, 0), (80, 12), (12, 12), (12, 50), (0, 50)]
@@ -45,7 +45,9 @@ def known_symmetries(name: str, model: binpick.Model):
     return dict(rotations=six + flips, center=c)
 
 
-def rendered_view(model: binpick.Model, T_base_object: np.ndarray, rng: np.random.Generator, noise: float = 0.15) -> np.ndarray:
+def rendered_view(
+    model: binpick.Model, T_base_object: np.ndarray, rng: np.random.Generator, noise: float = 0.15
+) -> np.ndarray:
     """What the simulated cell's camera sees of the part alone at ``T_base_object`` (base frame, mm)."""
     cell = sim.Cell()
     world = sim.World()
@@ -118,7 +120,10 @@ def part_in_bin(model: binpick.Model, seed: int):
     return cell, pile, scene
 
 
-@pytest.mark.parametrize("shown,asked", [("hexagon", "bracket"), ("bracket", "hexagon"), ("shaft", "bracket"), ("bracket", "shaft"), ("hexagon", "shaft")])
+@pytest.mark.parametrize(
+    "shown,asked",
+    [("hexagon", "bracket"), ("bracket", "hexagon"), ("shaft", "bracket"), ("bracket", "shaft"), ("hexagon", "shaft")],
+)
 def test_a_scene_without_the_part_gives_no_object_found(parts, shown, asked):
     for seed in range(2):
         cell, _, scene = part_in_bin(parts[shown], seed)
@@ -211,8 +216,8 @@ def test_bad_requests_raise_clear_errors(parts):
 def test_estimate_command_reads_a_mesh_file_and_reports_instances(parts, tmp_path, capsys):
     import json
 
-    from binpick.cli import main
     from _geometry import write_stl_binary
+    from binpick.cli import main
 
     v, f = extruded_mesh(L_BRACKET, 30.0)
     write_stl_binary(tmp_path / "bracket.stl", v, f)
@@ -220,7 +225,19 @@ def test_estimate_command_reads_a_mesh_file_and_reports_instances(parts, tmp_pat
     T = random_pose(rng)
     np.save(tmp_path / "scene.npy", rendered_view(parts["bracket"], T, rng))
     png = tmp_path / "estimate.png"
-    code = main(["estimate", str(tmp_path / "scene.npy"), str(tmp_path / "bracket.stl"), "--method", "ppf", "--instances", "2", "--png", str(png)])
+    code = main(
+        [
+            "estimate",
+            str(tmp_path / "scene.npy"),
+            str(tmp_path / "bracket.stl"),
+            "--method",
+            "ppf",
+            "--instances",
+            "2",
+            "--png",
+            str(png),
+        ]
+    )
     assert code == 0
     docs = json.loads(capsys.readouterr().out)
     assert isinstance(docs, list) and 1 <= len(docs) <= 2 and docs[0]["method"] == "ppf"

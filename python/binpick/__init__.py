@@ -7,8 +7,7 @@ Lengths are millimetres, angles radians; transforms are 4×4 arrays named ``T_to
 
 from __future__ import annotations
 
-from . import _core
-from . import parts
+from . import _core, parts
 from .errors import *  # noqa: F401,F403 - the exception classes are public API
 from .errors import __all__ as _error_names
 from .models import Branch, Model, PpfParams, Symmetries, estimate_normals, read_ply, voxel_downsample, write_ply
@@ -17,13 +16,14 @@ from .poses import IcpResult, PoseResult, estimate_pose, estimate_poses, grasp_p
 __version__ = _core.__version__
 
 # Subpackages and names that pull in OpenCV, serial I/O or the simulator load on first use.
-_LAZY_MODULES = ("calibration", "cell", "devices", "scan", "sim", "vision", "viz")
+_LAZY_MODULES = ("calibration", "camera", "cell", "devices", "scan", "sim", "transforms", "vision", "viz")
 _LAZY_NAMES = {
     "Cloud": "vision",
     "extract_line": "vision",
     "triangulate": "vision",
     "reconstruct": "vision",
-    "CameraIntrinsics": "calibration",
+    "CameraIntrinsics": "camera",
+    "pose_error": "transforms",
     "CellCalibration": "calibration",
     "Scan": "scan",
     "load_scan": "scan",
@@ -31,7 +31,7 @@ _LAZY_NAMES = {
     "Cell": "cell",
     "CellConfig": "cell",
     "PickRecord": "cell",
-    "simulated_cell": "cell",
+    "simulated_cell": "sim",
 }
 
 

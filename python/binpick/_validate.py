@@ -1,13 +1,15 @@
-"""Input checks shared by every public function: arrays become contiguous float64 of the
-right shape with finite values, or a specific exception says what was wrong and what to do."""
+"""The one validation vocabulary: every public function, driver and calibration checks its input
+here. Arrays become contiguous float64 of the right shape with finite values, numbers land in
+their range, or a specific exception names the argument and says what to do."""
 
 from __future__ import annotations
 
-from typing import Any
+import math
+from typing import Any, Optional
 
 import numpy as np
 
-from .errors import DTypeError, InvalidInputError, NonFiniteError, ShapeError, TooFewPointsError
+from .errors import CalibrationError, DTypeError, InvalidInputError, NonFiniteError, ShapeError, TooFewPointsError
 
 
 def as_float_array(value: Any, name: str) -> np.ndarray:
@@ -63,10 +65,14 @@ def as_transform(value: Any, name: str) -> np.ndarray:
     return check_rigid(arr, name)
 
 
+_LAST_ROW = np.array([0.0, 0.0, 0.0, 1.0])
+
+
 def check_rigid(arr: np.ndarray, name: str, error: type = InvalidInputError) -> np.ndarray:
     """Raises ``error`` unless the 4×4 ``arr`` is rigid: last row 0 0 0 1, rotation block
     orthonormal with determinant +1 (to 1e-6)."""
-    if not np.allclose(arr[3], [0.0, 0.0, 0.0, 1.0], atol=1e-9):
+    # np.allclose(arr[3], [0, 0, 0, 1], atol=1e-9) written out: this check runs on every transform.
+    if not (np.abs(arr[3] - _LAST_ROW) <= 1e-9 + 1e-5 * _LAST_ROW).all():
         raise error(f"{name}: the last row must be [0, 0, 0, 1], got {arr[3].tolist()}")
     rot = arr[:3, :3]
     err = float(np.abs(rot.T @ rot - np.eye(3)).max())
@@ -94,7 +100,9 @@ def non_negative(value: Any, name: str, unit: str = "") -> float:
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: must be a number{(' (' + unit + ')') if unit else ''}, got {value!r}") from None
+        raise InvalidInputError(
+            f"{name}: must be a number{(' (' + unit + ')') if unit else ''}, got {value!r}"
+        ) from None
     if not np.isfinite(v) or v < 0:
         raise InvalidInputError(f"{name}: must be a finite number ≥ 0, got {value!r}")
     return v
@@ -107,3 +115,156 @@ def count(value: Any, name: str, minimum: int = 0) -> int:
     if value < minimum:
         raise InvalidInputError(f"{name}: must be at least {minimum}, got {value}")
     return int(value)
+
+
+# --------------------------------------------------------------------------- devices
+
+
+def check_number(
+    value: Any, name: str, *, low: Optional[float] = None, high: Optional[float] = None, unit: str = ""
+) -> float:
+    """``value`` as a finite float within [low, high], or InvalidInputError naming ``name``."""
+    if isinstance(value, bool):
+        raise InvalidInputError(f"{name}: must be a number{_unit(unit)}, got the boolean {value!r}")
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise InvalidInputError(f"{name}: must be a number{_unit(unit)}, got {value!r}") from None
+    if not math.isfinite(v):
+        raise InvalidInputError(f"{name}: must be finite, got {v}")
+    if (low is not None and v < low) or (high is not None and v > high):
+        raise InvalidInputError(
+            f"{name}: {v:g}{unit and ' ' + unit} is outside [{low}, {high}]{_unit(unit)}; "
+            "pass a value inside that range"
+        )
+    return v
+
+
+def check_int(value: Any, name: str, low: int, high: int) -> int:
+    """``value`` as an int within [low, high], or InvalidInputError naming ``name``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise InvalidInputError(f"{name}: must be an integer in [{low}, {high}], got {value!r}")
+    v = int(value)
+    if not low <= v <= high:
+        raise InvalidInputError(f"{name}: {v} is outside [{low}, {high}]; pass an integer inside that range")
+    return v
+
+
+def check_transform(value: Any, name: str) -> np.ndarray:
+    """A finite 4×4 float64 rigid transform, or a specific InvalidInputError saying what is wrong
+    (the drivers' form of :func:`as_transform`: any unreadable value is InvalidInputError)."""
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InvalidInputError(
+            f"{name}: cannot be read as a 4×4 numeric array; pass a numpy (4, 4) float array"
+        ) from None
+    if arr.shape != (4, 4):
+        raise ShapeError(f"{name}: expected a (4, 4) homogeneous transform, got shape {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise InvalidInputError(f"{name}: holds NaN or infinity; pass a finite transform")
+    return check_rigid(arr, name)
+
+
+def _unit(unit: str) -> str:
+    return f" ({unit})" if unit else ""
+
+
+# --------------------------------------------------------------------------- the measuring chain
+
+#: Largest motor angle accepted, in radians; anything beyond is taken for degrees passed by mistake.
+MAX_ANGLE = math.pi
+
+
+def as_angles(value: Any, name: str, *, size: int | None = None) -> np.ndarray:
+    """A 1-D finite float64 array of angles in radians, each within ±π.
+
+    Values beyond π are almost always degrees passed where radians are expected, so the error
+    says so instead of silently producing a wrong laser plane.
+    """
+    arr = as_float_array(value, name)
+    if arr.ndim == 0:
+        arr = arr.reshape(1)
+    if arr.ndim != 1:
+        raise ShapeError(f"{name}: expected a 1-D array of angles, got shape {arr.shape}")
+    if size is not None and arr.shape[0] != size:
+        raise ShapeError(f"{name}: expected {size} angles (one per frame), got {arr.shape[0]}")
+    check_finite(arr, name)
+    big = np.abs(arr) > MAX_ANGLE
+    if big.any():
+        i = int(np.argmax(big))
+        raise InvalidInputError(
+            f"{name}: element {i} is {arr[i]:g}, beyond ±π; angles are radians — "
+            f"if these are degrees, pass np.radians({name})"
+        )
+    return arr
+
+
+def as_image(value: Any, name: str, *, shape: tuple[int, int] | None = None, color: bool | None = None) -> np.ndarray:
+    """A uint8 image, (H, W) or (H, W, 3), optionally of a given (height, width).
+
+    ``color=True`` requires three channels (BGR), ``False`` one, ``None`` either.
+    """
+    if not isinstance(value, np.ndarray):
+        raise DTypeError(f"{name}: expected a numpy image array (as cv2.imread returns), got {type(value).__name__}")
+    if value.dtype != np.uint8:
+        raise DTypeError(
+            f"{name}: dtype {value.dtype}; pass an 8-bit image (uint8), e.g. cv2.imread(path) or "
+            f"(img / img.max() * 255).astype(np.uint8)"
+        )
+    if value.ndim == 3 and value.shape[2] == 1:
+        value = value[:, :, 0]
+    if value.ndim == 2:
+        if color:
+            raise ShapeError(
+                f"{name}: a grey image of shape {value.shape}; the laser "
+                "line is found by colour, pass the BGR frame (H, W, 3)"
+            )
+    elif value.ndim == 3 and value.shape[2] == 3:
+        if color is False:
+            raise ShapeError(f"{name}: expected a single-channel image, got shape {value.shape}")
+    else:
+        raise ShapeError(f"{name}: expected an image of shape (H, W) or (H, W, 3), got {value.shape}")
+    if value.shape[0] < 2 or value.shape[1] < 2:
+        raise ShapeError(f"{name}: image of shape {value.shape} is too small")
+    if shape is not None and value.shape[:2] != tuple(shape):
+        raise ShapeError(
+            f"{name}: image is {value.shape[1]}×{value.shape[0]} (width×height) but the camera "
+            f"calibration says {shape[1]}×{shape[0]}; use frames from the calibrated camera"
+        )
+    return value
+
+
+def calibration_matrix(value: Any, field: str, shape: tuple[int, ...]) -> np.ndarray:
+    """A finite float64 array of ``shape`` read from a calibration source, or CalibrationError naming ``field``."""
+    try:
+        arr = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise CalibrationError(f"{field}: expected numbers of shape {shape}, got {value!r}") from None
+    if arr.shape != shape:
+        raise CalibrationError(f"{field}: expected shape {shape}, got {arr.shape}")
+    if not np.isfinite(arr).all():
+        raise CalibrationError(f"{field}: holds NaN or infinity")
+    return arr
+
+
+def frozen_copy(arr: np.ndarray) -> np.ndarray:
+    """A read-only float64 copy of ``arr`` (for the arrays of frozen dataclasses)."""
+    arr = np.array(arr, dtype=np.float64, copy=True)
+    arr.flags.writeable = False
+    return arr
+
+
+def as_box(value: Any, name: str = "bin") -> tuple[np.ndarray, np.ndarray]:
+    """An axis-aligned box ((xmin, ymin, zmin), (xmax, ymax, zmax)) in mm as its two corners, or
+    InvalidInputError naming ``name``."""
+    b = np.asarray(value, dtype=np.float64)
+    if b.shape != (2, 3) or not np.isfinite(b).all():
+        raise InvalidInputError(
+            f"{name}: expected ((xmin, ymin, zmin), (xmax, ymax, zmax)) in mm, got {np.asarray(value).tolist()}"
+        )
+    if not (b[1] > b[0]).all():
+        raise InvalidInputError(
+            f"{name}: the max corner {b[1].tolist()} must exceed the min corner {b[0].tolist()} on every axis"
+        )
+    return b[0], b[1]

@@ -20,8 +20,9 @@ import os
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, List, Optional, Sequence
+from typing import Any, Optional
 
 from .errors import BinpickError, InvalidInputError
 
@@ -49,13 +50,18 @@ def _print_table(records: Sequence[Any], out: Any = None) -> None:
     out = out or sys.stdout
     rows = [("pick", "result", "score", "rmse mm", "rot err °", "pos err mm", "grasp", "time s")]
     for r in records:
-        rows.append((
-            str(r.index), "picked" if r.success else "failed",
-            "-" if r.score is None else f"{r.score:.2f}", "-" if r.rmse is None else f"{r.rmse:.2f}",
-            "-" if r.truth is None else f"{r.truth.rotation_error_deg:.2f}",
-            "-" if r.truth is None else f"{r.truth.translation_error_mm:.2f}",
-            r.grasp or "-", f"{r.timings.get('total', 0.0) / 1e3:.1f}",
-        ))
+        rows.append(
+            (
+                str(r.index),
+                "picked" if r.success else "failed",
+                "-" if r.score is None else f"{r.score:.2f}",
+                "-" if r.rmse is None else f"{r.rmse:.2f}",
+                "-" if r.truth is None else f"{r.truth.rotation_error_deg:.2f}",
+                "-" if r.truth is None else f"{r.truth.translation_error_mm:.2f}",
+                r.grasp or "-",
+                f"{r.timings.get('total', 0.0) / 1e3:.1f}",
+            )
+        )
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     for k, row in enumerate(rows):
         print("  ".join(c.ljust(w) for c, w in zip(row, widths)), file=out)
@@ -66,13 +72,15 @@ def _print_table(records: Sequence[Any], out: Any = None) -> None:
             print(f"pick {r.index}: {r.error}", file=out)
 
 
-def _pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> List[Path]:
+def _pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> list[Path]:
     from . import viz
 
-    written: List[Path] = []
+    written: list[Path] = []
     scan = report.last_scan
     if scan is not None and scan.frames:
-        written.append(viz.save_contact_sheet(out / "scan_contact_sheet.png", [scan.frames[k] for k in sorted(scan.frames)]))
+        written.append(
+            viz.save_contact_sheet(out / "scan_contact_sheet.png", [scan.frames[k] for k in sorted(scan.frames)])
+        )
     loc = report.last_located
     if loc is not None:
         scan = loc.scan  # the picture shows the last part found, over the scan it was found in
@@ -80,22 +88,41 @@ def _pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> List[Path]
         if loc is not None:
             title = f"{len(scan.points)} points; {model.name} found with score {loc.result.score:.2f}"
             if loc.truth is not None:
-                title += f", {loc.truth.rotation_error_deg:.2f}° / {loc.truth.translation_error_mm:.2f} mm from the truth"
-            written.append(viz.save_cloud(out / "cloud.png", scan.points, model=model, T_base_object=loc.T_base_object,
-                                          highlight=loc.indices, bin_bounds=bin_bounds, title=title))
+                title += (
+                    f", {loc.truth.rotation_error_deg:.2f}° / {loc.truth.translation_error_mm:.2f} mm from the truth"
+                )
+            written.append(
+                viz.save_cloud(
+                    out / "cloud.png",
+                    scan.points,
+                    model=model,
+                    T_base_object=loc.T_base_object,
+                    highlight=loc.indices,
+                    bin_bounds=bin_bounds,
+                    title=title,
+                )
+            )
         else:
-            written.append(viz.save_cloud(out / "cloud.png", scan.points, bin_bounds=bin_bounds, title=f"{len(scan.points)} points"))
+            written.append(
+                viz.save_cloud(
+                    out / "cloud.png", scan.points, bin_bounds=bin_bounds, title=f"{len(scan.points)} points"
+                )
+            )
     if report.records:
         written.append(viz.save_pick_summary(out / "summary.png", report.records))
-    (out / "picks.json").write_text(json.dumps({"picks": [r.as_dict() for r in report.records], "stopped": report.stopped}, indent=1))
+    (out / "picks.json").write_text(
+        json.dumps({"picks": [r.as_dict() for r in report.records], "stopped": report.stopped}, indent=1)
+    )
     written.append(out / "picks.json")
     return written
 
 
 # --------------------------------------------------------------------------- demo
 
+
 def _demo(args: argparse.Namespace) -> int:
-    from .cell import ProgressPrinter, SimulatedCell
+    from .cell import ProgressPrinter
+    from .sim import SimulatedCell
 
     if args.picks < 1 or args.count < 1 or args.frames < 2:
         raise _Usage("--picks and --count must be at least 1, --frames at least 2")
@@ -103,9 +130,19 @@ def _demo(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     model = _model(args.part, args.unit)
     progress = ProgressPrinter()
-    progress("demo", f"{args.count} {model.name} parts, {args.picks} picks, {args.frames} frames per scan, seed {args.seed}, pictures into {out}")
-    with SimulatedCell(model, count=args.count, seed=args.seed, frames=args.frames, progress=progress,
-                       estimate_options=_estimate_options(args)) as sim:
+    progress(
+        "demo",
+        f"{args.count} {model.name} parts, {args.picks} picks, {args.frames} "
+        f"frames per scan, seed {args.seed}, pictures into {out}",
+    )
+    with SimulatedCell(
+        model,
+        count=args.count,
+        seed=args.seed,
+        frames=args.frames,
+        progress=progress,
+        estimate_options=_estimate_options(args),
+    ) as sim:
         report = sim.cell.run(args.picks)
         bin_bounds = sim.cell.config.bin_bounds
         failures = sim.emulator_failures
@@ -118,10 +155,15 @@ def _demo(args: argparse.Namespace) -> int:
     if failures:
         print("emulator failures (a bug): " + "; ".join(failures), file=sys.stderr)
     picked = report.successes
-    print(f"{picked} of {len(report.records)} picks succeeded in {time.perf_counter() - t0:.1f} s"
-          + (f"; stopped: {report.stopped}" if report.stopped else ""))
+    print(
+        f"{picked} of {len(report.records)} picks succeeded in {time.perf_counter() - t0:.1f} s"
+        + (f"; stopped: {report.stopped}" if report.stopped else "")
+    )
     if picked == 0:
-        print("binpick demo: no part was picked — " + (report.stopped or "every pick failed (see the table)"), file=sys.stderr)
+        print(
+            "binpick demo: no part was picked — " + (report.stopped or "every pick failed (see the table)"),
+            file=sys.stderr,
+        )
         return 1
     return 0
 
@@ -137,8 +179,9 @@ def _estimate_options(args: argparse.Namespace) -> dict:
 
 # --------------------------------------------------------------------------- pick
 
+
 def _pick(args: argparse.Namespace) -> int:
-    from .cell import CELL_FILE_EXAMPLE, ProgressPrinter, RunReport, cell_from_file, load_cell_file
+    from .cell import CELL_FILE_EXAMPLE, ProgressPrinter, cell_from_file, load_cell_file
 
     if args.example:
         print(CELL_FILE_EXAMPLE, end="")
@@ -152,22 +195,7 @@ def _pick(args: argparse.Namespace) -> int:
     out = Path(args.out)
     with cell:
         if args.dry_run:
-            scan = cell.scan()
-            try:
-                located = cell.locate(scan)
-            except BinpickError as exc:
-                report = RunReport(records=(), stopped=str(exc), last_scan=scan)
-                _pictures(out, report, cell.config.model, cell.config.bin_bounds)
-                print(f"binpick pick --dry-run: {exc}", file=sys.stderr)
-                return 1
-            report = RunReport(records=(), stopped="dry run", last_scan=scan, last_located=located)
-            written = _pictures(out, report, cell.config.model, cell.config.bin_bounds)
-            pose = located.T_base_object
-            print(json.dumps({"T_base_object": pose.round(4).tolist(), "score": located.result.score, "rmse_mm": located.result.rmse,
-                              "points": len(scan.points)}, indent=1))
-            for p in written:
-                print(f"wrote {p}")
-            return 0
+            return _dry_run(cell, out)
         report = cell.run(args.picks)
     written = _pictures(out, report, cell.config.model, cell.config.bin_bounds)
     _print_table(report.records)
@@ -179,7 +207,39 @@ def _pick(args: argparse.Namespace) -> int:
     return 0
 
 
+def _dry_run(cell: Any, out: Path) -> int:
+    """``binpick pick --dry-run``: scan and locate once, write the pictures, print the pose."""
+    from .cell import RunReport
+
+    scan = cell.scan()
+    try:
+        located = cell.locate(scan)
+    except BinpickError as exc:
+        report = RunReport(records=(), stopped=str(exc), last_scan=scan)
+        _pictures(out, report, cell.config.model, cell.config.bin_bounds)
+        print(f"binpick pick --dry-run: {exc}", file=sys.stderr)
+        return 1
+    report = RunReport(records=(), stopped="dry run", last_scan=scan, last_located=located)
+    written = _pictures(out, report, cell.config.model, cell.config.bin_bounds)
+    pose = located.T_base_object
+    print(
+        json.dumps(
+            {
+                "T_base_object": pose.round(4).tolist(),
+                "score": located.result.score,
+                "rmse_mm": located.result.rmse,
+                "points": len(scan.points),
+            },
+            indent=1,
+        )
+    )
+    for p in written:
+        print(f"wrote {p}")
+    return 0
+
+
 # --------------------------------------------------------------------------- estimate
+
 
 def _read_scene(path: str) -> Any:
     import numpy as np
@@ -203,19 +263,39 @@ def _estimate(args: argparse.Namespace) -> int:
     scene = _read_scene(args.scene)
     model = _model(args.model, args.unit)
     bin_box = None if args.bin is None else (tuple(args.bin[:3]), tuple(args.bin[3:]))
-    found = estimate_poses(scene, model, bin=bin_box, method=args.method, max_instances=args.instances, **_estimate_options(args))
-    docs = [{"T_scene_model": r.T_scene_model.tolist(), "score": r.score, "rmse_mm": r.rmse, "points": int(len(r.indices)),
-             "method": r.method, "pickability": r.pickability, "timings_ms": {k: float(v) for k, v in r.timings.items()}} for r in found]
+    found = estimate_poses(
+        scene, model, bin=bin_box, method=args.method, max_instances=args.instances, **_estimate_options(args)
+    )
+    docs = [
+        {
+            "T_scene_model": r.T_scene_model.tolist(),
+            "score": r.score,
+            "rmse_mm": r.rmse,
+            "points": int(len(r.indices)),
+            "method": r.method,
+            "pickability": r.pickability,
+            "timings_ms": {k: float(v) for k, v in r.timings.items()},
+        }
+        for r in found
+    ]
     print(json.dumps(docs[0] if args.instances == 1 else docs, indent=1))
     res = found[0]
     png = Path(args.png)
-    viz.save_cloud(png, scene, model=model, T_base_object=res.T_scene_model, highlight=res.indices, bin_bounds=bin_box,
-                   title=f"{model.name}: score {res.score:.2f}, rmse {res.rmse:.2f} mm")
+    viz.save_cloud(
+        png,
+        scene,
+        model=model,
+        T_base_object=res.T_scene_model,
+        highlight=res.indices,
+        bin_bounds=bin_box,
+        title=f"{model.name}: score {res.score:.2f}, rmse {res.rmse:.2f} mm",
+    )
     print(f"wrote {png}", file=sys.stderr)
     return 0
 
 
 # --------------------------------------------------------------------------- calibrate
+
 
 def _calibrate(args: argparse.Namespace) -> int:
     import cv2
@@ -229,12 +309,21 @@ def _calibrate(args: argparse.Namespace) -> int:
         cols, rows = (int(v) for v in args.pattern.lower().split("x"))
     except ValueError:
         raise _Usage(f"--pattern: {args.pattern!r} is not COLSxROWS of inner corners, e.g. 9x6") from None
-    paths = sorted(p for p in folder.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"))
+    paths = sorted(
+        p for p in folder.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+    )
     images = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in paths]
     res = calibrate_camera([im for im in images if im is not None], (cols, rows), args.square)
     cam = res.camera
-    doc = {"width": cam.width, "height": cam.height, "K": cam.K.tolist(), "dist": cam.dist.tolist(), "rms_px": res.rms,
-           "views": [paths[i].name for i in res.views], "per_view_rms_px": res.per_view_rms.tolist()}
+    doc = {
+        "width": cam.width,
+        "height": cam.height,
+        "K": cam.K.tolist(),
+        "dist": cam.dist.tolist(),
+        "rms_px": res.rms,
+        "views": [paths[i].name for i in res.views],
+        "per_view_rms_px": res.per_view_rms.tolist(),
+    }
     print(json.dumps(doc, indent=1))
     print(f"{len(res.views)} of {len(paths)} images used, reprojection RMS {res.rms:.3f} px", file=sys.stderr)
     return 0
@@ -242,12 +331,15 @@ def _calibrate(args: argparse.Namespace) -> int:
 
 # --------------------------------------------------------------------------- bench
 
+
 def _bench(args: argparse.Namespace) -> int:
     root = Path(__file__).resolve().parents[2] / "benches"
     scripts = sorted(root.glob("*.py")) if root.is_dir() else []
     if not scripts:
-        print("binpick bench: the benchmarks live in the source repository's benches/ folder (criterion benches: "
-              "`cargo bench -p binpick-core`; Python benches: `python benches/<name>.py`); this installation has none.")
+        print(
+            "binpick bench: the benchmarks live in the source repository's benches/ folder (criterion benches: "
+            "`cargo bench -p binpick-core`; Python benches: `python benches/<name>.py`); this installation has none."
+        )
         return 0
     if args.list:
         for s in scripts:
@@ -256,7 +348,9 @@ def _bench(args: argparse.Namespace) -> int:
     chosen = [s for s in scripts if not args.names or s.stem in args.names]
     unknown = set(args.names) - {s.stem for s in scripts}
     if unknown:
-        raise _Usage(f"bench: unknown bench {', '.join(sorted(unknown))}; available: {', '.join(s.stem for s in scripts)}")
+        raise _Usage(
+            f"bench: unknown bench {', '.join(sorted(unknown))}; available: {', '.join(s.stem for s in scripts)}"
+        )
     status = 0
     for s in chosen:
         print(f"== {s.stem}", flush=True)
@@ -266,20 +360,34 @@ def _bench(args: argparse.Namespace) -> int:
 
 # --------------------------------------------------------------------------- parser
 
+
 def _parser() -> argparse.ArgumentParser:
     from . import __version__
 
     p = argparse.ArgumentParser(prog="binpick", description="Eye-in-hand laser-line bin picking.")
     p.add_argument("--version", action="version", version=f"binpick {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    for add in (_add_demo, _add_pick, _add_forwarded, _add_estimate, _add_calibrate, _add_bench):
+        add(sub)
+    return p
 
-    def pose_options(q: argparse.ArgumentParser) -> None:
-        q.add_argument("--d-star", type=float, default=None, help="segmentation distance d* (mm); default: the estimator's")
-        q.add_argument("--min-points", type=int, default=None, help="fewest points of a part region; default: the estimator's")
 
-    d = sub.add_parser("demo", help="the whole simulated cell picking parts over emulated serial devices",
-                       description="Drops a pile of parts into the simulated bin, then scans, locates and picks them with the "
-                                   "real drivers talking to emulated devices on ptys; writes pictures into --out.")
+def _pose_options(q: argparse.ArgumentParser) -> None:
+    """The options of a pose request that the demo and estimate commands share."""
+    q.add_argument("--d-star", type=float, default=None, help="segmentation distance d* (mm); default: the estimator's")
+    q.add_argument(
+        "--min-points", type=int, default=None, help="fewest points of a part region; default: the estimator's"
+    )
+
+
+def _add_demo(sub: Any) -> None:
+    """``binpick demo``."""
+    d = sub.add_parser(
+        "demo",
+        help="the whole simulated cell picking parts over emulated serial devices",
+        description="Drops a pile of parts into the simulated bin, then scans, locates and picks them with the "
+        "real drivers talking to emulated devices on ptys; writes pictures into --out.",
+    )
     d.add_argument("--part", default="tee", help="built-in part (tee, elbow, cross) or a mesh file (default tee)")
     d.add_argument("--unit", default="mm", help="unit of a mesh file (mm, cm, m, in)")
     d.add_argument("--count", type=int, default=12, help="parts in the pile (default 12)")
@@ -287,47 +395,94 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--seed", type=int, default=0, help="seed of the pile and the sensor noise (default 0)")
     d.add_argument("--frames", type=int, default=90, help="laser frames per scan (default 90)")
     d.add_argument("--out", default="binpick-demo", help="folder for the pictures (default ./binpick-demo)")
-    pose_options(d)
+    _pose_options(d)
     d.set_defaults(run=_demo)
 
-    k = sub.add_parser("pick", help="pick parts in the real cell described by a cell file",
-                       description="Connects to the robot, laser motor, gripper and camera of a cell file (TOML) and picks parts.")
+
+def _add_pick(sub: Any) -> None:
+    """``binpick pick``."""
+    k = sub.add_parser(
+        "pick",
+        help="pick parts in the real cell described by a cell file",
+        description="Connects to the robot, laser motor, gripper and camera of a cell file (TOML) and picks parts.",
+    )
     k.add_argument("config", nargs="?", help="the cell file (TOML); `binpick pick --example` prints one")
     k.add_argument("--picks", type=int, default=1, help="picks to attempt (default 1)")
-    k.add_argument("--dry-run", action="store_true", help="only scan and locate: the arm goes to the scan pose, the gripper stays open")
+    k.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="only scan and locate: the arm goes to the scan pose, the gripper stays open",
+    )
     k.add_argument("--out", default="binpick-pick", help="folder for the pictures (default ./binpick-pick)")
     k.add_argument("--example", action="store_true", help="print an example cell file and exit")
     k.set_defaults(run=_pick)
 
-    s = sub.add_parser("simulate", help="render a simulated scan to a scan folder (see `binpick simulate --help`)", add_help=False)
+
+def _add_forwarded(sub: Any) -> None:
+    """``binpick simulate`` and ``binpick emulate``: their own parsers read the rest."""
+    s = sub.add_parser(
+        "simulate", help="render a simulated scan to a scan folder (see `binpick simulate --help`)", add_help=False
+    )
     s.set_defaults(forward="simulate")
-    e = sub.add_parser("emulate", help="serve an emulated robot, motor or gripper on a pty (see `binpick emulate --help`)", add_help=False)
+    e = sub.add_parser(
+        "emulate",
+        help="serve an emulated robot, motor or gripper on a pty (see `binpick emulate --help`)",
+        add_help=False,
+    )
     e.set_defaults(forward="emulate")
 
-    t = sub.add_parser("estimate", help="estimate a part's pose in a scene cloud",
-                       description="Reads a scene (PLY, or NPY of shape (N, 3), mm) and a part, prints the pose as JSON and writes a picture.")
+
+def _add_estimate(sub: Any) -> None:
+    """``binpick estimate``."""
+    t = sub.add_parser(
+        "estimate",
+        help="estimate a part's pose in a scene cloud",
+        description="Reads a scene (PLY, or NPY of shape (N, 3), mm) and a part, prints the pose as JSON "
+        "and writes a picture.",
+    )
     t.add_argument("scene", help="scene cloud: .ply or .npy (N, 3), mm")
     t.add_argument("model", help="built-in part (tee, elbow, cross) or a mesh file")
     t.add_argument("--unit", default="mm", help="unit of a mesh file (mm, cm, m, in)")
-    t.add_argument("--method", default="auto", choices=("auto", "ppf", "ccp", "centroid"), help="coarse pose method (default auto)")
-    t.add_argument("--instances", type=int, default=1, help="instances to report, most pickable first (default 1: one JSON object; more: a list)")
-    t.add_argument("--bin", type=float, nargs=6, metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"), help="bin box in the scene frame, mm")
+    t.add_argument(
+        "--method", default="auto", choices=("auto", "ppf", "ccp", "centroid"), help="coarse pose method (default auto)"
+    )
+    t.add_argument(
+        "--instances",
+        type=int,
+        default=1,
+        help="instances to report, most pickable first (default 1: one JSON object; more: a list)",
+    )
+    t.add_argument(
+        "--bin",
+        type=float,
+        nargs=6,
+        metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"),
+        help="bin box in the scene frame, mm",
+    )
     t.add_argument("--png", default="estimate.png", help="picture to write (default estimate.png)")
-    pose_options(t)
+    _pose_options(t)
     t.set_defaults(run=_estimate)
 
-    c = sub.add_parser("calibrate", help="camera intrinsics from checkerboard images",
-                       description="Finds the checkerboard in every image of FOLDER and prints the intrinsics as JSON.")
+
+def _add_calibrate(sub: Any) -> None:
+    """``binpick calibrate``."""
+    c = sub.add_parser(
+        "calibrate",
+        help="camera intrinsics from checkerboard images",
+        description="Finds the checkerboard in every image of FOLDER and prints the intrinsics as JSON.",
+    )
     c.add_argument("folder", help="folder of checkerboard images")
     c.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS (default 9x6)")
     c.add_argument("--square", type=float, default=20.0, help="square size, mm (default 20)")
     c.set_defaults(run=_calibrate)
 
+
+def _add_bench(sub: Any) -> None:
+    """``binpick bench``."""
     b = sub.add_parser("bench", help="run the benchmarks of a source checkout")
     b.add_argument("names", nargs="*", help="benches to run (default all)")
     b.add_argument("--list", action="store_true", help="list the benches")
     b.set_defaults(run=_bench)
-    return p
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -365,7 +520,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 1
 
 
-def _forward(entry: Any, argv: List[str]) -> int:
+def _forward(entry: Any, argv: list[str]) -> int:
     try:
         return int(entry(argv) or 0)
     except SystemExit as exc:

@@ -5,17 +5,28 @@ from __future__ import annotations
 import hashlib
 import os
 import warnings
-from dataclasses import dataclass, field
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any, Optional
 
 import numpy as np
 
 from . import _core
 from ._validate import as_points, as_transform, as_vector, count, positive
 from .errors import InvalidInputError
+from .transforms import pose_error
 
-__all__ = ["Model", "Branch", "PpfParams", "Symmetries", "read_ply", "write_ply", "estimate_normals", "voxel_downsample"]
+__all__ = [
+    "Model",
+    "Branch",
+    "PpfParams",
+    "Symmetries",
+    "read_ply",
+    "write_ply",
+    "estimate_normals",
+    "voxel_downsample",
+]
 
 
 @dataclass(frozen=True)
@@ -138,14 +149,14 @@ class Model:
     @classmethod
     def from_mesh(
         cls,
-        path: "str | os.PathLike[str]",
+        path: str | os.PathLike[str],
         *,
         unit: str = "mm",
         spacing: Optional[float] = None,
         count: Optional[int] = None,
         seed: int = 0,
         name: Optional[str] = None,
-    ) -> "Model":
+    ) -> Model:
         """Reads a mesh (binary/ASCII STL, ASCII/binary PLY, OBJ), converts ``unit`` (mm, cm, m, in)
         to millimetres and samples its surface: evenly at ``spacing`` mm, or ``count`` points.
         With neither, the spacing is 1/100 of the bounding-box diagonal."""
@@ -169,7 +180,7 @@ class Model:
         name: str = "part",
         branches: Sequence[Branch] = (),
         special_direction: Optional[Sequence[float]] = None,
-    ) -> "Model":
+    ) -> Model:
         """A model from a vertex array (V, 3) in ``unit`` and a face index array (F, 3)."""
         v = as_points(vertices, "vertices", min_points=3)
         f = np.asarray(faces)
@@ -187,8 +198,18 @@ class Model:
         if count is not None:
             count = _count(count)
         pts, nrm, diameter, area = _core.sample_mesh(v, f, spacing, count, int(seed))
-        return cls(v, f, pts, nrm, spacing=spacing, diameter=diameter, area=area, name=name, branches=branches,
-                   special_direction=special_direction)
+        return cls(
+            v,
+            f,
+            pts,
+            nrm,
+            spacing=spacing,
+            diameter=diameter,
+            area=area,
+            name=name,
+            branches=branches,
+            special_direction=special_direction,
+        )
 
     def declare_branches(self, branches: Sequence[Branch], special_direction: Optional[Sequence[float]] = None) -> None:
         """Declares the part's cylindrical branches (and special feature) so that CCP can be used.
@@ -213,7 +234,9 @@ class Model:
         if not isinstance(params, PpfParams):
             raise InvalidInputError(f"ppf: expected binpick.PpfParams, got {type(params).__name__}")
         if self._prepared is None or self._prepared[0] != params:
-            rows = np.array([[*b.direction, b.length, b.radius] for b in self.branches], dtype=np.float64).reshape(-1, 5)
+            rows = np.array([[*b.direction, b.length, b.radius] for b in self.branches], dtype=np.float64).reshape(
+                -1, 5
+            )
             special = None if self.special_direction is None else np.asarray(self.special_direction, dtype=np.float64)
             key = (float(params.sampling_ratio), int(params.angle_bins), int(params.rotation_bins))
             path = self._cache_path(key)
@@ -223,7 +246,17 @@ class Model:
                     cached = path.read_bytes()
                 except OSError:
                     cached = None
-            native = _core.PreparedModel(self.points, self.normals, self.diameter, self.area, rows if len(rows) else None, special, key, cached, (self.vertices, self.faces))
+            native = _core.PreparedModel(
+                self.points,
+                self.normals,
+                self.diameter,
+                self.area,
+                rows if len(rows) else None,
+                special,
+                key,
+                cached,
+                (self.vertices, self.faces),
+            )
             if path is not None and not native.ppf_from_cache():
                 _write_atomically(path, native.ppf_bytes())
             self._prepared = (params, native)
@@ -257,9 +290,16 @@ class Model:
 
     def pose_error(self, T_estimate: Any, T_truth: Any) -> tuple[float, float]:
         """Rotation (degrees) and translation (mm) error of a pose against the truth, minimised
-        over the part's symmetries (as the BOP benchmark judges)."""
-        rot, trans = self.prepared().pose_error(as_transform(T_estimate, "T_estimate"), as_transform(T_truth, "T_truth"))
-        return float(np.degrees(rot)), float(trans)
+        over the part's symmetries (as the BOP benchmark judges): :func:`binpick.transforms.pose_error`
+        with this part's symmetry group (its continuous axis, if any, exactly)."""
+        sym = self.symmetries
+        maps = []
+        for R in sym.rotations:
+            S = np.eye(4)
+            S[:3, :3] = R
+            S[:3, 3] = sym.center - R @ sym.center
+            maps.append(S)
+        return pose_error(T_estimate, T_truth, maps, continuous_axis=sym.continuous_axis, center=sym.center)
 
     def add_grasp(self, name: str, T_gripper_object: Any) -> None:
         """Declares a grasp: the object's pose in the gripper frame when the gripper holds it."""
@@ -282,7 +322,11 @@ def _write_atomically(path: Path, data: Optional[bytes]) -> None:
         tmp.write_bytes(data)
         os.replace(tmp, path)
     except OSError as exc:
-        warnings.warn(f"binpick: cannot write the PPF cache {path} ({exc}); set BINPICK_CACHE_DIR to a writable folder", RuntimeWarning, stacklevel=3)
+        warnings.warn(
+            f"binpick: cannot write the PPF cache {path} ({exc}); set BINPICK_CACHE_DIR to a writable folder",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 def _count(value: Any) -> int:
@@ -300,12 +344,12 @@ def _unit_scale(unit: Any) -> float:
     return _UNITS[unit.strip().lower()]
 
 
-def read_ply(path: "str | os.PathLike[str]") -> tuple[np.ndarray, Optional[np.ndarray]]:
+def read_ply(path: str | os.PathLike[str]) -> tuple[np.ndarray, Optional[np.ndarray]]:
     """Reads a PLY point cloud (ASCII or binary): ``(points, normals or None)``, in the file's units."""
     return _core.read_ply(os.fspath(path))
 
 
-def write_ply(path: "str | os.PathLike[str]", points: Any, normals: Any = None, *, ascii: bool = False) -> None:
+def write_ply(path: str | os.PathLike[str], points: Any, normals: Any = None, *, ascii: bool = False) -> None:
     """Writes points (and normals) as PLY that MeshLab and CloudCompare open (binary by default)."""
     pts = as_points(points, "points", min_points=0)
     nrm = None if normals is None else as_points(normals, "normals", min_points=0)
@@ -331,7 +375,9 @@ def estimate_normals(
     return _core.estimate_normals(pts, k, vp, d, count(num_threads, "num_threads"))
 
 
-def voxel_downsample(points: Any, voxel_size: float, normals: Any = None) -> tuple[np.ndarray, Optional[np.ndarray], np.ndarray]:
+def voxel_downsample(
+    points: Any, voxel_size: float, normals: Any = None
+) -> tuple[np.ndarray, Optional[np.ndarray], np.ndarray]:
     """One point per occupied ``voxel_size`` mm cube (the mean of its points):
     ``(points, normals or None, index of each voxel's first input point)``."""
     pts = as_points(points, "points", min_points=0)

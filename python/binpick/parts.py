@@ -17,11 +17,15 @@ __all__ = ["tee", "elbow", "cross"]
 
 def _model(raw, name: str, spacing: Optional[float], count: Optional[int], seed: int, special=None) -> Model:
     vertices, faces, branches = raw
-    rows = [Branch(direction=(float(b[0]), float(b[1]), float(b[2])), length=float(b[3]), radius=float(b[4])) for b in branches]
+    rows = [
+        Branch(direction=(float(b[0]), float(b[1]), float(b[2])), length=float(b[3]), radius=float(b[4]))
+        for b in branches
+    ]
     if spacing is None and count is None:
         spacing = 1.0
-    return Model.from_arrays(vertices, faces, spacing=spacing, count=count, seed=seed, name=name, branches=rows,
-                             special_direction=special)
+    return Model.from_arrays(
+        vertices, faces, spacing=spacing, count=count, seed=seed, name=name, branches=rows, special_direction=special
+    )
 
 
 def tee(
@@ -55,13 +59,39 @@ def tee(
     return _model(raw, "tee", spacing, count, seed, special=(0.0, 0.0, 1.0) if boss_height > 0 else None)
 
 
-def elbow(*, outer_diameter: float = 26.0, branch_length: float = 40.0, resolution: float = 0.6, spacing: Optional[float] = None, count: Optional[int] = None, seed: int = 0) -> Model:
+def elbow(
+    *,
+    outer_diameter: float = 26.0,
+    branch_length: float = 40.0,
+    resolution: float = 0.6,
+    spacing: Optional[float] = None,
+    count: Optional[int] = None,
+    seed: int = 0,
+) -> Model:
     """A 90° elbow: branches along +x and +y, ``branch_length`` mm from the corner to each end face."""
-    raw = _core.part_fitting("elbow", positive(outer_diameter, "outer_diameter"), positive(branch_length, "branch_length"), positive(resolution, "resolution"))
+    raw = _core.part_fitting(
+        "elbow",
+        positive(outer_diameter, "outer_diameter"),
+        positive(branch_length, "branch_length"),
+        positive(resolution, "resolution"),
+    )
     return _model(raw, "elbow", spacing, count, seed)
 
 
-def cross(*, outer_diameter: float = 26.0, branch_length: float = 40.0, resolution: float = 0.6, spacing: Optional[float] = None, count: Optional[int] = None, seed: int = 0) -> Model:
+def cross(
+    *,
+    outer_diameter: float = 26.0,
+    branch_length: float = 40.0,
+    resolution: float = 0.6,
+    spacing: Optional[float] = None,
+    count: Optional[int] = None,
+    seed: int = 0,
+) -> Model:
     """A cross: four branches along ±x and ±y, ``branch_length`` mm from the centre to each end face."""
-    raw = _core.part_fitting("cross", positive(outer_diameter, "outer_diameter"), positive(branch_length, "branch_length"), positive(resolution, "resolution"))
+    raw = _core.part_fitting(
+        "cross",
+        positive(outer_diameter, "outer_diameter"),
+        positive(branch_length, "branch_length"),
+        positive(resolution, "resolution"),
+    )
     return _model(raw, "cross", spacing, count, seed)

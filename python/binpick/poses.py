@@ -10,7 +10,7 @@ import numpy as np
 
 from . import _core
 from ._validate import as_float_array, as_points, as_transform, as_vector, check_finite, count, non_negative, positive
-from .errors import InvalidInputError, NoObjectFound
+from .errors import InvalidInputError
 from .models import Model, estimate_normals
 
 __all__ = ["IcpResult", "icp", "PoseResult", "estimate_pose", "estimate_poses", "grasp_pose"]
@@ -158,8 +158,10 @@ class PoseResult:
     def __repr__(self) -> str:
         t = self.T_scene_model[:3, 3]
         return (
-            f"PoseResult(method={self.method!r}, score={self.score:.3f}, rmse={self.rmse:.3f} mm, points={len(self.indices)}, "
-            f"t=[{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] mm, pickability={self.pickability:.2f}, total={sum(self.timings.values()):.1f} ms)"
+            f"PoseResult(method={self.method!r}, score={self.score:.3f}, "
+            f"rmse={self.rmse:.3f} mm, points={len(self.indices)}, "
+            f"t=[{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] mm, "
+            f"pickability={self.pickability:.2f}, total={sum(self.timings.values()):.1f} ms)"
         )
 
 
@@ -215,13 +217,18 @@ def estimate_poses(
     through the bin's floor or walls); it never returns a guess.
     """
     if not isinstance(model, Model):
-        raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}; build one with binpick.Model.from_mesh")
+        raise InvalidInputError(
+            f"model: expected a binpick.Model, got {type(model).__name__}; build one with binpick.Model.from_mesh"
+        )
     pts = as_points(scene, "scene", min_points=10)
     m = str(method).lower()
     if m not in _METHODS:
         raise InvalidInputError(f"method: unknown method {method!r}; use 'auto', 'ppf', 'ccp' or 'centroid'")
     if m == "ccp" and not model.branches:
-        raise InvalidInputError("method: 'ccp' needs the model's cylindrical branches; declare them with Model.declare_branches, or use method='ppf'")
+        raise InvalidInputError(
+            "method: 'ccp' needs the model's cylindrical branches; "
+            "declare them with Model.declare_branches, or use method='ppf'"
+        )
     box = None
     if bin is not None:
         box = as_float_array(bin, "bin")
@@ -229,7 +236,9 @@ def estimate_poses(
             raise InvalidInputError(f"bin: expected ((xmin, ymin, zmin), (xmax, ymax, zmax)), got shape {box.shape}")
         check_finite(box, "bin")
         if not (box[1] > box[0]).all():
-            raise InvalidInputError(f"bin: max corner {box[1].tolist()} must exceed min corner {box[0].tolist()} on every axis")
+            raise InvalidInputError(
+                f"bin: max corner {box[1].tolist()} must exceed min corner {box[0].tolist()} on every axis"
+            )
     up_v = as_vector(up, "up")
     if np.linalg.norm(up_v) == 0:
         raise InvalidInputError("up: must be a non-zero direction")

@@ -22,9 +22,8 @@ from typing import Any
 
 import numpy as np
 
-from ._validate import as_transform
+from ._validate import as_angles, as_image, as_transform
 from .calibration import CellCalibration
-from .calibration._checks import as_angles, as_image
 from .errors import FileWriteError, InvalidInputError, MeshFileNotFoundError, ScanFormatError
 
 __all__ = ["SCAN_VERSION", "Scan", "ScanFrame", "load_scan", "save_scan"]

@@ -10,8 +10,9 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -32,7 +33,7 @@ def _pyplot():
     return plt
 
 
-def _save(fig: Any, path: "str | os.PathLike[str]") -> Path:
+def _save(fig: Any, path: str | os.PathLike[str]) -> Path:
     p = Path(path)
     try:
         p.parent.mkdir(parents=True, exist_ok=True)
@@ -50,8 +51,16 @@ def _thin(points: np.ndarray, limit: int, seed: int = 0) -> np.ndarray:
     return points[np.random.default_rng(seed).choice(len(points), limit, replace=False)]
 
 
-def save_cloud(path: "str | os.PathLike[str]", points: Any, *, model: Any = None, T_base_object: Any = None,
-               highlight: Any = None, bin_bounds: Any = None, title: str = "") -> Path:
+def save_cloud(
+    path: str | os.PathLike[str],
+    points: Any,
+    *,
+    model: Any = None,
+    T_base_object: Any = None,
+    highlight: Any = None,
+    bin_bounds: Any = None,
+    title: str = "",
+) -> Path:
     """Writes the cloud (N, 3, mm) seen from above (x, y coloured by z) and in 3-D.
 
     With ``model`` (a :class:`binpick.Model`) and ``T_base_object``, the model's surface points at
@@ -104,7 +113,7 @@ def save_cloud(path: "str | os.PathLike[str]", points: Any, *, model: Any = None
     return _save(fig, path)
 
 
-def save_pick_summary(path: "str | os.PathLike[str]", records: Sequence[Any], *, title: str = "") -> Path:
+def save_pick_summary(path: str | os.PathLike[str], records: Sequence[Any], *, title: str = "") -> Path:
     """Writes a per-pick summary of :class:`binpick.cell.PickRecord` s: score, pose error against
     ground truth where known (with the pick-grade limits 5° and 3 mm), and the time per stage."""
     recs = list(records)
@@ -153,14 +162,18 @@ def save_pick_summary(path: "str | os.PathLike[str]", records: Sequence[Any], *,
     return _save(fig, path)
 
 
-def save_contact_sheet(path: "str | os.PathLike[str]", frames_bgr: Sequence[np.ndarray], *, columns: int = 3, width: int = 1200) -> Path:
+def save_contact_sheet(
+    path: str | os.PathLike[str], frames_bgr: Sequence[np.ndarray], *, columns: int = 3, width: int = 1200
+) -> Path:
     """Writes frames (uint8 BGR, as grabbed, all of one size) tiled ``columns`` wide."""
     import cv2
 
     from .sim import contact_sheet
 
     frames = [np.asarray(f) for f in frames_bgr]
-    if not frames or any(f.ndim != 3 or f.shape[2] != 3 or f.dtype != np.uint8 or f.shape != frames[0].shape for f in frames):
+    if not frames or any(
+        f.ndim != 3 or f.shape[2] != 3 or f.dtype != np.uint8 or f.shape != frames[0].shape for f in frames
+    ):
         raise InvalidInputError("frames_bgr: expected one or more uint8 BGR images (H, W, 3) of one size")
     sheet = contact_sheet(np.stack([f[:, :, ::-1] for f in frames]), picks=len(frames), columns=columns, width=width)
     p = Path(path)

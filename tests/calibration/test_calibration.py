@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from calibration_rig import PATTERN, SQUARE, Rig, rotation_angle_deg
 
 from binpick.calibration import (
     HAND_EYE_METHODS,
@@ -20,10 +21,8 @@ from binpick.calibration import (
 )
 from binpick.calibration._file import CameraIntrinsics
 from binpick.errors import CalibrationError, InvalidInputError, SingularGeometryError
-from binpick.vision import extract_line
 from binpick.vision import _synthetic as syn
-
-from conftest import PATTERN, SQUARE, Rig, rotation_angle_deg
+from binpick.vision import extract_line
 
 
 def test_camera_intrinsics_from_rendered_checkerboards(rig, board_views):
@@ -91,7 +90,10 @@ def test_laser_plane_fit_across_angles_predicts_the_sheet(rig):
     cal = small.calibration
     rng = np.random.default_rng(4)
     stations = [small.looking_at_board(*rng.uniform(-0.3, 0.3, 2), rng.uniform(-0.4, 0.4), d) for d in (430, 520, 600)]
-    boards = [board_pose(find_checkerboard(small.image(T, seed=20 + i), PATTERN), cal.camera, PATTERN, SQUARE) for i, T in enumerate(stations)]
+    boards = [
+        board_pose(find_checkerboard(small.image(T, seed=20 + i), PATTERN), cal.camera, PATTERN, SQUARE)
+        for i, T in enumerate(stations)
+    ]
     angles = [0.20, 0.27, 0.34, 0.41]
     points = []
     for k, a in enumerate(angles):
@@ -99,13 +101,21 @@ def test_laser_plane_fit_across_angles_predicts_the_sheet(rig):
         for i, (T, T_cb) in enumerate(zip(stations, boards)):
             uv = extract_line(small.image(T, angle=a, seed=100 * k + i), threshold=15)
             # Keep the line on the board: the table around it is another plane.
-            board_uv = uv[np.abs(laser_points_on_board(uv, cal.camera, T_cb) @ np.linalg.inv(T_cb)[:3, :3].T + np.linalg.inv(T_cb)[:3, 3])[:, 2] < 100]
+            board_uv = uv[
+                np.abs(
+                    laser_points_on_board(uv, cal.camera, T_cb) @ np.linalg.inv(T_cb)[:3, :3].T
+                    + np.linalg.inv(T_cb)[:3, 3]
+                )[:, 2]
+                < 100
+            ]
             lit.append(laser_points_on_board(board_uv, cal.camera, T_cb))
         points.append(np.concatenate(lit))
     result = LaserCalibration.fit(angles, points)
     assert result.rms < 0.15
     # The fitted sheet at any angle in the sweep stays within 0.2 mm of the true one over the working volume.
-    probe = np.stack(np.meshgrid(np.linspace(-120, 120, 5), np.linspace(-120, 120, 5), np.linspace(400, 620, 4)), -1).reshape(-1, 3)
+    probe = np.stack(
+        np.meshgrid(np.linspace(-120, 120, 5), np.linspace(-120, 120, 5), np.linspace(400, 620, 4)), -1
+    ).reshape(-1, 3)
     for a in np.linspace(0.2, 0.41, 5):
         n_true = cal.T_camera_laser_at(a)[:3, 0]
         T_fit = result.T_camera_laser @ syn.pose(ry=a)

@@ -6,12 +6,11 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from calibration_rig import rotation_angle_deg
 
 from binpick.calibration import HAND_EYE_METHODS, calibrate_hand_eye
 from binpick.errors import CalibrationError
 from binpick.vision._synthetic import pose
-
-from conftest import rotation_angle_deg
 
 TRUTH = pose(0.02, -0.01, 0.3, (30.0, -10.0, 90.0))
 T_BASE_BOARD = pose(0.0, 0.0, 0.05, (400.0, -70.0, 0.0))
@@ -33,7 +32,9 @@ def stations(seed: int, n: int = 12) -> tuple[list[np.ndarray], list[np.ndarray]
     for _ in range(n):
         T_base_camera = np.eye(4)
         T_base_camera[:3, :3] = rotation([np.pi, 0, 0]) @ rotation(rng.uniform(-0.4, 0.4, 3))
-        T_base_camera[:3, 3] = T_BASE_BOARD[:3, 3] - T_base_camera[:3, 2] * rng.uniform(400, 600) + rng.uniform(-50, 50, 3)
+        T_base_camera[:3, 3] = (
+            T_BASE_BOARD[:3, 3] - T_base_camera[:3, 2] * rng.uniform(400, 600) + rng.uniform(-50, 50, 3)
+        )
         flange = T_base_camera @ np.linalg.inv(TRUTH)
         board = np.linalg.inv(T_base_camera) @ T_BASE_BOARD
         flange[:3, :3] = flange[:3, :3] @ rotation(rng.normal(0, np.radians(0.005), 3))

@@ -7,8 +7,9 @@ import numpy as np
 import pytest
 
 import binpick
-from binpick.cell import CellConfig, SimulatedCell, check_static_poses, sim_limits
+from binpick.cell import CellConfig, check_static_poses
 from binpick.errors import SafetyError
+from binpick.sim import SimulatedCell, sim_limits
 
 # The estimator's default segmentation distance follows the along-line spacing; with 60 frames the
 # lines lie ~5 mm apart, so the tests give d* and the smallest region explicitly.
@@ -58,7 +59,13 @@ def test_config_checks_scan_pose_below_the_approach_height(tee):
     limits = sim_limits(sim.layout)
     low = sim.layout.T_base_flange.copy()
     low[2, 3] = limits.approach_height_mm - 10.0
-    config = CellConfig(calibration=sim.layout.calibration(), model=tee, bin_bounds=sim.layout.bin.bounds, scan_poses=(low,),
-                        drop_pose=sim.drop_pose, limits=limits)
+    config = CellConfig(
+        calibration=sim.layout.calibration(),
+        model=tee,
+        bin_bounds=sim.layout.bin.bounds,
+        scan_poses=(low,),
+        drop_pose=sim.drop_pose,
+        limits=limits,
+    )
     with pytest.raises(SafetyError, match="approach height"):
         check_static_poses(config)

@@ -15,7 +15,9 @@ def test_demo_picks_one_part_and_writes_the_pictures(tmp_path, capsys):
     # swapped, 0.35 mm) that the 5° grasp set can reach within the tilt limit; that attempt lifts
     # the part but does not count (the pose was not pick-grade), and the second picks the next part.
     out = tmp_path / "demo"
-    code = main(["demo", "--picks", "2", "--count", "4", "--frames", "60", "--seed", "1", "--out", str(out), *ESTIMATE_FLAGS])
+    code = main(
+        ["demo", "--picks", "2", "--count", "4", "--frames", "60", "--seed", "1", "--out", str(out), *ESTIMATE_FLAGS]
+    )
     text = capsys.readouterr().out
     assert code == 0, text
     for name in ("scan_contact_sheet.png", "cloud.png", "summary.png"):
@@ -24,16 +26,19 @@ def test_demo_picks_one_part_and_writes_the_pictures(tmp_path, capsys):
     assert "picked" in text and " of 2 picks succeeded" in text and "0 of 2 picks succeeded" not in text
 
 
-@pytest.mark.parametrize("argv", [
-    ["demo", "--picks", "many"],
-    ["demo", "--picks", "0"],
-    ["demo", "--part", "no-such-part.stl"],
-    ["frobnicate"],
-    [],
-    ["pick"],
-    ["estimate", "missing.ply", "tee"],
-    ["calibrate", "/no/such/folder"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["demo", "--picks", "many"],
+        ["demo", "--picks", "0"],
+        ["demo", "--part", "no-such-part.stl"],
+        ["frobnicate"],
+        [],
+        ["pick"],
+        ["estimate", "missing.ply", "tee"],
+        ["calibrate", "/no/such/folder"],
+    ],
+)
 def test_bad_arguments_exit_2(argv, capsys):
     assert main(argv) == 2
     assert "Traceback" not in capsys.readouterr().err
@@ -45,15 +50,19 @@ def test_pick_example_prints_a_cell_file(capsys):
 
 
 def test_pick_dry_run_against_emulators(tmp_path, capsys):
-    from binpick.cell import SIM_ARM, sim_limits
     from binpick.devices.emulators import DynamixelEmulator, GripperEmulator, RobotEmulator, RobotEmulatorConfig
+    from binpick.sim import SIM_ARM, sim_limits
     from binpick.sim import Cell as Layout
 
     layout = Layout()
     layout.calibration().save(tmp_path / "calibration.toml")
     limits = sim_limits(layout)
     lo, hi = layout.bin.bounds
-    with RobotEmulator(config=RobotEmulatorConfig(arm=SIM_ARM, speed_scale=20.0)) as robot, DynamixelEmulator() as motor, GripperEmulator() as gripper:
+    with (
+        RobotEmulator(config=RobotEmulatorConfig(arm=SIM_ARM, speed_scale=20.0)) as robot,
+        DynamixelEmulator() as motor,
+        GripperEmulator() as gripper,
+    ):
         cfg = tmp_path / "cell.toml"
         cfg.write_text(f"""
 [robot]

@@ -1,16 +1,16 @@
-"""Grasp derivation and the simulated gripper's grasp matching, checked against direct computation."""
+"""Grasp derivation and the grasp matching of the simulated gripper, checked against direct computation."""
 
 from __future__ import annotations
 
 import math
-import types
 
 import numpy as np
 import pytest
 
 import binpick
-from binpick.cell import SimulatedCell, _rot_about, branch_grasps, pose_error
+from binpick.cell.grasp import GraspMatcher, branch_grasps
 from binpick.poses import grasp_pose
+from binpick.transforms import pose_error, rotation_about
 
 
 @pytest.fixture(scope="module")
@@ -29,32 +29,31 @@ def test_a_tilted_branch_has_a_grasp_within_half_a_step_of_its_elevation(tee, el
     grasps = branch_grasps(tee)
     rng = np.random.default_rng(3)
     for _ in range(5):
-        R = _rot_about(np.array([0.0, 0.0, 1.0]), rng.uniform(0, 2 * math.pi))
+        R = rotation_about(np.array([0.0, 0.0, 1.0]), rng.uniform(0, 2 * math.pi))
         for b_index, b in enumerate(tee.branches):
             d = np.asarray(b.direction, dtype=float)
             # turn the part so that branch b points elevation_deg below the horizontal
             h = np.cross(d, [0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
             T = np.eye(4)
-            T[:3, :3] = R @ _rot_about(h, math.radians(elevation_deg))
+            T[:3, :3] = R @ rotation_about(h, math.radians(elevation_deg))
             elev = math.degrees(math.asin(abs((T[:3, :3] @ d)[2])))
             assert elev == pytest.approx(elevation_deg, abs=1e-6)
-            best = min(_tilt_deg(grasp_pose(T, G)) for name, G in grasps.items() if name.startswith(f"branch{b_index}/"))
+            best = min(
+                _tilt_deg(grasp_pose(T, G)) for name, G in grasps.items() if name.startswith(f"branch{b_index}/")
+            )
             assert elev - 1e-6 <= best <= elev + 2.5 + 1e-6
 
 
 def test_vectorised_grasp_matching_equals_pose_error_over_every_grasp(tee):
     S = np.eye(4)
-    S[:3, :3] = _rot_about(np.array([0.0, 1.0, 0.0]), math.pi)
+    S[:3, :3] = rotation_about(np.array([0.0, 1.0, 0.0]), math.pi)
     grasps = branch_grasps(tee)
-    sim = SimulatedCell.__new__(SimulatedCell)  # only the matching state, no pile or emulators
-    sim._grasp_stack = None
-    sim.grip_tolerance_deg, sim.grip_tolerance_mm = 12.0, 6.0
-    sim.cell = types.SimpleNamespace(config=types.SimpleNamespace(grasps=grasps, symmetries=(S,)))
+    matcher = GraspMatcher(grasps, (S,), tolerance_deg=12.0, tolerance_mm=6.0)
     values = list(grasps.values())
     rng = np.random.default_rng(0)
     for k in range(100):
         T = values[rng.integers(len(values))].copy()
-        T[:3, :3] = _rot_about(rng.normal(size=3), rng.uniform(0, 0.4 if k < 50 else 3.0)) @ T[:3, :3]
+        T[:3, :3] = rotation_about(rng.normal(size=3), rng.uniform(0, 0.4 if k < 50 else 3.0)) @ T[:3, :3]
         T[:3, 3] += rng.normal(size=3) * (3.0 if k < 50 else 30.0)
         expected = min((pose_error(T, G, (S,)) for G in values), key=lambda e: e[0] / 12.0 + e[1] / 6.0)
-        assert sim._grasp_error(T) == pytest.approx(expected, abs=1e-6)
+        assert matcher.error(T) == pytest.approx(expected, abs=1e-6)

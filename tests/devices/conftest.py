@@ -5,8 +5,7 @@ from __future__ import annotations
 import math
 
 import pytest
-
-from binpick.errors import DeviceError
+from device_settings import FAST_ROBOT
 
 from binpick.devices import (
     AiMotor,
@@ -15,7 +14,6 @@ from binpick.devices import (
     DynamixelConfig,
     DynamixelMotor,
     GripperConfig,
-    MelfaConfig,
     MelfaRobot,
     ModbusGripper,
     MotorRange,
@@ -28,14 +26,8 @@ from binpick.devices.emulators import (
     RobotEmulator,
     RobotEmulatorConfig,
 )
+from binpick.errors import DeviceError
 
-FAST_ROBOT = MelfaConfig(
-    serial=SerialSettings(baudrate=9600, parity="E", stopbits=2, timeout_s=0.3, retries=2),
-    initial_override_percent=50,
-    initial_linear_speed_mm_s=200,
-    poll_interval_s=0.005,
-    motion_timeout_s=5.0,
-)
 FAST_RANGE = MotorRange(max_speed_rad_s=30.0, move_timeout_s=2.0, poll_interval_s=0.005)
 
 
@@ -71,8 +63,10 @@ def dxl_emulator():
 
 @pytest.fixture
 def dxl_motor(dxl_emulator):
-    m = DynamixelMotor(dxl_emulator.slave_path, config=DynamixelConfig(
-        serial=SerialSettings(baudrate=57600, timeout_s=0.1), range=FAST_RANGE))
+    m = DynamixelMotor(
+        dxl_emulator.slave_path,
+        config=DynamixelConfig(serial=SerialSettings(baudrate=57600, timeout_s=0.1), range=FAST_RANGE),
+    )
     yield m
     m.close()
 
@@ -84,9 +78,13 @@ def ai_emulator():
 
 @pytest.fixture
 def ai_motor(ai_emulator):
-    m = AiMotor(ai_emulator.slave_path, config=AiMotorConfig(
-        serial=SerialSettings(baudrate=57600, timeout_s=0.1),
-        range=MotorRange(tolerance_rad=math.radians(1.5), move_timeout_s=2.0, poll_interval_s=0.005)))
+    m = AiMotor(
+        ai_emulator.slave_path,
+        config=AiMotorConfig(
+            serial=SerialSettings(baudrate=57600, timeout_s=0.1),
+            range=MotorRange(tolerance_rad=math.radians(1.5), move_timeout_s=2.0, poll_interval_s=0.005),
+        ),
+    )
     yield m
     m.close()
 
@@ -98,7 +96,11 @@ def gripper_emulator():
 
 @pytest.fixture
 def gripper(gripper_emulator):
-    g = ModbusGripper(gripper_emulator.slave_path, config=GripperConfig(
-        serial=SerialSettings(baudrate=115200, timeout_s=0.1), poll_interval_s=0.005, move_timeout_s=2.0))
+    g = ModbusGripper(
+        gripper_emulator.slave_path,
+        config=GripperConfig(
+            serial=SerialSettings(baudrate=115200, timeout_s=0.1), poll_interval_s=0.005, move_timeout_s=2.0
+        ),
+    )
     yield g
     g.close_port()

@@ -6,7 +6,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-
 import binpick
 from binpick.devices import DynamixelConfig, DynamixelMotor, MelfaConfig, MelfaRobot, SerialSettings
 from binpick.devices.cli import emulate_main
@@ -17,8 +16,9 @@ PYTHON_ROOT = str(Path(binpick.__file__).resolve().parent.parent)
 def _start(*args):
     env = dict(os.environ, PYTHONPATH=PYTHON_ROOT + os.pathsep + os.environ.get("PYTHONPATH", ""))
     code = f"import sys; from binpick.devices.cli import emulate_main; sys.exit(emulate_main({list(args)!r}))"
-    return subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            env=env, text=True)
+    return subprocess.Popen(
+        [sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True
+    )
 
 
 def _stop(proc):

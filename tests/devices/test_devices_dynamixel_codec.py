@@ -48,8 +48,9 @@ def test_read_matches_published_bytes():
     assert encode_read(1, 132, 4) == READ_4_AT_132_ID1
 
 
-@pytest.mark.parametrize("packet", [PING_ID1, WRITE_512_AT_116_ID1, READ_4_AT_132_ID1, PING_STATUS_ID1,
-                                    READ_STATUS_ID1])
+@pytest.mark.parametrize(
+    "packet", [PING_ID1, WRITE_512_AT_116_ID1, READ_4_AT_132_ID1, PING_STATUS_ID1, READ_STATUS_ID1]
+)
 def test_crc_of_published_packets(packet):
     want = int.from_bytes(packet[-2:], "little")
     assert crc16(packet[:-2]) == want == reference_crc(packet[:-2])

@@ -6,8 +6,16 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from binpick.devices import AiMotor, AiMotorConfig, DynamixelBus, ModbusGripper, GripperConfig, SerialSettings
-from binpick.devices import MelfaConfig, MelfaRobot
+from binpick.devices import (
+    AiMotor,
+    AiMotorConfig,
+    DynamixelBus,
+    GripperConfig,
+    MelfaConfig,
+    MelfaRobot,
+    ModbusGripper,
+    SerialSettings,
+)
 from binpick.devices.aimotor import decode_reply
 from binpick.devices.dynamixel import HEADER, decode_packet, decode_status
 from binpick.devices.emulators import PtyEmulator
@@ -18,8 +26,12 @@ from binpick.errors import DeviceError, ProtocolError
 FAST = settings(max_examples=300, deadline=None)
 text = st.text(alphabet=st.characters(min_codepoint=32, max_codepoint=126), max_size=120)
 # strings shaped like the real replies, so the parsers get past their first checks
-pose_like = st.lists(st.sampled_from(["X", "Y", "Z", "A", "B", "C", "J1", "J6", "", "7,0", "1.5", "-3", "nan",
-                                      "1e999", "****,****", "x"]), max_size=20).map(";".join)
+pose_like = st.lists(
+    st.sampled_from(
+        ["X", "Y", "Z", "A", "B", "C", "J1", "J6", "", "7,0", "1.5", "-3", "nan", "1e999", "****,****", "x"]
+    ),
+    max_size=20,
+).map(";".join)
 
 
 @FAST
@@ -103,13 +115,24 @@ def drivers(chatter):
 
 
 @settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-@given(st.one_of(st.binary(max_size=64), st.binary(max_size=32).map(lambda b: HEADER + b),
-                 st.binary(max_size=32).map(lambda b: b"QoK" + b + b"\r")))
+@given(
+    st.one_of(
+        st.binary(max_size=64),
+        st.binary(max_size=32).map(lambda b: HEADER + b),
+        st.binary(max_size=32).map(lambda b: b"QoK" + b + b"\r"),
+    )
+)
 def test_stream_readers_on_random_bytes_end_in_documented_errors(chatter, drivers, payload):
     chatter.payload = payload
     robot, bus, ai, gripper = drivers
-    calls = [robot.read_pose, robot.state, lambda: bus.ping(1), lambda: bus.read(1, 132, 4), ai.present_angle,
-             gripper.status]
+    calls = [
+        robot.read_pose,
+        robot.state,
+        lambda: bus.ping(1),
+        lambda: bus.read(1, 132, 4),
+        ai.present_angle,
+        gripper.status,
+    ]
     for call in calls:
         t = time.monotonic()
         try:

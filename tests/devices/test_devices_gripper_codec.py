@@ -22,7 +22,8 @@ def test_published_activation_frames():
 def test_published_close_frame():
     # rACT + rGTO, position 255, speed 255, force 255
     assert encode_write_registers(9, 0x03E8, [0x0900, 0x00FF, 0xFFFF]) == H(
-        "09 10 03 E8 00 03 06 09 00 00 FF FF FF 42 29")
+        "09 10 03 E8 00 03 06 09 00 00 FF FF FF 42 29"
+    )
 
 
 def test_published_status_read_frame():

@@ -57,9 +57,16 @@ def test_limits_send_nothing(gripper, gripper_emulator):
     assert len(gripper_emulator.requests) == before
 
 
-@pytest.mark.parametrize("fault,error", [
-    (Fault.NO_REPLY, DeviceTimeout), (Fault.GARBLED, ProtocolError), (Fault.PARTIAL, TruncatedReplyError),
-    (Fault.BAD_CRC, ChecksumError), (Fault.UNKNOWN_REPLY, UnknownReplyError)])
+@pytest.mark.parametrize(
+    "fault,error",
+    [
+        (Fault.NO_REPLY, DeviceTimeout),
+        (Fault.GARBLED, ProtocolError),
+        (Fault.PARTIAL, TruncatedReplyError),
+        (Fault.BAD_CRC, ChecksumError),
+        (Fault.UNKNOWN_REPLY, UnknownReplyError),
+    ],
+)
 def test_status_faults_after_bounded_retries(gripper, gripper_emulator, fault, error):
     gripper_emulator.inject(fault, times=10, when=reads)
     t = time.monotonic()

@@ -3,7 +3,14 @@
 import numpy as np
 import pytest
 
-from binpick.devices.melfa import encode_command, format_position, parse_joints, parse_position, parse_reply, parse_state
+from binpick.devices.melfa import (
+    encode_command,
+    format_position,
+    parse_joints,
+    parse_position,
+    parse_reply,
+    parse_state,
+)
 from binpick.errors import InvalidInputError, ProtocolError, UnknownReplyError
 
 # reply lines in the format RV-2A/CR1 integrations record from the controller
@@ -56,8 +63,16 @@ def test_pposf_with_extra_axes():
     assert flags == (6, 1)
 
 
-@pytest.mark.parametrize("bad", ["X;1;Y;2;Z;3;A;4;B;5;;7,0", "X;1;Y;2;Z;3;A;4;B;5;C;oops;;7,0",
-                                 "X;1;Y;2;Z;3;A;4;B;5;C;6;;", "X;1;Y", "X;1;Y;2;Z;3;A;4;B;5;C;nan;;7,0"])
+@pytest.mark.parametrize(
+    "bad",
+    [
+        "X;1;Y;2;Z;3;A;4;B;5;;7,0",
+        "X;1;Y;2;Z;3;A;4;B;5;C;oops;;7,0",
+        "X;1;Y;2;Z;3;A;4;B;5;C;6;;",
+        "X;1;Y",
+        "X;1;Y;2;Z;3;A;4;B;5;C;nan;;7,0",
+    ],
+)
 def test_pposf_errors(bad):
     with pytest.raises(ProtocolError):
         parse_position(bad)

@@ -64,7 +64,9 @@ def test_goal_outside_range_sends_nothing(dxl_motor, dxl_emulator):
 
 def test_motor_refuses_goal_beyond_its_own_limit():
     with DynamixelEmulator(config=DynamixelEmulatorConfig(min_position=1500, max_position=2600)) as emu:
-        m = DynamixelMotor(emu.slave_path, config=DynamixelConfig(serial=SerialSettings(baudrate=57600, timeout_s=0.05)))
+        m = DynamixelMotor(
+            emu.slave_path, config=DynamixelConfig(serial=SerialSettings(baudrate=57600, timeout_s=0.05))
+        )
         try:
             m.enable()
             with pytest.raises(DeviceFault, match="data limit error"):
@@ -80,9 +82,16 @@ def test_eeprom_write_with_torque_on_is_an_access_error(dxl_motor):
         dxl_motor.bus.write(1, 8, b"\x03")  # baud rate lives in EEPROM
 
 
-@pytest.mark.parametrize("fault,error", [
-    (Fault.NO_REPLY, DeviceTimeout), (Fault.GARBLED, ProtocolError), (Fault.PARTIAL, TruncatedReplyError),
-    (Fault.BAD_CRC, ChecksumError), (Fault.UNKNOWN_REPLY, UnknownReplyError)])
+@pytest.mark.parametrize(
+    "fault,error",
+    [
+        (Fault.NO_REPLY, DeviceTimeout),
+        (Fault.GARBLED, ProtocolError),
+        (Fault.PARTIAL, TruncatedReplyError),
+        (Fault.BAD_CRC, ChecksumError),
+        (Fault.UNKNOWN_REPLY, UnknownReplyError),
+    ],
+)
 def test_read_faults_after_bounded_retries(dxl_motor, dxl_emulator, fault, error):
     dxl_emulator.inject(fault, times=10, when=reads)
     t = time.monotonic()
@@ -109,8 +118,9 @@ def test_lost_write_status_is_checked_by_reading_back_not_by_resending(dxl_motor
     dxl_motor.enable()
     dxl_emulator.inject(Fault.NO_REPLY, when=writes)
     dxl_motor.move_to(0.3)
-    goal_writes = [p for p in dxl_emulator.requests
-                   if writes(p) and struct.unpack_from("<H", p.params)[0] == ADDR_GOAL_POSITION]
+    goal_writes = [
+        p for p in dxl_emulator.requests if writes(p) and struct.unpack_from("<H", p.params)[0] == ADDR_GOAL_POSITION
+    ]
     assert len(goal_writes) == 1
 
 
@@ -119,8 +129,9 @@ def test_write_that_was_not_taken_is_reported_not_resent(dxl_motor, dxl_emulator
     dxl_emulator.inject(Fault.IGNORED, when=writes)  # the goal write never arrives
     with pytest.raises(DeviceTimeout, match="not the written"):
         dxl_motor.move_to(0.2)
-    goal_writes = [p for p in dxl_emulator.requests
-                   if writes(p) and struct.unpack_from("<H", p.params)[0] == ADDR_GOAL_POSITION]
+    goal_writes = [
+        p for p in dxl_emulator.requests if writes(p) and struct.unpack_from("<H", p.params)[0] == ADDR_GOAL_POSITION
+    ]
     assert len(goal_writes) == 1
     assert dxl_emulator.present_position() == 2048
 
@@ -146,8 +157,10 @@ def test_port_disappearing(dxl_motor, dxl_emulator):
 
 
 def test_unknown_id_times_out(dxl_emulator):
-    m = DynamixelMotor(dxl_emulator.slave_path, config=DynamixelConfig(
-        motor_id=7, serial=SerialSettings(baudrate=57600, timeout_s=0.03, retries=1)))
+    m = DynamixelMotor(
+        dxl_emulator.slave_path,
+        config=DynamixelConfig(motor_id=7, serial=SerialSettings(baudrate=57600, timeout_s=0.03, retries=1)),
+    )
     try:
         with pytest.raises(DeviceTimeout, match="2 attempts"):
             m.ping()
@@ -156,6 +169,7 @@ def test_unknown_id_times_out(dxl_emulator):
 
 
 # ----------------------------------------------------------------------------- AI motor
+
 
 def test_ai_motor_moves_and_reads(ai_motor, ai_emulator):
     assert ai_motor.ping() == 0
@@ -172,8 +186,10 @@ def test_ai_motor_requests_are_the_documented_frames(ai_motor, ai_emulator):
     assert ai_emulator.requests[0] == (0x40, 127)  # torque level 2, ID 0, centre position
 
 
-@pytest.mark.parametrize("fault,error", [(Fault.NO_REPLY, DeviceTimeout), (Fault.GARBLED, ProtocolError),
-                                         (Fault.PARTIAL, TruncatedReplyError)])
+@pytest.mark.parametrize(
+    "fault,error",
+    [(Fault.NO_REPLY, DeviceTimeout), (Fault.GARBLED, ProtocolError), (Fault.PARTIAL, TruncatedReplyError)],
+)
 def test_ai_motor_faults(ai_motor, ai_emulator, fault, error):
     ai_emulator.inject(fault, times=10)
     with pytest.raises(error):

@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
-from conftest import FAST_ROBOT
+from device_settings import FAST_ROBOT
 
 from binpick.devices import MelfaConfig, MelfaHandGripper, MelfaRobot, SerialSettings
 from binpick.devices.emulators import Fault, RobotEmulator, RobotEmulatorConfig
@@ -157,6 +157,7 @@ def test_hand_open_close(robot, robot_emulator):
 
 # ----------------------------------------------------------------------------- faults
 
+
 def test_lost_reply_to_a_query_is_retried(robot, robot_emulator):
     robot_emulator.inject(Fault.NO_REPLY, when=is_cmd("PPOSF"))
     np.testing.assert_allclose(robot.read_pose()[:3, 3], [160, 0, 478], atol=0.01)
@@ -172,8 +173,10 @@ def test_query_gives_up_after_bounded_retries(robot, robot_emulator):
     assert commands(robot_emulator).count("JPOSF") == 3
 
 
-@pytest.mark.parametrize("fault,error", [(Fault.GARBLED, ProtocolError), (Fault.PARTIAL, TruncatedReplyError),
-                                         (Fault.UNKNOWN_REPLY, UnknownReplyError)])
+@pytest.mark.parametrize(
+    "fault,error",
+    [(Fault.GARBLED, ProtocolError), (Fault.PARTIAL, TruncatedReplyError), (Fault.UNKNOWN_REPLY, UnknownReplyError)],
+)
 def test_bad_replies_raise_their_class(robot, robot_emulator, fault, error):
     robot_emulator.inject(fault, times=3, when=is_cmd("DSTATE"))
     with pytest.raises(error):

@@ -5,7 +5,14 @@ import math
 import numpy as np
 import pytest
 
-from binpick.devices.safety import CellLimits, check_linear_speed, check_move, check_override, check_pose, check_sequence
+from binpick.devices.safety import (
+    CellLimits,
+    check_linear_speed,
+    check_move,
+    check_override,
+    check_pose,
+    check_sequence,
+)
 from binpick.devices.xyzabc import transform_from_xyzabc
 from binpick.errors import InvalidInputError, SafetyError
 
@@ -20,8 +27,9 @@ def test_inside_box_pointing_down_passes():
     check_pose(down(300, 0, 300), LIMITS)
 
 
-@pytest.mark.parametrize("xyz,axis", [((50, 0, 300), "x"), ((300, 400, 300), "y"), ((300, 0, -5), "z"),
-                                      ((300, 0, 600), "z")])
+@pytest.mark.parametrize(
+    "xyz,axis", [((50, 0, 300), "x"), ((300, 400, 300), "y"), ((300, 0, -5), "z"), ((300, 0, 600), "z")]
+)
 def test_outside_box_is_refused(xyz, axis):
     with pytest.raises(SafetyError, match=f"{axis} = .* outside the cell's workspace"):
         check_pose(down(*xyz), LIMITS)

@@ -24,12 +24,15 @@ def test_tool_pointing_down_is_a180_b0_c180():
 
 
 def test_single_axis_rotations_match_hand_worked_matrices():
-    np.testing.assert_allclose(transform_from_xyzabc([0, 0, 0, D(90), 0, 0])[:3, :3],
-                               [[1, 0, 0], [0, 0, -1], [0, 1, 0]], atol=1e-12)
-    np.testing.assert_allclose(transform_from_xyzabc([0, 0, 0, 0, D(90), 0])[:3, :3],
-                               [[0, 0, 1], [0, 1, 0], [-1, 0, 0]], atol=1e-12)
-    np.testing.assert_allclose(transform_from_xyzabc([0, 0, 0, 0, 0, D(90)])[:3, :3],
-                               [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-12)
+    np.testing.assert_allclose(
+        transform_from_xyzabc([0, 0, 0, D(90), 0, 0])[:3, :3], [[1, 0, 0], [0, 0, -1], [0, 1, 0]], atol=1e-12
+    )
+    np.testing.assert_allclose(
+        transform_from_xyzabc([0, 0, 0, 0, D(90), 0])[:3, :3], [[0, 0, 1], [0, 1, 0], [-1, 0, 0]], atol=1e-12
+    )
+    np.testing.assert_allclose(
+        transform_from_xyzabc([0, 0, 0, 0, 0, D(90)])[:3, :3], [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-12
+    )
 
 
 def test_order_is_x_first_then_y_then_z_about_fixed_axes():
@@ -50,8 +53,14 @@ def test_decomposition_of_known_matrix():
 def test_round_trip_random_angles():
     rng = np.random.default_rng(7)
     for _ in range(200):
-        v = np.concatenate([rng.uniform(-500, 500, 3), rng.uniform(-math.pi, math.pi, 1),
-                            rng.uniform(-math.pi / 2 + 1e-3, math.pi / 2 - 1e-3, 1), rng.uniform(-math.pi, math.pi, 1)])
+        v = np.concatenate(
+            [
+                rng.uniform(-500, 500, 3),
+                rng.uniform(-math.pi, math.pi, 1),
+                rng.uniform(-math.pi / 2 + 1e-3, math.pi / 2 - 1e-3, 1),
+                rng.uniform(-math.pi, math.pi, 1),
+            ]
+        )
         back = xyzabc_from_transform(transform_from_xyzabc(v))
         np.testing.assert_allclose(back, v, atol=1e-9)
 

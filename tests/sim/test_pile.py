@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 import binpick
+from _geometry import box_mesh
 from binpick import sim
 
 
@@ -108,9 +109,7 @@ def test_bin_must_have_positive_size():
 def test_a_low_poly_cad_part_falls_and_settles():
     """A box-like part whose mesh has only its 8 corners (as CAD exports flat parts) still gets
     solid collision pieces: the parts fall into the bin instead of hanging where they were dropped."""
-    v = np.array([[x, y, z] for z in (0, 12.0) for y in (0, 40.0) for x in (0, 70.0)])
-    f = np.array([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
-                  [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]])
+    v, f = box_mesh((70.0, 40.0, 12.0))
     plate = binpick.Model.from_arrays(v, f, spacing=2.0)
     cell = sim.Cell()
     pile = sim.Pile(plate, 6, bin=cell.bin, seed=2)

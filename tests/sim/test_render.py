@@ -27,7 +27,9 @@ def test_line_lands_where_the_sheet_meets_a_known_plane(tilt):
     c, s = np.cos(tilt), np.sin(tilt)
     T_plane[:3, :3] = [[1, 0, 0], [0, c, -s], [0, s, c]]
     T_plane[2, 3] = 500.0
-    cell = sim.Cell(camera=CAM, T_flange_camera=np.eye(4), T_base_flange=np.eye(4), laser=sim.Laser(sheet_sigma=1.0, power=150.0))
+    cell = sim.Cell(
+        camera=CAM, T_flange_camera=np.eye(4), T_base_flange=np.eye(4), laser=sim.Laser(sheet_sigma=1.0, power=150.0)
+    )
     view = _plane_world(T_plane).view(cell)
     angle = 0.03
     on = view.frame(angle, noise=sim.SensorNoise.none()).astype(float)
@@ -72,7 +74,9 @@ def test_depth_points_and_ids_agree_with_the_camera_model():
 
     vv, uu = np.nonzero(hit)
     sel = np.arange(0, len(vv), 37)
-    proj, _ = cv2.projectPoints(pts[vv[sel], uu[sel]].astype(np.float64), np.zeros(3), np.zeros(3), cam.K, np.array(cam.dist))
+    proj, _ = cv2.projectPoints(
+        pts[vv[sel], uu[sel]].astype(np.float64), np.zeros(3), np.zeros(3), cam.K, np.array(cam.dist)
+    )
     err = proj[:, 0, :] - np.stack([uu[sel], vv[sel]], axis=1)
     assert np.abs(err).max() < 1e-2
     # The part's top, seen in the base frame, is where it was placed (tee axis at z = 13, radius 13 + boss to 17).
@@ -107,12 +111,15 @@ def test_checkerboard_corners_are_found_where_they_project():
     gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
     found, corners = cv2.findChessboardCorners(gray, (9, 6))
     assert found
-    corners = cv2.cornerSubPix(gray, corners, (5, 5), (-1, -1), (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4))
+    corners = cv2.cornerSubPix(
+        gray, corners, (5, 5), (-1, -1), (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 50, 1e-4)
+    )
     obj = np.array([[i * 20.0, j * 20.0, 0.0] for j in range(6) for i in range(9)])
     proj, _ = cv2.projectPoints(obj, cv2.Rodrigues(T[:3, :3])[0], T[:3, 3], cam.K, np.array(cam.dist))
     d = np.linalg.norm(corners[:, 0, :] - proj[:, 0, :], axis=1)
     d_rev = np.linalg.norm(corners[::-1, 0, :] - proj[:, 0, :], axis=1)
-    # Measured 0.15 px worst with 8×8 supersampling (cornerSubPix bias on sharp edges, not yet separated from renderer error).
+    # Measured 0.15 px worst with 8×8 supersampling (cornerSubPix bias on sharp edges, not yet
+    # separated from renderer error).
     assert min(d.max(), d_rev.max()) < 0.2
 
 

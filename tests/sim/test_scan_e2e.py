@@ -52,7 +52,9 @@ def test_reconstruction_is_within_0_2_mm_rms_of_the_true_surfaces(pile_scan):
     rms = float(np.sqrt(np.mean(dist**2)))
     # Measured: 0.124 mm RMS, median 0.060 mm over 15 635 points (seed 1). The larger errors sit
     # where the line crosses an edge (bin rim, a part's silhouette or its laser shadow).
-    assert rms <= TARGET_RMS, f"RMS {rms:.3f} mm over {len(dist)} points (median {np.median(dist):.3f}, p99 {np.percentile(dist, 99):.3f})"
+    assert rms <= TARGET_RMS, (
+        f"RMS {rms:.3f} mm over {len(dist)} points (median {np.median(dist):.3f}, p99 {np.percentile(dist, 99):.3f})"
+    )
     assert np.median(dist) < 0.08
     assert len(cloud) > 10_000
     assert set(np.unique(cloud.frame)) == set(range(FRAMES)), "a frame gave no points"
@@ -73,7 +75,9 @@ def _cylinder_mesh(radius, length, segments=720):
     """A closed cylinder along y, centred at the origin: side quads and two capped fans."""
     a = 2 * np.pi * np.arange(segments) / segments
     ring = np.stack([radius * np.cos(a), np.zeros(segments), radius * np.sin(a)], axis=1)
-    v = np.concatenate([ring + [0, -length / 2, 0], ring + [0, length / 2, 0], [[0, -length / 2, 0], [0, length / 2, 0]]])
+    v = np.concatenate(
+        [ring + [0, -length / 2, 0], ring + [0, length / 2, 0], [[0, -length / 2, 0], [0, length / 2, 0]]]
+    )
     i = np.arange(segments)
     j = (i + 1) % segments
     n = segments
@@ -97,7 +101,10 @@ class _PlaneAndCylinder:
     def world(self):
         w = sim.World()
         half = 300.0
-        floor = w.add_mesh(np.array([[-half, -half, 0], [half, -half, 0], [half, half, 0], [-half, half, 0]]), np.array([[0, 1, 2], [0, 2, 3]]))
+        floor = w.add_mesh(
+            np.array([[-half, -half, 0], [half, -half, 0], [half, half, 0], [-half, half, 0]]),
+            np.array([[0, 1, 2], [0, 2, 3]]),
+        )
         w.add_instance(floor, _translation(400.0, 0.0, 0.0), 0)
         cyl = w.add_mesh(*_cylinder_mesh(self.radius, self.length))
         w.add_instance(cyl, _translation(*self.centre), 1)

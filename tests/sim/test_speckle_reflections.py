@@ -16,7 +16,9 @@ from binpick.vision import extract_line, reconstruct
 
 CAM = sim.Camera(width=320, height=240, fx=500.0, fy=500.0, cx=159.5, cy=119.5, dist=(0, 0, 0, 0, 0))
 # Camera at the base origin looking along +z, the laser 130 mm to its side (the default projector).
-CELL = sim.Cell(camera=CAM, T_flange_camera=np.eye(4), T_base_flange=np.eye(4), laser=sim.Laser(sheet_sigma=1.0, power=150.0))
+CELL = sim.Cell(
+    camera=CAM, T_flange_camera=np.eye(4), T_base_flange=np.eye(4), laser=sim.Laser(sheet_sigma=1.0, power=150.0)
+)
 IDEAL = sim.SensorNoise.none()
 SQUARE = np.array([[0, 1, 2], [0, 2, 3]])
 
@@ -175,7 +177,9 @@ def test_cli_flags_turn_them_on(tmp_path, monkeypatch):
     def small(model, count_, **kw):
         seen.append(kw["cell"])
         # A small camera keeps the run short; everything else is the CLI's cell.
-        kw["cell"] = replace(kw["cell"], camera=sim.Camera(width=240, height=180, fx=300.0, fy=300.0, cx=119.5, cy=89.5))
+        kw["cell"] = replace(
+            kw["cell"], camera=sim.Camera(width=240, height=180, fx=300.0, fy=300.0, cx=119.5, cy=89.5)
+        )
         return real(model, 1, **kw)
 
     monkeypatch.setattr(dataset, "simulate_scan", small)

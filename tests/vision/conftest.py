@@ -13,7 +13,9 @@ from binpick.vision._synthetic import pose
 
 class Cell:
     def __init__(self) -> None:
-        cam = CameraIntrinsics(1032, 778, [[1200.0, 0, 520.3], [0, 1195.0, 385.7], [0, 0, 1]], [-0.09, 0.06, 0.0006, -0.0004, -0.01])
+        cam = CameraIntrinsics(
+            1032, 778, [[1200.0, 0, 520.3], [0, 1195.0, 385.7], [0, 0, 1]], [-0.09, 0.06, 0.0006, -0.0004, -0.01]
+        )
         self.calibration = CellCalibration(
             cam, pose(0.01, -0.02, 0.015, (-150.0, 2.0, 5.0)), pose(0.02, -0.01, 0.3, (30.0, -10.0, 90.0))
         )

@@ -23,7 +23,9 @@ def centre_errors(uv: np.ndarray, truth: np.ndarray, along: int = 1) -> np.ndarr
     order = np.argsort(keys_true)
     k, c = keys_true[order], truth[order, across]
     edges = k[1:][(np.abs(np.diff(c)) > 2.0) | (np.diff(k) > 1)]
-    near_edge = {int(e) + d for e in edges for d in range(-3, 4)} | {int(e) - 1 + d for e in edges for d in range(-3, 4)}
+    near_edge = {int(e) + d for e in edges for d in range(-3, 4)} | {
+        int(e) - 1 + d for e in edges for d in range(-3, 4)
+    }
     table = {int(key): val for key, val in zip(keys_true, truth[:, across]) if key in single and key not in near_edge}
     keys = np.rint(uv[:, along]).astype(int)
     matched = np.array([key in table for key in keys], dtype=bool)
@@ -39,8 +41,17 @@ def noisy_frames(request, cell):
     out = []
     for u in (260.0, 540.0, 820.0):
         angle = cell.angle_for_column(u)
-        img = syn.render(cell.calibration, surfaces, cell.T_base_flange, angle=angle, rng=rng, noise=3.0,
-                         ambient=110.0, ambient_tint=request.param, rays=cell.rays)
+        img = syn.render(
+            cell.calibration,
+            surfaces,
+            cell.T_base_flange,
+            angle=angle,
+            rng=rng,
+            noise=3.0,
+            ambient=110.0,
+            ambient_tint=request.param,
+            rays=cell.rays,
+        )
         out.append((img, syn.true_line_centres(cell.calibration, surfaces, cell.T_base_flange, angle)))
     return out
 
@@ -61,7 +72,9 @@ def test_line_in_any_direction_is_scanned_across(cell):
     laser[:3, 3] = rot @ T90[:3, 3]
     cal = type(cell.calibration)(cell.calibration.camera, laser, cell.calibration.T_flange_camera)
     angle = 0.25
-    img = syn.render(cal, [cell.floor], cell.T_base_flange, angle=angle, rng=np.random.default_rng(1), noise=2.0, rays=cell.rays)
+    img = syn.render(
+        cal, [cell.floor], cell.T_base_flange, angle=angle, rng=np.random.default_rng(1), noise=2.0, rays=cell.rays
+    )
     uv = extract_line(img)
     assert np.ptp(uv[:, 0]) > 900 and np.ptp(uv[:, 1]) < 200, "expected one point per column"
     # Truth: scan the transposed problem by columns.
@@ -79,13 +92,17 @@ def test_line_in_any_direction_is_scanned_across(cell):
 
 def test_a_stray_brighter_red_spot_does_not_pull_the_line(cell):
     angle = cell.angle_for_column(500.0)
-    img = syn.render(cell.calibration, [cell.floor], cell.T_base_flange, angle=angle, rng=np.random.default_rng(3), rays=cell.rays)
+    img = syn.render(
+        cell.calibration, [cell.floor], cell.T_base_flange, angle=angle, rng=np.random.default_rng(3), rays=cell.rays
+    )
     truth = syn.true_line_centres(cell.calibration, [cell.floor], cell.T_base_flange, angle)
     # A red reflection, wider and brighter than the line, on rows 300–307 only.
     cv2.rectangle(img, (800, 300), (812, 307), (40, 40, 255), thickness=-1)
     err = centre_errors(extract_line(img), truth)
     assert np.abs(err).max() < 0.5
-    assert np.abs(centre_errors(extract_line(img, max_jump=None), truth)).max() > 100, "the spot should win without continuity"
+    assert np.abs(centre_errors(extract_line(img, max_jump=None), truth)).max() > 100, (
+        "the spot should win without continuity"
+    )
 
 
 def test_no_line_gives_no_points_and_grey_frames_work(cell):

@@ -7,9 +7,15 @@ import cv2
 import numpy as np
 import pytest
 
-from binpick.calibration import CellCalibration
-from binpick.calibration import CameraIntrinsics
-from binpick.errors import CalibrationError, InvalidInputError, NonFiniteError, ScanFormatError, ShapeError, SingularGeometryError
+from binpick.calibration import CameraIntrinsics, CellCalibration
+from binpick.errors import (
+    CalibrationError,
+    InvalidInputError,
+    NonFiniteError,
+    ScanFormatError,
+    ShapeError,
+    SingularGeometryError,
+)
 from binpick.scan import load_scan, save_scan
 from binpick.vision import _synthetic as syn
 from binpick.vision import pixel_rays, reconstruct, triangulate
@@ -19,8 +25,18 @@ def test_scan_of_a_floor_and_cylinder_is_within_0_2_mm_rms(cell, tmp_path):
     surfaces = [cell.floor, cell.cylinder]
     rng = np.random.default_rng(11)
     angles = [cell.angle_for_column(u) for u in np.linspace(150, 900, 6)]
-    frames = [syn.render(cell.calibration, surfaces, cell.T_base_flange, angle=a, rng=rng, noise=3.0, rays=cell.rays) for a in angles]
-    save_scan(tmp_path, frames, angles, [cell.T_base_flange] * len(angles), cell.calibration, ground_truth={"scene": "floor+cylinder"})
+    frames = [
+        syn.render(cell.calibration, surfaces, cell.T_base_flange, angle=a, rng=rng, noise=3.0, rays=cell.rays)
+        for a in angles
+    ]
+    save_scan(
+        tmp_path,
+        frames,
+        angles,
+        [cell.T_base_flange] * len(angles),
+        cell.calibration,
+        ground_truth={"scene": "floor+cylinder"},
+    )
     scan = load_scan(tmp_path)
     assert scan.ground_truth == {"scene": "floor+cylinder"} and scan.calibration == cell.calibration
     cloud = reconstruct(scan)
@@ -41,7 +57,9 @@ def test_scan_of_a_floor_and_cylinder_is_within_0_2_mm_rms(cell, tmp_path):
 def test_exact_pixels_triangulate_exactly_across_robot_poses(cell):
     cal = cell.calibration
     T_a = cell.T_base_flange
-    T_b = T_a @ np.array([[np.cos(0.2), -np.sin(0.2), 0, 15], [np.sin(0.2), np.cos(0.2), 0, -30], [0, 0, 1, 20], [0, 0, 0, 1.0]])
+    T_b = T_a @ np.array(
+        [[np.cos(0.2), -np.sin(0.2), 0, 15], [np.sin(0.2), np.cos(0.2), 0, -30], [0, 0, 1, 20], [0, 0, 0, 1.0]]
+    )
     pixels, index, truth = [], [], []
     for f, (T, a) in enumerate([(T_a, 0.25), (T_b, 0.35)]):
         uv = syn.true_line_centres(cal, [cell.floor], T, a)[::40]
@@ -113,7 +131,11 @@ def test_singular_geometry_and_bad_input_are_named(cell):
     laser_left = CellCalibration(cal.camera, syn.pose(t=(-150.0, 0.0, 0.0)), cal.T_flange_camera)
     px = np.array([[300.0, 300.0], [700.0, 300.0], [200.0, 400.0], [800.0, 100.0]])
     cloud = triangulate(px, [0, 0, 1, 1], [0.0, 0.1], [np.eye(4)] * 2, laser_left)
-    assert np.array_equal(cloud.pixels, px[[0, 2]]) and np.array_equal(cloud.frame, [0, 1]) and np.array_equal(cloud.angle, [0.0, 0.1])
+    assert (
+        np.array_equal(cloud.pixels, px[[0, 2]])
+        and np.array_equal(cloud.frame, [0, 1])
+        and np.array_equal(cloud.angle, [0.0, 0.1])
+    )
     with pytest.raises(SingularGeometryError, match=r"row 1 \[700.0, 300.0\] in frame 0: .*behind"):
         triangulate(px, [0, 0, 1, 1], [0.0, 0.1], [np.eye(4)] * 2, laser_left, on_singular="raise")
 
@@ -127,7 +149,9 @@ def test_scan_folder_errors_are_clear(cell, tmp_path):
     with pytest.raises(ScanFormatError, match="not a scan folder"):
         load_scan(tmp_path / "nowhere")
     save_scan(tmp_path, [img], [0.1], [np.eye(4)], cell.calibration)
-    (tmp_path / "calibration.toml").write_text((tmp_path / "calibration.toml").read_text().replace("[hand_eye]", "[hand_eyes]"))
+    (tmp_path / "calibration.toml").write_text(
+        (tmp_path / "calibration.toml").read_text().replace("[hand_eye]", "[hand_eyes]")
+    )
     with pytest.raises(CalibrationError, match="hand_eye"):
         load_scan(tmp_path)
     (tmp_path / "scan.json").write_text('{"version": 2, "frames": []}')

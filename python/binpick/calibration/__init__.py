@@ -3,7 +3,8 @@ the laser projector (the paper's Table 1), the general laser plane and hand-eye.
 
 from __future__ import annotations
 
-from ._file import FORMAT_VERSION, CameraIntrinsics, CellCalibration
+from ..camera import CameraIntrinsics
+from ._file import FORMAT_VERSION, CellCalibration
 from .camera import CameraCalibration, board_object_points, board_pose, calibrate_camera, find_checkerboard
 from .hand_eye import HAND_EYE_METHODS, HandEyeCalibration, calibrate_hand_eye
 from .laser import LaserCalibration, fit_plane, laser_points_on_board

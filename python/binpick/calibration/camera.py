@@ -8,10 +8,9 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .._validate import positive
+from .._validate import as_image, positive
+from ..camera import CameraIntrinsics
 from ..errors import CalibrationError, InvalidInputError
-from ._checks import as_image
-from ._file import CameraIntrinsics
 
 __all__ = ["CameraCalibration", "board_object_points", "board_pose", "calibrate_camera", "find_checkerboard"]
 
@@ -39,7 +38,9 @@ def find_checkerboard(image: np.ndarray, pattern: tuple[int, int]) -> np.ndarray
     img = as_image(image, "image")
     grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
     size = _pattern(pattern)
-    found, corners = cv2.findChessboardCorners(grey, size, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE)
+    found, corners = cv2.findChessboardCorners(
+        grey, size, flags=cv2.CALIB_CB_ADAPTIVE_THRESH | cv2.CALIB_CB_NORMALIZE_IMAGE
+    )
     if not found:
         return None
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
@@ -113,11 +114,15 @@ def calibrate_camera(
             f"images: the {pattern} checkerboard was found in {len(views)} of {len(imgs)} images, "
             f"at least {min_views} are needed; check the pattern size (inner corners) and the lighting"
         )
-    rms, K, dist, rvecs, tvecs = cv2.calibrateCamera([obj] * len(views), corners, (width, height), None, None, flags=flags)
+    rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(
+        [obj] * len(views), corners, (width, height), None, None, flags=flags
+    )
     per_view = []
     for c, r, t in zip(corners, rvecs, tvecs):
         proj, _ = cv2.projectPoints(obj, r, t, K, dist)
         per_view.append(float(np.sqrt(np.mean(np.sum((proj - c).reshape(-1, 2) ** 2, axis=1)))))
     camera = CameraIntrinsics(width=width, height=height, K=K, dist=np.ravel(dist)[:5])
     poses = tuple(_pose(r, t) for r, t in zip(rvecs, tvecs))
-    return CameraCalibration(camera=camera, rms=float(rms), per_view_rms=np.array(per_view), views=np.array(views), T_camera_boards=poses)
+    return CameraCalibration(
+        camera=camera, rms=float(rms), per_view_rms=np.array(per_view), views=np.array(views), T_camera_boards=poses
+    )

@@ -52,7 +52,9 @@ class HandEyeCalibration:
         return "\n".join(lines)
 
 
-def _residuals(X: np.ndarray, T_base_flanges: list[np.ndarray], T_camera_boards: list[np.ndarray]) -> tuple[float, float]:
+def _residuals(
+    X: np.ndarray, T_base_flanges: list[np.ndarray], T_camera_boards: list[np.ndarray]
+) -> tuple[float, float]:
     boards = np.array([Tb @ X @ Tc for Tb, Tc in zip(T_base_flanges, T_camera_boards)])
     t = boards[:, :3, 3]
     t_rms = float(np.sqrt(np.mean(np.sum((t - t.mean(axis=0)) ** 2, axis=1))))
@@ -76,21 +78,31 @@ def calibrate_hand_eye(
     flanges = [as_transform(T, f"T_base_flanges[{i}]") for i, T in enumerate(T_base_flanges)]
     boards = [as_transform(T, f"T_camera_boards[{i}]") for i, T in enumerate(T_camera_boards)]
     if len(flanges) != len(boards):
-        raise CalibrationError(f"T_camera_boards: {len(boards)} board poses for {len(flanges)} robot poses; give one per station")
+        raise CalibrationError(
+            f"T_camera_boards: {len(boards)} board poses for {len(flanges)} robot poses; give one per station"
+        )
     if len(flanges) < 3:
-        raise CalibrationError(f"T_base_flanges: {len(flanges)} stations; hand-eye calibration needs at least 3 (10 or more recommended)")
+        raise CalibrationError(
+            f"T_base_flanges: {len(flanges)} stations; hand-eye calibration needs at least 3 (10 or more recommended)"
+        )
     rel = [np.linalg.inv(flanges[0]) @ f for f in flanges[1:]]
     axes = [cv2.Rodrigues(r[:3, :3])[0].ravel() for r in rel]
     big = [a / np.linalg.norm(a) for a in axes if np.linalg.norm(a) > np.radians(2)]
     if len(big) < 2 or np.linalg.svd(np.array(big))[1][1] < 0.1:
-        raise CalibrationError("T_base_flanges: the flange rotations between stations share one axis (or are tiny); tilt the hand about at least two different axes")
+        raise CalibrationError(
+            "T_base_flanges: the flange rotations between stations share one "
+            "axis (or are tiny); tilt the hand about at least two different axes"
+        )
     names = list(HAND_EYE_METHODS) if method == "best" else [method]
     transforms, residuals = {}, {}
     for name in names:
         try:
             R, t = cv2.calibrateHandEye(
-                [f[:3, :3] for f in flanges], [f[:3, 3] for f in flanges],
-                [b[:3, :3] for b in boards], [b[:3, 3] for b in boards], method=HAND_EYE_METHODS[name],
+                [f[:3, :3] for f in flanges],
+                [f[:3, 3] for f in flanges],
+                [b[:3, :3] for b in boards],
+                [b[:3, 3] for b in boards],
+                method=HAND_EYE_METHODS[name],
             )
         except cv2.error:
             continue
@@ -101,6 +113,8 @@ def calibrate_hand_eye(
         transforms[name] = X
         residuals[name] = _residuals(X, flanges, boards)
     if not transforms:
-        raise CalibrationError("T_base_flanges: no hand-eye method found a solution; check that robot and board poses belong together")
+        raise CalibrationError(
+            "T_base_flanges: no hand-eye method found a solution; check that robot and board poses belong together"
+        )
     best = min(residuals, key=lambda m: residuals[m][0] + np.radians(residuals[m][1]) * _LEVER_ARM)
     return HandEyeCalibration(T_flange_camera=transforms[best], method=best, residuals=residuals, transforms=transforms)

@@ -9,17 +9,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_points, as_transform, positive
+from .._validate import as_angles, as_points, as_transform, positive
+from ..camera import CameraIntrinsics
 from ..errors import CalibrationError, SingularGeometryError
-from ._checks import as_angles
-from ._file import CameraIntrinsics
 
 __all__ = ["LaserCalibration", "fit_plane", "laser_points_on_board"]
 
 
 def laser_points_on_board(pixels: np.ndarray, camera: CameraIntrinsics, T_camera_board: np.ndarray) -> np.ndarray:
     """The 3-D points (camera frame, mm) where the rays through ``pixels`` meet the board plane."""
-    from ..vision import pixel_rays  # vision depends on calibration's file types, not the reverse
+    from ..vision._triangulate import pixel_rays  # vision depends on calibration's file types, not the reverse
 
     T = as_transform(T_camera_board, "T_camera_board")
     rays = pixel_rays(pixels, camera)
@@ -33,7 +32,9 @@ def laser_points_on_board(pixels: np.ndarray, camera: CameraIntrinsics, T_camera
     return rays * s[:, None]
 
 
-def fit_plane(points: np.ndarray, *, inlier_distance: float = 0.5, iterations: int = 200, seed: int = 0) -> tuple[np.ndarray, float, np.ndarray]:
+def fit_plane(
+    points: np.ndarray, *, inlier_distance: float = 0.5, iterations: int = 200, seed: int = 0
+) -> tuple[np.ndarray, float, np.ndarray]:
     """A robust plane through ``points`` (N, 3): RANSAC on triples, then a least-squares refit on
     the inliers (within ``inlier_distance`` mm). Returns (unit normal, offset, inlier mask),
     the plane being ``normal · x = offset``."""
@@ -52,7 +53,9 @@ def fit_plane(points: np.ndarray, *, inlier_distance: float = 0.5, iterations: i
         if best is None or inl.sum() > best.sum():
             best = inl
     if best is None or best.sum() < 3:
-        raise SingularGeometryError("points: collinear or too few to define a plane; observe the line on the board at more than one pose")
+        raise SingularGeometryError(
+            "points: collinear or too few to define a plane; observe the line on the board at more than one pose"
+        )
     for _ in range(3):
         centre = pts[best].mean(axis=0)
         _, sv, vt = np.linalg.svd(pts[best] - centre, full_matrices=False)
@@ -83,7 +86,9 @@ class LaserCalibration:
         return f"LaserCalibration({len(self.angles)} angles, rms={self.rms:.4f} mm)"
 
     @classmethod
-    def fit(cls, angles: Sequence[float], points: Sequence[np.ndarray], *, inlier_distance: float = 0.5) -> "LaserCalibration":
+    def fit(
+        cls, angles: Sequence[float], points: Sequence[np.ndarray], *, inlier_distance: float = 0.5
+    ) -> LaserCalibration:
         """Fits the projector from the sheet's points at each motor angle.
 
         ``points[k]`` (N_k, 3) are lit points in the camera frame (from :func:`laser_points_on_board`
@@ -125,6 +130,9 @@ class LaserCalibration:
             all_res.append(res)
         res = np.concatenate(all_res)
         return cls(
-            T_camera_laser=T, angles=theta, planes=np.column_stack([normals, offsets]),
-            rms=float(np.sqrt(np.mean(res**2))), per_angle_rms=np.array(per_angle),
+            T_camera_laser=T,
+            angles=theta,
+            planes=np.column_stack([normals, offsets]),
+            rms=float(np.sqrt(np.mean(res**2))),
+            per_angle_rms=np.array(per_angle),
         )

@@ -8,9 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_float_array, as_transform, check_finite
+from .._validate import as_angles, as_float_array, as_transform, check_finite
 from ..errors import CalibrationError, ShapeError, SingularGeometryError
-from ._checks import as_angles
 
 __all__ = ["ProjectorCalibration", "axis_depth", "calibrate_projector"]
 
@@ -23,10 +22,14 @@ def axis_depth(T_camera_board: np.ndarray) -> float:
     T = as_transform(T_camera_board, "T_camera_board")
     n, p = T[:3, 2], T[:3, 3]
     if abs(n[2]) < 1e-6:
-        raise SingularGeometryError("T_camera_board: the board is edge-on to the camera; the optical axis never meets it")
+        raise SingularGeometryError(
+            "T_camera_board: the board is edge-on to the camera; the optical axis never meets it"
+        )
     depth = float(n @ p / n[2])
     if depth <= 0:
-        raise SingularGeometryError(f"T_camera_board: the board plane meets the optical axis behind the camera ({depth:.1f} mm)")
+        raise SingularGeometryError(
+            f"T_camera_board: the board plane meets the optical axis behind the camera ({depth:.1f} mm)"
+        )
     return depth
 
 
@@ -63,13 +66,23 @@ def calibrate_projector(distances, angles) -> ProjectorCalibration:
     check_finite(d, "distances")
     theta = as_angles(angles, "angles", size=len(d))
     if len(d) < 3:
-        raise CalibrationError(f"distances: {len(d)} observations; at least 3 are needed to solve p_x, p_z and see a residual")
+        raise CalibrationError(
+            f"distances: {len(d)} observations; at least 3 are needed to solve p_x, p_z and see a residual"
+        )
     if (np.abs(np.sin(theta)) < _MIN_SINE).any():
         i = int(np.argmax(np.abs(np.sin(theta)) < _MIN_SINE))
-        raise SingularGeometryError(f"angles: element {i} is {theta[i]:g} rad; at angle 0 the sheet is parallel to the optical axis and cannot cross it")
+        raise SingularGeometryError(
+            f"angles: element {i} is {theta[i]:g} rad; at angle 0 the "
+            "sheet is parallel to the optical axis and cannot cross it"
+        )
     A = np.stack([-1.0 / np.tan(theta), np.ones_like(theta)], axis=1)
     if np.ptp(d) < 1e-6 or np.linalg.cond(A) > 1e8:
-        raise SingularGeometryError("distances: all observations at one distance do not separate p_x from p_z; move the camera along its z axis between steps")
+        raise SingularGeometryError(
+            "distances: all observations at one distance do not separate "
+            "p_x from p_z; move the camera along its z axis between steps"
+        )
     (p_x, p_z), *_ = np.linalg.lstsq(A, d, rcond=None)
     residuals = d - A @ np.array([p_x, p_z])
-    return ProjectorCalibration(p_x=float(p_x), p_z=float(p_z), residuals=residuals, rms=float(np.sqrt(np.mean(residuals**2))))
+    return ProjectorCalibration(
+        p_x=float(p_x), p_z=float(p_z), residuals=residuals, rms=float(np.sqrt(np.mean(residuals**2)))
+    )

@@ -1,6 +1,6 @@
 """Talking to the cell: serial drivers for the robot, the laser motor and the gripper.
 
-* :class:`MelfaRobot` — Mitsubishi MELFA controller over the R3 protocol (RS-232C).
+* :class:`MelfaRobot` — Mitsubishi MELFA controller over the R3 protocol (RS-232C), behind :class:`Robot`.
 * :class:`DynamixelMotor` (default laser motor, Protocol 2.0) and :class:`AiMotor` behind the
   common :class:`LaserMotor` interface.
 * :class:`ModbusGripper` (Robotiq 2F register map, Modbus RTU) and :class:`MelfaHandGripper`
@@ -21,6 +21,7 @@ from .dynamixel import DynamixelBus, DynamixelConfig, DynamixelMotor
 from .gripper import Gripper, GripperConfig, GripperStatus, MelfaHandGripper, ModbusGripper
 from .melfa import MelfaConfig, MelfaRobot, R3Reply, RobotState
 from .motor import LaserMotor, MotorRange
+from .robot import Robot
 from .safety import CellLimits
 from .xyzabc import transform_from_xyzabc, xyzabc_from_transform
 
@@ -31,6 +32,7 @@ __all__ = [
     "MelfaRobot",
     "R3Reply",
     "RobotState",
+    "Robot",
     "LaserMotor",
     "MotorRange",
     "DynamixelBus",

@@ -1,4 +1,4 @@
-"""The serial transport every driver shares, and the small input checks of this package.
+"""The serial transport every driver shares (its input checks are in :mod:`binpick._validate`).
 
 A :class:`SerialLink` owns one pyserial port and reads against absolute deadlines, so no read
 can wait longer than the configured reply timeout. pyserial and OS errors become
@@ -8,13 +8,12 @@ a reply that stops part-way becomes :class:`~binpick.errors.TruncatedReplyError`
 
 from __future__ import annotations
 
-import math
 import time
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Any, Callable, Iterator, Optional, TypeVar, Union
+from typing import Callable, Optional, TypeVar, Union
 
-import numpy as np
 import serial
 
 try:
@@ -24,6 +23,7 @@ try:
 except ImportError:  # pragma: no cover - not POSIX
     _PORT_ERRORS = (serial.SerialException, OSError)
 
+from .._validate import check_int, check_number
 from ..errors import (
     BinpickError,
     DeviceError,
@@ -31,7 +31,6 @@ from ..errors import (
     InvalidInputError,
     PortClosedError,
     ProtocolError,
-    ShapeError,
     TruncatedReplyError,
 )
 
@@ -42,63 +41,14 @@ E = TypeVar("E", bound=BaseException)
 
 _SLICE_S = 0.01  # the port's read timeout: reads return at least this often to check their deadline
 
-_PARITIES = {"N": serial.PARITY_NONE, "E": serial.PARITY_EVEN, "O": serial.PARITY_ODD,
-             "M": serial.PARITY_MARK, "S": serial.PARITY_SPACE}
+_PARITIES = {
+    "N": serial.PARITY_NONE,
+    "E": serial.PARITY_EVEN,
+    "O": serial.PARITY_ODD,
+    "M": serial.PARITY_MARK,
+    "S": serial.PARITY_SPACE,
+}
 
-
-# --------------------------------------------------------------------------- input checks
-
-def check_number(value: Any, name: str, *, low: Optional[float] = None, high: Optional[float] = None,
-                 unit: str = "") -> float:
-    """``value`` as a finite float within [low, high], or InvalidInputError naming ``name``."""
-    if isinstance(value, bool):
-        raise InvalidInputError(f"{name}: must be a number{_unit(unit)}, got the boolean {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: must be a number{_unit(unit)}, got {value!r}") from None
-    if not math.isfinite(v):
-        raise InvalidInputError(f"{name}: must be finite, got {v}")
-    if (low is not None and v < low) or (high is not None and v > high):
-        raise InvalidInputError(f"{name}: {v:g}{unit and ' ' + unit} is outside [{low}, {high}]{_unit(unit)}; "
-                                "pass a value inside that range")
-    return v
-
-
-def check_int(value: Any, name: str, low: int, high: int) -> int:
-    """``value`` as an int within [low, high], or InvalidInputError naming ``name``."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise InvalidInputError(f"{name}: must be an integer in [{low}, {high}], got {value!r}")
-    v = int(value)
-    if not low <= v <= high:
-        raise InvalidInputError(f"{name}: {v} is outside [{low}, {high}]; pass an integer inside that range")
-    return v
-
-
-def check_transform(value: Any, name: str) -> np.ndarray:
-    """A finite 4×4 float64 rigid transform, or a specific InvalidInputError saying what is wrong."""
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: cannot be read as a 4×4 numeric array; pass a numpy (4, 4) float array") from None
-    if arr.shape != (4, 4):
-        raise ShapeError(f"{name}: expected a (4, 4) homogeneous transform, got shape {arr.shape}")
-    if not np.isfinite(arr).all():
-        raise InvalidInputError(f"{name}: holds NaN or infinity; pass a finite transform")
-    if not np.allclose(arr[3], (0.0, 0.0, 0.0, 1.0), atol=1e-9):
-        raise InvalidInputError(f"{name}: the last row must be [0, 0, 0, 1], got {arr[3].tolist()}")
-    rot = arr[:3, :3]
-    if np.abs(rot.T @ rot - np.eye(3)).max() > 1e-6 or np.linalg.det(rot) < 0:
-        raise InvalidInputError(f"{name}: the 3×3 block is not a rotation; pass a rigid transform without scale "
-                                "or reflection")
-    return arr
-
-
-def _unit(unit: str) -> str:
-    return f" ({unit})" if unit else ""
-
-
-# --------------------------------------------------------------------------- settings
 
 @dataclass(frozen=True)
 class SerialSettings:
@@ -137,6 +87,7 @@ class SerialSettings:
 
 # --------------------------------------------------------------------------- link
 
+
 class SerialLink:
     """One open serial port read against deadlines.
 
@@ -156,16 +107,23 @@ class SerialLink:
             try:
                 port.timeout = _SLICE_S
             except (*_PORT_ERRORS, ValueError) as exc:
-                raise PortClosedError(f"{device}: cannot set the read timeout of {self.port_name} ({exc}); "
-                                      "pass a port path instead and let the driver open it") from None
+                raise PortClosedError(
+                    f"{device}: cannot set the read timeout of {self.port_name} ({exc}); "
+                    "pass a port path instead and let the driver open it"
+                ) from None
             return
         if not isinstance(port, str) or not port:
             raise InvalidInputError(f"{device}: port must be a device path such as '/dev/ttyUSB0', got {port!r}")
         self.port_name = port
         try:
             self._ser = serial.Serial(
-                port, baudrate=settings.baudrate, bytesize=settings.bytesize, parity=_PARITIES[settings.parity],
-                stopbits=settings.stopbits, timeout=_SLICE_S, write_timeout=settings.write_timeout_s,
+                port,
+                baudrate=settings.baudrate,
+                bytesize=settings.bytesize,
+                parity=_PARITIES[settings.parity],
+                stopbits=settings.stopbits,
+                timeout=_SLICE_S,
+                write_timeout=settings.write_timeout_s,
             )
         except (serial.SerialException, OSError, ValueError) as exc:
             raise PortClosedError(
@@ -217,8 +175,10 @@ class SerialLink:
                 self._ser.write(data)
                 self._ser.flush()
             except serial.SerialTimeoutException:
-                raise DeviceTimeout(f"{self.device}: writing to {self.port_name} did not finish in "
-                                    f"{self.settings.write_timeout_s} s; check the line and flow control") from None
+                raise DeviceTimeout(
+                    f"{self.device}: writing to {self.port_name} did not finish in "
+                    f"{self.settings.write_timeout_s} s; check the line and flow control"
+                ) from None
 
     def read_some(self, n: int, deadline: float) -> bytes:
         """Up to ``n`` bytes: whatever arrives first, or b'' once the deadline has passed.
@@ -248,8 +208,10 @@ class SerialLink:
         buf = bytearray()
         while not buf.endswith(terminator):
             if len(buf) >= max_bytes:
-                raise ProtocolError(f"{self.device}: {what} ran past {max_bytes} bytes without its terminator "
-                                    f"{terminator!r}: {bytes(buf[:40])!r}…")
+                raise ProtocolError(
+                    f"{self.device}: {what} ran past {max_bytes} bytes without its terminator "
+                    f"{terminator!r}: {bytes(buf[:40])!r}…"
+                )
             chunk = self.read_some(1, deadline)
             if not chunk:
                 self.silence(what, bytes(buf))
@@ -257,13 +219,18 @@ class SerialLink:
         return bytes(buf)
 
     def silence(self, what: str, got: bytes) -> None:
-        """Raises for a reply that did not (fully) come: DeviceTimeout when ``got`` is empty, else TruncatedReplyError."""
+        """Raises for a reply that did not (fully) come: DeviceTimeout when ``got`` is empty, else
+        TruncatedReplyError."""
         t = self.settings.timeout_s
         if got:
-            raise TruncatedReplyError(f"{self.device}: {what} stopped after {len(got)} bytes ({got[:40]!r}) and "
-                                      f"the rest did not come within {t} s; check the cable and line settings")
-        raise DeviceTimeout(f"{self.device}: no {what} on {self.port_name} within {t} s; check power, cable, "
-                            "baud rate and the device's address")
+            raise TruncatedReplyError(
+                f"{self.device}: {what} stopped after {len(got)} bytes ({got[:40]!r}) and "
+                f"the rest did not come within {t} s; check the cable and line settings"
+            )
+        raise DeviceTimeout(
+            f"{self.device}: no {what} on {self.port_name} within {t} s; check power, cable, "
+            "baud rate and the device's address"
+        )
 
 
 def with_retries(attempts: int, action: Callable[[], T]) -> T:

@@ -23,12 +23,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Tuple, Union
+from typing import Union
 
 import serial
 
+from .._validate import check_int, check_number
 from ..errors import InvalidInputError, ProtocolError
-from ._link import SerialLink, SerialSettings, check_int, check_number, with_retries
+from ._link import SerialLink, SerialSettings, with_retries
 from .motor import LaserMotor, MotorRange
 
 __all__ = ["MODE_STATUS", "MODE_PASSIVE", "encode_request", "decode_reply", "AiMotorConfig", "AiMotor"]
@@ -53,7 +54,7 @@ def encode_position(motor_id: int, position: int, *, torque_level: int = 2) -> b
     return encode_request((torque_level << 5) | motor_id, check_int(position, "position", 0, MAX_POSITION))
 
 
-def decode_reply(raw: bytes) -> Tuple[int, int]:
+def decode_reply(raw: bytes) -> tuple[int, int]:
     """(load, position) from a 2-byte reply; ProtocolError for anything else."""
     raw = bytes(raw)
     if len(raw) != 2:
@@ -109,8 +110,8 @@ class AiMotor(LaserMotor):
         self.range = config.range
         self._link = SerialLink(port, config.serial, device="ai-motor")
 
-    def _exchange(self, request: bytes, *, retry: bool) -> Tuple[int, int]:
-        def once() -> Tuple[int, int]:
+    def _exchange(self, request: bytes, *, retry: bool) -> tuple[int, int]:
+        def once() -> tuple[int, int]:
             self._link.discard_input()
             self._link.write(request)
             return decode_reply(self._link.read_exact(2, self._link.deadline(), what="reply"))
@@ -141,6 +142,8 @@ class AiMotor(LaserMotor):
     def _send_goal(self, angle_rad: float) -> None:
         unit = self._unit(angle_rad)
         if not 0 <= unit <= MAX_POSITION:
-            raise InvalidInputError(f"angle_rad: {math.degrees(angle_rad):.1f}° maps to position {unit}, outside 0–254; "
-                                    "narrow MotorRange or fix AiMotorConfig.centre_unit")
+            raise InvalidInputError(
+                f"angle_rad: {math.degrees(angle_rad):.1f}° maps to position {unit}, outside 0–254; "
+                "narrow MotorRange or fix AiMotorConfig.centre_unit"
+            )
         self._exchange(encode_position(self.config.motor_id, unit, torque_level=self.config.torque_level), retry=False)

@@ -11,7 +11,7 @@ import signal
 import sys
 import threading
 import time
-from typing import List, Optional
+from typing import Optional
 
 from ..errors import BinpickError
 from .emulators import PtyEmulator
@@ -23,16 +23,28 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="binpick emulate",
         description="Serve one emulated cell device on a pseudo-terminal until Ctrl-C. The first line printed "
-                    "is the pty path to open as the device's serial port.",
+        "is the pty path to open as the device's serial port.",
     )
-    p.add_argument("device", choices=("robot", "motor", "gripper"),
-                   help="robot: MELFA controller (R3 protocol); motor: laser motor; gripper: Modbus RTU gripper")
-    p.add_argument("--protocol", choices=("dynamixel", "aimotor"), default="dynamixel",
-                   help="motor protocol (default: dynamixel, Protocol 2.0)")
-    p.add_argument("--id", type=int, default=None,
-                   help="motor ID (default 1 for dynamixel, 0 for aimotor) or gripper slave address (default 9)")
-    p.add_argument("--speed-scale", type=float, default=1.0,
-                   help="robot: multiply every speed by this factor (default 1)")
+    p.add_argument(
+        "device",
+        choices=("robot", "motor", "gripper"),
+        help="robot: MELFA controller (R3 protocol); motor: laser motor; gripper: Modbus RTU gripper",
+    )
+    p.add_argument(
+        "--protocol",
+        choices=("dynamixel", "aimotor"),
+        default="dynamixel",
+        help="motor protocol (default: dynamixel, Protocol 2.0)",
+    )
+    p.add_argument(
+        "--id",
+        type=int,
+        default=None,
+        help="motor ID (default 1 for dynamixel, 0 for aimotor) or gripper slave address (default 9)",
+    )
+    p.add_argument(
+        "--speed-scale", type=float, default=1.0, help="robot: multiply every speed by this factor (default 1)"
+    )
     return p
 
 
@@ -54,7 +66,7 @@ def _build(args: argparse.Namespace) -> PtyEmulator:
     return DynamixelEmulator(config=DynamixelEmulatorConfig(motor_id=1 if args.id is None else args.id))
 
 
-def emulate_main(argv: Optional[List[str]] = None) -> int:
+def emulate_main(argv: Optional[list[str]] = None) -> int:
     """Runs ``binpick emulate`` with ``argv`` (without the program name); returns the exit code.
 
     0 after Ctrl-C (or when the emulated port closes), 2 for bad arguments or settings.
@@ -75,8 +87,11 @@ def emulate_main(argv: Optional[List[str]] = None) -> int:
         signal.signal(signal.SIGTERM, signal.default_int_handler)
     with emulator:
         print(emulator.slave_path, flush=True)
-        print(f"binpick emulate: {args.device} emulator serving on {emulator.slave_path}; press Ctrl-C to stop",
-              file=sys.stderr, flush=True)
+        print(
+            f"binpick emulate: {args.device} emulator serving on {emulator.slave_path}; press Ctrl-C to stop",
+            file=sys.stderr,
+            flush=True,
+        )
         try:
             while not emulator.port_closed:
                 time.sleep(0.1)

@@ -27,10 +27,11 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass
-from typing import Tuple, Union
+from typing import Union
 
 import serial
 
+from .._validate import check_int
 from ..errors import (
     ChecksumError,
     DeviceError,
@@ -41,7 +42,7 @@ from ..errors import (
     TruncatedReplyError,
     UnknownReplyError,
 )
-from ._link import SerialLink, SerialSettings, check_int, raise_after_stop, with_retries
+from ._link import SerialLink, SerialSettings, raise_after_stop, with_retries
 from .motor import LaserMotor, MotorRange
 
 __all__ = [
@@ -83,11 +84,18 @@ ADDR_PRESENT_POSITION = 132
 MAX_LENGTH = 1024  # longest LEN this driver accepts in a reply
 _MAX_GARBAGE = 512  # bytes skipped while looking for a header before giving up
 
-ERROR_NAMES = {1: "result fail", 2: "instruction error", 3: "CRC error", 4: "data range error",
-               5: "data length error", 6: "data limit error", 7: "access error"}
+ERROR_NAMES = {
+    1: "result fail",
+    2: "instruction error",
+    3: "CRC error",
+    4: "data range error",
+    5: "data length error",
+    6: "data limit error",
+    7: "access error",
+}
 
 
-def _crc_table() -> Tuple[int, ...]:
+def _crc_table() -> tuple[int, ...]:
     table = []
     for i in range(256):
         crc = i << 8
@@ -235,8 +243,10 @@ def decode_packet(raw: bytes) -> Packet:
     got = struct.unpack_from("<H", raw, len(raw) - 2)[0]
     want = crc16(raw[:-2])
     if got != want:
-        raise ChecksumError(f"dynamixel: CRC {got:04X} does not match the packet's {want:04X}; "
-                            "check for noise or a second master on the bus")
+        raise ChecksumError(
+            f"dynamixel: CRC {got:04X} does not match the packet's {want:04X}; "
+            "check for noise or a second master on the bus"
+        )
     body = unstuff(raw[7:-2])
     return Packet(raw[4], body[0], body[1:])
 
@@ -245,14 +255,17 @@ def decode_status(raw: bytes) -> StatusPacket:
     """Decodes one status packet; UnknownReplyError when the packet is not a status (0x55)."""
     packet = decode_packet(raw)
     if packet.instruction != INST_STATUS:
-        raise UnknownReplyError(f"dynamixel: expected a status packet (0x55), got instruction "
-                                f"0x{packet.instruction:02X} from ID {packet.motor_id}")
+        raise UnknownReplyError(
+            f"dynamixel: expected a status packet (0x55), got instruction "
+            f"0x{packet.instruction:02X} from ID {packet.motor_id}"
+        )
     if not packet.params:
         raise ProtocolError(f"dynamixel: status packet from ID {packet.motor_id} lacks its error byte")
     return StatusPacket(packet.motor_id, packet.params[0], packet.params[1:])
 
 
 # --------------------------------------------------------------------------- bus
+
 
 class DynamixelBus:
     """Instruction → status transactions on one Protocol 2.0 bus.
@@ -262,8 +275,12 @@ class DynamixelBus:
         settings: line settings; Dynamixel X motors default to 57600 baud, 8N1.
     """
 
-    def __init__(self, port: Union[str, serial.SerialBase], *,
-                 settings: SerialSettings = SerialSettings(baudrate=57600, timeout_s=0.1)) -> None:
+    def __init__(
+        self,
+        port: Union[str, serial.SerialBase],
+        *,
+        settings: SerialSettings = SerialSettings(baudrate=57600, timeout_s=0.1),
+    ) -> None:
         self.link = SerialLink(port, settings, device="dynamixel")
 
     def close(self) -> None:
@@ -274,13 +291,17 @@ class DynamixelBus:
         window = bytearray()
         while not window.endswith(HEADER):
             if len(window) > _MAX_GARBAGE:
-                raise ProtocolError(f"dynamixel: {len(window)} bytes without a packet header; check baud rate and "
-                                    "that only one master drives the bus")
+                raise ProtocolError(
+                    f"dynamixel: {len(window)} bytes without a packet header; check baud rate and "
+                    "that only one master drives the bus"
+                )
             b = self.link.read_some(1, deadline)
             if not b:
                 if window and not any(HEADER.startswith(window[-k:]) for k in range(1, 4)):
-                    raise ProtocolError(f"dynamixel: garbled reply, {len(window)} bytes without a packet header: "
-                                        f"{bytes(window[:32]).hex(' ')}")
+                    raise ProtocolError(
+                        f"dynamixel: garbled reply, {len(window)} bytes without a packet header: "
+                        f"{bytes(window[:32]).hex(' ')}"
+                    )
                 self.link.silence("status packet", bytes(window))
             window += b
         head = self.link.read_exact(3, deadline, what="status packet", got=HEADER)
@@ -307,11 +328,12 @@ class DynamixelBus:
 
         status = with_retries(self.link.settings.retries if retry else 0, once)
         if status.error:
-            raise DeviceFault(f"dynamixel: motor {motor_id} refused instruction 0x{instruction:02X}: "
-                              f"{status.describe_error()}")
+            raise DeviceFault(
+                f"dynamixel: motor {motor_id} refused instruction 0x{instruction:02X}: {status.describe_error()}"
+            )
         return status
 
-    def ping(self, motor_id: int) -> Tuple[int, int]:
+    def ping(self, motor_id: int) -> tuple[int, int]:
         """(model number, firmware version) of ``motor_id``."""
         st = self.transact(motor_id, INST_PING, retry=True)
         if len(st.params) != 3:
@@ -338,10 +360,13 @@ class DynamixelBus:
             except DeviceError as again:
                 raise_after_stop(exc, f"reading address {address} back failed too ({again})")
             if held != bytes(data):
-                raise_after_stop(exc, f"address {address} holds {held.hex(' ')}, not the written {bytes(data).hex(' ')}")
+                raise_after_stop(
+                    exc, f"address {address} holds {held.hex(' ')}, not the written {bytes(data).hex(' ')}"
+                )
 
 
 # --------------------------------------------------------------------------- motor
+
 
 @dataclass(frozen=True)
 class DynamixelConfig:
@@ -428,4 +453,3 @@ class DynamixelMotor(LaserMotor):
 
     def _send_goal(self, angle_rad: float) -> None:
         self.bus.write(self.config.motor_id, ADDR_GOAL_POSITION, struct.pack("<i", self._ticks(angle_rad)))
-

@@ -26,11 +26,13 @@ from __future__ import annotations
 import abc
 import struct
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Optional, Sequence, Tuple, Union
+from typing import Any, Optional, Union
 
 import serial
 
+from .._validate import check_int, check_number
 from ..errors import (
     ChecksumError,
     DeviceError,
@@ -42,7 +44,7 @@ from ..errors import (
     TruncatedReplyError,
     UnknownReplyError,
 )
-from ._link import SerialLink, SerialSettings, check_int, check_number, raise_after_stop, with_retries
+from ._link import SerialLink, SerialSettings, raise_after_stop, with_retries
 
 __all__ = [
     "Gripper",
@@ -62,15 +64,41 @@ FC_READ_HOLDING, FC_READ_INPUT, FC_WRITE_MULTIPLE = 0x03, 0x04, 0x10
 COMMAND_REGISTER = 0x03E8
 STATUS_REGISTER = 0x07D0
 ACT, GTO = 0x01, 0x08
-EXCEPTION_NAMES = {1: "illegal function", 2: "illegal data address", 3: "illegal data value",
-                   4: "slave device failure", 5: "acknowledge", 6: "slave device busy"}
-FAULT_NAMES = {0x05: "action delayed: activation must complete first", 0x07: "activation bit not set",
-               0x08: "temperature too high", 0x0A: "supply voltage too low", 0x0B: "automatic release in progress",
-               0x0C: "internal fault", 0x0D: "activation fault", 0x0E: "overcurrent", 0x0F: "automatic release done"}
+EXCEPTION_NAMES = {
+    1: "illegal function",
+    2: "illegal data address",
+    3: "illegal data value",
+    4: "slave device failure",
+    5: "acknowledge",
+    6: "slave device busy",
+}
+FAULT_NAMES = {
+    0x05: "action delayed: activation must complete first",
+    0x07: "activation bit not set",
+    0x08: "temperature too high",
+    0x0A: "supply voltage too low",
+    0x0B: "automatic release in progress",
+    0x0C: "internal fault",
+    0x0D: "activation fault",
+    0x0E: "overcurrent",
+    0x0F: "automatic release done",
+}
 
 
 class Gripper(abc.ABC):
-    """What the pick sequence needs of a gripper."""
+    """What the pick sequence needs of a gripper: :meth:`open` and :meth:`close`, and
+    :meth:`activate`, :meth:`open_for_grasp` and :meth:`close_port` where the device has them
+    (their defaults do nothing, or open fully)."""
+
+    def activate(self) -> Any:
+        """Makes the gripper ready to move (a reset and activation where the device needs one); nothing by default."""
+
+    def open_for_grasp(self, width_mm: float) -> None:
+        """Opens the fingers at least ``width_mm`` apart for a grasp; fully by default."""
+        self.open()
+
+    def close_port(self) -> None:
+        """Releases the gripper's own connection, if it has one; nothing by default."""
 
     @abc.abstractmethod
     def open(self, *, wait: bool = True) -> None:
@@ -111,7 +139,8 @@ class MelfaHandGripper(Gripper):
 
 # --------------------------------------------------------------------------- Modbus RTU codec
 
-def _crc_table() -> Tuple[int, ...]:
+
+def _crc_table() -> tuple[int, ...]:
     table = []
     for i in range(256):
         crc = i
@@ -143,8 +172,10 @@ def encode_write_registers(slave: int, address: int, values: Sequence[int]) -> b
     if not 1 <= len(values) <= 123:
         raise InvalidInputError(f"values: 1–123 registers per write, got {len(values)}")
     regs = [check_int(v, "register value", 0, 0xFFFF) for v in values]
-    return _frame(struct.pack(">BBHHB", slave, FC_WRITE_MULTIPLE, address, len(regs), 2 * len(regs))
-                  + struct.pack(f">{len(regs)}H", *regs))
+    return _frame(
+        struct.pack(">BBHHB", slave, FC_WRITE_MULTIPLE, address, len(regs), 2 * len(regs))
+        + struct.pack(f">{len(regs)}H", *regs)
+    )
 
 
 def encode_read_input_registers(slave: int, address: int, count: int) -> bytes:
@@ -185,14 +216,16 @@ def decode_response(raw: bytes, *, slave: int, function: int) -> bytes:
         raise UnknownReplyError(f"gripper: asked slave {slave}, slave {raw[0]} answered")
     if raw[1] == function | 0x80:
         code = raw[2]
-        raise DeviceFault(f"gripper: refused function 0x{function:02X}: exception {code} "
-                          f"({EXCEPTION_NAMES.get(code, 'unknown')})")
+        raise DeviceFault(
+            f"gripper: refused function 0x{function:02X}: exception {code} ({EXCEPTION_NAMES.get(code, 'unknown')})"
+        )
     if raw[1] != function:
         raise UnknownReplyError(f"gripper: asked function 0x{function:02X}, the reply is function 0x{raw[1]:02X}")
     return raw[3:-2] if function in (FC_READ_HOLDING, FC_READ_INPUT) else raw[2:-2]
 
 
 # --------------------------------------------------------------------------- driver
+
 
 @dataclass(frozen=True)
 class GripperStatus:
@@ -218,7 +251,7 @@ class GripperStatus:
     current: int
 
     @classmethod
-    def from_bytes(cls, data: bytes) -> "GripperStatus":
+    def from_bytes(cls, data: bytes) -> GripperStatus:
         """Parses the 6 status bytes; ProtocolError for another length."""
         if len(data) != 6:
             raise ProtocolError(f"gripper: status has 6 bytes, got {len(data)}")
@@ -293,7 +326,7 @@ class ModbusGripper(Gripper):
         """Closes the serial port."""
         self._link.close()
 
-    def __enter__(self) -> "ModbusGripper":
+    def __enter__(self) -> ModbusGripper:
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -316,8 +349,9 @@ class ModbusGripper(Gripper):
         return GripperStatus.from_bytes(self._exchange(request, FC_READ_INPUT, retry=True))
 
     def _command(self, action: int, position: int, speed: int, force: int) -> None:
-        request = encode_write_registers(self.config.slave, COMMAND_REGISTER,
-                                         [action << 8, position, (speed << 8) | force])
+        request = encode_write_registers(
+            self.config.slave, COMMAND_REGISTER, [action << 8, position, (speed << 8) | force]
+        )
         try:
             self._exchange(request, FC_WRITE_MULTIPLE, retry=False)
         except (DeviceTimeout, ProtocolError) as exc:
@@ -335,16 +369,19 @@ class ModbusGripper(Gripper):
         self._command(ACT, 0, 0, 0)
         return self._wait(lambda st: st.activated, self.config.activation_timeout_s, "activation")
 
-    def move_to_width(self, width_mm: float, *, speed: Optional[int] = None, force: Optional[int] = None,
-                      wait: bool = True) -> GripperStatus:
+    def move_to_width(
+        self, width_mm: float, *, speed: Optional[int] = None, force: Optional[int] = None, wait: bool = True
+    ) -> GripperStatus:
         """Moves the fingers to ``width_mm`` apart; returns the status (after arriving with ``wait``)."""
         cfg = self.config
         w = check_number(width_mm, "width_mm", low=0.0, high=cfg.stroke_mm, unit="mm")
         sp = cfg.speed if speed is None else check_int(speed, "speed", 0, 255)
         fo = cfg.force if force is None else check_int(force, "force", 0, 255)
         if sp > cfg.max_speed or fo > cfg.max_force:
-            raise SafetyError(f"gripper: speed {sp} / force {fo} exceed the limits {cfg.max_speed} / {cfg.max_force}; "
-                              "nothing was sent — lower them or raise GripperConfig.max_speed/max_force")
+            raise SafetyError(
+                f"gripper: speed {sp} / force {fo} exceed the limits {cfg.max_speed} / {cfg.max_force}; "
+                "nothing was sent — lower them or raise GripperConfig.max_speed/max_force"
+            )
         position = int(round((1.0 - w / cfg.stroke_mm) * 255))
         self._command(ACT | GTO, position, sp, fo)
         if not wait:
@@ -354,6 +391,10 @@ class ModbusGripper(Gripper):
     def open(self, *, wait: bool = True) -> None:
         """Opens fully."""
         self.move_to_width(self.config.stroke_mm, wait=wait)
+
+    def open_for_grasp(self, width_mm: float) -> None:
+        """Opens to ``width_mm`` (at most the stroke)."""
+        self.move_to_width(min(float(width_mm), float(self.config.stroke_mm)))
 
     def close(self, *, wait: bool = True) -> Optional[bool]:
         """Closes fully; with ``wait`` returns whether an object stopped the fingers."""
@@ -365,8 +406,9 @@ class ModbusGripper(Gripper):
         while True:
             st = self.status()
             if st.fault:
-                raise DeviceFault(f"gripper: fault 0x{st.fault:02X} ({FAULT_NAMES.get(st.fault, 'unknown')}) during "
-                                  f"{what}")
+                raise DeviceFault(
+                    f"gripper: fault 0x{st.fault:02X} ({FAULT_NAMES.get(st.fault, 'unknown')}) during {what}"
+                )
             if done(st):
                 return st
             if time.monotonic() > deadline:

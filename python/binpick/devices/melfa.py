@@ -43,12 +43,14 @@ from __future__ import annotations
 import math
 import re
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Optional, Union
 
 import numpy as np
 import serial
 
+from .._validate import check_int, check_number
 from ..errors import (
     DeviceError,
     DeviceFault,
@@ -58,7 +60,8 @@ from ..errors import (
     SafetyError,
     UnknownReplyError,
 )
-from ._link import SerialLink, SerialSettings, check_int, check_number, raise_after_stop, restate, with_retries
+from ._link import SerialLink, SerialSettings, raise_after_stop, restate, with_retries
+from .robot import Robot
 from .safety import CellLimits, check_linear_speed, check_move, check_override, check_pose, check_sequence
 from .xyzabc import transform_from_xyzabc, xyzabc_from_transform, xyzabc_from_wire, xyzabc_to_wire
 
@@ -87,6 +90,7 @@ BIT_SERVO = 0x20
 
 
 # --------------------------------------------------------------------------- codec
+
 
 @dataclass(frozen=True)
 class R3Reply:
@@ -148,8 +152,10 @@ def parse_reply(raw: bytes) -> R3Reply:
         raise InvalidInputError(f"raw: expected bytes, got {type(raw).__name__}")
     body = bytes(raw[:-1] if raw.endswith(b"\r") else raw)
     if any(b < 0x20 or b > 0x7E for b in body):
-        raise ProtocolError(f"robot: garbled reply {bytes(raw[:60])!r} (bytes outside printable ASCII); "
-                            "check baud rate, parity (even) and stop bits (2)")
+        raise ProtocolError(
+            f"robot: garbled reply {bytes(raw[:60])!r} (bytes outside printable ASCII); "
+            "check baud rate, parity (even) and stop bits (2)"
+        )
     text = body.decode("ascii")
     if len(text) < 3:
         raise ProtocolError(f"robot: reply {text!r} is too short to hold a status (QoK/QeR…)")
@@ -176,7 +182,7 @@ def _number(text: str, what: str) -> float:
     return v
 
 
-def _named_values(data: str, names: Tuple[str, ...], what: str) -> Tuple[np.ndarray, list]:
+def _named_values(data: str, names: tuple[str, ...], what: str) -> tuple[np.ndarray, list]:
     """Values of ``name;value;`` pairs up to the first empty field, then the remaining fields."""
     fields = data.split(";")
     values = {}
@@ -189,10 +195,10 @@ def _named_values(data: str, names: Tuple[str, ...], what: str) -> Tuple[np.ndar
     missing = [n for n in names if n not in values]
     if missing:
         raise ProtocolError(f"robot: {what} reply {data[:80]!r} lacks {', '.join(missing)}")
-    return np.array([values[n] for n in names]), fields[i + 1:]
+    return np.array([values[n] for n in names]), fields[i + 1 :]
 
 
-def parse_position(data: str) -> Tuple[np.ndarray, Tuple[int, int]]:
+def parse_position(data: str) -> tuple[np.ndarray, tuple[int, int]]:
     """(X, Y, Z, A, B, C) in mm and degrees and the flags (FL1, FL2) from a PPOSF reply's data."""
     xyzabc, rest = _named_values(data, _POSE_NAMES, "PPOSF")
     m = re.fullmatch(r"(\d+),(-?\d+)", rest[0]) if rest else None
@@ -212,22 +218,22 @@ def parse_state(data: str) -> RobotState:
     if not m:
         raise ProtocolError(f"robot: DSTATE reply {data[:40]!r} does not start with two hex status digits")
     bits = int(m.group(1), 16)
-    return RobotState(bool(bits & BIT_CONTROL), bool(bits & BIT_RUNNING), bool(bits & BIT_SERVO),
-                      int(m.group(2) or 0))
+    return RobotState(bool(bits & BIT_CONTROL), bool(bits & BIT_RUNNING), bool(bits & BIT_SERVO), int(m.group(2) or 0))
 
 
-def format_position(number: int, xyzabc_deg: Any, flags: Tuple[int, int]) -> str:
+def format_position(number: int, xyzabc_deg: Any, flags: tuple[int, int]) -> str:
     """``P<n>=(X,Y,Z,A,B,C)(FL1,FL2)`` with two decimals, the body of an EXECP command."""
     check_int(number, "position number", 1, 999)
     v = [check_number(x, "xyzabc_deg", low=-99999.0, high=99999.0) for x in np.asarray(xyzabc_deg, dtype=float)]
     if len(v) != 6:
         raise InvalidInputError(f"xyzabc_deg: expected six numbers, got {len(v)}")
     fl1 = check_int(flags[0], "FL1", 0, 7)
-    fl2 = check_int(flags[1], "FL2", -(2 ** 31), 2 ** 31 - 1)
+    fl2 = check_int(flags[1], "FL2", -(2**31), 2**31 - 1)
     return f"P{number}=(" + ",".join(f"{x:.2f}" for x in v) + f")({fl1},{fl2})"
 
 
 # --------------------------------------------------------------------------- driver
+
 
 @dataclass(frozen=True)
 class MelfaConfig:
@@ -253,7 +259,7 @@ class MelfaConfig:
     slot: int = 1
     client_name: str = "NARCUSR"
     position_variable: int = 1
-    default_flags: Tuple[int, int] = (7, 0)
+    default_flags: tuple[int, int] = (7, 0)
     initial_override_percent: float = 10.0
     initial_linear_speed_mm_s: float = 50.0
     servo_on_timeout_s: float = 5.0
@@ -276,7 +282,7 @@ class MelfaConfig:
         check_number(self.arrival_tolerance_mm, "MelfaConfig.arrival_tolerance_mm", low=0.0, unit="mm")
 
 
-class MelfaRobot:
+class MelfaRobot(Robot):
     """A MELFA arm driven over R3; every motion is checked against ``limits`` before it is sent.
 
     Use as a context manager to open and close the session::
@@ -290,8 +296,13 @@ class MelfaRobot:
         limits: the cell's workspace, approach and speed rules.
     """
 
-    def __init__(self, port: Union[str, serial.SerialBase], *, config: MelfaConfig = MelfaConfig(),
-                 limits: CellLimits = CellLimits()) -> None:
+    def __init__(
+        self,
+        port: Union[str, serial.SerialBase],
+        *,
+        config: MelfaConfig = MelfaConfig(),
+        limits: CellLimits = CellLimits(),
+    ) -> None:
         if not isinstance(config, MelfaConfig):
             raise InvalidInputError(f"config: expected MelfaConfig, got {type(config).__name__}")
         if not isinstance(limits, CellLimits):
@@ -302,7 +313,7 @@ class MelfaRobot:
         self._link = SerialLink(port, config.serial, device="robot")
 
     # -- life cycle
-    def __enter__(self) -> "MelfaRobot":
+    def __enter__(self) -> MelfaRobot:
         try:
             self.open_session()
         except BaseException:
@@ -333,8 +344,10 @@ class MelfaRobot:
         deadline = time.monotonic() + cfg.servo_on_timeout_s
         while not self.state().servo_on:
             if time.monotonic() > deadline:
-                raise DeviceTimeout(f"robot: servo power not on {cfg.servo_on_timeout_s} s after SRVON; check the "
-                                    "emergency stop, the door switch and the controller's display")
+                raise DeviceTimeout(
+                    f"robot: servo power not on {cfg.servo_on_timeout_s} s after SRVON; check the "
+                    "emergency stop, the door switch and the controller's display"
+                )
             time.sleep(cfg.poll_interval_s)
         self.set_override(cfg.initial_override_percent)
         self.set_linear_speed(cfg.initial_linear_speed_mm_s)
@@ -363,8 +376,10 @@ class MelfaRobot:
         if not isinstance(command, str):
             raise InvalidInputError(f"command: expected a string such as 'PPOSF', got {type(command).__name__}")
         if _UNCHECKED_MOTION.match(command.upper()):
-            raise SafetyError(f"command: {command!r} moves the arm or changes its speed without the cell's checks; "
-                              "nothing was sent — use move_to, set_override or set_linear_speed")
+            raise SafetyError(
+                f"command: {command!r} moves the arm or changes its speed without the cell's checks; "
+                "nothing was sent — use move_to, set_override or set_linear_speed"
+            )
         return self._send(command, retry=retry)
 
     def _send(self, command: str, *, retry: bool = False, parse: Optional[Callable[[str], Any]] = None) -> Any:
@@ -376,7 +391,7 @@ class MelfaRobot:
         frame = encode_command(command, robot=self.config.robot_number, slot=self.config.slot)
         what = f"reply to {command!r}"
 
-        def once() -> Tuple[R3Reply, Any]:
+        def once() -> tuple[R3Reply, Any]:
             self._link.discard_input()
             self._link.write(frame)
             deadline = self._link.deadline()
@@ -428,7 +443,7 @@ class MelfaRobot:
         """Operation rights, servo power, running and alarm number (DSTATE)."""
         return self._send("DSTATE", retry=True, parse=parse_state)
 
-    def read_xyzabc(self) -> Tuple[np.ndarray, Tuple[int, int]]:
+    def read_xyzabc(self) -> tuple[np.ndarray, tuple[int, int]]:
         """The flange pose as (X, Y, Z, A, B, C) in mm and radians, and the posture flags (PPOSF)."""
         deg, flags = self._send("PPOSF", retry=True, parse=parse_position)
         return xyzabc_from_wire(deg), flags
@@ -484,8 +499,9 @@ class MelfaRobot:
                 raise DeviceTimeout(f"robot: the motion did not finish within {limit} s")
             time.sleep(self.config.poll_interval_s)
 
-    def move_to(self, T_base_flange: Any, *, linear: bool = False, flags: Optional[Tuple[int, int]] = None,
-                wait: bool = True) -> None:
+    def move_to(
+        self, T_base_flange: Any, *, linear: bool = False, flags: Optional[tuple[int, int]] = None, wait: bool = True
+    ) -> None:
         """Moves the flange to ``T_base_flange`` (MOV, or MVS when ``linear``).
 
         The target is checked against the cell's limits (SafetyError, nothing sent), then the
@@ -515,7 +531,7 @@ class MelfaRobot:
             except DeviceError as exc:
                 raise restate(exc, f"step {i + 1} of {len(checked)} failed, later steps were not sent: {exc}") from exc
 
-    def _execute(self, target: np.ndarray, linear: bool, flags: Tuple[int, int], wait: bool) -> None:
+    def _execute(self, target: np.ndarray, linear: bool, flags: tuple[int, int], wait: bool) -> None:
         n = self.config.position_variable
         self._send("EXEC" + format_position(n, xyzabc_to_wire(xyzabc_from_transform(target)), flags), retry=True)
         verb = "MVS" if linear else "MOV"
@@ -526,8 +542,10 @@ class MelfaRobot:
                 reached = self.read_pose()
                 miss = float(np.linalg.norm(reached[:3, 3] - target[:3, 3]))
                 if miss > self.config.arrival_tolerance_mm:
-                    raise DeviceFault(f"robot: the arm stopped {miss:.2f} mm from the target (tolerance "
-                                      f"{self.config.arrival_tolerance_mm} mm)")
+                    raise DeviceFault(
+                        f"robot: the arm stopped {miss:.2f} mm from the target (tolerance "
+                        f"{self.config.arrival_tolerance_mm} mm)"
+                    )
         except DeviceError as exc:
             raise_after_stop(exc, self._stop_after_fault())
 

@@ -13,8 +13,9 @@ import time
 from dataclasses import dataclass
 from typing import Any, Optional
 
+from .._validate import check_number
 from ..errors import DeviceTimeout, InvalidInputError, SafetyError
-from ._link import SerialLink, check_number
+from ._link import SerialLink
 
 __all__ = ["MotorRange", "LaserMotor"]
 
@@ -100,9 +101,11 @@ class LaserMotor(abc.ABC):
         a = check_number(angle_rad, "angle_rad", unit="rad")
         r = self.range
         if not r.min_angle_rad <= a <= r.max_angle_rad:
-            raise SafetyError(f"laser motor: goal {math.degrees(a):.2f}° is outside the allowed range "
-                              f"[{math.degrees(r.min_angle_rad):.2f}°, {math.degrees(r.max_angle_rad):.2f}°]; "
-                              "nothing was sent — choose an angle inside MotorRange")
+            raise SafetyError(
+                f"laser motor: goal {math.degrees(a):.2f}° is outside the allowed range "
+                f"[{math.degrees(r.min_angle_rad):.2f}°, {math.degrees(r.max_angle_rad):.2f}°]; "
+                "nothing was sent — choose an angle inside MotorRange"
+            )
         self._send_goal(a)
         self._goal = a
         return self.wait_until_reached() if wait else a
@@ -118,8 +121,10 @@ class LaserMotor(abc.ABC):
             if abs(angle - self._goal) <= self.range.tolerance_rad and not self._still_moving():
                 return angle
             if time.monotonic() > deadline:
-                raise DeviceTimeout(f"laser motor: still at {math.degrees(angle):.2f}° {limit} s after the goal "
-                                    f"{math.degrees(self._goal):.2f}° was sent; check torque, load and the speed limit")
+                raise DeviceTimeout(
+                    f"laser motor: still at {math.degrees(angle):.2f}° {limit} s after the goal "
+                    f"{math.degrees(self._goal):.2f}° was sent; check torque, load and the speed limit"
+                )
             time.sleep(self.range.poll_interval_s)
 
     def _still_moving(self) -> bool:
@@ -130,7 +135,7 @@ class LaserMotor(abc.ABC):
         """Closes the serial port."""
         self._link.close()
 
-    def __enter__(self) -> "LaserMotor":
+    def __enter__(self) -> LaserMotor:
         return self
 
     def __exit__(self, *exc: Any) -> None:

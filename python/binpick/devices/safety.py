@@ -18,17 +18,18 @@ what to change. The rules, all in the robot's base frame on the flange pose ``T_
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence, Tuple
+from typing import Any
 
 import numpy as np
 
+from .._validate import check_number, check_transform
 from ..errors import InvalidInputError, SafetyError
-from ._link import check_number, check_transform
 
 __all__ = ["CellLimits", "check_pose", "check_move", "check_sequence", "check_override", "check_linear_speed"]
 
-Vec3 = Tuple[float, float, float]
+Vec3 = tuple[float, float, float]
 
 
 @dataclass(frozen=True)
@@ -58,7 +59,9 @@ class CellLimits:
         lo = [check_number(v, "CellLimits.workspace_min_mm", unit="mm") for v in _triple(self.workspace_min_mm, "min")]
         hi = [check_number(v, "CellLimits.workspace_max_mm", unit="mm") for v in _triple(self.workspace_max_mm, "max")]
         if any(h <= low for low, h in zip(lo, hi)):
-            raise InvalidInputError(f"CellLimits: workspace_max_mm {hi} must exceed workspace_min_mm {lo} on every axis")
+            raise InvalidInputError(
+                f"CellLimits: workspace_max_mm {hi} must exceed workspace_min_mm {lo} on every axis"
+            )
         check_number(self.max_tool_tilt_rad, "CellLimits.max_tool_tilt_rad", low=0.0, high=math.pi, unit="rad")
         check_number(self.approach_height_mm, "CellLimits.approach_height_mm", unit="mm")
         check_number(self.max_lateral_below_mm, "CellLimits.max_lateral_below_mm", low=0.0, unit="mm")
@@ -133,8 +136,10 @@ def check_override(percent: Any, limits: CellLimits) -> float:
     """Rule 4 for a speed override, percent."""
     v = check_number(percent, "override_percent", low=1.0, high=100.0, unit="%")
     if v > limits.max_override_percent:
-        raise SafetyError(f"override_percent: {v:g} % exceeds the cell's limit of {limits.max_override_percent:g} %; "
-                          "nothing was sent — use a lower override or raise CellLimits.max_override_percent")
+        raise SafetyError(
+            f"override_percent: {v:g} % exceeds the cell's limit of {limits.max_override_percent:g} %; "
+            "nothing was sent — use a lower override or raise CellLimits.max_override_percent"
+        )
     return v
 
 
@@ -142,6 +147,8 @@ def check_linear_speed(speed_mm_s: Any, limits: CellLimits) -> float:
     """Rule 4 for a straight-line speed, mm/s."""
     v = check_number(speed_mm_s, "speed_mm_s", low=0.001, unit="mm/s")
     if v > limits.max_linear_speed_mm_s:
-        raise SafetyError(f"speed_mm_s: {v:g} mm/s exceeds the cell's limit of {limits.max_linear_speed_mm_s:g} mm/s; "
-                          "nothing was sent — use a lower speed or raise CellLimits.max_linear_speed_mm_s")
+        raise SafetyError(
+            f"speed_mm_s: {v:g} mm/s exceeds the cell's limit of {limits.max_linear_speed_mm_s:g} mm/s; "
+            "nothing was sent — use a lower speed or raise CellLimits.max_linear_speed_mm_s"
+        )
     return v

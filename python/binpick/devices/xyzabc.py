@@ -19,8 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from .._validate import check_transform
 from ..errors import InvalidInputError, ShapeError
-from ._link import check_transform
 
 __all__ = [
     "transform_from_xyzabc",
@@ -38,11 +38,13 @@ def rotation_from_abc(a: float, b: float, c: float) -> np.ndarray:
     ca, sa = math.cos(a), math.sin(a)
     cb, sb = math.cos(b), math.sin(b)
     cc, sc = math.cos(c), math.sin(c)
-    return np.array([
-        [cc * cb, cc * sb * sa - sc * ca, cc * sb * ca + sc * sa],
-        [sc * cb, sc * sb * sa + cc * ca, sc * sb * ca - cc * sa],
-        [-sb, cb * sa, cb * ca],
-    ])
+    return np.array(
+        [
+            [cc * cb, cc * sb * sa - sc * ca, cc * sb * ca + sc * sa],
+            [sc * cb, sc * sb * sa + cc * ca, sc * sb * ca - cc * sa],
+            [-sb, cb * sa, cb * ca],
+        ]
+    )
 
 
 def _as_xyzabc(value: Any, name: str) -> np.ndarray:

@@ -1,5 +1,12 @@
 """The simulated cell: physics piles of parts in a bin and the eye-in-hand camera with its swept
-laser line, rendered as the real camera would grab them, with depth and instance-id ground truth.
+laser line, rendered as the real camera would grab them, with depth and instance-id ground truth;
+and the digital twin (:class:`SimulatedCell`): the pick loop on emulated devices over ptys.
+
+* :mod:`~binpick.sim.cell` — the layout: camera, laser, lighting, noise, bin, scan pose
+* :mod:`~binpick.sim.pile`, :mod:`~binpick.sim.render` — physics piles and the renderer
+* :mod:`~binpick.sim.dataset` — simulated scans written to disk
+* :mod:`~binpick.sim.camera` — virtual cameras for the pick loop
+* :mod:`~binpick.sim.twin` — :class:`SimulatedCell`, its arm and limits
 
 >>> import binpick
 >>> from binpick import sim
@@ -9,10 +16,12 @@ laser line, rendered as the real camera would grab them, with depth and instance
 
 from __future__ import annotations
 
+from .camera import RenderedCamera, SimCamera
 from .cell import Bin, Camera, Cell, Laser, Lighting, SensorNoise, look_down, rot_y
 from .dataset import GLOSSY_PART_SPECULAR, SimulatedScan, contact_sheet, simulate_scan, write_scan
 from .pile import Pile, SettleReport, convex_decomposition, max_interpenetration
 from .render import BIN_ID, NO_SURFACE, TABLE_ID, View, World, render_checkerboard
+from .twin import SIM_ARM, SimulatedCell, sim_limits, simulated_cell
 
 __all__ = [
     "BIN_ID",
@@ -23,6 +32,10 @@ __all__ = [
     "Laser",
     "Lighting",
     "NO_SURFACE",
+    "RenderedCamera",
+    "SIM_ARM",
+    "SimCamera",
+    "SimulatedCell",
     "Pile",
     "SensorNoise",
     "SettleReport",
@@ -36,6 +49,8 @@ __all__ = [
     "max_interpenetration",
     "render_checkerboard",
     "rot_y",
+    "sim_limits",
     "simulate_scan",
+    "simulated_cell",
     "write_scan",
 ]

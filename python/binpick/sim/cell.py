@@ -10,59 +10,33 @@ sheet at motor angle 0 crossing the optical axis 520 mm out; the sweep covers th
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .. import _core
 from .._validate import as_transform, as_vector, count, non_negative, positive
+from ..camera import CameraIntrinsics
 from ..errors import InvalidInputError
+from ..transforms import laser_sweep, look_down, rot_y
 
 __all__ = ["Camera", "Laser", "Lighting", "SensorNoise", "Bin", "Cell", "rot_y", "look_down"]
 
 
-def rot_y(angle: float) -> np.ndarray:
-    """4×4 rotation about y by ``angle`` radians."""
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, 0, s, 0], [0, 1, 0, 0], [-s, 0, c, 0], [0, 0, 0, 1.0]])
-
-
-def look_down(x: float, y: float, z: float) -> np.ndarray:
-    """A pose at (x, y, z) whose z axis points straight down (−z of the base) and x axis along base +x."""
-    T = np.eye(4)
-    T[:3, :3] = np.diag([1.0, -1.0, -1.0])
-    T[:3, 3] = (x, y, z)
-    return T
-
-
-@dataclass(frozen=True)
-class Camera:
-    """OpenCV pinhole camera: size (px), focal lengths and principal point (px), ``dist = [k1, k2, p1, p2, k3]``.
-    The default is the paper's 1032 × 778 camera with an 8 mm-class lens and mild barrel distortion."""
-
-    width: int = 1032
-    height: int = 778
-    fx: float = 1600.0
-    fy: float = 1600.0
-    cx: float = 515.5
-    cy: float = 388.5
-    dist: tuple[float, float, float, float, float] = (-0.04, 0.01, 0.0, 0.0, 0.0)
-
-    def __post_init__(self) -> None:
-        count(self.width, "width", 2)
-        count(self.height, "height", 2)
-        positive(self.fx, "fx", "px")
-        positive(self.fy, "fy", "px")
-        d = as_vector(self.dist, "dist", 5)
-        object.__setattr__(self, "dist", tuple(float(v) for v in d))
-
-    @property
-    def K(self) -> np.ndarray:
-        """The 3×3 intrinsic matrix."""
-        return np.array([[self.fx, 0.0, self.cx], [0.0, self.fy, self.cy], [0.0, 0.0, 1.0]])
-
-    def _args(self) -> tuple:
-        return (int(self.width), int(self.height), float(self.fx), float(self.fy), float(self.cx), float(self.cy), list(self.dist))
+def Camera(  # named like a class: it builds the simulated camera, as binpick.sim.Camera(...) always has
+    width: int = 1032,
+    height: int = 778,
+    fx: float = 1600.0,
+    fy: float = 1600.0,
+    cx: float = 515.5,
+    cy: float = 388.5,
+    dist: Sequence[float] = (-0.04, 0.01, 0.0, 0.0, 0.0),
+) -> CameraIntrinsics:
+    """The simulated cell's camera, as the one camera model (:class:`binpick.camera.CameraIntrinsics`):
+    size (px), focal lengths and principal point (px), ``dist = [k1, k2, p1, p2, k3]``. The default
+    is the paper's 1032 × 778 camera with an 8 mm-class lens and mild barrel distortion."""
+    return CameraIntrinsics.pinhole(width, height, fx, fy, cx, cy, dist)
 
 
 # The default projector is defined once, in the Rust core (``Laser::default``); its pose and
@@ -104,12 +78,20 @@ class Laser:
         return self.T_camera_laser0 @ rot_y(angle)
 
     def _args(self) -> tuple:
-        return (self.T_camera_laser0, float(self.sheet_sigma), float(self.power), float(self.fan_angle), list(self.color), float(self.reference_distance))
+        return (
+            self.T_camera_laser0,
+            float(self.sheet_sigma),
+            float(self.power),
+            float(self.fan_angle),
+            list(self.color),
+            float(self.reference_distance),
+        )
 
 
 @dataclass(frozen=True)
 class Lighting:
-    """Ambient light: ``ambient`` and ``lamp`` DN on white, the lamp's direction in the base frame, ``background`` DN."""
+    """Ambient light: ``ambient`` and ``lamp`` DN on white, the lamp's direction in the base frame,
+    ``background`` DN."""
 
     ambient: float = 55.0
     lamp: float = 45.0
@@ -120,7 +102,9 @@ class Lighting:
         non_negative(self.ambient, "ambient", "DN")
         non_negative(self.lamp, "lamp", "DN")
         non_negative(self.background, "background", "DN")
-        object.__setattr__(self, "lamp_direction", tuple(float(v) for v in as_vector(self.lamp_direction, "lamp_direction", 3)))
+        object.__setattr__(
+            self, "lamp_direction", tuple(float(v) for v in as_vector(self.lamp_direction, "lamp_direction", 3))
+        )
 
     def _args(self) -> tuple:
         return (float(self.ambient), float(self.lamp), list(self.lamp_direction), float(self.background))
@@ -142,17 +126,24 @@ class SensorNoise:
             non_negative(getattr(self, name), name)
 
     @classmethod
-    def none(cls, blur: float = 0.6) -> "SensorNoise":
+    def none(cls, blur: float = 0.6) -> SensorNoise:
         """An ideal sensor: no noise, speckle or reflections (the optics blur stays)."""
         return cls(read_noise=0.0, shot_noise=0.0, speckle=0.0, reflections=0.0, blur=blur)
 
     def _args(self) -> tuple:
-        return (float(self.read_noise), float(self.shot_noise), float(self.speckle), float(self.reflections), float(self.blur))
+        return (
+            float(self.read_noise),
+            float(self.shot_noise),
+            float(self.speckle),
+            float(self.reflections),
+            float(self.blur),
+        )
 
 
 @dataclass(frozen=True)
 class Bin:
-    """An open box on the floor: inner ``size`` (x, y, height) mm, inner floor centre ``center`` (x, y), floor height ``floor_z``."""
+    """An open box on the floor: inner ``size`` (x, y, height) mm, inner floor centre ``center``
+    (x, y), floor height ``floor_z``."""
 
     size: tuple[float, float, float] = (300.0, 200.0, 80.0)
     center: tuple[float, float] = (400.0, 0.0)
@@ -162,7 +153,9 @@ class Bin:
     def __post_init__(self) -> None:
         s = as_vector(self.size, "size", 3)
         if (s <= 0).any():
-            raise InvalidInputError(f"size: the bin's inner length, width and height must be positive mm, got {s.tolist()}")
+            raise InvalidInputError(
+                f"size: the bin's inner length, width and height must be positive mm, got {s.tolist()}"
+            )
         object.__setattr__(self, "size", tuple(float(v) for v in s))
         object.__setattr__(self, "center", tuple(float(v) for v in as_vector(self.center, "center", 2)))
         object.__setattr__(self, "floor_z", float(as_vector([self.floor_z], "floor_z", 1)[0]))
@@ -180,7 +173,7 @@ class Cell:
     """The whole simulated cell: camera, laser, hand-eye ``T_flange_camera``, bin, lighting and noise,
     and the robot pose ``T_base_flange`` it scans from."""
 
-    camera: Camera = field(default_factory=Camera)
+    camera: CameraIntrinsics = field(default_factory=Camera)
     laser: Laser = field(default_factory=Laser)
     T_flange_camera: np.ndarray = field(default_factory=lambda: _flange_camera())
     bin: Bin = field(default_factory=Bin)
@@ -199,26 +192,20 @@ class Cell:
 
     def calibration(self):
         """The cell's exact calibration as a ``binpick.calibration.CellCalibration``."""
-        from ..calibration import CameraIntrinsics, CellCalibration
+        from ..calibration import CellCalibration
 
-        cam = CameraIntrinsics(width=self.camera.width, height=self.camera.height, K=self.camera.K, dist=np.array(self.camera.dist))
-        return CellCalibration(camera=cam, T_camera_laser=self.laser.T_camera_laser0, T_flange_camera=self.T_flange_camera)
+        return CellCalibration(
+            camera=self.camera,
+            T_camera_laser=self.laser.T_camera_laser0,
+            T_flange_camera=self.T_flange_camera,
+        )
 
     def sweep(self, frames: int = 90, margin: float = 10.0) -> np.ndarray:
         """``frames`` motor angles (rad), evenly spaced, whose laser sheets cover the bin's inner
         floor from wall to wall (plus ``margin`` mm) at the scan pose."""
-        count(frames, "frames", 1)
-        T_camera_base = np.linalg.inv(self.T_base_camera)
+        n = count(frames, "frames", 1)
         lo, hi = self.bin.bounds
-        corners = np.array([[x, y, lo[2]] for x in (lo[0] - margin, hi[0] + margin) for y in (lo[1], hi[1])] + [[x, y, hi[2]] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])])
-        pts = (T_camera_base[:3, :3] @ corners.T).T + T_camera_base[:3, 3]
-        T0 = self.laser.T_camera_laser0
-        local = (T0[:3, :3].T @ (pts - T0[:3, 3]).T).T
-        # The sheet at angle θ is x_L cos θ − z_L sin θ = 0: it passes through a point at θ = atan2(x, z).
-        theta = np.arctan2(local[:, 0], local[:, 2])
-        if frames == 1:
-            return np.array([float(theta.mean())])
-        return np.linspace(theta.min(), theta.max(), frames)
+        return laser_sweep(self.T_base_camera @ self.laser.T_camera_laser0, lo, hi, n, margin)
 
 
 def _flange_camera() -> np.ndarray:

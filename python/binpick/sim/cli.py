@@ -52,7 +52,10 @@ def simulate_main(argv: list[str]) -> int:
     except BinpickError as exc:
         print(f"binpick simulate: {exc}", file=sys.stderr)
         return 2
-    print(f"{len(scan.pile)} {args.part} parts, {len(scan.frames)} frames rendered in {t1 - t0:.1f} s, written to {root} in {t2 - t1:.1f} s")
+    print(
+        f"{len(scan.pile)} {args.part} parts, {len(scan.frames)} frames "
+        f"rendered in {t1 - t0:.1f} s, written to {root} in {t2 - t1:.1f} s"
+    )
     return 0
 
 

@@ -72,7 +72,9 @@ def simulate_scan(
     view = world.view(cell, num_threads=num_threads)
     angles = cell.sweep(count(frames, "frames", 1))
     imgs = view.frames(angles, seed=seed, num_threads=num_threads)
-    return SimulatedScan(frames=imgs, angles=angles, T_base_flange=cell.T_base_flange, cell=cell, pile=pile, view=view, world=world)
+    return SimulatedScan(
+        frames=imgs, angles=angles, T_base_flange=cell.T_base_flange, cell=cell, pile=pile, view=view, world=world
+    )
 
 
 def contact_sheet(frames: np.ndarray, *, picks: int = 6, columns: int = 3, width: int = 1200) -> np.ndarray:
@@ -92,11 +94,11 @@ def contact_sheet(frames: np.ndarray, *, picks: int = 6, columns: int = 3, width
         tile = cv2.resize(np.ascontiguousarray(frames[i][:, :, ::-1]), (tw, th), interpolation=cv2.INTER_AREA)
         cv2.putText(tile, f"frame {i}", (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 2)
         r, c = divmod(k, columns)
-        sheet[r * th:(r + 1) * th, c * tw:(c + 1) * tw] = tile
+        sheet[r * th : (r + 1) * th, c * tw : (c + 1) * tw] = tile
     return sheet
 
 
-def write_scan(scan: SimulatedScan, directory: "str | os.PathLike[str]") -> Path:
+def write_scan(scan: SimulatedScan, directory: str | os.PathLike[str]) -> Path:
     """Writes ``scan`` as a scan folder binpick reads like a real one (``binpick.scan.load_scan``):
     frames/NNN.png, scan.json, calibration.toml, ground_truth.json, contact_sheet.png."""
     import cv2

@@ -16,20 +16,31 @@ __all__ = ["Pile", "SettleReport", "max_interpenetration", "convex_decomposition
 
 
 class SettleReport:
-    """What one settling did: ``steps``, ``simulated_time`` (s), ``settled`` (all parts at rest), ``max_speed`` (mm/s)."""
+    """What one settling did: ``steps``, ``simulated_time`` (s), ``settled`` (all parts at rest),
+    ``max_speed`` (mm/s)."""
 
     __slots__ = ("steps", "simulated_time", "settled", "max_speed")
 
     def __init__(self, raw: tuple) -> None:
-        self.steps, self.simulated_time, self.settled, self.max_speed = int(raw[0]), float(raw[1]), bool(raw[2]), float(raw[3])
+        self.steps, self.simulated_time, self.settled, self.max_speed = (
+            int(raw[0]),
+            float(raw[1]),
+            bool(raw[2]),
+            float(raw[3]),
+        )
 
     def __repr__(self) -> str:
-        return f"SettleReport(settled={self.settled}, steps={self.steps}, simulated_time={self.simulated_time:.3f} s, max_speed={self.max_speed:.3g} mm/s)"
+        return (
+            f"SettleReport(settled={self.settled}, steps={self.steps}, "
+            f"simulated_time={self.simulated_time:.3f} s, max_speed={self.max_speed:.3g} mm/s)"
+        )
 
 
 def _model(model: Any) -> Model:
     if not isinstance(model, Model):
-        raise InvalidInputError(f"model: expected a binpick.Model (e.g. binpick.parts.tee()), got {type(model).__name__}")
+        raise InvalidInputError(
+            f"model: expected a binpick.Model (e.g. binpick.parts.tee()), got {type(model).__name__}"
+        )
     return model
 
 
@@ -132,11 +143,26 @@ def max_interpenetration(model: Model, poses: Any, *, spacing: float = 1.0) -> f
     T = np.ascontiguousarray(poses, dtype=np.float64)
     if T.ndim != 3 or T.shape[1:] != (4, 4):
         raise InvalidInputError(f"poses: expected an (N, 4, 4) array, got shape {T.shape}")
-    samples = _core.sample_mesh(np.ascontiguousarray(model.vertices, dtype=np.float64), np.ascontiguousarray(model.faces, dtype=np.int64), positive(spacing, "spacing"), None, 1)[0]
-    return float(_core.sim_max_interpenetration(np.ascontiguousarray(model.vertices, dtype=np.float64), np.ascontiguousarray(model.faces, dtype=np.int64), T, np.ascontiguousarray(samples, dtype=np.float64)))
+    samples = _core.sample_mesh(
+        np.ascontiguousarray(model.vertices, dtype=np.float64),
+        np.ascontiguousarray(model.faces, dtype=np.int64),
+        positive(spacing, "spacing"),
+        None,
+        1,
+    )[0]
+    return float(
+        _core.sim_max_interpenetration(
+            np.ascontiguousarray(model.vertices, dtype=np.float64),
+            np.ascontiguousarray(model.faces, dtype=np.int64),
+            T,
+            np.ascontiguousarray(samples, dtype=np.float64),
+        )
+    )
 
 
-def convex_decomposition(model: Model, *, decomposition_resolution: int = 48, max_convex_hulls: int = 24) -> list[tuple[np.ndarray, np.ndarray]]:
+def convex_decomposition(
+    model: Model, *, decomposition_resolution: int = 48, max_convex_hulls: int = 24
+) -> list[tuple[np.ndarray, np.ndarray]]:
     """The convex pieces (vertices, faces) enclosing ``model`` that a pile collides with."""
     model = _model(model)
     return _core.sim_convex_decomposition(

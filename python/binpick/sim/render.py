@@ -9,15 +9,17 @@ ground truth; instance ids are the pile's part ids (≥ 0), −2 for the bin, �
 
 from __future__ import annotations
 
-from typing import Any, Optional, Sequence
+from collections.abc import Sequence
+from typing import Any, Optional
 
 import numpy as np
 
 from .. import _core
 from .._validate import as_points, as_transform, count, positive
+from ..camera import CameraIntrinsics
 from ..errors import InvalidInputError
 from ..models import Model
-from .cell import Bin, Camera, Cell, Laser, Lighting, SensorNoise
+from .cell import Bin, Cell, Laser, Lighting, SensorNoise
 
 __all__ = ["World", "View", "render_checkerboard", "BIN_ID", "TABLE_ID", "NO_SURFACE"]
 
@@ -31,7 +33,10 @@ TABLE_ALBEDO = (0.45, 0.40, 0.33)
 
 
 def _box(lo: Sequence[float], hi: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
-    v = np.array([[hi[0] if i & 1 else lo[0], hi[1] if i & 2 else lo[1], hi[2] if i & 4 else lo[2]] for i in range(8)], dtype=np.float64)
+    v = np.array(
+        [[hi[0] if i & 1 else lo[0], hi[1] if i & 2 else lo[1], hi[2] if i & 4 else lo[2]] for i in range(8)],
+        dtype=np.float64,
+    )
     quads = [[0, 2, 3, 1], [4, 5, 7, 6], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]]
     f = np.array([t for q in quads for t in ([q[0], q[1], q[2]], [q[0], q[2], q[3]])], dtype=np.int64)
     return v, f
@@ -45,7 +50,7 @@ class World:
         self._meshes: dict[int, int] = {}
 
     @classmethod
-    def of_pile(cls, pile: Any, *, bin: Bin | None = None, table: bool = True, part_specular: float = 0.0) -> "World":
+    def of_pile(cls, pile: Any, *, bin: Bin | None = None, table: bool = True, part_specular: float = 0.0) -> World:
         """The bin, a table under it, and every part of ``pile`` (a :class:`binpick.sim.Pile`) at its pose."""
         w = cls()
         b = bin if bin is not None else pile.bin
@@ -65,11 +70,21 @@ class World:
             t = self._scene.add_mesh(tv, tf, list(TABLE_ALBEDO), 0.0, 10.0)
             self._scene.add_instance(t, np.eye(4), TABLE_ID)
 
-    def add_mesh(self, vertices: Any, faces: Any, *, albedo: Sequence[float] = PART_ALBEDO, specular: float = 0.0, shininess: float = 20.0) -> int:
+    def add_mesh(
+        self,
+        vertices: Any,
+        faces: Any,
+        *,
+        albedo: Sequence[float] = PART_ALBEDO,
+        specular: float = 0.0,
+        shininess: float = 20.0,
+    ) -> int:
         """Adds a mesh (mm, its own frame) and returns its index for :meth:`add_instance`."""
         v = np.ascontiguousarray(vertices, dtype=np.float64)
         f = np.ascontiguousarray(faces, dtype=np.int64)
-        return int(self._scene.add_mesh(v, f, [float(a) for a in albedo], float(specular), positive(shininess, "shininess")))
+        return int(
+            self._scene.add_mesh(v, f, [float(a) for a in albedo], float(specular), positive(shininess, "shininess"))
+        )
 
     def add_instance(self, mesh: int, T_base_object: Any, id: int) -> None:
         """Places mesh ``mesh`` at ``T_base_object`` under instance id ``id``."""
@@ -108,13 +123,15 @@ class World:
         pts = as_points(points, "points", min_points=0)
         return self._scene.nearest_surface(np.ascontiguousarray(pts, dtype=np.float64))
 
-    def view(self, cell: Cell, T_base_flange: Optional[Any] = None, *, num_threads: int = 0) -> "View":
+    def view(self, cell: Cell, T_base_flange: Optional[Any] = None, *, num_threads: int = 0) -> View:
         """Casts the camera's rays at robot pose ``T_base_flange`` (default: the cell's scan pose)."""
         if not isinstance(cell, Cell):
             raise InvalidInputError(f"cell: expected a binpick.sim.Cell, got {type(cell).__name__}")
         T_bf = cell.T_base_flange if T_base_flange is None else as_transform(T_base_flange, "T_base_flange")
         T_bc = T_bf @ cell.T_flange_camera
-        raw = self._scene.view(cell.camera._args(), T_bc, cell.lighting._args(), count(num_threads, "num_threads"))
+        raw = self._scene.view(
+            _camera_args(cell.camera), T_bc, cell.lighting._args(), count(num_threads, "num_threads")
+        )
         return View(raw, cell, T_bf)
 
 
@@ -146,18 +163,30 @@ class View:
         """(H, W, 3) float32 camera-facing unit normals in the camera frame."""
         return self._raw.normals()
 
-    def frame(self, angle: float, *, seed: int = 0, laser: Optional[Laser] = None, noise: Optional[SensorNoise] = None) -> np.ndarray:
+    def frame(
+        self, angle: float, *, seed: int = 0, laser: Optional[Laser] = None, noise: Optional[SensorNoise] = None
+    ) -> np.ndarray:
         """The RGB frame (H, W, 3) uint8 the camera grabs with the laser at motor angle ``angle`` (rad)."""
         return self.frames([angle], seed=seed, laser=laser, noise=noise)[0]
 
-    def frames(self, angles: Sequence[float], *, seed: int = 0, laser: Optional[Laser] = None, noise: Optional[SensorNoise] = None, num_threads: int = 0) -> np.ndarray:
+    def frames(
+        self,
+        angles: Sequence[float],
+        *,
+        seed: int = 0,
+        laser: Optional[Laser] = None,
+        noise: Optional[SensorNoise] = None,
+        num_threads: int = 0,
+    ) -> np.ndarray:
         """(K, H, W, 3) uint8 RGB frames, one per motor angle; frame k's noise is seeded by ``seed + k``."""
         laser = self.cell.laser if laser is None else laser
         noise = self.cell.noise if noise is None else noise
         a = np.asarray(angles, dtype=np.float64).ravel()
         if not np.isfinite(a).all():
             raise InvalidInputError("angles: must be finite radians")
-        return self._raw.frames(*laser._args(), a.tolist(), noise._args(), count(seed, "seed"), count(num_threads, "num_threads"))
+        return self._raw.frames(
+            *laser._args(), a.tolist(), noise._args(), count(seed, "seed"), count(num_threads, "num_threads")
+        )
 
     def ambient_frame(self, *, seed: int = 0, noise: Optional[SensorNoise] = None) -> np.ndarray:
         """The RGB frame without the laser."""
@@ -165,8 +194,21 @@ class View:
         return self._raw.ambient_frame(noise._args(), count(seed, "seed"))
 
 
+def _camera_args(camera: CameraIntrinsics) -> tuple:
+    """The renderer's camera arguments: size, fx, fy, cx, cy, distortion (it models no skew)."""
+    if not isinstance(camera, CameraIntrinsics):
+        raise InvalidInputError(
+            f"camera: expected a binpick.camera.CameraIntrinsics (binpick.sim.Camera(...)), got {type(camera).__name__}"
+        )
+    if camera.skew != 0.0:
+        raise InvalidInputError(
+            f"camera: the renderer models no skew, got K[0, 1] = {camera.skew:g}; use a camera with K[0, 1] = 0"
+        )
+    return (camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy, [float(v) for v in camera.dist])
+
+
 def render_checkerboard(
-    camera: Camera,
+    camera: CameraIntrinsics,
     T_camera_board: Any,
     *,
     pattern: tuple[int, int] = (9, 6),
@@ -182,13 +224,11 @@ def render_checkerboard(
     """An RGB image (H, W, 3) uint8 of a checkerboard with ``pattern`` = (columns, rows) inner
     corners, ``square`` mm, at ``T_camera_board`` (OpenCV board frame: origin at the first inner
     corner, corners at (i·square, j·square, 0)); with the laser line at ``angle`` if ``laser``."""
-    if not isinstance(camera, Camera):
-        raise InvalidInputError(f"camera: expected a binpick.sim.Camera, got {type(camera).__name__}")
     cols, rows = (count(pattern[0], "pattern[0]", 1), count(pattern[1], "pattern[1]", 1))
     lighting = lighting or Lighting(ambient=150.0, lamp=60.0)
     noise = noise or SensorNoise()
     return _core.sim_render_checkerboard(
-        camera._args(),
+        _camera_args(camera),
         (cols + 1, rows + 1, positive(square, "square"), float(margin)),
         as_transform(T_camera_board, "T_camera_board"),
         lighting._args(),

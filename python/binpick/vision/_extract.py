@@ -8,7 +8,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from ..calibration._checks import as_image
+from .._validate import as_image
 from ..errors import InvalidInputError
 
 __all__ = ["extract_line", "laser_mask", "red_excess"]
@@ -41,7 +41,9 @@ def _threshold(value: Any) -> float:
     except (TypeError, ValueError):
         raise InvalidInputError(f"threshold: must be a number of grey levels (0–255), got {value!r}") from None
     if not 0 <= t < 255:
-        raise InvalidInputError(f"threshold: {t:g} is outside 0–255; it is the chroma (Cr − 128) or grey level a line pixel must exceed")
+        raise InvalidInputError(
+            f"threshold: {t:g} is outside 0–255; it is the chroma (Cr − 128) or grey level a line pixel must exceed"
+        )
     return t
 
 
@@ -100,7 +102,9 @@ def extract_line(
     return uv
 
 
-def _centres(signal: np.ndarray, threshold: float, window: int, method: str, max_jump: float | None) -> tuple[np.ndarray, np.ndarray]:
+def _centres(
+    signal: np.ndarray, threshold: float, window: int, method: str, max_jump: float | None
+) -> tuple[np.ndarray, np.ndarray]:
     """Sub-pixel peak positions along each row of ``signal``: (position across, row index)."""
     height, width = signal.shape
     # The strongest peak after a box blur of about the line's width: a wide, bright line wins
@@ -116,7 +120,9 @@ def _centres(signal: np.ndarray, threshold: float, window: int, method: str, max
         if stray.any():
             r = lit[stray]
             jump = int(np.ceil(max_jump))
-            band = np.clip(np.rint(predicted[stray]).astype(np.intp)[:, None] + np.arange(-jump, jump + 1), 0, width - 1)
+            band = np.clip(
+                np.rint(predicted[stray]).astype(np.intp)[:, None] + np.arange(-jump, jump + 1), 0, width - 1
+            )
             peak_col[r] = band[np.arange(len(r)), smooth[r[:, None], band].argmax(axis=1)]
     offsets = np.arange(-window, window + 1)
 

@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from ..calibration._checks import as_image
+from .._validate import as_image
 from ..errors import InvalidInputError
 from ..scan import Scan
 from ._extract import extract_line

@@ -20,7 +20,11 @@ def pose(rx: float = 0.0, ry: float = 0.0, rz: float = 0.0, t=(0.0, 0.0, 0.0)) -
     """A 4×4 transform ``Rz·Ry·Rx`` (angles in radians) with translation ``t`` (mm)."""
     cx, sx, cy, sy, cz, sz = np.cos(rx), np.sin(rx), np.cos(ry), np.sin(ry), np.cos(rz), np.sin(rz)
     T = np.eye(4)
-    T[:3, :3] = np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]]) @ np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]]) @ np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    T[:3, :3] = (
+        np.array([[cz, -sz, 0], [sz, cz, 0], [0, 0, 1]])
+        @ np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+        @ np.array([[1, 0, 0], [0, cx, -sx], [0, sx, cx]])
+    )
     T[:3, 3] = t
     return T
 
@@ -90,7 +94,7 @@ class Checkerboard(Plane):
     square: float = 20.0
 
     @classmethod
-    def at(cls, T_base_board: np.ndarray, pattern: tuple[int, int] = (9, 6), square: float = 20.0) -> "Checkerboard":
+    def at(cls, T_base_board: np.ndarray, pattern: tuple[int, int] = (9, 6), square: float = 20.0) -> Checkerboard:
         T = np.asarray(T_base_board, float)
         return cls(point=T[:3, 3], normal=T[:3, 2], T_base_board=T, pattern=pattern, square=square)
 
@@ -105,18 +109,24 @@ class Checkerboard(Plane):
         local = (pts - T[:3, 3]) @ T[:3, :3]
         s = self.square
         cols, rows = self.pattern
+
         # Soft edges: the share of the pixel footprint on either side of the nearest edge.
         def soft(c):
             frac = c / s - np.floor(c / s)
             edge = np.minimum(frac, 1 - frac) * s
-            side = (np.floor(c / s) % 2 == 0)
+            side = np.floor(c / s) % 2 == 0
             cover = np.clip(0.5 + edge / footprint, 0, 1)
             return np.where(side, cover, 1 - cover)
 
         ax, ay = soft(local[:, 0] + s), soft(local[:, 1] + s)
         dark = ax * ay + (1 - ax) * (1 - ay)
         inside = (local[:, 0] > -s) & (local[:, 0] < cols * s) & (local[:, 1] > -s) & (local[:, 1] < rows * s)
-        margin = (local[:, 0] > -2 * s) & (local[:, 0] < (cols + 1) * s) & (local[:, 1] > -2 * s) & (local[:, 1] < (rows + 1) * s)
+        margin = (
+            (local[:, 0] > -2 * s)
+            & (local[:, 0] < (cols + 1) * s)
+            & (local[:, 1] > -2 * s)
+            & (local[:, 1] < (rows + 1) * s)
+        )
         return np.where(inside, 0.9 - 0.8 * dark, np.where(margin, 0.9, 0.3))
 
 
@@ -126,7 +136,9 @@ def camera_rays(camera: CameraIntrinsics, pixels: np.ndarray | None = None) -> n
     if pixels is None:
         v, u = np.mgrid[0 : camera.height, 0 : camera.width]
         pixels = np.stack([u.ravel(), v.ravel()], axis=1).astype(np.float64)
-    rays = _core.pixel_rays(camera.width, camera.height, camera.K, camera.dist, np.ascontiguousarray(pixels, dtype=np.float64))
+    rays = _core.pixel_rays(
+        camera.width, camera.height, camera.K, camera.dist, np.ascontiguousarray(pixels, dtype=np.float64)
+    )
     return rays / np.linalg.norm(rays, axis=1, keepdims=True)
 
 
@@ -204,7 +216,12 @@ def true_line_centres(
     v, u = np.mgrid[0 : cam.height, 0 : cam.width]
     s, which = signed(u.ravel().astype(float), v.ravel().astype(float))
     s, which = s.reshape(cam.height, cam.width), which.reshape(cam.height, cam.width)
-    cross = (np.sign(s[:, :-1]) != np.sign(s[:, 1:])) & np.isfinite(s[:, :-1]) & np.isfinite(s[:, 1:]) & (which[:, :-1] == which[:, 1:])
+    cross = (
+        (np.sign(s[:, :-1]) != np.sign(s[:, 1:]))
+        & np.isfinite(s[:, :-1])
+        & np.isfinite(s[:, 1:])
+        & (which[:, :-1] == which[:, 1:])
+    )
     rows, cols = np.nonzero(cross)
     lo, hi = cols.astype(float), cols + 1.0
     slo, shi = s[rows, cols], s[rows, cols + 1]

@@ -9,9 +9,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _core
-from .._validate import as_float_array, as_points, as_transform, check_finite, count
-from ..calibration import CameraIntrinsics, CellCalibration
-from ..calibration._checks import as_angles
+from .._validate import as_angles, as_float_array, as_points, as_transform, check_finite, count
+from ..calibration._file import CellCalibration
+from ..camera import CameraIntrinsics
 from ..errors import InvalidInputError, ShapeError, SingularGeometryError
 
 __all__ = ["Cloud", "pixel_rays", "triangulate"]

@@ -14,7 +14,7 @@ import threading
 import time
 import tty
 from dataclasses import dataclass
-from typing import Any, Callable, List, Optional
+from typing import Any, Callable, Optional
 
 from ...errors import InvalidInputError
 
@@ -76,15 +76,15 @@ class PtyEmulator:
         self.slave_path = os.ttyname(self._slave)
         self._stop = threading.Event()
         self._lock = threading.RLock()
-        self._faults: List[_Armed] = []
-        self._requests: List[Any] = []
+        self._faults: list[_Armed] = []
+        self._requests: list[Any] = []
         self._closed = False
         #: exceptions raised while handling requests (an emulator bug); tests assert it stays empty
-        self.failures: List[str] = []
+        self.failures: list[str] = []
         self._thread = threading.Thread(target=self._serve, name=f"{self.device}-emulator", daemon=True)
 
     # -- public
-    def start(self) -> "PtyEmulator":
+    def start(self) -> PtyEmulator:
         """Starts serving (returns self)."""
         if not self._thread.is_alive() and not self._closed:
             self._thread.start()
@@ -97,7 +97,7 @@ class PtyEmulator:
             self._thread.join(timeout=5.0)
         self._close_fds()
 
-    def __enter__(self) -> "PtyEmulator":
+    def __enter__(self) -> PtyEmulator:
         return self.start()
 
     def __exit__(self, *exc: Any) -> None:
@@ -109,13 +109,14 @@ class PtyEmulator:
         return self._closed
 
     @property
-    def requests(self) -> List[Any]:
+    def requests(self) -> list[Any]:
         """Every request received so far, in order (the protocol's own representation)."""
         with self._lock:
             return list(self._requests)
 
-    def inject(self, fault: Fault, *, times: int = 1, when: Optional[Callable[[Any], bool]] = None,
-               delay_s: float = 0.5) -> None:
+    def inject(
+        self, fault: Fault, *, times: int = 1, when: Optional[Callable[[Any], bool]] = None, delay_s: float = 0.5
+    ) -> None:
         """Plays ``fault`` on the next ``times`` requests for which ``when(request)`` is true (all if None)."""
         if not isinstance(fault, Fault):
             raise InvalidInputError(f"fault: expected a Fault, got {fault!r}")
@@ -136,7 +137,7 @@ class PtyEmulator:
         os.write(self._master, bytes(data))
 
     # -- protocol hooks
-    def _take_requests(self, buf: bytearray) -> List[Any]:
+    def _take_requests(self, buf: bytearray) -> list[Any]:
         raise NotImplementedError
 
     def _handle(self, request: Any) -> Optional[bytes]:

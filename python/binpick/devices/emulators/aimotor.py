@@ -9,9 +9,9 @@ UNKNOWN_REPLY and DEVICE_ERROR cannot be played.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import List, Optional, Tuple
+from typing import Optional
 
-from .._link import check_int, check_number
+from ..._validate import check_int, check_number
 from ..aimotor import MODE_PASSIVE, MODE_STATUS
 from ._pty import Fault, PtyEmulator
 from .motor import LinearAxis
@@ -59,7 +59,7 @@ class AiMotorEmulator(PtyEmulator):
         with self._lock:
             return self.axis.position()
 
-    def _take_requests(self, buf: bytearray) -> List[Tuple[int, int]]:
+    def _take_requests(self, buf: bytearray) -> list[tuple[int, int]]:
         out = []
         while True:
             start = buf.find(b"\xff")
@@ -76,7 +76,7 @@ class AiMotorEmulator(PtyEmulator):
             else:
                 del buf[:1]  # not a request: resynchronise on the next FF
 
-    def _handle(self, request: Tuple[int, int]) -> Optional[bytes]:
+    def _handle(self, request: tuple[int, int]) -> Optional[bytes]:
         d1, d2 = request
         mode, motor_id = d1 >> 5, d1 & 0x1F
         if motor_id != self.config.motor_id:

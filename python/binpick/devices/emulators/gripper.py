@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
-from typing import Any, List, Optional
+from typing import Any, Optional
 
-from .._link import check_int, check_number
+from ..._validate import check_int, check_number
 from ..gripper import (
     ACT,
     COMMAND_REGISTER,
@@ -101,7 +101,7 @@ class GripperEmulator(PtyEmulator):
             self.axis.set_goal(goal)
 
     # -- protocol
-    def _take_requests(self, buf: bytearray) -> List[bytes]:
+    def _take_requests(self, buf: bytearray) -> list[bytes]:
         out = []
         while len(buf) >= 8:
             need = 9 + buf[6] if buf[1] == FC_WRITE_MULTIPLE else 8
@@ -138,7 +138,7 @@ class GripperEmulator(PtyEmulator):
                     return self._exception(fc, 2)
                 if nbytes != 2 * count:
                     return self._exception(fc, 3)
-                self.command[: 2 * count] = frame[7:7 + nbytes]
+                self.command[: 2 * count] = frame[7 : 7 + nbytes]
                 self._apply()
                 return self._reply(frame[:6])
             return self._exception(fc, 1)

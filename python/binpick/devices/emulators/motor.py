@@ -12,9 +12,10 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass
-from typing import Any, List, Optional, Union
+from typing import Any, Optional, Union
 
-from .._link import check_int, check_number
+from ..._validate import check_int, check_number
+from ...errors import ChecksumError, ProtocolError
 from ..dynamixel import (
     ADDR_GOAL_POSITION,
     ADDR_MOVING,
@@ -31,7 +32,6 @@ from ..dynamixel import (
     decode_packet,
     encode_packet,
 )
-from ...errors import ChecksumError, ProtocolError
 from ._pty import PtyEmulator, monotonic
 
 __all__ = ["LinearAxis", "DynamixelEmulatorConfig", "DynamixelEmulator", "CrcFailure"]
@@ -136,8 +136,8 @@ class DynamixelEmulator(PtyEmulator):
         return bool(self.table[ADDR_TORQUE_ENABLE])
 
     # -- protocol
-    def _take_requests(self, buf: bytearray) -> List[Union[Packet, CrcFailure]]:
-        out: List[Union[Packet, CrcFailure]] = []
+    def _take_requests(self, buf: bytearray) -> list[Union[Packet, CrcFailure]]:
+        out: list[Union[Packet, CrcFailure]] = []
         while True:
             start = buf.find(HEADER)
             if start < 0:
@@ -191,7 +191,7 @@ class DynamixelEmulator(PtyEmulator):
             if addr + n > TABLE_SIZE:
                 return self._status(_ERR_ACCESS)
             self._refresh()
-            return self._status(0, bytes(self.table[addr:addr + n]))
+            return self._status(0, bytes(self.table[addr : addr + n]))
         if p.instruction == INST_WRITE:
             if len(p.params) < 3:
                 return self._status(_ERR_LENGTH)
@@ -221,8 +221,9 @@ class DynamixelEmulator(PtyEmulator):
         self.axis.enabled = bool(self.table[ADDR_TORQUE_ENABLE])
         velocity = struct.unpack_from("<I", self.table, ADDR_PROFILE_VELOCITY)[0]
         rpm_to_ticks = 4096 / 60.0
-        self.axis.speed = (velocity * 0.229 * rpm_to_ticks if velocity
-                           else self.config.max_speed_rad_s * 4096 / (2 * math.pi))
+        self.axis.speed = (
+            velocity * 0.229 * rpm_to_ticks if velocity else self.config.max_speed_rad_s * 4096 / (2 * math.pi)
+        )
         self.axis.set_goal(struct.unpack_from("<i", self.table, ADDR_GOAL_POSITION)[0])
 
     # -- fault hooks

@@ -22,12 +22,12 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Optional
 
 import numpy as np
 
+from ..._validate import check_number
 from ...errors import InvalidInputError
-from .._link import check_number
 from ..xyzabc import rotation_from_abc, xyzabc_from_transform
 from ._pty import Fault, PtyEmulator, monotonic
 
@@ -38,7 +38,7 @@ ERR_NO_CONTROL, ERR_SERVO_OFF, ERR_BUSY, ERR_ALARM = 2001, 2002, 2003, 2004
 ERR_NO_POSITION, ERR_REACH, ERR_JOINT, ERR_PATH, ERR_RANGE = 3001, 3002, 3003, 3004, 3005
 ERR_COLLISION, ERR_INTERNAL = 4001, 4002
 
-ERROR_TEXTS: Dict[int, str] = {
+ERROR_TEXTS: dict[int, str] = {
     ERR_SYNTAX: "Command syntax error",
     ERR_UNKNOWN: "Unknown command",
     ERR_NOT_OPEN: "Communication not opened (send OPEN=)",
@@ -96,10 +96,10 @@ class ArmModel:
     upper_arm_mm: float = 250.0
     forearm_mm: float = 160.0
     flange_mm: float = 72.0
-    joint_min_deg: Tuple[float, ...] = (-150.0, -60.0, -30.0, -160.0, -120.0, -360.0)
-    joint_max_deg: Tuple[float, ...] = (150.0, 120.0, 160.0, 160.0, 120.0, 360.0)
-    workspace_min_mm: Tuple[float, float, float] = (-450.0, -450.0, -100.0)
-    workspace_max_mm: Tuple[float, float, float] = (450.0, 450.0, 750.0)
+    joint_min_deg: tuple[float, ...] = (-150.0, -60.0, -30.0, -160.0, -120.0, -360.0)
+    joint_max_deg: tuple[float, ...] = (150.0, 120.0, 160.0, 160.0, 120.0, 360.0)
+    workspace_min_mm: tuple[float, float, float] = (-450.0, -450.0, -100.0)
+    workspace_max_mm: tuple[float, float, float] = (450.0, 450.0, 750.0)
 
     def forward(self, q: np.ndarray) -> np.ndarray:
         """T_base_flange of joint angles ``q`` (radians)."""
@@ -172,7 +172,7 @@ class RobotEmulatorConfig:
     arm: ArmModel = ArmModel()
     robot_number: int = 1
     model_name: str = "RV-1A"
-    home_deg: Tuple[float, ...] = (0.0, 0.0, 90.0, 0.0, 90.0, 0.0)
+    home_deg: tuple[float, ...] = (0.0, 0.0, 90.0, 0.0, 90.0, 0.0)
     joint_speed_deg_s: float = 180.0
     speed_scale: float = 1.0
     servo_on_delay_s: float = 0.0
@@ -222,14 +222,16 @@ def _quat(R: np.ndarray) -> np.ndarray:
 
 def _quat_matrix(q: np.ndarray) -> np.ndarray:
     w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
-def _straight_path(T0: np.ndarray, T1: np.ndarray, steps: int) -> List[np.ndarray]:
+def _straight_path(T0: np.ndarray, T1: np.ndarray, steps: int) -> list[np.ndarray]:
     q0, q1 = _quat(T0[:3, :3]), _quat(T1[:3, :3])
     if q0 @ q1 < 0:
         q1 = -q1
@@ -272,9 +274,9 @@ class RobotEmulator(PtyEmulator):
         self._override = 100
         self._speed_mm_s = 100.0
         self._alarm = 0
-        self._positions: Dict[int, Tuple[np.ndarray, int, int]] = {}
-        self._pending_alarm: Optional[Tuple[float, int]] = None
-        self.hands: Dict[int, bool] = {}
+        self._positions: dict[int, tuple[np.ndarray, int, int]] = {}
+        self._pending_alarm: Optional[tuple[float, int]] = None
+        self.hands: dict[int, bool] = {}
 
     # -- state for tests
     def joints(self) -> np.ndarray:
@@ -349,7 +351,7 @@ class RobotEmulator(PtyEmulator):
         return motion
 
     # -- protocol
-    def _take_requests(self, buf: bytearray) -> List[str]:
+    def _take_requests(self, buf: bytearray) -> list[str]:
         out = []
         while b"\r" in buf:
             line, _, rest = bytes(buf).partition(b"\r")
@@ -390,9 +392,15 @@ class RobotEmulator(PtyEmulator):
             return self.config.model_name
         if not self._opened and not cmd.startswith("ERRORMES"):
             raise _Refused(ERR_NOT_OPEN)
-        simple = {"CLOSE": self._close_session, "CNTLON": lambda: setattr(self, "_control", True),
-                  "CNTLOFF": lambda: setattr(self, "_control", False), "SRVON": self._servo_on,
-                  "SRVOFF": self._servo_off, "RSTALRM": lambda: setattr(self, "_alarm", 0), "STOP": self._halt}
+        simple = {
+            "CLOSE": self._close_session,
+            "CNTLON": lambda: setattr(self, "_control", True),
+            "CNTLOFF": lambda: setattr(self, "_control", False),
+            "SRVON": self._servo_on,
+            "SRVOFF": self._servo_off,
+            "RSTALRM": lambda: setattr(self, "_alarm", 0),
+            "STOP": self._halt,
+        }
         if cmd in simple:
             simple[cmd]()
             return ""

@@ -1,0 +1,247 @@
+"""What the pick loop knows about a cell: :class:`CellConfig` (calibration, part and grasps, bin
+box, scan and drop poses, gripper, limits) and :class:`GripperGeometry` (the gripper's TCP and
+shape, for planning and collision checks); :func:`sweep_angles`, the motor angles whose laser
+sheets sweep the bin.
+
+Lengths in mm, angles in radians; transforms are 4×4 ``T_to_from``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+from .._validate import as_box, as_transform, count, non_negative, positive
+from ..calibration import CellCalibration
+from ..devices import safety
+from ..errors import InvalidInputError, SafetyError
+from ..models import Model
+from ..transforms import laser_sweep, translation
+from .grasp import branch_grasps
+
+__all__ = ["CellConfig", "GripperGeometry", "check_static_poses", "sweep_angles"]
+
+
+@dataclass(frozen=True)
+class GripperGeometry:
+    """The gripper on the flange, for planning and collision checks (gripper frame: z = approach
+    direction into the part, x = the fingers' closing direction, origin = the TCP between the fingertips).
+
+    Attributes:
+        T_flange_gripper: the TCP frame in the flange frame (4×4, mm).
+        open_width_mm: finger opening when open, mm.
+        finger_length_mm: length of the fingers along z, mm.
+        finger_width_mm: width of a finger along y, mm.
+        finger_thickness_mm: thickness of a finger along x, mm.
+        tip_depth_mm: how far the fingertips reach past the TCP along +z, mm.
+        body_radius_mm: radius of the gripper body above the fingers (a cylinder about z), mm.
+        body_length_mm: length of that body along z, mm.
+    """
+
+    T_flange_gripper: np.ndarray = field(default_factory=lambda: translation(0.0, 0.0, 150.0))
+    open_width_mm: float = 50.0
+    finger_length_mm: float = 45.0
+    finger_width_mm: float = 20.0
+    finger_thickness_mm: float = 8.0
+    tip_depth_mm: float = 10.0
+    body_radius_mm: float = 45.0
+    body_length_mm: float = 60.0
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "T_flange_gripper", as_transform(self.T_flange_gripper, "T_flange_gripper"))
+        for name in (
+            "open_width_mm",
+            "finger_length_mm",
+            "finger_width_mm",
+            "finger_thickness_mm",
+            "body_radius_mm",
+            "body_length_mm",
+        ):
+            positive(getattr(self, name), name)
+        non_negative(self.tip_depth_mm, "tip_depth_mm", "mm")
+
+    def occupied(self, points_gripper: np.ndarray) -> np.ndarray:
+        """Which points (N, 3, in the gripper frame) lie inside the open gripper (fingers or body)."""
+        x, y, z = points_gripper.T
+        top = self.tip_depth_mm - self.finger_length_mm
+        in_z = (z <= self.tip_depth_mm) & (z >= top)
+        offset = self.open_width_mm / 2 + self.finger_thickness_mm / 2
+        finger = (
+            in_z
+            & (np.abs(y) <= self.finger_width_mm / 2)
+            & (
+                (np.abs(x - offset) <= self.finger_thickness_mm / 2)
+                | (np.abs(x + offset) <= self.finger_thickness_mm / 2)
+            )
+        )
+        body = (z < top) & (z >= top - self.body_length_mm) & (np.hypot(x, y) <= self.body_radius_mm)
+        return finger | body
+
+    def between_fingers(self, points_gripper: np.ndarray) -> np.ndarray:
+        """Which points (N, 3, in the gripper frame) lie in the slab the closing fingers sweep."""
+        _, y, z = points_gripper.T
+        return (
+            (np.abs(y) <= self.finger_width_mm / 2)
+            & (z <= self.tip_depth_mm)
+            & (z >= self.tip_depth_mm - self.finger_length_mm)
+        )
+
+
+@dataclass(frozen=True)
+class CellConfig:
+    """What the pick loop needs to know about a cell (base frame, mm, radians).
+
+    Attributes:
+        calibration: camera intrinsics, laser pose at motor angle 0, hand-eye.
+        model: the part model.
+        bin_bounds: the bin's inner volume ((xmin, ymin, zmin), (xmax, ymax, zmax)), mm.
+        scan_poses: the flange poses ``T_base_flange`` to scan from (one or more).
+        drop_pose: the flange pose where a picked part is released.
+        frames: laser frames per scan pose.
+        scan_angles: motor angles (rad) per scan pose; None = computed from the calibration to sweep the bin.
+        grasps: name → ``T_gripper_object``; None = the model's declared grasps, or
+            :func:`~binpick.cell.branch_grasps` for a model with branches and no declared grasps.
+        gripper: the gripper's TCP and shape.
+        limits: the cell's motion limits (also given to the robot driver).
+        approach_distance_mm: the straight approach along the gripper axis before the grasp, mm.
+        clearance_z_mm: flange height for travelling over the bin, mm; None = the approach height + 20 mm.
+        max_collision_points: a grasp is refused when more scene points than this lie inside the open gripper
+            (fingers or body), or more points of the located part's own model (at the located pose).
+        max_candidates: parts tried per scan when the top part has no usable grasp.
+        reachable: optional test ``T_base_flange → bool`` from the arm's kinematics; None = trust
+            the controller (it refuses unreachable targets, and the cell then stops).
+        symmetries: ``T_object_object`` maps of the part onto itself, for judging pose errors.
+        min_score: a located pose scoring lower counts as not found.
+        estimate_options: extra keyword arguments for :func:`binpick.estimate_pose`.
+        keep_frames: how many frames of each scan to keep in memory (evenly spaced; for pictures).
+        num_threads: worker threads for extraction and pose estimation, 0 = all cores.
+    """
+
+    calibration: CellCalibration
+    model: Model
+    bin_bounds: Any
+    scan_poses: Sequence[Any]
+    drop_pose: Any
+    frames: int = 90
+    scan_angles: Optional[Sequence[Sequence[float]]] = None
+    grasps: Optional[Mapping[str, Any]] = None
+    gripper: GripperGeometry = field(default_factory=GripperGeometry)
+    limits: safety.CellLimits = field(default_factory=safety.CellLimits)
+    approach_distance_mm: float = 40.0
+    clearance_z_mm: Optional[float] = None
+    max_collision_points: int = 15
+    max_candidates: int = 5
+    reachable: Optional[Callable[[np.ndarray], bool]] = None
+    symmetries: Sequence[Any] = ()
+    min_score: float = 0.0
+    estimate_options: Mapping[str, Any] = field(default_factory=dict)
+    keep_frames: int = 6
+    num_threads: int = 0
+
+    def __post_init__(self) -> None:
+        self._check_types()
+        object.__setattr__(self, "bin_bounds", np.array(as_box(self.bin_bounds)))
+        self._set_poses()
+        self._set_grasps()
+        positive(self.approach_distance_mm, "approach_distance_mm")
+        if self.clearance_z_mm is None:
+            object.__setattr__(self, "clearance_z_mm", float(self.limits.approach_height_mm) + 20.0)
+        count(self.max_collision_points, "max_collision_points")
+        count(self.max_candidates, "max_candidates", 1)
+        object.__setattr__(
+            self, "symmetries", tuple(as_transform(S, f"symmetries[{i}]") for i, S in enumerate(self.symmetries))
+        )
+        non_negative(self.min_score, "min_score")
+        count(self.keep_frames, "keep_frames")
+        count(self.num_threads, "num_threads")
+        if self.reachable is not None and not callable(self.reachable):
+            raise InvalidInputError("reachable: expected a function T_base_flange -> bool, or None")
+
+    def _check_types(self) -> None:
+        for name, kind, what in (
+            ("calibration", CellCalibration, "a CellCalibration"),
+            ("model", Model, "a binpick.Model"),
+            ("gripper", GripperGeometry, "a GripperGeometry"),
+            ("limits", safety.CellLimits, "a binpick.devices.CellLimits"),
+        ):
+            value = getattr(self, name)
+            if not isinstance(value, kind):
+                raise InvalidInputError(f"{name}: expected {what}, got {type(value).__name__}")
+
+    def _set_poses(self) -> None:
+        poses = [self.scan_poses] if np.asarray(self.scan_poses, dtype=object).ndim == 2 else list(self.scan_poses)
+        if not poses:
+            raise InvalidInputError("scan_poses: give at least one flange pose to scan from")
+        object.__setattr__(self, "scan_poses", tuple(as_transform(T, f"scan_poses[{i}]") for i, T in enumerate(poses)))
+        object.__setattr__(self, "drop_pose", as_transform(self.drop_pose, "drop_pose"))
+        count(self.frames, "frames", 1)
+        if self.scan_angles is not None:
+            angles = tuple(np.asarray(a, dtype=np.float64).ravel() for a in self.scan_angles)
+            if len(angles) != len(self.scan_poses) or any(len(a) == 0 or not np.isfinite(a).all() for a in angles):
+                raise InvalidInputError(
+                    "scan_angles: give one non-empty list of finite motor angles (rad) per scan pose"
+                )
+            object.__setattr__(self, "scan_angles", angles)
+
+    def _set_grasps(self) -> None:
+        grasps = (
+            self.grasps
+            if self.grasps is not None
+            else (self.model.grasps or branch_grasps(self.model, finger_width_mm=self.gripper.finger_width_mm))
+        )
+        if not grasps:
+            raise InvalidInputError(
+                f"grasps: the part {self.model.name!r} has no grasps; declare some with model.add_grasp"
+            )
+        object.__setattr__(
+            self, "grasps", MappingProxyType({str(k): as_transform(v, f"grasps[{k!r}]") for k, v in grasps.items()})
+        )
+
+    def angles_for(self, i: int) -> np.ndarray:
+        """The motor angles (rad) of scan pose ``i``."""
+        if self.scan_angles is not None:
+            return self.scan_angles[i]
+        cal = self.calibration
+        T_base_laser = self.scan_poses[i] @ cal.T_flange_camera @ cal.T_camera_laser
+        return laser_sweep(T_base_laser, self.bin_bounds[0], self.bin_bounds[1], self.frames)
+
+
+def sweep_angles(
+    calibration: CellCalibration, T_base_flange: Any, bin_bounds: Any, frames: int, *, margin: float = 10.0
+) -> np.ndarray:
+    """``frames`` motor angles (rad), evenly spaced, whose laser sheets sweep the bin box
+    ``bin_bounds`` (floor corners widened by ``margin`` mm along x, and the rim) seen from ``T_base_flange``."""
+    if not isinstance(calibration, CellCalibration):
+        raise InvalidInputError(f"calibration: expected a CellCalibration, got {type(calibration).__name__}")
+    T_bf = as_transform(T_base_flange, "T_base_flange")
+    lo, hi = as_box(bin_bounds)
+    n = count(frames, "frames", 1)
+    return laser_sweep(T_bf @ calibration.T_flange_camera @ calibration.T_camera_laser, lo, hi, n, margin)
+
+
+def check_static_poses(config: CellConfig) -> None:
+    """The scan and drop poses and the clearance height against the cell's limits (SafetyError);
+    the cell checks them when it is built, before any byte is sent."""
+    lim = config.limits
+    for i, T in enumerate(config.scan_poses):
+        safety.check_pose(T, lim, name=f"scan_poses[{i}]")
+        if T[2, 3] < lim.approach_height_mm:
+            raise SafetyError(
+                f"scan_poses[{i}]: z = {T[2, 3]:.1f} mm is below the approach height {lim.approach_height_mm:g} mm; "
+                "nothing was sent — scan from above the approach height"
+            )
+    safety.check_pose(config.drop_pose, lim, name="drop_pose")
+    if config.drop_pose[2, 3] < lim.approach_height_mm:
+        raise SafetyError(
+            f"drop_pose: z = {config.drop_pose[2, 3]:.1f} mm is below the approach height "
+            f"{lim.approach_height_mm:g} mm; nothing was sent — drop from above the approach height"
+        )
+    if not lim.approach_height_mm <= config.clearance_z_mm <= lim.workspace_max_mm[2]:
+        raise SafetyError(
+            f"clearance_z_mm: {config.clearance_z_mm:g} mm must lie between the approach height "
+            f"{lim.approach_height_mm:g} mm and the workspace top {lim.workspace_max_mm[2]:g} mm; nothing was sent"
+        )

@@ -1,0 +1,501 @@
+"""The pick loop — the same code drives the simulated cell and the real one.
+
+A :class:`Cell` holds the drivers (robot, laser motor, gripper), a :class:`FrameSource` (the
+camera) and a :class:`CellConfig` (calibration, part model and grasps, bin box, scan and drop
+poses, gripper geometry, motion limits). One pick is::
+
+    cell.scan()    robot to the scan pose (checked by the safety layer), sweep the laser motor,
+                   grab a frame per angle, extract the line, triangulate → cloud in the base frame
+    cell.locate()  estimate_pose(cloud, model, bin box) → T_base_object
+    cell.plan()    every declared grasp: T_base_gripper = T_base_object · T_gripper_object⁻¹ (Eq. 30),
+                   T_base_flange = T_base_gripper · T_flange_gripper⁻¹; keep the ones within the
+                   tool-tilt limit, reachable, free of the scene, whose whole motion passes the
+                   safety rules; take the most vertical (:func:`binpick.cell.grasp.plan_grasp`)
+    cell.pick()    open, above → approach → grasp (straight along the gripper axis), close, lift
+                   straight up, drop pose, open; on any fault the arm is stopped and the fault raised
+
+The simulated cell (:class:`binpick.sim.SimulatedCell`) runs this loop on emulated devices; this
+module loads neither the emulators nor the simulator.
+
+Lengths in mm, angles in radians; transforms are 4×4 ``T_to_from``.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+from dataclasses import replace
+from types import MappingProxyType
+from typing import Any, Callable, Optional, TextIO
+
+import numpy as np
+
+from .._validate import count
+from ..devices.gripper import Gripper
+from ..devices.motor import LaserMotor
+from ..devices.robot import Robot
+from ..errors import BinpickError, DeviceError, InvalidInputError, NoObjectFound
+from ..poses import estimate_pose
+from ..vision import extract_line, triangulate
+from .config import CellConfig, check_static_poses
+from .frames import FrameSource
+from .grasp import NoGraspError, plan_grasp
+from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult
+
+__all__ = ["Cell", "ProgressPrinter", "quiet"]
+
+
+class ProgressPrinter:
+    """Prints one line per stage: elapsed time, the pick, the stage and what it did."""
+
+    def __init__(self, stream: Optional[TextIO] = None) -> None:
+        self.stream = stream
+        self._t0 = time.perf_counter()
+
+    def __call__(self, stage: str, message: str) -> None:
+        stream = self.stream if self.stream is not None else sys.stdout
+        print(f"[{time.perf_counter() - self._t0:7.2f} s] {stage:<10} {message}", file=stream, flush=True)
+
+
+def quiet(stage: str, message: str) -> None:
+    """A progress callback that prints nothing."""
+    return None
+
+
+def _ms_since(t0: float) -> float:
+    return (time.perf_counter() - t0) * 1e3
+
+
+class _Sweep:
+    """The frames of one scan as they come in: line pixels, frame index, motor angle, flange pose."""
+
+    def __init__(self) -> None:
+        self.pixels: list[np.ndarray] = []
+        self.frame_of: list[np.ndarray] = []
+        self.angles: list[float] = []
+        self.poses: list[np.ndarray] = []
+        self.kept: dict[int, np.ndarray] = {}
+
+    def add(self, uv: np.ndarray, angle: float, T_base_flange: np.ndarray, image: Optional[np.ndarray]) -> None:
+        index = len(self.angles)
+        self.pixels.append(uv)
+        self.frame_of.append(np.full(len(uv), index, dtype=np.int64))
+        self.angles.append(angle)
+        self.poses.append(T_base_flange)
+        if image is not None:
+            self.kept[index] = image
+
+
+class Cell:
+    """The pick loop on a cell's drivers (see the module docstring).
+
+    Args:
+        config: the cell's calibration, part, poses, gripper and limits.
+        robot: the robot driver; its ``limits`` must be ``config.limits`` (the driver checks every motion).
+        motor: the laser motor driver.
+        gripper: the gripper driver.
+        camera: where frames come from.
+        progress: called with (stage, message) as the work goes on; None = silent.
+        truth: optional ground truth (the simulator) with ``judge(T_base_object) -> PoseTruth`` and
+            ``take_picked() -> Optional[int]`` (the instance that left the bin since the last call).
+    """
+
+    EMPTY_GRIP_RADIUS_MM = 15.0
+    """A part located within this distance of where the gripper closed on nothing earlier in the
+    run is passed over: the same (wrong) pose would most likely be found and tried again."""
+
+    def __init__(
+        self,
+        config: CellConfig,
+        *,
+        robot: Robot,
+        motor: LaserMotor,
+        gripper: Gripper,
+        camera: FrameSource,
+        progress: Optional[Callable[[str, str], None]] = None,
+        truth: Any = None,
+    ) -> None:
+        if not isinstance(config, CellConfig):
+            raise InvalidInputError(f"config: expected a CellConfig, got {type(config).__name__}")
+        if not isinstance(camera, FrameSource):
+            raise InvalidInputError(f"camera: expected a binpick.cell.FrameSource, got {type(camera).__name__}")
+        if robot.limits is not None and robot.limits != config.limits:
+            raise InvalidInputError(
+                "robot: the driver's CellLimits differ from config.limits; open the robot with limits=config.limits"
+            )
+        self.config = config
+        self.robot = robot
+        self.motor = motor
+        self.gripper = gripper
+        self.camera = camera
+        self.progress = progress or quiet
+        self.truth = truth
+        self._empty_grips: list[np.ndarray] = []
+        check_static_poses(config)
+
+    # -- life cycle
+    def open(self) -> Cell:
+        """Opens the robot session, enables the laser motor, activates and opens the gripper."""
+        self.progress("connect", "robot session, laser motor torque, gripper activation")
+        self.robot.open_session()
+        self.motor.enable()
+        self.gripper.activate()
+        self.gripper.open()
+        return self
+
+    def close(self) -> None:
+        """Closes the robot session and releases the motor, the camera and the ports (best effort)."""
+        for action in (self.robot.close_session, self.motor.disable):
+            try:
+                action()
+            except DeviceError:
+                pass
+        for closer in (self.robot.close, self.motor.close, self.gripper.close_port, self.camera.close):
+            try:
+                closer()
+            except (DeviceError, OSError):
+                pass
+
+    def __enter__(self) -> Cell:
+        try:
+            return self.open()
+        except BaseException:
+            self.close()
+            raise
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # -- motion
+    def _halt(self) -> str:
+        try:
+            self.robot.stop()
+        except DeviceError as exc:
+            return f"STOP could not be sent ({exc}); stop the arm by hand"
+        return "the arm was stopped"
+
+    def _move(self, T: np.ndarray, *, linear: bool) -> None:
+        self.robot.move_to(T, linear=linear)
+
+    def _go_above_approach(self) -> None:
+        """From wherever the arm is, straight up to the clearance height if it is below the approach height."""
+        here = self.robot.read_pose()
+        if here[2, 3] < self.config.limits.approach_height_mm:
+            up = here.copy()
+            up[2, 3] = self.config.clearance_z_mm
+            self._move(up, linear=True)
+
+    # -- scan
+    def scan(self) -> ScanResult:
+        """Scans the bin from every scan pose; returns the cloud in the base frame."""
+        cfg = self.config
+        timings: dict[str, float] = {"move": 0.0, "sweep": 0.0, "extract": 0.0}
+        sweep = _Sweep()
+        for i, T_scan in enumerate(cfg.scan_poses):
+            t0 = time.perf_counter()
+            self._go_above_approach()
+            self._move(T_scan, linear=False)
+            T_bf = self.robot.read_pose()
+            t1 = time.perf_counter()
+            timings["move"] += (t1 - t0) * 1e3
+            wanted = cfg.angles_for(i)
+            extract_s = self._sweep_laser(sweep, wanted, T_bf)
+            timings["sweep"] += (time.perf_counter() - t1 - extract_s) * 1e3
+            timings["extract"] += extract_s * 1e3
+            done = sweep.angles[-len(wanted) :]
+            self.progress(
+                "scan",
+                f"{len(wanted)} frames from flange ({T_bf[0, 3]:.1f}, {T_bf[1, 3]:.1f}, {T_bf[2, 3]:.1f}) mm, "
+                f"laser {math.degrees(min(done)):.1f}°..{math.degrees(max(done)):.1f}°",
+            )
+        t2 = time.perf_counter()
+        cloud = triangulate(
+            np.concatenate(sweep.pixels),
+            np.concatenate(sweep.frame_of),
+            np.array(sweep.angles),
+            np.stack(sweep.poses),
+            cfg.calibration,
+            num_threads=cfg.num_threads,
+        )
+        timings["triangulate"] = _ms_since(t2)
+        self.progress(
+            "cloud",
+            f"{len(cloud)} points (extract {timings['extract']:.0f} ms, triangulate {timings['triangulate']:.0f} ms)",
+        )
+        return ScanResult(
+            cloud=cloud,
+            angles=np.array(sweep.angles),
+            T_base_flanges=np.stack(sweep.poses),
+            frames=MappingProxyType(sweep.kept),
+            timings=MappingProxyType(timings),
+        )
+
+    def _sweep_laser(self, sweep: _Sweep, wanted: np.ndarray, T_bf: np.ndarray) -> float:
+        """Turns the laser through ``wanted`` at flange pose ``T_bf``, a frame per angle into
+        ``sweep``; returns the seconds spent extracting lines."""
+        keep_n = self.config.keep_frames
+        keep = (
+            set(np.unique(np.linspace(0, len(wanted) - 1, min(keep_n, len(wanted))).round().astype(int)).tolist())
+            if keep_n
+            else set()
+        )
+        self.camera.begin(T_bf)
+        extract_s = 0.0
+        for k, a in enumerate(wanted):
+            reached = float(self.motor.move_to(float(a), wait=True))
+            self.camera.laser_at(reached)
+            img = self.camera.grab()
+            te = time.perf_counter()
+            uv = extract_line(img)
+            extract_s += time.perf_counter() - te
+            sweep.add(uv, reached, T_bf, img if k in keep else None)
+        return extract_s
+
+    # -- locate and plan
+    def locate(self, scan: Optional[ScanResult] = None, *, exclude: Optional[np.ndarray] = None) -> Located:
+        """The top pickable part in ``scan`` (a new scan when None), leaving out the points where
+        ``exclude`` (bool, one per point) is true; NoObjectFound when there is none."""
+        scan = self.scan() if scan is None else scan
+        cfg = self.config
+        keep = np.arange(len(scan.points)) if exclude is None else np.flatnonzero(~np.asarray(exclude, dtype=bool))
+        if len(keep) < 10:
+            raise NoObjectFound(f"the scan holds {len(keep)} usable points; is the laser on and the bin in view?")
+        options = dict(cfg.estimate_options)
+        options.setdefault("num_threads", cfg.num_threads)
+        # The camera's position at the first scan pose orients the scan's normals (PPF).
+        options.setdefault("viewpoint", (np.asarray(scan.T_base_flanges[0]) @ cfg.calibration.T_flange_camera)[:3, 3])
+        result = estimate_pose(scan.points[keep], cfg.model, bin=cfg.bin_bounds, **options)
+        if result.score < cfg.min_score:
+            raise NoObjectFound(
+                f"the best pose scores {result.score:.2f}, below the cell's min_score {cfg.min_score:.2f}"
+            )
+        T = np.asarray(result.T_scene_model, dtype=np.float64)
+        truth = self.truth.judge(T) if self.truth is not None else None
+        self._report_located(result, T, truth)
+        idx = np.asarray(result.indices, dtype=np.int64)
+        return Located(
+            scan=scan, result=result, T_base_object=T, indices=keep[idx[(idx >= 0) & (idx < len(keep))]], truth=truth
+        )
+
+    def _report_located(self, result: Any, T: np.ndarray, truth: Optional[PoseTruth]) -> None:
+        t = T[:3, 3]
+        judged = (
+            ""
+            if truth is None
+            else (
+                f"; vs truth {truth.rotation_error_deg:.2f}°, {truth.translation_error_mm:.2f} mm "
+                f"({'pick-grade' if truth.pick_grade else 'NOT pick-grade'})"
+            )
+        )
+        self.progress(
+            "locate",
+            f"{result.method} score {result.score:.2f}, rmse {result.rmse:.2f} "
+            f"mm, at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm "
+            f"in {sum(result.timings.values()):.0f} ms{judged}",
+        )
+
+    def locate_and_plan(self, scan: ScanResult) -> tuple[Located, PickPlan]:
+        """Locates the top part and plans its pick; when no grasp of it can be used (or the gripper
+        already closed on nothing there earlier in the run), leaves its points out and tries the
+        next part, up to ``config.max_candidates`` parts."""
+        excluded = np.zeros(len(scan.points), dtype=bool)
+        last: Optional[NoGraspError] = None
+        for _ in range(self.config.max_candidates):
+            try:
+                located = self.locate(scan, exclude=excluded)
+            except NoObjectFound:
+                if last is None:
+                    raise
+                break  # the parts found had no usable grasp: that is the reason to report
+            try:
+                self._refuse_empty_grip_spot(located)
+                return located, self.plan(located)
+            except NoGraspError as exc:
+                last = exc
+                self.progress("plan", f"{exc}; trying the next part")
+                if len(located.indices) == 0:
+                    break
+                excluded[located.indices] = True
+        assert last is not None
+        raise last
+
+    def _refuse_empty_grip_spot(self, located: Located) -> None:
+        t = located.T_base_object[:3, 3]
+        if any(np.linalg.norm(t - spot) < self.EMPTY_GRIP_RADIUS_MM for spot in self._empty_grips):
+            raise NoGraspError(
+                f"the gripper closed on nothing at this located {self.config.model.name} "
+                f"({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm in an earlier pick of this run"
+            )
+
+    def plan(self, located: Located) -> PickPlan:
+        """The most vertical declared grasp that is within the tilt limit, reachable, clear of the
+        scene and of the located part's own other branches, and whose whole motion passes the safety
+        rules; NoGraspError when none is."""
+        pts = np.asarray(located.scan.points)
+        others = np.ones(len(pts), dtype=bool)
+        others[located.indices] = False
+        plan, hits = plan_grasp(self.config, located.T_base_object, pts[others], self.robot.read_pose())
+        rejected = ", ".join(f"{v} {k}" for k, v in plan.rejected.items() if v) or "none rejected"
+        self.progress(
+            "plan",
+            f"grasp {plan.grasp}, tool tilt {plan.tilt_deg:.1f}°, {hits} scene points in the gripper "
+            f"({plan.considered} grasps: {rejected})",
+        )
+        return plan
+
+    # -- pick
+    def pick(self, located: Optional[Located] = None, *, plan: Optional[PickPlan] = None, index: int = 1) -> PickRecord:
+        """Scans and locates (unless ``located`` is given), plans and picks one part.
+
+        Device faults and safety refusals stop the arm and are raised; a failed grip is a record
+        with ``success=False``.
+        """
+        times: dict[str, float] = {}
+        t0 = time.perf_counter()
+        located, plan = self._located_and_planned(located, plan, times)
+        res = located.result
+        times.update({f"estimate.{k}": float(v) for k, v in dict(getattr(res, "timings", {})).items()})
+        t3 = time.perf_counter()
+        held = self._execute(plan)
+        times["motion"] = _ms_since(t3)
+        picked = self.truth.take_picked() if self.truth is not None else None
+        ok, error = self._judge_pick(located, held, picked)
+        times["total"] = _ms_since(t0)
+        self.progress(
+            "pick",
+            ("picked" if ok else "FAILED")
+            + (f" part {picked}" if picked is not None else "")
+            + f" with grasp {plan.grasp} in {times['motion'] / 1e3:.1f} s"
+            + (f" — {error}" if error else ""),
+        )
+        return PickRecord(
+            index=index,
+            success=ok,
+            T_base_object=located.T_base_object,
+            score=float(res.score),
+            rmse=float(res.rmse),
+            method=getattr(res, "method", None),
+            points=len(located.scan.points),
+            grasp=plan.grasp,
+            held=held,
+            truth=located.truth,
+            picked_instance=picked,
+            error=error,
+            timings=MappingProxyType(times),
+        )
+
+    def _located_and_planned(
+        self, located: Optional[Located], plan: Optional[PickPlan], times: dict[str, float]
+    ) -> tuple[Located, PickPlan]:
+        """What :meth:`pick` was given, completed: a scan, location and plan when ``located`` is
+        None, a plan when only ``plan`` is; their timings go into ``times``."""
+        if located is None:
+            scan = self.scan()
+            times.update({f"scan.{k}": v for k, v in scan.timings.items()})
+            t1 = time.perf_counter()
+            located, plan = self.locate_and_plan(scan)
+            times["locate+plan"] = _ms_since(t1)
+        elif plan is None:
+            t1 = time.perf_counter()
+            plan = self.plan(located)
+            times["plan"] = _ms_since(t1)
+        return located, plan
+
+    def _judge_pick(self, located: Located, held: Optional[bool], picked: Optional[int]) -> tuple[bool, Optional[str]]:
+        """Whether the pick succeeded, and why not; remembers where the gripper closed on nothing."""
+        if held is False:
+            self._empty_grips.append(located.T_base_object[:3, 3].copy())
+            return False, "the gripper closed on nothing (no part between the fingers)"
+        if self.truth is None:
+            return True, None
+        truth = located.truth
+        ok = picked is not None and truth is not None and picked == truth.instance and truth.pick_grade
+        if ok:
+            return True, None
+        if picked is None:
+            return False, "no part left the bin"
+        return False, (
+            f"part {picked} left the bin, but the located pose was not pick-grade or belonged to part "
+            f"{None if truth is None else truth.instance}"
+        )
+
+    def _execute(self, plan: PickPlan) -> Optional[bool]:
+        """Runs the plan; returns what the gripper said about holding. Faults stop the arm and are raised."""
+        try:
+            # Open as wide as the collision check assumed (fully when the gripper cannot be set to a width).
+            self.gripper.open_for_grasp(self.config.gripper.open_width_mm)
+            linear = {n: lin for n, _, lin in plan.waypoints}
+            for name in ("above", "approach", "grasp"):
+                self._move(plan.pose(name), linear=linear[name])
+            held = self.gripper.close()
+            self._move(plan.pose("lift"), linear=True)
+            if held is False:
+                self.gripper.open()
+                return False
+            self._move(plan.pose("drop"), linear=False)
+            self.gripper.open()
+            return held
+        except BinpickError as exc:
+            note = self._halt()
+            self.progress("FAULT", f"{exc} — {note}")
+            raise
+
+    # -- run
+    def run(self, n_picks: int) -> RunReport:
+        """Up to ``n_picks`` picks; stops early when nothing is found, no grasp fits, or a device
+        faults (the arm is stopped)."""
+        n = count(n_picks, "n_picks", 1)
+        self._empty_grips = []
+        records: list[PickRecord] = []
+        self._last: tuple[Optional[ScanResult], Optional[Located]] = (None, None)
+        stopped: Optional[str] = None
+        for i in range(1, n + 1):
+            self.progress("pick", f"— pick {i} of {n} —")
+            record, stopped = self._cycle(i)
+            records.append(record)
+            if stopped is not None:
+                break
+        last_scan, last_located = self._last
+        return RunReport(records=tuple(records), stopped=stopped, last_scan=last_scan, last_located=last_located)
+
+    def _cycle(self, i: int) -> tuple[PickRecord, Optional[str]]:
+        """One pick of :meth:`run`: scan, locate and plan, pick; the record, and why the run stops (None to go on)."""
+        t0 = time.perf_counter()
+        scan: Optional[ScanResult] = None
+        located: Optional[Located] = None
+        try:
+            scan = self.scan()
+            self._last = (scan, self._last[1])
+            t1 = time.perf_counter()
+            located, plan = self.locate_and_plan(scan)
+            self._last = (scan, located)
+            times = {f"scan.{k}": v for k, v in scan.timings.items()}
+            times["locate+plan"] = _ms_since(t1)
+            record = self.pick(located, plan=plan, index=i)
+            times.update(record.timings)
+            times["total"] = _ms_since(t0)
+            return replace(record, timings=MappingProxyType(times)), None
+        except (NoObjectFound, NoGraspError) as exc:
+            return self._failed(i, scan, located, exc, t0, fault=False), f"pick {i}: {exc}"
+        except BinpickError as exc:
+            return self._failed(i, scan, located, exc, t0, fault=True), f"pick {i}: {type(exc).__name__}: {exc}"
+
+    @staticmethod
+    def _failed(
+        i: int, scan: Optional[ScanResult], loc: Optional[Located], exc: BaseException, t0: float, *, fault: bool
+    ) -> PickRecord:
+        res = None if loc is None else loc.result
+        return PickRecord(
+            index=i,
+            success=False,
+            T_base_object=None if loc is None else loc.T_base_object,
+            score=None if res is None else float(res.score),
+            rmse=None if res is None else float(res.rmse),
+            method=None if res is None else res.method,
+            points=0 if scan is None else len(scan.points),
+            truth=None if loc is None else loc.truth,
+            error=str(exc),
+            fault=fault,
+            timings=MappingProxyType({"total": _ms_since(t0)}),
+        )

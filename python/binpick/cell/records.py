@@ -1,0 +1,142 @@
+"""The plain results of the pick loop: a scan, a located part (and its truth in the simulator),
+a pick plan, a pick record and a run report. Lengths in mm, transforms 4×4 ``T_to_from``."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any, Optional
+
+import numpy as np
+
+__all__ = ["ScanResult", "PoseTruth", "Located", "PickPlan", "PickRecord", "RunReport"]
+
+
+@dataclass(frozen=True, eq=False)
+class ScanResult:
+    """One scan: the cloud in the base frame, the motor angle (rad) and flange pose of every frame,
+    a few kept frames (index → BGR image) and the stage timings (ms)."""
+
+    cloud: Any
+    angles: np.ndarray
+    T_base_flanges: np.ndarray
+    frames: Mapping[int, np.ndarray]
+    timings: Mapping[str, float]
+
+    @property
+    def points(self) -> np.ndarray:
+        """(N, 3) points, mm, base frame."""
+        return self.cloud.points
+
+
+@dataclass(frozen=True)
+class PoseTruth:
+    """A located pose judged against ground truth: the nearest true instance, the errors
+    (minimised over the part's symmetries) and whether they are pick-grade (< 5°, < 3 mm)."""
+
+    instance: int
+    rotation_error_deg: float
+    translation_error_mm: float
+
+    @property
+    def pick_grade(self) -> bool:
+        """Rotation error under 5° and translation error under 3 mm."""
+        return self.rotation_error_deg < 5.0 and self.translation_error_mm < 3.0
+
+
+@dataclass(frozen=True, eq=False)
+class Located:
+    """The part found in a scan: the pose result, ``T_base_object``, the indices of its points in
+    the scan's cloud and, when the cell knows the truth (the simulator), how good it is."""
+
+    scan: ScanResult
+    result: Any
+    T_base_object: np.ndarray
+    indices: np.ndarray
+    truth: Optional[PoseTruth] = None
+
+
+@dataclass(frozen=True, eq=False)
+class PickPlan:
+    """The chosen grasp and the motion: ``waypoints`` are (name, T_base_flange, linear) in order."""
+
+    grasp: str
+    T_base_gripper: np.ndarray
+    T_base_flange: np.ndarray
+    tilt_deg: float
+    waypoints: tuple[tuple[str, np.ndarray, bool], ...]
+    considered: int
+    rejected: Mapping[str, int]
+
+    def pose(self, name: str) -> np.ndarray:
+        """The flange pose of waypoint ``name``."""
+        for n, T, _ in self.waypoints:
+            if n == name:
+                return T
+        raise KeyError(name)
+
+
+@dataclass(frozen=True, eq=False)
+class PickRecord:
+    """What one pick attempt did.
+
+    ``success``: the part was lifted out (with ground truth: the removed part is the located one and
+    its pose was pick-grade); ``held``: what the gripper reported (None when it cannot tell);
+    ``error``: why the attempt failed, None on success; ``timings``: stage → ms.
+    """
+
+    index: int
+    success: bool
+    T_base_object: Optional[np.ndarray] = None
+    score: Optional[float] = None
+    rmse: Optional[float] = None
+    method: Optional[str] = None
+    points: int = 0
+    grasp: Optional[str] = None
+    held: Optional[bool] = None
+    truth: Optional[PoseTruth] = None
+    picked_instance: Optional[int] = None
+    error: Optional[str] = None
+    fault: bool = False
+    timings: Mapping[str, float] = field(default_factory=dict)
+
+    def as_dict(self) -> dict:
+        """A JSON-ready summary."""
+        return {
+            "index": self.index,
+            "success": self.success,
+            "T_base_object": None if self.T_base_object is None else np.round(self.T_base_object, 6).tolist(),
+            "score": self.score,
+            "rmse_mm": self.rmse,
+            "method": self.method,
+            "points": self.points,
+            "grasp": self.grasp,
+            "held": self.held,
+            "truth": None
+            if self.truth is None
+            else {
+                "instance": self.truth.instance,
+                "rotation_error_deg": self.truth.rotation_error_deg,
+                "translation_error_mm": self.truth.translation_error_mm,
+                "pick_grade": self.truth.pick_grade,
+            },
+            "picked_instance": self.picked_instance,
+            "error": self.error,
+            "timings_ms": dict(self.timings),
+        }
+
+
+@dataclass(frozen=True, eq=False)
+class RunReport:
+    """The picks of :meth:`Cell.run`, why it stopped (None when every pick was tried), and the
+    last scan and location."""
+
+    records: tuple[PickRecord, ...]
+    stopped: Optional[str]
+    last_scan: Optional[ScanResult] = None
+    last_located: Optional[Located] = None
+
+    @property
+    def successes(self) -> int:
+        """How many picks succeeded."""
+        return sum(r.success for r in self.records)

@@ -1,0 +1,390 @@
+"""The simulated cell, the digital twin of the real one: a settled physics pile, the robot,
+laser motor and gripper emulators serving their real protocols on ptys, the real drivers opened
+on those ptys, and a camera that renders the pile from the pose the robot emulator reports with
+the laser at the angle the motor emulator reports — driven by the same pick loop
+(:class:`binpick.cell.Cell`) as the real cell. The simulated gripper closes on a part only when
+the part really lies between its fingers; the part leaves the pile when the gripper lets go.
+
+Lengths in mm, angles in radians; transforms are 4×4 ``T_to_from``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+from .. import parts
+from .._validate import positive
+from ..cell.config import CellConfig, GripperGeometry
+from ..cell.grasp import GraspMatcher, grip_width
+from ..cell.loop import Cell, quiet
+from ..cell.records import PoseTruth
+from ..devices import (
+    DynamixelConfig,
+    DynamixelMotor,
+    GripperConfig,
+    MelfaConfig,
+    MelfaRobot,
+    ModbusGripper,
+    MotorRange,
+    SerialSettings,
+    safety,
+)
+from ..devices.emulators import ArmModel, DynamixelEmulator, GripperEmulator, RobotEmulator, RobotEmulatorConfig
+from ..devices.gripper import GTO
+from ..errors import InvalidInputError, NoObjectFound
+from ..models import Model
+from ..transforms import inverse, look_down, pose_error
+from .camera import SimCamera
+from .cell import Cell as Layout
+from .pile import Pile
+
+__all__ = ["SimulatedCell", "simulated_cell", "sim_limits", "SIM_ARM"]
+
+
+def _sim_arm() -> ArmModel:
+    # A larger arm than the emulator's default RV-1A class, so that the simulated cell's scan pose
+    # 620 mm above the bin floor and every corner of the bin are within reach.
+    return ArmModel(
+        base_height_mm=250.0,
+        upper_arm_mm=400.0,
+        forearm_mm=450.0,
+        flange_mm=90.0,
+        workspace_min_mm=(-900.0, -900.0, -200.0),
+        workspace_max_mm=(900.0, 900.0, 1100.0),
+    )
+
+
+SIM_ARM = _sim_arm()
+"""The simulated cell's arm (see :class:`binpick.devices.emulators.ArmModel`)."""
+
+
+def sim_limits(layout: Any = None, gripper: Optional[GripperGeometry] = None) -> safety.CellLimits:
+    """The simulated cell's motion limits: a workspace around the bin and the drop area, and an
+    approach height that keeps the gripper above the bin's rim for joint moves."""
+    layout = layout if layout is not None else Layout()
+    gripper = gripper or GripperGeometry()
+    lo, hi = layout.bin.bounds
+    reach = float(gripper.T_flange_gripper[2, 3]) + gripper.tip_depth_mm
+    return safety.CellLimits(
+        workspace_min_mm=(float(lo[0]) - 150.0, float(lo[1]) - 250.0, float(lo[2]) + 60.0),
+        workspace_max_mm=(float(hi[0]) + 100.0, float(hi[1]) + 250.0, float(layout.T_base_flange[2, 3]) + 80.0),
+        approach_height_mm=float(hi[2]) + reach + 30.0,
+        max_lateral_below_mm=40.0,
+    )
+
+
+class _Reach:
+    """``T_base_flange → bool``: whether the arm's inverse kinematics reaches the pose in posture FL1."""
+
+    def __init__(self, arm: Any, fl1: int = 7) -> None:
+        self.arm = arm
+        self.fl1 = fl1
+        self.q_ref = np.radians([0.0, 0.0, 90.0, 0.0, 90.0, 0.0])
+
+    def __call__(self, T: np.ndarray) -> bool:
+        try:
+            self.arm.inverse(T, self.fl1, self.q_ref)
+        except Exception:  # the arm model raises its refusal (joint limit, out of reach) as an exception
+            return False
+        return True
+
+
+class SimulatedCell:
+    """The simulated cell: a settled pile, the three emulators on ptys, the real drivers on them,
+    the simulated camera, and the :class:`Cell` running the pick loop (``.cell``).
+
+    Use as a context manager (it starts the emulators and opens the cell). It is also the cell's
+    ground truth (:meth:`judge`, :meth:`take_picked`).
+
+    Args:
+        model: the part.
+        count: parts dropped into the bin.
+        seed: seed of the pile and the sensor noise.
+        frames: laser frames per scan.
+        layout: the simulated hardware (camera, laser, bin, lighting, noise, scan pose), a ``binpick.sim.Cell``.
+        gripper: the gripper geometry.
+        drop_pose: where parts are released (default: beside the bin, 350 mm up).
+        grip_tolerance_mm: the gripper holds a part when the part's pose in the gripper is within
+            this distance of a declared grasp …
+        grip_tolerance_deg: … and within this angle.
+        speed_scale: speeds up the emulated arm (1 = real time).
+        progress: stage printer (see :class:`ProgressPrinter`).
+        num_threads: rendering and pose-estimation threads, 0 = all cores.
+        config_overrides: fields of :class:`CellConfig` to set (e.g. ``estimate_options``).
+    """
+
+    def __init__(
+        self,
+        model: Model,
+        *,
+        count: int = 12,
+        seed: int = 0,
+        frames: int = 90,
+        layout: Any = None,
+        gripper: Optional[GripperGeometry] = None,
+        drop_pose: Any = None,
+        grip_tolerance_mm: float = 6.0,
+        grip_tolerance_deg: float = 12.0,
+        speed_scale: float = 10.0,
+        progress: Optional[Callable[[str, str], None]] = None,
+        num_threads: int = 0,
+        **config_overrides: Any,
+    ) -> None:
+        if not isinstance(model, Model):
+            raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}")
+        self.layout = layout if layout is not None else Layout()
+        self.model = model
+        self.seed = int(seed)
+        self.num_threads = int(num_threads)
+        self.gripper_geometry = gripper or GripperGeometry()
+        self.grip_tolerance_mm = positive(grip_tolerance_mm, "grip_tolerance_mm")
+        self.grip_tolerance_deg = positive(grip_tolerance_deg, "grip_tolerance_deg", "deg")
+        self.speed_scale = positive(speed_scale, "speed_scale", "")
+        self.progress = progress or quiet
+        self.frames = frames
+        self.count = count
+        self.config_overrides = config_overrides
+        lo, hi = self.layout.bin.bounds
+        self.drop_pose = (
+            drop_pose if drop_pose is not None else look_down(float(lo[0] + hi[0]) / 2, float(lo[1]) - 150.0, 350.0)
+        )
+        t0 = time.perf_counter()
+        self.pile = Pile(model, count, bin=self.layout.bin, seed=seed)
+        self.progress(
+            "pile", f"{len(self.pile)} {model.name} parts dropped and settled in {time.perf_counter() - t0:.1f} s"
+        )
+        self.removed: list[int] = []
+        self._held: Optional[int] = None
+        self._release_pending: Optional[int] = None
+        self._picked: Optional[int] = None
+        self.cell: Optional[Cell] = None
+        self._matcher: Optional[GraspMatcher] = None
+        self.robot_emulator = self.motor_emulator = self.gripper_emulator = None
+
+    # -- life cycle
+    def __enter__(self) -> SimulatedCell:
+        try:
+            self.start()
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    def start(self) -> Cell:
+        """Starts the emulators, opens the drivers on their ptys and the cell; returns the cell."""
+        self._start_emulators()
+        limits = self.config_overrides.pop("limits", None) or sim_limits(self.layout, self.gripper_geometry)
+        config = self._config(limits)
+        robot, motor, gripper = self._drivers(limits)
+        self.cell = Cell(
+            config,
+            robot=robot,
+            motor=motor,
+            gripper=gripper,
+            camera=SimCamera(self, seed=self.seed),
+            progress=self.progress,
+            truth=self,
+        )
+        self.cell.open()
+        return self.cell
+
+    def _start_emulators(self) -> None:
+        self.robot_emulator = RobotEmulator(
+            config=RobotEmulatorConfig(arm=SIM_ARM, speed_scale=self.speed_scale)
+        ).start()
+        self.motor_emulator = DynamixelEmulator().start()
+        self.gripper_emulator = _SimGripperEmulator(self).start()
+        self.progress(
+            "emulate",
+            f"robot on {self.robot_emulator.slave_path}, laser motor on {self.motor_emulator.slave_path}, "
+            f"gripper on {self.gripper_emulator.slave_path}",
+        )
+
+    def _config(self, limits: safety.CellLimits) -> CellConfig:
+        """The pick loop's view of the simulated cell: its exact calibration, bin, scan pose and arm."""
+        return CellConfig(
+            calibration=self.layout.calibration(),
+            model=self.model,
+            bin_bounds=self.layout.bin.bounds,
+            scan_poses=(self.layout.T_base_flange,),
+            drop_pose=self.drop_pose,
+            frames=self.frames,
+            gripper=self.gripper_geometry,
+            limits=limits,
+            reachable=_Reach(SIM_ARM),
+            num_threads=self.num_threads,
+            **self.config_overrides,
+        )
+
+    def _drivers(self, limits: safety.CellLimits) -> tuple[MelfaRobot, DynamixelMotor, ModbusGripper]:
+        """The real drivers opened on the emulators' ptys, with timings for an emulated cell."""
+        robot = MelfaRobot(
+            self.robot_emulator.slave_path,
+            limits=limits,
+            config=MelfaConfig(
+                serial=SerialSettings(baudrate=9600, parity="E", stopbits=2, timeout_s=1.0, retries=2),
+                initial_override_percent=min(50.0, limits.max_override_percent),
+                initial_linear_speed_mm_s=min(250.0, limits.max_linear_speed_mm_s),
+                poll_interval_s=0.01,
+                motion_timeout_s=30.0,
+            ),
+        )
+        motor = DynamixelMotor(
+            self.motor_emulator.slave_path,
+            config=DynamixelConfig(
+                serial=SerialSettings(baudrate=57600, timeout_s=0.2),
+                range=MotorRange(max_speed_rad_s=2 * math.pi, poll_interval_s=0.002),
+            ),
+        )
+        self._gripper_config = GripperConfig(serial=SerialSettings(baudrate=115200, timeout_s=0.3), speed=255)
+        return robot, motor, ModbusGripper(self.gripper_emulator.slave_path, config=self._gripper_config)
+
+    def close(self) -> None:
+        """Closes the cell and stops the emulators."""
+        if self.cell is not None:
+            self.cell.close()
+        for emu in (self.robot_emulator, self.motor_emulator, self.gripper_emulator):
+            if emu is not None:
+                emu.close()
+
+    @property
+    def emulator_failures(self) -> list[str]:
+        """Exceptions the emulators raised while serving (an emulator bug; should stay empty)."""
+        return [
+            f
+            for emu in (self.robot_emulator, self.motor_emulator, self.gripper_emulator)
+            if emu is not None
+            for f in emu.failures
+        ]
+
+    # -- the physical world
+    def laser_angle(self) -> float:
+        """Where the laser motor really is, radians."""
+        ticks = self.motor_emulator.present_position()
+        return (ticks - 2048) * 2 * math.pi / 4096
+
+    def T_base_tcp(self) -> np.ndarray:
+        """Where the gripper's TCP really is."""
+        return self.robot_emulator.pose() @ self.gripper_geometry.T_flange_gripper
+
+    @property
+    def grasp_matcher(self) -> GraspMatcher:
+        """The declared grasps of the running cell, matched with the grip tolerances."""
+        if self._matcher is None:
+            assert self.cell is not None
+            cfg = self.cell.config
+            self._matcher = GraspMatcher(
+                cfg.grasps, cfg.symmetries, tolerance_deg=self.grip_tolerance_deg, tolerance_mm=self.grip_tolerance_mm
+            )
+        return self._matcher
+
+    def grip_check(self) -> Optional[tuple[int, float]]:
+        """The part between the fingers now, if any, and its width across them (mm): the part
+        nearest the TCP whose pose in the gripper is within the grip tolerance of a declared grasp."""
+        self.settle_pending()
+        matcher = self.grasp_matcher
+        T_gb = inverse(self.T_base_tcp())
+        best = None
+        for pid, T_bo in zip(self.pile.ids, self.pile.poses):
+            if int(pid) == self._held:
+                continue
+            T_go = T_gb @ T_bo
+            err = matcher.error(T_go)
+            if best is None or matcher.cost(err) < matcher.cost(best[1]):
+                best = (int(pid), err, T_go)
+        if best is None or not matcher.within(best[1]):
+            return None
+        pid, _, T_go = best
+        width = grip_width(self.gripper_geometry, self.model.points, T_go)
+        return None if width is None else (pid, width)
+
+    def on_gripper_command(self, closing: bool, emulator: Any) -> None:
+        """Called by the gripper emulator on every motion command: on closing it finds the part
+        between the fingers (the fingers stop on it); on opening a held part is let go."""
+        if closing:
+            hit = self.grip_check()
+            if hit is None:
+                emulator.object_at = None
+                self._held = None
+            else:
+                pid, width = hit
+                stroke = self._gripper_config.stroke_mm
+                emulator.object_at = int(round((1.0 - min(width, stroke) / stroke) * 255))
+                self._held = pid
+        else:
+            emulator.object_at = None
+            if self._held is not None:
+                self._release_pending = self._held
+                self._held = None
+
+    def settle_pending(self) -> None:
+        """Takes a released part out of the pile and lets the rest settle (done lazily, off the emulator thread)."""
+        pid = self._release_pending
+        if pid is not None:
+            self._release_pending = None
+            tcp = self.T_base_tcp()[:3, 3]
+            lo, hi = self.layout.bin.bounds
+            inside = bool((tcp[:2] >= lo[:2]).all() and (tcp[:2] <= hi[:2]).all() and tcp[2] < hi[2] + 20)
+            if inside:
+                self.pile.settle()  # let go above the pile: it falls back in
+                return
+            t0 = time.perf_counter()
+            report = self.pile.remove(pid)
+            self.removed.append(pid)
+            self._picked = pid
+            self.progress(
+                "physics",
+                f"part {pid} left the bin; {len(self.pile)} remain, settled in {time.perf_counter() - t0:.1f} s "
+                f"({report.steps} steps)",
+            )
+
+    # -- ground truth
+    def judge(self, T_base_object: np.ndarray) -> PoseTruth:
+        """The located pose against the nearest part of the pile (errors modulo the part's symmetries)."""
+        self.settle_pending()
+        syms = self.cell.config.symmetries if self.cell is not None else ()
+        best = None
+        for pid, T_bo in zip(self.pile.ids, self.pile.poses):
+            deg, mm = pose_error(T_base_object, T_bo, syms)
+            if best is None or mm < best.translation_error_mm:
+                best = PoseTruth(instance=int(pid), rotation_error_deg=deg, translation_error_mm=mm)
+        if best is None:
+            raise NoObjectFound("the simulated bin is empty")
+        return best
+
+    def take_picked(self) -> Optional[int]:
+        """The part that left the bin since the last call, or None."""
+        self.settle_pending()
+        pid, self._picked = self._picked, None
+        return pid
+
+
+class _SimGripperEmulator(GripperEmulator):
+    """The Modbus gripper emulator whose fingers stop on the simulated part between them."""
+
+    def __init__(self, sim: SimulatedCell) -> None:
+        super().__init__()
+        self.sim = sim
+
+    def _apply(self) -> None:
+        action, request = self.command[0], self.command[3]
+        if action & GTO:
+            try:
+                self.sim.on_gripper_command(request > self.axis.position(), self)
+            except Exception as exc:  # keep serving; the failure shows in emulator.failures
+                self.failures.append(f"simulated grip: {type(exc).__name__}: {exc}")
+        super()._apply()
+
+
+def simulated_cell(model: Optional[Model] = None, **kwargs: Any) -> SimulatedCell:
+    """A :class:`SimulatedCell` (the built-in tee when ``model`` is None); use it as a context manager."""
+    if model is None:
+        model = parts.tee()
+    return SimulatedCell(model, **kwargs)

@@ -1,0 +1,135 @@
+"""4×4 rigid-transform helpers shared by the pick loop, the simulator and the tests.
+
+Transforms are 4×4 float arrays named ``T_to_from``; lengths in mm, angles in radians unless a
+name says ``_deg``. This is a leaf module: it imports nothing from binpick but the validation
+vocabulary.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import Any, Optional
+
+import numpy as np
+
+from ._validate import as_transform, as_vector
+
+__all__ = [
+    "inverse",
+    "translation",
+    "rotation_about",
+    "rot_y",
+    "rotation_angle_deg",
+    "look_down",
+    "pose_error",
+    "laser_sweep",
+]
+
+
+def inverse(T: np.ndarray) -> np.ndarray:
+    """The inverse of the rigid transform ``T`` (transposed rotation, rotated-back translation)."""
+    out = np.eye(4)
+    out[:3, :3] = T[:3, :3].T
+    out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
+    return out
+
+
+def translation(x: float, y: float, z: float) -> np.ndarray:
+    """The pure translation by (x, y, z) mm."""
+    T = np.eye(4)
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+def rotation_about(axis: Any, angle: float) -> np.ndarray:
+    """The 3×3 rotation by ``angle`` radians about ``axis`` (any non-zero length; Rodrigues)."""
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def rot_y(angle: float) -> np.ndarray:
+    """4×4 rotation about y by ``angle`` radians (the laser motor's axis)."""
+    c, s = np.cos(angle), np.sin(angle)
+    return np.array([[c, 0, s, 0], [0, 1, 0, 0], [-s, 0, c, 0], [0, 0, 0, 1.0]])
+
+
+def rotation_angle_deg(R: np.ndarray) -> Any:
+    """The angle of the 3×3 rotation ``R`` (or of each of a stack (..., 3, 3)), degrees in [0, 180].
+
+    From cos θ = (tr R − 1) / 2 and sin θ = |axial part of R|, with atan2, so that angles near
+    0° and 180° keep full precision (arccos alone loses half the digits near 0°)."""
+    R = np.asarray(R, dtype=np.float64)
+    cos = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
+    axial = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], axis=-1)
+    deg = np.degrees(np.arctan2(np.linalg.norm(axial, axis=-1) / 2.0, cos))
+    return float(deg) if deg.ndim == 0 else deg
+
+
+def look_down(x: float, y: float, z: float) -> np.ndarray:
+    """A pose at (x, y, z) whose z axis points straight down (−z of the base) and x axis along base +x."""
+    T = np.eye(4)
+    T[:3, :3] = np.diag([1.0, -1.0, -1.0])
+    T[:3, 3] = (x, y, z)
+    return T
+
+
+def _closest_spin(M: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """The rotation R_φ about ``axis`` maximising trace(M R_φ), i.e. minimising the angle of M R_φ.
+
+    With R_φ = a aᵀ + cos φ (I − a aᵀ) + sin φ [a]ₓ the trace is
+    aᵀMa + cos φ (tr M − aᵀMa) + sin φ tr(M [a]ₓ), which peaks in closed form."""
+    a = axis / np.linalg.norm(axis)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    along = float(a @ M @ a)
+    return rotation_about(a, math.atan2(float(np.trace(M @ K)), float(np.trace(M)) - along))
+
+
+def pose_error(
+    T_est: Any,
+    T_true: Any,
+    symmetries: Sequence[Any] = (),
+    *,
+    continuous_axis: Optional[Any] = None,
+    center: Any = (0.0, 0.0, 0.0),
+) -> tuple[float, float]:
+    """(rotation error in degrees, translation error in mm) of ``T_est`` against ``T_true``, the
+    smallest over the part's symmetries.
+
+    ``symmetries`` are 4×4 ``T_object_object`` maps of the part onto itself (the identity is always
+    included). With ``continuous_axis`` (a unit axis in the model frame through ``center``) each of
+    them is also turned about that axis by the angle that minimises the rotation error (exactly).
+    Of the candidates, the one closest in pick-grade units (5° ~ 3 mm) is reported.
+    """
+    A = as_transform(T_est, "T_est")
+    B = as_transform(T_true, "T_true")
+    axis = None if continuous_axis is None else as_vector(continuous_axis, "continuous_axis", 3)
+    c = None if axis is None else as_vector(center, "center", 3)
+    errors = []
+    for S in [np.eye(4), *symmetries]:
+        S = np.asarray(S, dtype=np.float64)
+        if axis is not None:
+            spin = np.eye(4)
+            spin[:3, :3] = _closest_spin(A[:3, :3].T @ B[:3, :3] @ S[:3, :3], axis)
+            spin[:3, 3] = c - spin[:3, :3] @ c
+            S = S @ spin
+        Bs = B @ S
+        errors.append((rotation_angle_deg(Bs[:3, :3].T @ A[:3, :3]), float(np.linalg.norm(A[:3, 3] - Bs[:3, 3]))))
+    return min(errors, key=lambda e: e[0] / 5.0 + e[1] / 3.0)
+
+
+def laser_sweep(
+    T_base_laser: np.ndarray, lo: np.ndarray, hi: np.ndarray, frames: int, margin: float = 10.0
+) -> np.ndarray:
+    """``frames`` motor angles (rad), evenly spaced, whose laser sheets sweep the box ``lo``..``hi``
+    (floor corners widened by ``margin`` mm along x, and the rim), for the laser at motor angle 0
+    posed at ``T_base_laser`` (inputs already checked)."""
+    corners = [[x, y, lo[2]] for x in (lo[0] - margin, hi[0] + margin) for y in (lo[1], hi[1])]
+    corners += [[x, y, hi[2]] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])]
+    T_laser_base = inverse(T_base_laser)
+    local = np.asarray(corners) @ T_laser_base[:3, :3].T + T_laser_base[:3, 3]
+    # At motor angle θ the sheet is x cos θ − z sin θ = 0 in the laser frame: it meets a point at θ = atan2(x, z).
+    theta = np.arctan2(local[:, 0], local[:, 2])
+    return np.array([float(theta.mean())]) if frames == 1 else np.linspace(theta.min(), theta.max(), frames)
