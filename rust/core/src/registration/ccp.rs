@@ -59,6 +59,9 @@ pub struct CcpResult {
     pub candidates: Vec<Isometry3<f64>>,
 }
 
+/// An observed branch axis (unit, from p'_c) and the size of its group, the weight it gets.
+type Observed = (Vector3<f64>, usize);
+
 /// Runs CCP on a data cloud (one object's points). `view` is the direction toward the sensor in
 /// the data frame if known; it places the translation on the visible half of the model.
 pub fn ccp(
@@ -88,12 +91,54 @@ pub fn ccp(
     let pc = centroid(data);
     let near: Vec<Point> = data.iter().copied().filter(|p| (p - pc).norm() <= s).collect();
     let pcc = if near.len() >= 3 { centroid(&near) } else { pc };
-    // Eq. 22: endpoints by farthest-point sampling from p'_c.
     let n_end = layout.directions.len() + usize::from(layout.special.is_some());
-    let mut endpoints: Vec<Point> = Vec::with_capacity(n_end);
+    let mut endpoints = farthest_endpoints(data, &pcc, n_end, 0.5 * layout.radius);
+    let special_endpoint = if layout.special.is_some() && endpoints.len() >= 3 {
+        take_special_endpoint(data, &pcc, layout.radius, &mut endpoints)
+    } else {
+        None
+    };
+    if endpoints.len() < 2 {
+        return Err(Error::NoObjectFound {
+            reason: format!(
+                "CCP found {} branch endpoint(s); it needs two visible branches",
+                endpoints.len()
+            ),
+        });
+    }
+    let (axes, group_sizes) = group_axes(data, &pcc, &endpoints, tau);
+    let special_dir = special_endpoint.map(|e| (e - pcc).normalize());
+    let place = |rot: &UnitQuaternion<f64>| {
+        let model_ref = visible_centroid(model_points, model_normals, rot, view);
+        Isometry3::from_parts(Translation3::from(pc.coords - rot * model_ref.coords), *rot)
+    };
+    let candidates: Vec<Isometry3<f64>> = readings(&axes, &group_sizes, special_dir, layout)
+        .iter()
+        .flat_map(|(obs, sp)| rotations(obs, *sp, layout))
+        .map(|r| place(&r))
+        .collect();
+    if candidates.is_empty() {
+        return Err(Error::NoObjectFound {
+            reason: "CCP found no branch assignment consistent with the model's layout".into(),
+        });
+    }
+    Ok(CcpResult {
+        center: pc,
+        closer_center: pcc,
+        endpoints,
+        special_endpoint,
+        axes,
+        group_sizes,
+        candidates,
+    })
+}
+
+/// Eq. 22: up to `n` endpoints by farthest-point sampling from p'_c, none nearer than
+/// `min_reach` to those taken.
+fn farthest_endpoints(data: &[Point], pcc: &Point, n: usize, min_reach: f64) -> Vec<Point> {
+    let mut endpoints: Vec<Point> = Vec::with_capacity(n);
     let mut dist: Vec<f64> = data.iter().map(|p| (p - pcc).norm()).collect();
-    let min_reach = 0.5 * layout.radius;
-    for _ in 0..n_end {
+    for _ in 0..n {
         let (i, d) = dist
             .iter()
             .enumerate()
@@ -109,38 +154,37 @@ pub fn ccp(
             dist[k] = dist[k].min((p - e).norm());
         }
     }
-    // The special endpoint: farthest from the plane of the points around p'_c.
-    let mut special_endpoint = None;
-    if layout.special.is_some() && endpoints.len() >= 3 {
-        let ring: Vec<Point> = data
-            .iter()
-            .copied()
-            .filter(|p| (p - pcc).norm() <= 2.0 * layout.radius)
-            .collect();
-        if ring.len() >= 3 {
-            let (c, cov) = covariance(&ring);
-            let (_, axes) = principal_axes(&cov);
-            let n = axes[2];
-            let k = (0..endpoints.len())
-                .max_by(|&a, &b| {
-                    (endpoints[a] - c)
-                        .dot(&n)
-                        .abs()
-                        .total_cmp(&(endpoints[b] - c).dot(&n).abs())
-                })
-                .unwrap();
-            special_endpoint = Some(endpoints.remove(k));
-        }
+    endpoints
+}
+
+/// Removes and returns the special endpoint: the one farthest from the plane of the points
+/// within two branch radii of p'_c (none when too few points are there).
+fn take_special_endpoint(data: &[Point], pcc: &Point, radius: f64, endpoints: &mut Vec<Point>) -> Option<Point> {
+    let ring: Vec<Point> = data
+        .iter()
+        .copied()
+        .filter(|p| (p - pcc).norm() <= 2.0 * radius)
+        .collect();
+    if ring.len() < 3 {
+        return None;
     }
-    if endpoints.len() < 2 {
-        return Err(Error::NoObjectFound {
-            reason: format!(
-                "CCP found {} branch endpoint(s); it needs two visible branches",
-                endpoints.len()
-            ),
-        });
-    }
-    // Eq. 25–27: groups along the lines p'_c → endpoint.
+    let (c, cov) = covariance(&ring);
+    let (_, axes) = principal_axes(&cov);
+    let n = axes[2];
+    let k = (0..endpoints.len())
+        .max_by(|&a, &b| {
+            (endpoints[a] - c)
+                .dot(&n)
+                .abs()
+                .total_cmp(&(endpoints[b] - c).dot(&n).abs())
+        })
+        .unwrap();
+    Some(endpoints.remove(k))
+}
+
+/// Eq. 25–28: each point within τ of an endpoint joins the group whose line p'_c → endpoint it
+/// is nearest; the axes run from p'_c to each group's mean, with the groups' sizes.
+fn group_axes(data: &[Point], pcc: &Point, endpoints: &[Point], tau: f64) -> (Vec<Vector3<f64>>, Vec<usize>) {
     let mut sums = vec![Vector3::zeros(); endpoints.len()];
     let mut counts = vec![0usize; endpoints.len()];
     for p in data {
@@ -175,53 +219,31 @@ pub fn ccp(
             group_sizes.push(counts[g].max(1));
         }
     }
-    // Candidate rotations. First the paper's reading (the special endpoint is the feature, the
-    // others are branches); then, because a partial view may hide the feature or show an end
-    // face as the farthest point, every subset of two or more endpoints read as branches. Each
-    // reading is tried with every injective assignment to the model's branches; the caller
-    // scores them against the scene.
-    let mut all_axes: Vec<(Vector3<f64>, usize)> = axes.iter().copied().zip(group_sizes.iter().copied()).collect();
-    let special_dir = special_endpoint.map(|e| (e - pcc).normalize());
+    (axes, group_sizes)
+}
+
+/// The readings of the observed axes, each a set of axes read as branches and perhaps one as
+/// the special feature. First the paper's reading (the special endpoint is the feature, the
+/// others are branches); then, because a partial view may hide the feature or show an end face
+/// as the farthest point, every subset of two or more axes read as branches, each with every
+/// other observed axis as the feature too (the paper's plane test misses it when the part lies
+/// on its side).
+fn readings(
+    axes: &[Vector3<f64>],
+    group_sizes: &[usize],
+    special_dir: Option<Vector3<f64>>,
+    layout: &BranchLayout,
+) -> Vec<(Vec<Observed>, Option<Vector3<f64>>)> {
+    let observed: Vec<Observed> = axes.iter().copied().zip(group_sizes.iter().copied()).collect();
+    let mut all_axes = observed.clone();
     if let Some(d) = special_dir {
         all_axes.push((d, group_sizes.iter().sum::<usize>() / group_sizes.len().max(1)));
     }
-    let mut candidates = Vec::new();
-    let mut add = |obs: &[(Vector3<f64>, usize)], special: Option<Vector3<f64>>| {
-        let k = obs.len().min(layout.directions.len());
-        for assignment in injective_maps(k, layout.directions.len()) {
-            let mut h = Matrix3::zeros();
-            for (o, &m) in assignment.iter().enumerate() {
-                h += (obs[o].1 as f64) * layout.directions[m] * obs[o].0.transpose();
-            }
-            if let (Some(ms), Some(ds)) = (layout.special, special) {
-                let w = obs.iter().map(|x| x.1).sum::<usize>() as f64 / obs.len() as f64;
-                h += w * ms * ds.transpose();
-            }
-            let Some(r) = kabsch(&h) else { continue };
-            // Drop readings whose fitted branches miss what was seen by more than 50°.
-            let worst = assignment
-                .iter()
-                .enumerate()
-                .map(|(o, &m)| (r * layout.directions[m]).dot(&obs[o].0))
-                .fold(1.0, f64::min);
-            if worst < 50f64.to_radians().cos() {
-                continue;
-            }
-            let rot = UnitQuaternion::from_rotation_matrix(&r);
-            let model_ref = visible_centroid(model_points, model_normals, &rot, view);
-            candidates.push(Isometry3::from_parts(
-                Translation3::from(pc.coords - rot * model_ref.coords),
-                rot,
-            ));
-        }
-    };
+    let mut out = Vec::new();
     if special_dir.is_some() && axes.len() >= 2 {
-        let obs: Vec<(Vector3<f64>, usize)> = axes.iter().copied().zip(group_sizes.iter().copied()).collect();
-        add(&obs, special_dir);
+        out.push((observed, special_dir));
     }
     let n = all_axes.len();
-    // Each observed axis may also be the special feature (the paper's plane test misses it when
-    // the part lies on its side), the rest read as branches.
     let special_choices: Vec<Option<usize>> = if layout.special.is_some() {
         std::iter::once(None).chain((0..n).map(Some)).collect()
     } else {
@@ -235,25 +257,40 @@ pub fn ccp(
             {
                 continue;
             }
-            let obs: Vec<(Vector3<f64>, usize)> =
-                (0..n).filter(|i| mask & (1 << i) != 0).map(|i| all_axes[i]).collect();
-            add(&obs, special.map(|s| all_axes[s].0));
+            let obs: Vec<Observed> = (0..n).filter(|i| mask & (1 << i) != 0).map(|i| all_axes[i]).collect();
+            out.push((obs, special.map(|s| all_axes[s].0)));
         }
     }
-    if candidates.is_empty() {
-        return Err(Error::NoObjectFound {
-            reason: "CCP found no branch assignment consistent with the model's layout".into(),
-        });
+    out
+}
+
+/// The rotations (model → data) of one reading: Kabsch on the axis directions for every
+/// injective assignment of the observed axes to the model's branches, dropping those whose
+/// fitted branches miss what was seen by more than 50°.
+fn rotations(obs: &[Observed], special: Option<Vector3<f64>>, layout: &BranchLayout) -> Vec<UnitQuaternion<f64>> {
+    let k = obs.len().min(layout.directions.len());
+    let mut out = Vec::new();
+    for assignment in injective_maps(k, layout.directions.len()) {
+        let mut h = Matrix3::zeros();
+        for (o, &m) in assignment.iter().enumerate() {
+            h += (obs[o].1 as f64) * layout.directions[m] * obs[o].0.transpose();
+        }
+        if let (Some(ms), Some(ds)) = (layout.special, special) {
+            let w = obs.iter().map(|x| x.1).sum::<usize>() as f64 / obs.len() as f64;
+            h += w * ms * ds.transpose();
+        }
+        let Some(r) = kabsch(&h) else { continue };
+        let worst = assignment
+            .iter()
+            .enumerate()
+            .map(|(o, &m)| (r * layout.directions[m]).dot(&obs[o].0))
+            .fold(1.0, f64::min);
+        if worst < 50f64.to_radians().cos() {
+            continue;
+        }
+        out.push(UnitQuaternion::from_rotation_matrix(&r));
     }
-    Ok(CcpResult {
-        center: pc,
-        closer_center: pcc,
-        endpoints,
-        special_endpoint,
-        axes,
-        group_sizes,
-        candidates,
-    })
+    out
 }
 
 /// Centroid of the model points that face the sensor under rotation `rot` (all points if no view).
