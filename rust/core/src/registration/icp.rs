@@ -8,7 +8,7 @@
 //! rayon task and merged, so the work splits across threads without locks. Sums are taken
 //! about the target's centroid, which keeps them well conditioned far from the origin.
 
-use super::config::{IcpConfig, IcpMethod};
+use super::config::{IcpConfig, IcpMethod, RobustKernel};
 use crate::error::{Error, Result};
 use crate::geometry::{centroid, check_count, check_finite, check_spread, kabsch, Point};
 use crate::parallel::with_threads;
@@ -296,15 +296,169 @@ pub fn icp(source: &[Point], target: &IcpTarget, init: &Isometry3<f64>, config: 
     }
 }
 
+/// What the correspondence search of one ICP run needs: the target, the coarse nearest field
+/// when the search may be approximate, the squared distance bound, the target's centre.
+struct Matcher<'a> {
+    target: &'a IcpTarget,
+    approx: Option<&'a NearestField>,
+    max_sq: f64,
+    c: Vector3<f64>,
+}
+
+/// The current and the previous pose of one iteration, as rotations and shifts about the
+/// target's centre: a source point moves to `q_c = R p + (t − c)`.
+struct Motion {
+    rot: Matrix3<f64>,
+    shift: Vector3<f64>,
+    rot_prev: Matrix3<f64>,
+    shift_prev: Vector3<f64>,
+}
+
+impl Motion {
+    fn new(t_est: &Isometry3<f64>, t_prev: &Isometry3<f64>, c: &Vector3<f64>) -> Self {
+        Motion {
+            rot: t_est.rotation.to_rotation_matrix().into_inner(),
+            shift: t_est.translation.vector - c,
+            rot_prev: t_prev.rotation.to_rotation_matrix().into_inner(),
+            shift_prev: t_prev.translation.vector - c,
+        }
+    }
+}
+
+impl Matcher<'_> {
+    /// The match of source point `p`: its moved position (about the centre), the target index
+    /// and the squared distance. `last` is the distance of `p`'s previous match and `hint` the
+    /// match of the previous point in Z-order: being near, both bound the search.
+    #[inline]
+    fn find(
+        &self,
+        m: &Motion,
+        p: &Point,
+        last: &mut f64,
+        hint: &mut Option<Point>,
+    ) -> Option<(Vector3<f64>, usize, f64)> {
+        let (target, c) = (self.target, self.c);
+        let q = m.rot * p.coords + m.shift;
+        let qw = Point::from(q + c);
+        if let Some(field) = self.approx {
+            let j = field.nearest(&[qw.x, qw.y, qw.z])?;
+            let d = (target.points[j] - qw).norm_squared();
+            return (d <= self.max_sq).then_some((q, j, d));
+        }
+        let moved = (q - (m.rot_prev * p.coords + m.shift_prev)).norm();
+        // The previous match is at most `last + moved` away now, so nothing nearer is missed.
+        let bound = (*last + moved) * (1.0 + 1e-9) + 1e-12;
+        let mut bound_sq = if bound.is_finite() {
+            (bound * bound).min(self.max_sq)
+        } else {
+            self.max_sq
+        };
+        if let Some(h) = hint {
+            bound_sq = bound_sq.min((qw - *h).norm_squared() * (1.0 + 1e-9) + 1e-12);
+        }
+        match target.search.nearest_within(&[qw.x, qw.y, qw.z], bound_sq) {
+            Some((j, d)) => {
+                *last = d.sqrt();
+                *hint = Some(target.points[j]);
+                Some((q, j, d))
+            }
+            None => {
+                *last = f64::INFINITY;
+                None
+            }
+        }
+    }
+
+    /// The weighted sums of one correspondence.
+    #[inline]
+    fn add<S: Sums>(&self, s: &mut S, q: &Vector3<f64>, j: usize, kernel: RobustKernel) {
+        let zero_normal = Vector3::zeros();
+        let tq = self.target.points[j].coords - self.c;
+        let n = self.target.normals.as_deref().map_or(&zero_normal, |ns| &ns[j]);
+        s.add(q, &tq, n, kernel.weight(S::residual(q, &tq, n)));
+    }
+
+    /// One pass over every source point, each correspondence summed.
+    fn full_pass<S: Sums>(
+        &self,
+        m: &Motion,
+        source: &[Point],
+        last_match: &mut [f64],
+        kernel: RobustKernel,
+    ) -> Pass<S> {
+        let chunk_pass = |chunk: &[Point], lasts: &mut [f64]| {
+            let mut acc = Pass::<S>::zero();
+            let mut hint = None;
+            for (p, l) in chunk.iter().zip(lasts.iter_mut()) {
+                if let Some((q, j, d)) = self.find(m, p, l, &mut hint) {
+                    self.add(&mut acc.sums, &q, j, kernel);
+                    acc.inliers += 1;
+                    acc.sq_dist += d;
+                }
+            }
+            acc
+        };
+        // One chunk needs no task: a small source (a coarse check) skips rayon's overhead.
+        if source.len() <= CHUNK {
+            chunk_pass(source, last_match)
+        } else {
+            source
+                .par_chunks(CHUNK)
+                .zip(last_match.par_chunks_mut(CHUNK))
+                .map(|(chunk, lasts)| chunk_pass(chunk, lasts))
+                .reduce(Pass::zero, Pass::merge)
+        }
+    }
+
+    /// One pass that sums only the nearest `1 − trim_fraction` of the correspondences (the
+    /// counts and distances are of all of them).
+    fn trimmed_pass<S: Sums>(
+        &self,
+        m: &Motion,
+        source: &[Point],
+        last_match: &mut [f64],
+        kernel: RobustKernel,
+        trim_fraction: f64,
+    ) -> Pass<S> {
+        let mut pairs: Vec<(u32, u32, f64)> = source
+            .par_iter()
+            .zip(last_match.par_iter_mut())
+            .enumerate()
+            .filter_map(|(i, (p, l))| self.find(m, p, l, &mut None).map(|(_, j, d)| (i as u32, j as u32, d)))
+            .collect();
+        let inliers = pairs.len();
+        let sq_dist: f64 = pairs.iter().map(|x| x.2).sum();
+        let keep = ((1.0 - trim_fraction) * inliers as f64).ceil() as usize;
+        if keep > 0 && keep < inliers {
+            pairs.select_nth_unstable_by(keep - 1, |a, b| a.2.total_cmp(&b.2));
+            pairs.truncate(keep);
+        }
+        let sums = pairs
+            .par_chunks(CHUNK)
+            .map(|chunk| {
+                let mut s = S::zero();
+                for &(i, j, _) in chunk {
+                    let q = m.rot * source[i as usize].coords + m.shift;
+                    self.add(&mut s, &q, j as usize, kernel);
+                }
+                s
+            })
+            .reduce(S::zero, S::merge);
+        Pass { sums, inliers, sq_dist }
+    }
+}
+
 fn run<S: Sums>(source_in: &[Point], target: &IcpTarget, init: &Isometry3<f64>, config: &IcpConfig) -> IcpResult {
     let c = target.center.coords;
-    let max_sq = config.max_correspondence_distance * config.max_correspondence_distance;
-    let zero_normal = Vector3::zeros();
-    let normals = target.normals.as_deref();
-    let approx = if config.approximate {
-        target.field.as_ref()
-    } else {
-        None
+    let matcher = Matcher {
+        target,
+        approx: if config.approximate {
+            target.field.as_ref()
+        } else {
+            None
+        },
+        max_sq: config.max_correspondence_distance * config.max_correspondence_distance,
+        c,
     };
     let source: Vec<Point> = spatial_order(source_in, config.max_correspondence_distance.max(1e-3) * 0.25)
         .into_iter()
@@ -312,107 +466,16 @@ fn run<S: Sums>(source_in: &[Point], target: &IcpTarget, init: &Isometry3<f64>, 
         .collect();
     // Distance of each source point's last match (infinite when it had none).
     let mut last_match = vec![f64::INFINITY; source.len()];
-    let mut t_est = *init;
-    let mut t_prev = *init;
+    let (mut t_est, mut t_prev) = (*init, *init);
     let mut converged = false;
     let mut iterations = 0;
     let mut last = Pass::<S>::zero();
-    let trim = config.trim_fraction > 0.0;
-    let kernel = config.kernel;
-
     for _ in 0..config.max_iterations {
-        let rot: Matrix3<f64> = t_est.rotation.to_rotation_matrix().into_inner();
-        let rot_prev: Matrix3<f64> = t_prev.rotation.to_rotation_matrix().into_inner();
-        // Moving each source point relative to the centre: q_c = R p + (t − c).
-        let shift = t_est.translation.vector - c;
-        let shift_prev = t_prev.translation.vector - c;
-        // `hint` is the match of the previous point in Z-order: being near, its distance to
-        // this point bounds the search from the first iteration on.
-        let find = |p: &Point, last: &mut f64, hint: &mut Option<Point>| -> Option<(Vector3<f64>, usize, f64)> {
-            let q = rot * p.coords + shift;
-            let qw = Point::from(q + c);
-            if let Some(field) = approx {
-                let j = field.nearest(&[qw.x, qw.y, qw.z])?;
-                let d = (target.points[j] - qw).norm_squared();
-                return (d <= max_sq).then_some((q, j, d));
-            }
-            let moved = (q - (rot_prev * p.coords + shift_prev)).norm();
-            // The previous match is at most `last + moved` away now, so nothing nearer is missed.
-            let bound = (*last + moved) * (1.0 + 1e-9) + 1e-12;
-            let mut bound_sq = if bound.is_finite() {
-                (bound * bound).min(max_sq)
-            } else {
-                max_sq
-            };
-            if let Some(h) = hint {
-                bound_sq = bound_sq.min((qw - *h).norm_squared() * (1.0 + 1e-9) + 1e-12);
-            }
-            match target.search.nearest_within(&[qw.x, qw.y, qw.z], bound_sq) {
-                Some((j, d)) => {
-                    *last = d.sqrt();
-                    *hint = Some(target.points[j]);
-                    Some((q, j, d))
-                }
-                None => {
-                    *last = f64::INFINITY;
-                    None
-                }
-            }
-        };
-
-        let pass = if trim {
-            let mut pairs: Vec<(u32, u32, f64)> = source
-                .par_iter()
-                .zip(last_match.par_iter_mut())
-                .enumerate()
-                .filter_map(|(i, (p, l))| find(p, l, &mut None).map(|(_, j, d)| (i as u32, j as u32, d)))
-                .collect();
-            let inliers = pairs.len();
-            let sq_dist: f64 = pairs.iter().map(|x| x.2).sum();
-            let keep = ((1.0 - config.trim_fraction) * inliers as f64).ceil() as usize;
-            if keep > 0 && keep < inliers {
-                pairs.select_nth_unstable_by(keep - 1, |a, b| a.2.total_cmp(&b.2));
-                pairs.truncate(keep);
-            }
-            let sums = pairs
-                .par_chunks(CHUNK)
-                .map(|chunk| {
-                    let mut s = S::zero();
-                    for &(i, j, _) in chunk {
-                        let q = rot * source[i as usize].coords + shift;
-                        let tq = target.points[j as usize].coords - c;
-                        let n = normals.map_or(&zero_normal, |ns| &ns[j as usize]);
-                        s.add(&q, &tq, n, kernel.weight(S::residual(&q, &tq, n)));
-                    }
-                    s
-                })
-                .reduce(S::zero, S::merge);
-            Pass { sums, inliers, sq_dist }
+        let motion = Motion::new(&t_est, &t_prev, &c);
+        let pass = if config.trim_fraction > 0.0 {
+            matcher.trimmed_pass(&motion, &source, &mut last_match, config.kernel, config.trim_fraction)
         } else {
-            let chunk_pass = |chunk: &[Point], lasts: &mut [f64]| {
-                let mut acc = Pass::<S>::zero();
-                let mut hint = None;
-                for (p, l) in chunk.iter().zip(lasts.iter_mut()) {
-                    if let Some((q, j, d)) = find(p, l, &mut hint) {
-                        let tq = target.points[j].coords - c;
-                        let n = normals.map_or(&zero_normal, |ns| &ns[j]);
-                        acc.sums.add(&q, &tq, n, kernel.weight(S::residual(&q, &tq, n)));
-                        acc.inliers += 1;
-                        acc.sq_dist += d;
-                    }
-                }
-                acc
-            };
-            // One chunk needs no task: a small source (a coarse check) skips rayon's overhead.
-            if source.len() <= CHUNK {
-                chunk_pass(&source, &mut last_match)
-            } else {
-                source
-                    .par_chunks(CHUNK)
-                    .zip(last_match.par_chunks_mut(CHUNK))
-                    .map(|(chunk, lasts)| chunk_pass(chunk, lasts))
-                    .reduce(Pass::zero, Pass::merge)
-            }
+            matcher.full_pass(&motion, &source, &mut last_match, config.kernel)
         };
         last = pass;
         if pass.inliers < S::min_pairs() {
