@@ -50,7 +50,7 @@ pub use normals::{estimate_normals, Orientation};
 pub use parallel::with_threads;
 pub use pose::{
     estimate_pose, estimate_poses, CcpPathParams, CheckIcpParams, CoarseMethod, FineIcpParams, PoseConfig,
-    PoseEstimate, PoseModel,
+    PoseEstimate, PoseModel, Timings,
 };
 pub use registration::ccp::{ccp, BranchLayout, CcpConfig, CcpResult};
 pub use registration::ppf::{DetectConfig, PpfConfig, PpfModel};

@@ -16,7 +16,7 @@ mod types;
 
 pub use ccp_path::{CcpPathParams, CheckIcpParams, FineIcpParams};
 pub use model::PoseModel;
-pub use types::{CoarseMethod, PoseConfig, PoseEstimate};
+pub use types::{CoarseMethod, PoseConfig, PoseEstimate, Timings};
 
 use crate::error::{Error, Result};
 use crate::geometry::Point;
@@ -24,9 +24,6 @@ use ccp_path::run;
 use ppf_path::detect;
 use scene::{check_scene, remove_bin, DetectionScene};
 use std::time::Instant;
-
-/// Milliseconds per stage, in order.
-pub type Timings = Vec<(&'static str, f64)>;
 
 /// Stage timings: each lap is the time since the previous one.
 struct Laps<'a> {

@@ -1,10 +1,14 @@
-//! The pose pipeline's configuration and results: [`CoarseMethod`], [`PoseConfig`], [`PoseEstimate`].
+//! The pose pipeline's configuration and results: [`CoarseMethod`], [`PoseConfig`], [`PoseEstimate`],
+//! [`Timings`].
 
 use super::ccp_path::CcpPathParams;
 use crate::geometry::{BinBox, Point};
 use crate::registration::ccp::CcpConfig;
 use crate::registration::ppf::DetectConfig;
 use nalgebra::{Isometry3, Vector3};
+
+/// Milliseconds per stage, in order.
+pub type Timings = Vec<(&'static str, f64)>;
 
 /// How the coarse pose is found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -108,7 +112,7 @@ pub struct PoseEstimate {
     /// Scene indices of the points on the posed model.
     pub indices: Vec<usize>,
     /// Milliseconds per stage, in order.
-    pub timings: super::Timings,
+    pub timings: Timings,
     /// ICP iterations of the refinement.
     pub iterations: usize,
     /// The coarse method that found it.
