@@ -328,6 +328,37 @@ fn parse_ply(bytes: &[u8]) -> std::result::Result<PlyData, String> {
     }
     let end = find_header_end(bytes).ok_or("the PLY header has no 'end_header' line")?;
     let header = std::str::from_utf8(&bytes[..end.0]).map_err(|_| "the PLY header is not text")?;
+    let (format, elements) = parse_header(header)?;
+    let body = &bytes[end.1..];
+    let ascii = match format {
+        PlyFormat::Ascii => Some(
+            std::str::from_utf8(body)
+                .map_err(|_| "the ASCII PLY body is not text")?
+                .split_ascii_whitespace(),
+        ),
+        _ => None,
+    };
+    let mut reader = Body {
+        ascii,
+        bytes: body,
+        pos: 0,
+        big: format == PlyFormat::BinaryBe,
+    };
+    let mut out = PlyData::default();
+    for el in &elements {
+        read_element(el, &mut reader, &mut out)?;
+    }
+    let n = out.points.len() as u32;
+    if let Some(f) = out.faces.iter().find(|f| f.iter().any(|&v| v >= n)) {
+        return Err(format!(
+            "a face {f:?} indexes past the {n} vertices; the file is corrupt"
+        ));
+    }
+    Ok(out)
+}
+
+/// The body's format and its elements with their properties, from the header's lines.
+fn parse_header(header: &str) -> std::result::Result<(PlyFormat, Vec<Element>), String> {
     let mut format = None;
     let mut elements: Vec<Element> = Vec::new();
     for line in header.lines().skip(1) {
@@ -355,42 +386,46 @@ fn parse_ply(bytes: &[u8]) -> std::result::Result<PlyData, String> {
             }
             Some("property") => {
                 let el = elements.last_mut().ok_or("a property before any element")?;
-                if tok.get(1) == Some(&"list") {
-                    let (c, i, n) = (tok.get(2), tok.get(3), tok.get(4));
-                    let c = c
-                        .and_then(|s| Scalar::parse(s))
-                        .ok_or(format!("bad list count type in {line:?}"))?;
-                    let i = i
-                        .and_then(|s| Scalar::parse(s))
-                        .ok_or(format!("bad list item type in {line:?}"))?;
-                    el.props.push(Property::List(n.unwrap_or(&"").to_string(), c, i));
-                } else {
-                    let t = tok
-                        .get(1)
-                        .and_then(|s| Scalar::parse(s))
-                        .ok_or(format!("bad property type in {line:?}"))?;
-                    el.props
-                        .push(Property::Scalar(tok.get(2).unwrap_or(&"").to_string(), t));
-                }
+                el.props.push(parse_property(&tok, line)?);
             }
             _ => {}
         }
     }
-    let format = format.ok_or("the PLY header has no format line")?;
-    let body = &bytes[end.1..];
-    let mut out = PlyData::default();
-    let big = format == PlyFormat::BinaryBe;
-    let mut ascii_values = match format {
-        PlyFormat::Ascii => Some(
-            std::str::from_utf8(body)
-                .map_err(|_| "the ASCII PLY body is not text")?
-                .split_ascii_whitespace(),
-        ),
-        _ => None,
-    };
-    let mut pos = 0usize;
-    let mut next = |t: Scalar| -> std::result::Result<f64, String> {
-        match ascii_values.as_mut() {
+    Ok((format.ok_or("the PLY header has no format line")?, elements))
+}
+
+/// One `property` line, split into tokens.
+fn parse_property(tok: &[&str], line: &str) -> std::result::Result<Property, String> {
+    if tok.get(1) == Some(&"list") {
+        let (c, i, n) = (tok.get(2), tok.get(3), tok.get(4));
+        let c = c
+            .and_then(|s| Scalar::parse(s))
+            .ok_or(format!("bad list count type in {line:?}"))?;
+        let i = i
+            .and_then(|s| Scalar::parse(s))
+            .ok_or(format!("bad list item type in {line:?}"))?;
+        Ok(Property::List(n.unwrap_or(&"").to_string(), c, i))
+    } else {
+        let t = tok
+            .get(1)
+            .and_then(|s| Scalar::parse(s))
+            .ok_or(format!("bad property type in {line:?}"))?;
+        Ok(Property::Scalar(tok.get(2).unwrap_or(&"").to_string(), t))
+    }
+}
+
+/// The PLY body, read value by value: whitespace-separated numbers, or binary scalars.
+struct Body<'a> {
+    ascii: Option<std::str::SplitAsciiWhitespace<'a>>,
+    bytes: &'a [u8],
+    pos: usize,
+    big: bool,
+}
+
+impl Body<'_> {
+    /// The next value, of type `t` in a binary body.
+    fn next(&mut self, t: Scalar) -> std::result::Result<f64, String> {
+        match self.ascii.as_mut() {
             Some(it) => {
                 let s = it
                     .next()
@@ -400,78 +435,75 @@ fn parse_ply(bytes: &[u8]) -> std::result::Result<PlyData, String> {
             }
             None => {
                 let n = t.size();
-                if pos + n > body.len() {
+                if self.pos + n > self.bytes.len() {
                     return Err("the binary PLY body ends early; the file is truncated".into());
                 }
-                let v = t.read(&body[pos..], big);
-                pos += n;
+                let v = t.read(&self.bytes[self.pos..], self.big);
+                self.pos += n;
                 Ok(v)
             }
         }
-    };
-    for el in &elements {
-        let is_vertex = el.name == "vertex";
-        let is_face = el.name == "face";
-        let names: Vec<&str> = el
-            .props
-            .iter()
-            .map(|p| match p {
-                Property::Scalar(n, _) | Property::List(n, _, _) => n.as_str(),
-            })
-            .collect();
-        let col = |n: &str| names.iter().position(|x| *x == n);
-        let (xi, yi, zi) = (col("x"), col("y"), col("z"));
-        let (nxi, nyi, nzi) = (col("nx"), col("ny"), col("nz"));
-        if is_vertex && (xi.is_none() || yi.is_none() || zi.is_none()) {
-            return Err("the PLY vertex element lacks x, y or z".into());
-        }
-        let has_normals = is_vertex && nxi.is_some() && nyi.is_some() && nzi.is_some();
-        let mut normals = Vec::new();
-        let mut row = vec![0.0; el.props.len()];
-        for _ in 0..el.count {
-            let mut list: Vec<u32> = Vec::new();
-            for (k, p) in el.props.iter().enumerate() {
-                match p {
-                    Property::Scalar(_, t) => row[k] = next(*t)?,
-                    Property::List(name, ct, it) => {
-                        let n = next(*ct)?;
-                        if !(0.0..1e6).contains(&n) {
-                            return Err(format!("a list of {n} items; the file is corrupt"));
-                        }
-                        let keep = is_face && (name == "vertex_indices" || name == "vertex_index");
-                        for _ in 0..n as usize {
-                            let v = next(*it)?;
-                            if keep {
-                                list.push(v as u32);
-                            }
+    }
+}
+
+/// Reads one element's rows: vertices (with normals when it has nx, ny, nz) and faces (fanned
+/// into triangles) go into `out`; other elements are read past.
+fn read_element(el: &Element, body: &mut Body<'_>, out: &mut PlyData) -> std::result::Result<(), String> {
+    let is_vertex = el.name == "vertex";
+    let is_face = el.name == "face";
+    let names: Vec<&str> = el
+        .props
+        .iter()
+        .map(|p| match p {
+            Property::Scalar(n, _) | Property::List(n, _, _) => n.as_str(),
+        })
+        .collect();
+    let col = |n: &str| names.iter().position(|x| *x == n);
+    let (xi, yi, zi) = (col("x"), col("y"), col("z"));
+    let (nxi, nyi, nzi) = (col("nx"), col("ny"), col("nz"));
+    if is_vertex && (xi.is_none() || yi.is_none() || zi.is_none()) {
+        return Err("the PLY vertex element lacks x, y or z".into());
+    }
+    let has_normals = is_vertex && nxi.is_some() && nyi.is_some() && nzi.is_some();
+    let mut normals = Vec::new();
+    let mut row = vec![0.0; el.props.len()];
+    for _ in 0..el.count {
+        let mut list: Vec<u32> = Vec::new();
+        for (k, p) in el.props.iter().enumerate() {
+            match p {
+                Property::Scalar(_, t) => row[k] = body.next(*t)?,
+                Property::List(name, ct, it) => {
+                    let n = body.next(*ct)?;
+                    if !(0.0..1e6).contains(&n) {
+                        return Err(format!("a list of {n} items; the file is corrupt"));
+                    }
+                    let keep = is_face && (name == "vertex_indices" || name == "vertex_index");
+                    for _ in 0..n as usize {
+                        let v = body.next(*it)?;
+                        if keep {
+                            list.push(v as u32);
                         }
                     }
                 }
             }
-            if is_vertex {
-                out.points
-                    .push(Point::new(row[xi.unwrap()], row[yi.unwrap()], row[zi.unwrap()]));
-                if has_normals {
-                    normals.push(Vector3::new(row[nxi.unwrap()], row[nyi.unwrap()], row[nzi.unwrap()]));
-                }
-            }
-            if is_face && list.len() >= 3 {
-                for k in 1..list.len() - 1 {
-                    out.faces.push([list[0], list[k], list[k + 1]]);
-                }
+        }
+        if is_vertex {
+            out.points
+                .push(Point::new(row[xi.unwrap()], row[yi.unwrap()], row[zi.unwrap()]));
+            if has_normals {
+                normals.push(Vector3::new(row[nxi.unwrap()], row[nyi.unwrap()], row[nzi.unwrap()]));
             }
         }
-        if has_normals {
-            out.normals = Some(normals);
+        if is_face && list.len() >= 3 {
+            for k in 1..list.len() - 1 {
+                out.faces.push([list[0], list[k], list[k + 1]]);
+            }
         }
     }
-    let n = out.points.len() as u32;
-    if let Some(f) = out.faces.iter().find(|f| f.iter().any(|&v| v >= n)) {
-        return Err(format!(
-            "a face {f:?} indexes past the {n} vertices; the file is corrupt"
-        ));
+    if has_normals {
+        out.normals = Some(normals);
     }
-    Ok(out)
+    Ok(())
 }
 
 /// (end of the header text, start of the body) after the `end_header` line.
