@@ -338,7 +338,7 @@ def _bench(args: argparse.Namespace) -> int:
     if not scripts:
         print(
             "binpick bench: the benchmarks live in the source repository's benches/ folder (criterion benches: "
-            "`cargo bench -p binpick-core`; Python benches: `python benches/<name>.py`); this installation has none."
+            "`cargo bench -p binpick-bench`; Python benches: `python benches/<name>.py`); this installation has none."
         )
         return 0
     if args.list:
