@@ -4,16 +4,24 @@ mutations the fuzz tests feed them."""
 from __future__ import annotations
 
 import random
+import time
+from collections import Counter
 from pathlib import Path
+from typing import Any, Callable
 
 import numpy as np
 
 from binpick.calibration import CellCalibration
 from binpick.camera import CameraIntrinsics
+from binpick.errors import BinpickError
 from binpick.scan import save_scan
 from binpick.transforms import look_down
 
 WIDTH, HEIGHT = 64, 48
+
+#: Mutations per fuzz run, and the longest one case may take.
+CASES = 300
+SLOWEST_CASE_S = 2.0
 
 
 def small_calibration() -> CellCalibration:
@@ -90,3 +98,27 @@ def mutate(data: bytes, rng: random.Random) -> bytes:
         else:
             out[i:i] = rng.choice(_TOKENS)
     return bytes(out)
+
+
+def fuzz(path: Path, original: bytes, load: Callable[[], Any], seed: int, cases: int = CASES) -> tuple[Counter, list]:
+    """Writes ``cases`` mutations of ``original`` to ``path`` and calls ``load`` on each; the
+    outcome counts (valid, BinpickError, other) and the cases that ended in anything but a load
+    or a BinpickError. Fails at once when one case takes longer than ``SLOWEST_CASE_S``."""
+    rng = random.Random(seed)
+    outcomes: Counter = Counter()
+    other = []
+    for case in range(cases):
+        data = mutate(original, rng)
+        path.write_bytes(data)
+        t = time.monotonic()
+        try:
+            load()
+            outcomes["valid"] += 1
+        except BinpickError:
+            outcomes["BinpickError"] += 1
+        except Exception as exc:  # the outcome the fuzz exists to catch
+            outcomes["other"] += 1
+            other.append((case, type(exc).__name__, str(exc)[:120], data[:200]))
+        took = time.monotonic() - t
+        assert took < SLOWEST_CASE_S, f"case {case} took {took:.1f} s: {data[:200]!r}"
+    return outcomes, other

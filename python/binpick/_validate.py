@@ -9,6 +9,11 @@ from typing import Any, Optional
 
 import numpy as np
 
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python < 3.11
+    import tomli as tomllib  # type: ignore[no-redef]
+
 from .errors import CalibrationError, DTypeError, InvalidInputError, NonFiniteError, ShapeError, TooFewPointsError
 
 
@@ -323,3 +328,16 @@ def read_text_file(path: Any, what: str, error: type, *, max_bytes: int, missing
         raise error(
             f"{path}: byte {exc.start} of the {what} is not UTF-8 text ({exc.reason}); save the file as UTF-8"
         ) from None
+
+
+def parse_toml(text: str, source: str, error: type) -> dict:
+    """The TOML document in ``text``, or ``error`` naming ``source``: for bad syntax (with the line),
+    for arrays or tables nested too deeply to parse, and for integers too long to convert."""
+    try:
+        return tomllib.loads(text)
+    except RecursionError:
+        raise error(
+            f"{source}: not valid TOML (arrays or tables nested too deeply); nest lists two levels at most"
+        ) from None
+    except ValueError as exc:  # TOMLDecodeError, and integers longer than Python converts
+        raise error(f"{source}: not valid TOML ({str(exc)[:200]}); fix the line it names") from None

@@ -10,12 +10,7 @@ from typing import Any
 
 import numpy as np
 
-try:
-    import tomllib
-except ModuleNotFoundError:  # Python < 3.11
-    import tomli as tomllib  # type: ignore[no-redef]
-
-from .._validate import calibration_matrix, check_rigid, frozen_copy, image_size, read_text_file
+from .._validate import calibration_matrix, check_rigid, frozen_copy, image_size, parse_toml, read_text_file
 from ..camera import CameraIntrinsics
 from ..errors import CalibrationError, FileWriteError
 from ..transforms import rot_y
@@ -95,15 +90,7 @@ class CellCalibration:
         """Parses TOML text; ``source`` names the file in error messages."""
         if not isinstance(text, str):
             raise CalibrationError(f"{source}: expected the file's text as a str, got {type(text).__name__}")
-        try:
-            doc = tomllib.loads(text)
-        except RecursionError:
-            raise CalibrationError(
-                f"{source}: not valid TOML (arrays or tables nested too deeply); a calibration file holds "
-                "matrices nested two levels deep"
-            ) from None
-        except ValueError as exc:  # TOMLDecodeError, and integers longer than Python converts
-            raise CalibrationError(f"{source}: not valid TOML ({str(exc)[:200]}); fix the line it names") from None
+        doc = parse_toml(text, source, CalibrationError)
         return cls.from_dict(doc, source=source)
 
     @classmethod
