@@ -1,17 +1,20 @@
 """The MELFA driver's raw ``command`` is an allowlist, and the session survives one lost reply:
 checked over a pty against the R3 controller emulator."""
 
+import re
 import time
 
 import numpy as np
 import pytest
 from device_settings import FAST_ROBOT
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from test_devices_robot_driver import commands, down, is_cmd
 
 from binpick.devices import CellLimits, MelfaRobot
 from binpick.devices.emulators import Fault, RobotEmulator, RobotEmulatorConfig
-from binpick.devices.melfa import SAFE_COMMANDS
-from binpick.errors import DeviceFault, DeviceTimeout, SafetyError
+from binpick.devices.melfa import SAFE_COMMANDS, encode_command
+from binpick.errors import DeviceFault, DeviceTimeout, InvalidInputError, SafetyError
 
 # What moves the arm, starts or selects a program, jogs, changes speed or override, or works the
 # hand — in the spellings a careless or hostile caller would try.
@@ -138,9 +141,64 @@ def test_a_refused_open_is_not_retried(robot_emulator):
     assert commands(robot_emulator).count("OPEN=NARCUSR") == 1
 
 
-def test_refused_commands_are_refused_before_the_port_is_touched():
-    r = MelfaRobot.__new__(MelfaRobot)  # no port at all: a refusal must not need one
-    r.limits = CellLimits()
-    for cmd in ("EXECSPD 9999", "RUN1", "JOG1", "MOV P1"):
-        with pytest.raises(SafetyError):
-            r.command(cmd)
+class _RecordingLink:
+    """Stands in for the serial link: records what is written, answers every request QoK."""
+
+    def __init__(self):
+        self.written = []
+
+    def discard_input(self):
+        pass
+
+    def write(self, frame):
+        self.written.append(frame)
+
+    def deadline(self):
+        return 0.0
+
+    def read_until(self, terminator, deadline, *, what):
+        return b"QoK\r"
+
+
+def _recording_robot():
+    r = MelfaRobot.__new__(MelfaRobot)  # no port: the link is the recorder
+    r.config, r.limits, r.alarm_active, r._link = FAST_ROBOT, CellLimits(), False, _RecordingLink()
+    return r
+
+
+_PREFIXES = [
+    "EXEC",
+    "EXECSPD",
+    "OVRD",
+    "RUN",
+    "JOG",
+    "MOV",
+    "MVS",
+    "PRG",
+    "HND",
+    "SRV",
+    "CNTL",
+    "OPEN=",
+    "STOP",
+    "PPOSF",
+]
+
+
+@settings(max_examples=400, deadline=None)
+@given(
+    st.one_of(
+        st.text(max_size=40),
+        st.tuples(st.sampled_from(_PREFIXES), st.text(max_size=12)).map("".join),
+        st.sampled_from(list(SAFE_COMMANDS)).map(lambda name: name.replace("<n>", "1").replace("<client>", "X")),
+    )
+)
+def test_command_sends_exactly_the_allowlisted_commands_and_nothing_else(cmd):
+    r = _recording_robot()
+    try:
+        r.command(cmd)
+    except (SafetyError, InvalidInputError):
+        assert r._link.written == [], f"{cmd!r} was refused but something was sent"
+        return
+    assert any(re.fullmatch(pattern, cmd) for pattern, _ in SAFE_COMMANDS.values()), f"{cmd!r} passed"
+    assert not cmd.startswith(("EXEC", "OVRD", "RUN", "JOG", "MOV", "MVS", "HND", "PRG"))
+    assert r._link.written == [encode_command(cmd)]

@@ -33,9 +33,12 @@ Commands used and the replies parsed (angles on the wire in degrees, lengths in 
 FL1 is the posture flag (bit 2 right/left, bit 1 above/below, bit 0 non-flip/flip; 7 = R, A, N).
 Conversion between transforms and (X, Y, Z, A, B, C) lives in :mod:`binpick.devices.xyzabc`.
 
-Queries (PPOSF, JPOSF, DSTATE, ERRORMES, STOP, position definitions) are retried after a timeout
-or an unusable reply; motion commands are never sent twice. When anything fails after a motion
-has been commanded the driver sends STOP and raises the failure with what it did.
+Queries (PPOSF, JPOSF, DSTATE, ERRORMES, STOP, position definitions) and the session commands
+are retried after a timeout or an unusable reply; motion commands are never sent twice. The raw
+:meth:`MelfaRobot.command` sends only the queries and session commands of :data:`SAFE_COMMANDS`:
+every motion, speed, override, program, jog or hand command goes through a checked method.
+When anything fails after a motion has been commanded the driver sends STOP and raises the
+failure with what it did.
 """
 
 from __future__ import annotations
