@@ -9,6 +9,11 @@ from typing import Any, Optional
 
 import numpy as np
 
+try:
+    import tomllib
+except ModuleNotFoundError:  # Python < 3.11
+    import tomli as tomllib  # type: ignore[no-redef]
+
 from .errors import CalibrationError, DTypeError, InvalidInputError, NonFiniteError, ShapeError, TooFewPointsError
 
 
@@ -239,8 +244,10 @@ def calibration_matrix(value: Any, field: str, shape: tuple[int, ...]) -> np.nda
     """A finite float64 array of ``shape`` read from a calibration source, or CalibrationError naming ``field``."""
     try:
         arr = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise CalibrationError(f"{field}: expected numbers of shape {shape}, got {value!r}") from None
+    except (TypeError, ValueError, OverflowError, RecursionError):
+        raise CalibrationError(
+            f"{field}: expected numbers of shape {shape}, got {value!r:.80}; write them as nested lists of numbers"
+        ) from None
     if arr.shape != shape:
         raise CalibrationError(f"{field}: expected shape {shape}, got {arr.shape}")
     if not np.isfinite(arr).all():
@@ -268,3 +275,69 @@ def as_box(value: Any, name: str = "bin") -> tuple[np.ndarray, np.ndarray]:
             f"{name}: the max corner {b[1].tolist()} must exceed the min corner {b[0].tolist()} on every axis"
         )
     return b[0], b[1]
+
+
+# --------------------------------------------------------------------------- files
+
+#: Largest image width or height a calibration or scan file may declare, pixels.
+MAX_IMAGE_SIDE = 65_536
+
+#: Largest image a calibration or scan file may declare, pixels (width × height): 2**28 px,
+#: 768 MiB for one 8-bit BGR frame; beyond it one frame would not fit in a machine's memory.
+MAX_IMAGE_PIXELS = 2**28
+
+
+def image_size(width: Any, height: Any, where: str, error: type = CalibrationError) -> tuple[int, int]:
+    """``(width, height)`` in pixels as read from a file, each a whole number in
+    [2, :data:`MAX_IMAGE_SIDE`] and together at most :data:`MAX_IMAGE_PIXELS`, or ``error``
+    naming ``where.width`` / ``where.height``."""
+    for name, v in (("width", width), ("height", height)):
+        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 2 <= v <= MAX_IMAGE_SIDE:
+            raise error(
+                f"{where}.{name}: must be a whole number of pixels in [2, {MAX_IMAGE_SIDE}], got {v!r:.40}; "
+                f"write the camera's image {name} in pixels"
+            )
+    w, h = int(width), int(height)
+    if w * h > MAX_IMAGE_PIXELS:
+        raise error(
+            f"{where}: a {w}×{h} image has {w * h} pixels, more than the {MAX_IMAGE_PIXELS} binpick reads "
+            f"(one BGR frame would take {3 * w * h / 2**30:.1f} GiB); write the camera's real image size"
+        )
+    return w, h
+
+
+def read_text_file(path: Any, what: str, error: type, *, max_bytes: int, missing: str = "") -> str:
+    """The UTF-8 text of the file ``path``, or ``error`` naming the file: when it cannot be read
+    (``missing`` is appended when it does not exist), when it is larger than ``max_bytes`` (a
+    ceiling well above any real file, so a wrong or hostile file is not read whole), or when it
+    is not UTF-8 (naming the first bad byte)."""
+    try:
+        with open(path, "rb") as f:
+            data = f.read(max_bytes + 1)
+    except FileNotFoundError:
+        raise error(f"{path}: the {what} does not exist{missing}") from None
+    except (OSError, ValueError) as exc:  # ValueError: a NUL byte in the path
+        raise error(f"{path}: cannot read the {what} ({getattr(exc, 'strerror', None) or exc})") from None
+    if len(data) > max_bytes:
+        raise error(
+            f"{path}: the {what} is larger than {max_bytes} bytes, far beyond any real one; is it the right file?"
+        )
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise error(
+            f"{path}: byte {exc.start} of the {what} is not UTF-8 text ({exc.reason}); save the file as UTF-8"
+        ) from None
+
+
+def parse_toml(text: str, source: str, error: type) -> dict:
+    """The TOML document in ``text``, or ``error`` naming ``source``: for bad syntax (with the line),
+    for arrays or tables nested too deeply to parse, and for integers too long to convert."""
+    try:
+        return tomllib.loads(text)
+    except RecursionError:
+        raise error(
+            f"{source}: not valid TOML (arrays or tables nested too deeply); nest lists two levels at most"
+        ) from None
+    except ValueError as exc:  # TOMLDecodeError, and integers longer than Python converts
+        raise error(f"{source}: not valid TOML ({str(exc)[:200]}); fix the line it names") from None

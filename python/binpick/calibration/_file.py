@@ -10,18 +10,16 @@ from typing import Any
 
 import numpy as np
 
-try:
-    import tomllib
-except ModuleNotFoundError:  # Python < 3.11
-    import tomli as tomllib  # type: ignore[no-redef]
-
-from .._validate import calibration_matrix, check_rigid, frozen_copy
+from .._validate import calibration_matrix, check_rigid, frozen_copy, image_size, parse_toml, read_text_file
 from ..camera import CameraIntrinsics
 from ..errors import CalibrationError, FileWriteError
 from ..transforms import rot_y
 
 #: The calibration file format this code writes and reads.
 FORMAT_VERSION = 1
+
+#: Largest calibration file read, bytes (a real one is under a kilobyte).
+MAX_FILE_BYTES = 1 << 20
 
 
 def _rigid(value: Any, field: str) -> np.ndarray:
@@ -90,15 +88,16 @@ class CellCalibration:
     @classmethod
     def from_toml(cls, text: str, *, source: str = "calibration") -> CellCalibration:
         """Parses TOML text; ``source`` names the file in error messages."""
-        try:
-            doc = tomllib.loads(text)
-        except tomllib.TOMLDecodeError as exc:
-            raise CalibrationError(f"{source}: not valid TOML ({exc})") from None
+        if not isinstance(text, str):
+            raise CalibrationError(f"{source}: expected the file's text as a str, got {type(text).__name__}")
+        doc = parse_toml(text, source, CalibrationError)
         return cls.from_dict(doc, source=source)
 
     @classmethod
     def from_dict(cls, doc: dict, *, source: str = "calibration") -> CellCalibration:
         """Builds a calibration from the parsed TOML document, checking every field."""
+        if not isinstance(doc, dict):
+            raise CalibrationError(f"{source}: expected a TOML document (a table), got {type(doc).__name__}")
 
         def get(table: str, key: str) -> Any:
             sect = doc.get(table)
@@ -115,21 +114,24 @@ class CellCalibration:
             raise CalibrationError(
                 f"{source}: field version is missing; a calibration file starts with 'version = {FORMAT_VERSION}'"
             )
-        if version != FORMAT_VERSION:
+        if type(version) is not int or version != FORMAT_VERSION:  # not bool: True == 1
             raise CalibrationError(
-                f"{source}: field version is {version!r}; this binpick reads version {FORMAT_VERSION} only"
+                f"{source}: field version is {version!r:.40}; this binpick reads version {FORMAT_VERSION} only "
+                f"(write 'version = {FORMAT_VERSION}')"
             )
         axis = get("laser", "axis")
         if axis != "y":
             raise CalibrationError(
-                f'{source}: field laser.axis is {axis!r}; the projector turns about its own y axis, write axis = "y"'
+                f"{source}: field laser.axis is {axis!r:.40}; the projector turns about its own y axis, "
+                'write axis = "y"'
             )
         try:
+            width, height = image_size(get("camera", "width"), get("camera", "height"), "camera")
             camera = CameraIntrinsics(
-                width=get("camera", "width"),
-                height=get("camera", "height"),
-                K=get("camera", "K"),
-                dist=get("camera", "dist"),
+                width=width,
+                height=height,
+                K=calibration_matrix(get("camera", "K"), "camera.K", (3, 3)),
+                dist=calibration_matrix(get("camera", "dist"), "camera.dist", (5,)),
             )
             return cls(
                 camera=camera,
@@ -154,10 +156,7 @@ class CellCalibration:
     def load(cls, path: str | os.PathLike) -> CellCalibration:
         """Reads a calibration file; a missing or inconsistent field raises ``CalibrationError`` naming it."""
         path = Path(path)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as exc:
-            raise CalibrationError(f"{path}: cannot read the calibration file ({exc.strerror or exc})") from None
+        text = read_text_file(path, "calibration file", CalibrationError, max_bytes=MAX_FILE_BYTES)
         return cls.from_toml(text, source=str(path))
 
 

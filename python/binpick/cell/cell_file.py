@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import inspect
 import math
 import os
 from collections.abc import Mapping
@@ -12,12 +13,8 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-try:
-    import tomllib
-except ModuleNotFoundError:  # Python < 3.11
-    import tomli as tomllib  # type: ignore[no-redef]
-
 from .. import parts
+from .._validate import parse_toml, read_text_file
 from ..calibration import CellCalibration
 from ..devices import (
     AiMotor,
@@ -35,8 +32,9 @@ from ..devices import (
 from ..devices.gripper import Gripper
 from ..devices.motor import LaserMotor
 from ..devices.xyzabc import transform_from_xyzabc
-from ..errors import InvalidInputError, MeshFileNotFoundError
+from ..errors import BinpickError, InvalidInputError, MeshFileNotFoundError
 from ..models import Model
+from ..poses import estimate_pose
 from .config import CellConfig, GripperGeometry, check_static_poses
 from .frames import FrameSource, OpenCVCamera
 from .loop import Cell
@@ -95,161 +93,227 @@ max_tool_tilt_deg = 45.0
 """
 
 
-def _pose_deg(value: Any, where: str) -> np.ndarray:
-    v = np.asarray(value, dtype=np.float64) if isinstance(value, (list, tuple)) else None
-    if v is None or v.shape != (6,) or not np.isfinite(v).all():
-        raise InvalidInputError(f"{where}: expected [X, Y, Z, A, B, C] (mm, degrees), got {value!r}")
-    return transform_from_xyzabc(np.concatenate([v[:3], np.radians(v[3:])]))
+#: Largest cell file read, bytes (a real one is about two kilobytes).
+MAX_FILE_BYTES = 1 << 20
+
+_EXAMPLE = "see `binpick pick --example`"
 
 
 @dataclass(frozen=True, eq=False)
 class CellFile:
-    """A parsed cell file (see ``CELL_FILE_EXAMPLE``): the tables as read, the file's folder, the path."""
+    """A parsed cell file (see ``CELL_FILE_EXAMPLE``): the tables as read, the file's folder, the path.
+
+    The typed getters (:meth:`text`, :meth:`integer`, :meth:`number`, :meth:`numbers`) raise
+    InvalidInputError naming the file, the table and the key for a value of the wrong type.
+    """
 
     path: Any
     doc: Mapping[str, Any]
 
-    def table(self, name: str) -> Mapping[str, Any]:
-        """One table; InvalidInputError naming the file when it is missing."""
+    def table(self, name: str, *, optional: bool = False) -> Mapping[str, Any]:
+        """One table; InvalidInputError naming the file when it is missing (an empty table when
+        ``optional``) or is not a table."""
         t = self.doc.get(name)
+        if t is None and optional:
+            return {}
         if not isinstance(t, dict):
-            raise InvalidInputError(f"{self.path}: the [{name}] table is missing; see `binpick pick --example`")
+            raise InvalidInputError(f"{self.path}: the [{name}] table is missing; {_EXAMPLE}")
         return t
 
     def get(self, table: str, key: str, default: Any = ...) -> Any:
         """``[table] key``; InvalidInputError naming the file and key when it is missing and has no default."""
-        t = self.table(table)
+        t = self.table(table, optional=default is not ...)
         if key not in t:
             if default is ...:
-                raise InvalidInputError(f"{self.path}: [{table}] {key} is missing; see `binpick pick --example`")
+                raise InvalidInputError(f"{self.path}: [{table}] {key} is missing; {_EXAMPLE}")
             return default
         return t[key]
 
+    def _wrong(self, table: str, key: str, value: Any, expected: str) -> InvalidInputError:
+        return InvalidInputError(f"{self.path}: [{table}] {key} must be {expected}, got {value!r:.60}; {_EXAMPLE}")
+
+    def text(self, table: str, key: str, default: Any = ...) -> str:
+        """``[table] key`` as a string."""
+        v = self.get(table, key, default)
+        if not isinstance(v, str) or "\x00" in v:
+            raise self._wrong(table, key, v, "a string")
+        return v
+
+    def integer(self, table: str, key: str, default: Any = ...) -> int:
+        """``[table] key`` as a whole number (not a boolean)."""
+        v = self.get(table, key, default)
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self._wrong(table, key, v, "a whole number")
+        return v
+
+    def number(self, table: str, key: str, default: Any = ...) -> float:
+        """``[table] key`` as a finite number."""
+        v = self.get(table, key, default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise self._wrong(table, key, v, "a finite number")
+        return float(v)
+
+    def numbers(self, table: str, key: str, size: int, default: Any = ...) -> np.ndarray:
+        """``[table] key`` as a list of ``size`` finite numbers."""
+        v = self.get(table, key, default)
+        ok = isinstance(v, (list, tuple)) and len(v) == size
+        ok = ok and all(not isinstance(x, bool) and isinstance(x, (int, float)) and math.isfinite(x) for x in v)
+        if not ok:
+            raise self._wrong(table, key, v, f"a list of {size} finite numbers")
+        return np.array(v, dtype=np.float64)
+
+    def pose(self, table: str, key: str, default: Any = ...) -> np.ndarray:
+        """``[table] key`` as [X, Y, Z, A, B, C] (mm, degrees), returned as a 4×4 transform."""
+        v = self.numbers(table, key, 6, default)
+        return transform_from_xyzabc(np.concatenate([v[:3], np.radians(v[3:])]))
+
 
 def load_cell_file(path: Any) -> CellFile:
-    """Reads a cell file (TOML)."""
+    """Reads a cell file (TOML); InvalidInputError naming the file for one that cannot be read,
+    is too large, is not UTF-8 or is not valid TOML."""
     p = os.fspath(path)
-    try:
-        with open(p, "rb") as f:
-            doc = tomllib.load(f)
-    except FileNotFoundError:
-        raise MeshFileNotFoundError(f"{p}: cell file not found; write one after `binpick pick --example`") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InvalidInputError(f"{p}: not valid TOML ({exc})") from None
-    return CellFile(path=p, doc=doc)
+    if not os.path.exists(p):
+        raise MeshFileNotFoundError(f"{p}: cell file not found; write one after `binpick pick --example`")
+    text = read_text_file(p, "cell file", InvalidInputError, max_bytes=MAX_FILE_BYTES)
+    return CellFile(path=p, doc=parse_toml(text, p, InvalidInputError))
 
 
 def cell_from_file(
     cell_file: CellFile, *, progress: Optional[Callable[[str, str], None]] = None, num_threads: int = 0
 ) -> Cell:
     """Builds the drivers, camera and :class:`CellConfig` a cell file describes (nothing is sent
-    yet: open the returned cell as a context manager)."""
+    yet: open the returned cell as a context manager). Every value of the file is read and
+    checked before the first port is opened."""
     config = config_from_file(cell_file, num_threads=num_threads)
-    check_static_poses(config)  # before any port is opened
-    robot = _robot(cell_file, config.limits)
-    return Cell(
-        config,
-        robot=robot,
-        motor=_motor(cell_file),
-        gripper=_gripper(cell_file, robot),
-        camera=_camera(cell_file, config.model, num_threads),
-        progress=progress,
-    )
+    check_static_poses(config)
+    try:
+        open_robot, open_motor = _robot(cell_file, config.limits), _motor(cell_file)
+        open_gripper, open_camera = _gripper(cell_file), _camera(cell_file, config.model, num_threads)
+    except InvalidInputError as exc:
+        if str(exc).startswith(str(cell_file.path)):
+            raise
+        raise InvalidInputError(f"{cell_file.path}: {exc}") from None
+    opened: list[Any] = []
+    try:
+        robot = open_robot()
+        opened.append(robot.close)
+        motor = open_motor()
+        opened.append(motor.close)
+        gripper = open_gripper(robot)
+        opened.append(gripper.close_port)
+        camera = open_camera()
+    except BaseException:
+        for close in reversed(opened):
+            try:
+                close()
+            except (BinpickError, OSError):
+                pass
+        raise
+    return Cell(config, robot=robot, motor=motor, gripper=gripper, camera=camera, progress=progress)
 
 
 def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig:
     """The :class:`CellConfig` of a cell file: part, calibration, bin, poses, tool and limits."""
     f = cell_file
     here = os.path.dirname(os.path.abspath(f.path))
-    name = str(f.get("part", "model"))
+    name = f.text("part", "model")
     model = (
         getattr(parts, name)()
         if name in ("tee", "elbow", "cross")
-        else Model.from_mesh(os.path.join(here, name), unit=str(f.get("part", "unit", "mm")))
+        else Model.from_mesh(os.path.join(here, name), unit=f.text("part", "unit", "mm"))
     )
-    calibration = CellCalibration.load(os.path.join(here, str(f.get("cell", "calibration"))))
-    tool = _pose_deg(f.get("cell", "tool", [0, 0, 150, 0, 0, 0]), f"{f.path}: [cell] tool")
+    calibration = CellCalibration.load(os.path.join(here, f.text("cell", "calibration")))
+    tool = f.pose("cell", "tool", [0, 0, 150, 0, 0, 0])
     return CellConfig(
         calibration=calibration,
         model=model,
-        bin_bounds=(f.get("cell", "bin_min_mm"), f.get("cell", "bin_max_mm")),
-        scan_poses=(_pose_deg(f.get("cell", "scan_pose"), f"{f.path}: [cell] scan_pose"),),
-        drop_pose=_pose_deg(f.get("cell", "drop_pose"), f"{f.path}: [cell] drop_pose"),
-        frames=int(f.get("cell", "frames", 90)),
+        bin_bounds=(f.numbers("cell", "bin_min_mm", 3), f.numbers("cell", "bin_max_mm", 3)),
+        scan_poses=(f.pose("cell", "scan_pose"),),
+        drop_pose=f.pose("cell", "drop_pose"),
+        frames=f.integer("cell", "frames", 90),
         gripper=GripperGeometry(T_flange_gripper=tool),
         limits=_limits(f),
         num_threads=num_threads,
-        estimate_options=dict(f.doc.get("estimate", {})),
+        estimate_options=_estimate_options(f),
     )
+
+
+def _estimate_options(f: CellFile) -> dict:
+    """The [estimate] table, each key a keyword argument of :func:`binpick.estimate_pose`."""
+    options = dict(f.table("estimate", optional=True))
+    known = [n for n in inspect.signature(estimate_pose).parameters if n not in ("scene", "model", "bin")]
+    unknown = [k for k in options if k not in known]
+    if unknown:
+        raise InvalidInputError(
+            f"{f.path}: [estimate] {unknown[0]!r:.40} is not an option of binpick.estimate_pose; use {', '.join(known)}"
+        )
+    return options
 
 
 def _limits(f: CellFile) -> safety.CellLimits:
-    lim_t = f.doc.get("limits", {})
-    defaults = safety.CellLimits()
+    d = safety.CellLimits()
     return safety.CellLimits(
-        workspace_min_mm=tuple(float(v) for v in lim_t.get("workspace_min_mm", defaults.workspace_min_mm)),
-        workspace_max_mm=tuple(float(v) for v in lim_t.get("workspace_max_mm", defaults.workspace_max_mm)),
-        approach_height_mm=float(lim_t.get("approach_height_mm", defaults.approach_height_mm)),
-        max_tool_tilt_rad=math.radians(float(lim_t.get("max_tool_tilt_deg", math.degrees(defaults.max_tool_tilt_rad)))),
-        max_lateral_below_mm=float(lim_t.get("max_lateral_below_mm", defaults.max_lateral_below_mm)),
-        max_override_percent=float(lim_t.get("max_override_percent", defaults.max_override_percent)),
-        max_linear_speed_mm_s=float(lim_t.get("max_linear_speed_mm_s", defaults.max_linear_speed_mm_s)),
+        workspace_min_mm=tuple(f.numbers("limits", "workspace_min_mm", 3, d.workspace_min_mm)),
+        workspace_max_mm=tuple(f.numbers("limits", "workspace_max_mm", 3, d.workspace_max_mm)),
+        approach_height_mm=f.number("limits", "approach_height_mm", d.approach_height_mm),
+        max_tool_tilt_rad=math.radians(f.number("limits", "max_tool_tilt_deg", math.degrees(d.max_tool_tilt_rad))),
+        max_lateral_below_mm=f.number("limits", "max_lateral_below_mm", d.max_lateral_below_mm),
+        max_override_percent=f.number("limits", "max_override_percent", d.max_override_percent),
+        max_linear_speed_mm_s=f.number("limits", "max_linear_speed_mm_s", d.max_linear_speed_mm_s),
     )
 
 
-def _robot(f: CellFile, limits: safety.CellLimits) -> MelfaRobot:
-    return MelfaRobot(
-        str(f.get("robot", "port")),
-        limits=limits,
-        config=MelfaConfig(
-            serial=SerialSettings(
-                baudrate=int(f.get("robot", "baudrate", 9600)), parity="E", stopbits=2, timeout_s=2.0
-            ),
-            initial_override_percent=float(f.get("robot", "override_percent", 10.0)),
-            initial_linear_speed_mm_s=float(f.get("robot", "linear_speed_mm_s", 50.0)),
-        ),
+def _robot(f: CellFile, limits: safety.CellLimits) -> Callable[[], MelfaRobot]:
+    port = f.text("robot", "port")
+    config = MelfaConfig(
+        serial=SerialSettings(baudrate=f.integer("robot", "baudrate", 9600), parity="E", stopbits=2, timeout_s=2.0),
+        initial_override_percent=f.number("robot", "override_percent", 10.0),
+        initial_linear_speed_mm_s=f.number("robot", "linear_speed_mm_s", 50.0),
     )
+    return lambda: MelfaRobot(port, limits=limits, config=config)
 
 
-def _motor(f: CellFile) -> LaserMotor:
-    protocol = str(f.get("motor", "protocol", "dynamixel"))
-    motor_serial = SerialSettings(baudrate=int(f.get("motor", "baudrate", 57600)), timeout_s=0.2)
+def _motor(f: CellFile) -> Callable[[], LaserMotor]:
+    protocol = f.text("motor", "protocol", "dynamixel")
+    port = f.text("motor", "port")
+    motor_serial = SerialSettings(baudrate=f.integer("motor", "baudrate", 57600), timeout_s=0.2)
     if protocol == "dynamixel":
-        return DynamixelMotor(
-            str(f.get("motor", "port")),
-            config=DynamixelConfig(motor_id=int(f.get("motor", "id", 1)), serial=motor_serial),
-        )
+        dxl = DynamixelConfig(motor_id=f.integer("motor", "id", 1), serial=motor_serial)
+        return lambda: DynamixelMotor(port, config=dxl)
     if protocol == "aimotor":
-        return AiMotor(
-            str(f.get("motor", "port")),
-            config=AiMotorConfig(motor_id=int(f.get("motor", "id", 0)), serial=motor_serial),
-        )
-    raise InvalidInputError(f"{f.path}: [motor] protocol = {protocol!r}; use 'dynamixel' or 'aimotor'")
+        ai = AiMotorConfig(motor_id=f.integer("motor", "id", 0), serial=motor_serial)
+        return lambda: AiMotor(port, config=ai)
+    raise InvalidInputError(f"{f.path}: [motor] protocol = {protocol!r:.40}; use 'dynamixel' or 'aimotor'")
 
 
-def _gripper(f: CellFile, robot: MelfaRobot) -> Gripper:
-    kind = str(f.get("gripper", "kind", "modbus"))
+def _gripper(f: CellFile) -> Callable[[MelfaRobot], Gripper]:
+    kind = f.text("gripper", "kind", "modbus")
     if kind == "modbus":
-        return ModbusGripper(
-            str(f.get("gripper", "port")),
-            config=GripperConfig(
-                slave=int(f.get("gripper", "slave", 9)),
-                serial=SerialSettings(baudrate=int(f.get("gripper", "baudrate", 115200)), timeout_s=0.3),
-            ),
+        port = f.text("gripper", "port")
+        config = GripperConfig(
+            slave=f.integer("gripper", "slave", 9),
+            serial=SerialSettings(baudrate=f.integer("gripper", "baudrate", 115200), timeout_s=0.3),
         )
+        return lambda robot: ModbusGripper(port, config=config)
     if kind == "hand":
-        return MelfaHandGripper(robot, hand=int(f.get("gripper", "hand", 1)))
-    raise InvalidInputError(f"{f.path}: [gripper] kind = {kind!r}; use 'modbus' or 'hand'")
+        hand = f.integer("gripper", "hand", 1)
+        return lambda robot: MelfaHandGripper(robot, hand=hand)
+    raise InvalidInputError(f"{f.path}: [gripper] kind = {kind!r:.40}; use 'modbus' or 'hand'")
 
 
-def _camera(f: CellFile, model: Model, num_threads: int) -> FrameSource:
-    source = str(f.get("camera", "source", "opencv"))
+def _camera(f: CellFile, model: Model, num_threads: int) -> Callable[[], FrameSource]:
+    source = f.text("camera", "source", "opencv")
     if source == "opencv":
-        return OpenCVCamera(f.get("camera", "device", 0))
+        device = f.get("camera", "device", 0)
+        index_or_path = f.text("camera", "device") if isinstance(device, str) else f.integer("camera", "device", 0)
+        return lambda: OpenCVCamera(index_or_path)
     if source == "simulated":
-        from ..sim.camera import RenderedCamera  # the simulator loads only when a cell file asks for it
+        count, seed = f.integer("camera", "count", 8), f.integer("camera", "seed", 0)
 
-        return RenderedCamera(
-            model, count=int(f.get("camera", "count", 8)), seed=int(f.get("camera", "seed", 0)), num_threads=num_threads
-        )
-    raise InvalidInputError(f"{f.path}: [camera] source = {source!r}; use 'opencv' or 'simulated'")
+        def rendered() -> FrameSource:
+            from ..sim.camera import RenderedCamera  # the simulator loads only when a cell file asks for it
+
+            return RenderedCamera(model, count=count, seed=seed, num_threads=num_threads)
+
+        return rendered
+    raise InvalidInputError(f"{f.path}: [camera] source = {source!r:.40}; use 'opencv' or 'simulated'")

@@ -32,6 +32,7 @@ from typing import Any, Callable, Optional, TextIO
 import numpy as np
 
 from .._validate import count
+from ..devices import safety
 from ..devices.gripper import Gripper
 from ..devices.motor import LaserMotor
 from ..devices.robot import Robot
@@ -43,7 +44,7 @@ from .frames import FrameSource
 from .grasp import NoGraspError, plan_grasp
 from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult
 
-__all__ = ["Cell", "ProgressPrinter", "quiet"]
+__all__ = ["Cell", "PICK_MOVES", "ProgressPrinter", "quiet"]
 
 
 class ProgressPrinter:
@@ -61,6 +62,17 @@ class ProgressPrinter:
 def quiet(stage: str, message: str) -> None:
     """A progress callback that prints nothing."""
     return None
+
+
+#: The moves of one pick in the order :meth:`Cell.pick` makes them: the waypoint, and its
+#: interpolation when the loop fixes it (None: the plan's own).
+PICK_MOVES: tuple[tuple[str, Optional[bool]], ...] = (
+    ("above", None),
+    ("approach", None),
+    ("grasp", None),
+    ("lift", True),
+    ("drop", False),
+)
 
 
 def _ms_since(t0: float) -> float:
@@ -175,7 +187,7 @@ class Cell:
             return f"STOP could not be sent ({exc}); stop the arm by hand"
         return "the arm was stopped"
 
-    def _move(self, T: np.ndarray, *, linear: bool) -> None:
+    def _move(self, T: np.ndarray, linear: bool) -> None:
         self.robot.move_to(T, linear=linear)
 
     def _go_above_approach(self) -> None:
@@ -420,20 +432,57 @@ class Cell:
             f"{None if truth is None else truth.instance}"
         )
 
+    def check_plan(self, plan: PickPlan) -> dict[str, tuple[np.ndarray, bool]]:
+        """The moves of ``plan`` as :meth:`pick` makes them (:data:`PICK_MOVES`), checked whole
+        before the first: every waypoint present with a boolean interpolation, each pose rigid,
+        inside the workspace and with the tool down (before anything is sent), then every move from
+        the arm's pose now to the drop pose against the approach rules. A malformed plan raises
+        InvalidInputError and an unsafe one SafetyError naming the waypoint; either way the arm
+        and the gripper have been sent nothing. Returns waypoint → (pose, linear)."""
+        if not isinstance(plan, PickPlan):
+            raise InvalidInputError(f"plan: expected a binpick.cell.PickPlan, got {type(plan).__name__}")
+        if not isinstance(plan.waypoints, (tuple, list)):
+            raise InvalidInputError(
+                f"plan.waypoints: expected a tuple of (name, T_base_flange, linear), got {plan.waypoints!r:.80}"
+            )
+        linear: dict[str, bool] = {}
+        for i, entry in enumerate(plan.waypoints):
+            if not (isinstance(entry, tuple) and len(entry) == 3 and isinstance(entry[0], str)):
+                raise InvalidInputError(
+                    f"plan.waypoints[{i}]: expected (name, T_base_flange, linear), got {entry!r:.80}"
+                )
+            if not isinstance(entry[2], (bool, np.bool_)):
+                raise InvalidInputError(f"plan.waypoints[{i}]: linear must be True or False, got {entry[2]!r:.40}")
+            linear.setdefault(entry[0], bool(entry[2]))
+        missing = [name for name, _ in PICK_MOVES if name not in linear]
+        if missing:
+            raise InvalidInputError(
+                f"plan: waypoints {missing} are missing; a pick plan has {', '.join(n for n, _ in PICK_MOVES)} "
+                "(see binpick.cell.grasp.pick_waypoints)"
+            )
+        names = [name for name, _ in PICK_MOVES]
+        flags = [linear[name] if fixed is None else fixed for name, fixed in PICK_MOVES]
+        labels = [f"plan waypoint {name!r}" for name in names]
+        limits = self.config.limits
+        poses = [safety.check_pose(plan.pose(n), limits, name=label) for n, label in zip(names, labels)]
+        safety.check_sequence(self.robot.read_pose(), poses, flags, limits, names=labels)
+        return {name: (T, lin) for name, T, lin in zip(names, poses, flags)}
+
     def _execute(self, plan: PickPlan) -> Optional[bool]:
-        """Runs the plan; returns what the gripper said about holding. Faults stop the arm and are raised."""
+        """Runs the plan, checked whole first (:meth:`check_plan`); returns what the gripper said
+        about holding. Faults stop the arm and are raised."""
+        moves = self.check_plan(plan)
         try:
             # Open as wide as the collision check assumed (fully when the gripper cannot be set to a width).
             self.gripper.open_for_grasp(self.config.gripper.open_width_mm)
-            linear = {n: lin for n, _, lin in plan.waypoints}
             for name in ("above", "approach", "grasp"):
-                self._move(plan.pose(name), linear=linear[name])
+                self._move(*moves[name])
             held = self.gripper.close()
-            self._move(plan.pose("lift"), linear=True)
+            self._move(*moves["lift"])
             if held is False:
                 self.gripper.open()
                 return False
-            self._move(plan.pose("drop"), linear=False)
+            self._move(*moves["drop"])
             self.gripper.open()
             return held
         except BinpickError as exc:

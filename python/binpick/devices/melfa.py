@@ -33,9 +33,12 @@ Commands used and the replies parsed (angles on the wire in degrees, lengths in 
 FL1 is the posture flag (bit 2 right/left, bit 1 above/below, bit 0 non-flip/flip; 7 = R, A, N).
 Conversion between transforms and (X, Y, Z, A, B, C) lives in :mod:`binpick.devices.xyzabc`.
 
-Queries (PPOSF, JPOSF, DSTATE, ERRORMES, STOP, position definitions) are retried after a timeout
-or an unusable reply; motion commands are never sent twice. When anything fails after a motion
-has been commanded the driver sends STOP and raises the failure with what it did.
+Queries (PPOSF, JPOSF, DSTATE, ERRORMES, STOP, position definitions) and the session commands
+are retried after a timeout or an unusable reply; motion commands are never sent twice. The raw
+:meth:`MelfaRobot.command` sends only the queries and session commands of :data:`SAFE_COMMANDS`:
+every motion, speed, override, program, jog or hand command goes through a checked method.
+When anything fails after a motion has been commanded the driver sends STOP and raises the
+failure with what it did.
 """
 
 from __future__ import annotations
@@ -76,10 +79,27 @@ __all__ = [
     "parse_position",
     "parse_joints",
     "parse_state",
+    "SAFE_COMMANDS",
 ]
 
 _STATUSES = {"QoK": (True, False), "Qok": (True, True), "QeR": (False, False), "Qer": (False, True)}
-_UNCHECKED_MOTION = re.compile(r"^\s*(EXEC(?!P\d+=|SPD)|OVRD)")
+#: What :meth:`MelfaRobot.command` lets through, each matched against the whole command as
+#: written (no leading blanks, no lower case, nothing after it): name → (pattern, what it does).
+SAFE_COMMANDS: dict[str, tuple[str, str]] = {
+    "PPOSF": ("PPOSF", "read the flange position"),
+    "JPOSF": ("JPOSF", "read the joint angles"),
+    "DSTATE": ("DSTATE", "read the controller's state bits and alarm number"),
+    "ERRORMES<n>": (r"ERRORMES\d{1,5}", "read the text of an error number"),
+    "OPEN=<client>": ("OPEN=[A-Za-z0-9_]{1,32}", "open the session"),
+    "CLOSE": ("CLOSE", "close the session"),
+    "CNTLON": ("CNTLON", "take operation rights"),
+    "CNTLOFF": ("CNTLOFF", "give operation rights back"),
+    "SRVON": ("SRVON", "servo power on (the arm holds where it is)"),
+    "SRVOFF": ("SRVOFF", "servo power off (stops any motion)"),
+    "RSTALRM": ("RSTALRM", "reset the alarm"),
+    "STOP": ("STOP", "stop the running motion"),
+}
+_SAFE_COMMAND = re.compile("|".join(f"(?:{pattern})" for pattern, _ in SAFE_COMMANDS.values()))
 _COMMAND_OK = re.compile(r"^[\x20-\x7e]{1,250}$")
 _POSE_NAMES = ("X", "Y", "Z", "A", "B", "C")
 _JOINT_NAMES = ("J1", "J2", "J3", "J4", "J5", "J6")
@@ -336,11 +356,15 @@ class MelfaRobot(Robot):
         self._link.close()
 
     def open_session(self) -> None:
-        """OPEN, CNTLON, SRVON (waiting for servo power), then the initial override and speed."""
+        """OPEN, CNTLON, SRVON (waiting for servo power), then the initial override and speed.
+
+        Each is harmless to repeat, so a lost or unusable reply is retried (``serial.retries``
+        times) before DeviceTimeout or ProtocolError is raised.
+        """
         cfg = self.config
-        self._send(f"OPEN={cfg.client_name}")
-        self._send("CNTLON")
-        self._send("SRVON")
+        self._send(f"OPEN={cfg.client_name}", retry=True)
+        self._send("CNTLON", retry=True)
+        self._send("SRVON", retry=True)
         deadline = time.monotonic() + cfg.servo_on_timeout_s
         while not self.state().servo_on:
             if time.monotonic() > deadline:
@@ -353,11 +377,12 @@ class MelfaRobot(Robot):
         self.set_linear_speed(cfg.initial_linear_speed_mm_s)
 
     def close_session(self) -> None:
-        """SRVOFF, CNTLOFF and CLOSE; all three are tried, the first failure is raised after."""
+        """SRVOFF, CNTLOFF and CLOSE, each retried like :meth:`open_session`'s; all three are
+        tried, the first failure is raised after."""
         first: Optional[DeviceError] = None
         for cmd in ("SRVOFF", "CNTLOFF", "CLOSE"):
             try:
-                self._send(cmd)
+                self._send(cmd, retry=True)
             except DeviceError as exc:
                 first = first or exc
         if first is not None:
@@ -365,20 +390,30 @@ class MelfaRobot(Robot):
 
     # -- transactions
     def command(self, command: str, *, retry: bool = False) -> R3Reply:
-        """Sends one R3 command that does not move the arm and returns the accepted reply.
+        """Sends one raw R3 command from an allowlist and returns the accepted reply.
 
-        Motion and speed commands (``EXEC…`` other than ``EXECP<n>=``/``EXECSPD``, ``OVRD``) are
-        refused with SafetyError: use :meth:`move_to`, :meth:`set_override` and
-        :meth:`set_linear_speed`, which check them. ``retry`` resends after a timeout or an
-        unusable reply (only for commands harmless to repeat). A refusal (QeR/Qer) raises
-        DeviceFault carrying the controller's error number and its ERRORMES text.
+        Only queries and session commands pass (:data:`SAFE_COMMANDS`): ``PPOSF``, ``JPOSF``,
+        ``DSTATE``, ``ERRORMES<n>``, ``OPEN=<client>``, ``CLOSE``, ``CNTLON``, ``CNTLOFF``,
+        ``SRVON``, ``SRVOFF``, ``RSTALRM`` and ``STOP``, each matched whole and case as written.
+        Everything else is refused with SafetyError before a byte is sent: anything that moves the
+        arm (``EXEC…`` statements such as ``EXECMOV``, ``EXECMVS``, ``EXECP<n>=``), starts or
+        selects a program (``RUN…``, ``PRGLOAD…``), jogs (``JOG…``), changes speed or override
+        (``OVRD``, ``EXECSPD``), or opens or closes the hand. An allowlist, not a list of what to
+        refuse, because the controller's command set is large and any ``EXEC`` prefix runs a
+        MELFA-BASIC statement: the checked methods (:meth:`move_to`, :meth:`move_sequence`,
+        :meth:`set_override`, :meth:`set_linear_speed`, :meth:`open_hand`, :meth:`close_hand`)
+        are the only way to move anything. ``retry`` resends after a timeout or an unusable reply
+        (every allowed command is harmless to repeat). A refusal (QeR/Qer) raises DeviceFault
+        carrying the controller's error number and its ERRORMES text.
         """
         if not isinstance(command, str):
             raise InvalidInputError(f"command: expected a string such as 'PPOSF', got {type(command).__name__}")
-        if _UNCHECKED_MOTION.match(command.upper()):
+        if not _SAFE_COMMAND.fullmatch(command):
             raise SafetyError(
-                f"command: {command!r} moves the arm or changes its speed without the cell's checks; "
-                "nothing was sent — use move_to, set_override or set_linear_speed"
+                f"command: {command[:60]!r} is not one of the queries and session commands command() allows "
+                f"({', '.join(SAFE_COMMANDS)}); "
+                "nothing was sent — move with move_to or move_sequence, set speeds with set_override or "
+                "set_linear_speed, drive the hand with open_hand or close_hand"
             )
         return self._send(command, retry=retry)
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Optional
 
 import numpy as np
 
@@ -120,14 +120,25 @@ def check_move(T_start: Any, T_target: Any, *, linear: bool, limits: CellLimits,
     return target
 
 
-def check_sequence(T_start: Any, targets: Sequence[Any], linear: Sequence[bool], limits: CellLimits) -> list:
-    """:func:`check_move` for each step of a sequence, each step starting where the previous one ends."""
+def check_sequence(
+    T_start: Any,
+    targets: Sequence[Any],
+    linear: Sequence[bool],
+    limits: CellLimits,
+    *,
+    names: Optional[Sequence[str]] = None,
+) -> list:
+    """:func:`check_move` for each step of a sequence, each step starting where the previous one
+    ends; ``names`` name the steps in errors (``targets[i]`` by default)."""
     if len(targets) != len(linear):
         raise InvalidInputError(f"linear: has {len(linear)} entries for {len(targets)} targets; give one per target")
+    labels = [f"targets[{i}]" for i in range(len(targets))] if names is None else list(names)
+    if len(labels) != len(targets):
+        raise InvalidInputError(f"names: has {len(labels)} entries for {len(targets)} targets; give one per target")
     checked = []
     previous = T_start
-    for i, (T, lin) in enumerate(zip(targets, linear)):
-        previous = check_move(previous, T, linear=bool(lin), limits=limits, name=f"targets[{i}]")
+    for T, lin, label in zip(targets, linear, labels):
+        previous = check_move(previous, T, linear=bool(lin), limits=limits, name=label)
         checked.append(previous)
     return checked
 

@@ -256,8 +256,8 @@ class RobotEmulator(PtyEmulator):
         config: arm model, speeds and start-up pose.
 
     Test hooks besides :meth:`inject`: :meth:`inject_motion_alarm` stops the next motion part-way
-    with an alarm, and :meth:`joints`, :meth:`pose`, :meth:`is_moving`, :attr:`hands` show the
-    arm's state.
+    with an alarm, and :meth:`joints`, :meth:`pose`, :meth:`is_moving`, :attr:`speeds`, :attr:`hands` show
+    the arm's state.
     """
 
     supported_faults = frozenset(Fault) - {Fault.BAD_CRC}
@@ -294,6 +294,12 @@ class RobotEmulator(PtyEmulator):
         with self._lock:
             self._settle()
             return self._motion is not None
+
+    @property
+    def speeds(self) -> tuple[int, float]:
+        """The override (percent) and the straight-line speed (mm/s) the controller holds now."""
+        with self._lock:
+            return self._override, self._speed_mm_s
 
     @property
     def alarm(self) -> int:
