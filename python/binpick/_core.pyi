@@ -66,24 +66,77 @@ def part_fitting(kind: str, outer_diameter: float, branch_length: float, resolut
 
 # --- registration and pose ------------------------------------------------------------------
 
-def icp(
-    source: _F64,
-    target: _F64,
-    target_normals: Optional[_F64],
-    init: _F64,
-    method: str,
-    max_correspondence_distance: float,
-    max_iterations: int,
-    rotation_tolerance: float,
-    translation_tolerance: float,
-    kernel: str,
-    kernel_scale: float,
-    trim_fraction: float,
-    num_threads: int,
-) -> dict[str, Any]:
-    """Registers ``source`` onto ``target`` (method ``"point_to_point"``|``"point_to_plane"``, kernel
-    ``"none"``|``"huber"``|``"tukey"``|``"cauchy"``): dict with T_target_source, converged,
-    iterations, fitness, rmse, num_inliers."""
+class IcpConfig:
+    """ICP parameters (the core's ``IcpConfig``), frozen; an argument left out or None takes the
+    core's default (``kernel_scale``: a third of ``max_correspondence_distance``)."""
+
+    def __new__(
+        cls,
+        *,
+        method: Optional[str] = None,
+        max_correspondence_distance: Optional[float] = None,
+        max_iterations: Optional[int] = None,
+        rotation_tolerance: Optional[float] = None,
+        translation_tolerance: Optional[float] = None,
+        kernel: Optional[str] = None,
+        kernel_scale: Optional[float] = None,
+        trim_fraction: Optional[float] = None,
+        num_threads: Optional[int] = None,
+    ) -> "IcpConfig":
+        """``method`` ``"point_to_point"``|``"point_to_plane"``, ``kernel``
+        ``"none"``|``"huber"``|``"tukey"``|``"cauchy"``; mm and rad."""
+    @property
+    def method(self) -> str: ...
+    @property
+    def max_correspondence_distance(self) -> float: ...
+    @property
+    def max_iterations(self) -> int: ...
+    @property
+    def rotation_tolerance(self) -> float: ...
+    @property
+    def translation_tolerance(self) -> float: ...
+    @property
+    def kernel(self) -> str: ...
+    @property
+    def kernel_scale(self) -> Optional[float]: ...
+    @property
+    def trim_fraction(self) -> float: ...
+    @property
+    def num_threads(self) -> int: ...
+
+class IcpResult:
+    """The outcome of one ICP run."""
+
+    @property
+    def T_target_source(self) -> _F64: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def fitness(self) -> float: ...
+    @property
+    def rmse(self) -> float: ...
+    @property
+    def num_inliers(self) -> int: ...
+
+def icp(source: _F64, target: _F64, target_normals: Optional[_F64], init: _F64, config: IcpConfig) -> IcpResult:
+    """Registers ``source`` onto ``target`` from ``init`` (point-to-plane needs ``target_normals``)."""
+
+class PpfParams:
+    """Parameters of the point-pair-feature table (the core's ``PpfConfig``), frozen; an argument
+    left out or None takes the core's default."""
+
+    def __new__(
+        cls, *, sampling_ratio: Optional[float] = None, angle_bins: Optional[int] = None, rotation_bins: Optional[int] = None
+    ) -> "PpfParams":
+        """``sampling_ratio`` of the model's diameter; bins over [0, π] and over a turn."""
+    @property
+    def sampling_ratio(self) -> float: ...
+    @property
+    def angle_bins(self) -> int: ...
+    @property
+    def rotation_bins(self) -> int: ...
 
 class PreparedModel:
     """A model prepared for pose estimation: search structures, symmetries and the
@@ -97,15 +150,15 @@ class PreparedModel:
         area: float,
         branches: Optional[_F64],
         special: Optional[_F64],
-        ppf: Optional[tuple[float, int, int]] = None,
+        ppf: Optional[PpfParams] = None,
         ppf_cache: Optional[bytes] = None,
         mesh: Optional[tuple[_F64, _I64]] = None,
     ) -> "PreparedModel":
         """From surface samples (N, 3), their normals, diameter and area; ``branches`` rows
         [dx, dy, dz, length, radius] (None or empty: no branch layout), ``special`` the special
-        feature's direction or None; ``ppf`` = (sampling_ratio, angle_bins, rotation_bins) builds
-        the PPF table, or loads it from ``ppf_cache`` when that is valid for it; ``mesh`` =
-        (vertices, faces), the samples' surface, on which sparse samples are refined."""
+        feature's direction or None; ``ppf`` builds the PPF table, or loads it from ``ppf_cache``
+        when that is valid for it; ``mesh`` = (vertices, faces), the samples' surface, on which
+        sparse samples are refined."""
     def ppf_from_cache(self) -> bool:
         """Whether the PPF table came from ``ppf_cache``."""
     def ppf_pairs(self) -> int:
@@ -116,33 +169,93 @@ class PreparedModel:
         """Dict with center (3,), continuous_axis (3,) or None, rotations (K, 3, 3), identity first."""
     def canonical(self, t_scene_model: _F64) -> _F64:
         """The canonical form of a (4, 4) pose under the symmetries."""
-    def pose_error(self, estimate: _F64, truth: _F64) -> tuple[float, float]:
-        """(rotation error rad, translation error mm), minimised over the symmetries."""
 
-def estimate_poses(
-    scene: _F64,
-    model: PreparedModel,
-    bin_box: Optional[_F64],
-    up: _F64,
-    method: str,
-    d_star: Optional[float],
-    min_points: Optional[int],
-    max_normal_angle: float,
-    inlier_distance: Optional[float],
-    min_fitness: float,
-    closer_radius: Optional[float],
-    tau: Optional[float],
-    num_threads: int,
-    max_instances: int = 1,
-    viewpoint: Optional[_F64] = None,
-    reference_fraction: Optional[float] = None,
-    max_hypotheses: Optional[int] = None,
-    min_coverage: float = 0.8,
-) -> list[dict[str, Any]]:
-    """Up to ``max_instances`` verified instances, most pickable first (coarse ``method``
-    ``"auto"``|``"ppf"``|``"ccp"``|``"centroid"``, then ICP): dicts with T_scene_model,
-    T_scene_model_coarse, score, rmse, indices, timings, iterations, method, visible_fraction,
-    occluded_fraction, pickability."""
+class PoseConfig:
+    """Parameters of pose estimation (the core's ``PoseConfig``), frozen; an argument left out or
+    None takes the core's default. The core checks the values when the estimate runs."""
+
+    def __new__(
+        cls,
+        *,
+        bin: Optional[_F64] = None,
+        up: Optional[_F64] = None,
+        method: Optional[str] = None,
+        viewpoint: Optional[_F64] = None,
+        d_star: Optional[float] = None,
+        min_points: Optional[int] = None,
+        max_normal_angle: Optional[float] = None,
+        inlier_distance: Optional[float] = None,
+        min_fitness: Optional[float] = None,
+        min_coverage: Optional[float] = None,
+        ccp_closer_radius: Optional[float] = None,
+        ccp_tau: Optional[float] = None,
+        reference_fraction: Optional[float] = None,
+        max_hypotheses: Optional[int] = None,
+        max_instances: Optional[int] = None,
+        num_threads: Optional[int] = None,
+    ) -> "PoseConfig":
+        """``bin`` (2, 3) box corners, ``method`` ``"auto"``|``"ppf"``|``"ccp"``|``"centroid"``; mm and rad."""
+    @property
+    def bin(self) -> Optional[_F64]: ...
+    @property
+    def up(self) -> tuple[float, float, float]: ...
+    @property
+    def method(self) -> str: ...
+    @property
+    def viewpoint(self) -> Optional[tuple[float, float, float]]: ...
+    @property
+    def d_star(self) -> Optional[float]: ...
+    @property
+    def min_points(self) -> Optional[int]: ...
+    @property
+    def max_normal_angle(self) -> float: ...
+    @property
+    def inlier_distance(self) -> Optional[float]: ...
+    @property
+    def min_fitness(self) -> float: ...
+    @property
+    def min_coverage(self) -> float: ...
+    @property
+    def ccp_closer_radius(self) -> Optional[float]: ...
+    @property
+    def ccp_tau(self) -> Optional[float]: ...
+    @property
+    def reference_fraction(self) -> float: ...
+    @property
+    def max_hypotheses(self) -> int: ...
+    @property
+    def max_instances(self) -> int: ...
+    @property
+    def num_threads(self) -> int: ...
+
+class PoseEstimate:
+    """A verified pose; the fractions are None where not judged, pickability None when not ranked."""
+
+    @property
+    def T_scene_model(self) -> _F64: ...
+    @property
+    def T_scene_model_coarse(self) -> _F64: ...
+    @property
+    def score(self) -> float: ...
+    @property
+    def rmse(self) -> float: ...
+    @property
+    def indices(self) -> _I64: ...
+    @property
+    def timings(self) -> dict[str, float]: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def method(self) -> str: ...
+    @property
+    def visible_fraction(self) -> Optional[float]: ...
+    @property
+    def occluded_fraction(self) -> Optional[float]: ...
+    @property
+    def pickability(self) -> Optional[float]: ...
+
+def estimate_poses(scene: _F64, model: PreparedModel, config: PoseConfig) -> list[PoseEstimate]:
+    """Up to ``config.max_instances`` verified instances, most pickable first."""
 
 # --- triangulation --------------------------------------------------------------------------
 

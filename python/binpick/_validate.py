@@ -122,6 +122,24 @@ def count(value: Any, name: str, minimum: int = 0) -> int:
     return int(value)
 
 
+def native_config(cls: Any, **options: Any) -> Any:
+    """A frozen config of the native core, ``cls(**options)``: the binding converts each option's
+    type (a wrong one becomes InvalidInputError naming it) and leaves the core's default where an
+    option is None; the core checks the values when it runs."""
+    try:
+        return cls(**options)
+    except (TypeError, OverflowError):
+        pass
+    for name, value in options.items():  # name the option the binding could not convert
+        try:
+            cls(**{name: value})
+        except (TypeError, OverflowError) as exc:
+            raise InvalidInputError(
+                f"{name}: cannot take {value!r} ({exc}); pass a value of the documented type"
+            ) from None
+    raise InvalidInputError(f"{cls.__name__}: cannot take these options: {options!r}")
+
+
 # --------------------------------------------------------------------------- devices
 
 

@@ -42,18 +42,14 @@ class Branch:
     radius: float
 
 
-@dataclass(frozen=True)
-class PpfParams:
-    """Parameters of a model's point-pair-feature table (Drost et al. 2010).
+PpfParams = _core.PpfParams
+"""Parameters of a model's point-pair-feature table (Drost et al. 2010), keyword-only, frozen;
+an argument left out takes the core's default.
 
-    ``sampling_ratio``: model and scene sampling distance, and the distance quantisation step, as
-    a fraction of the model's diameter. ``angle_bins``: bins of each of the three angle features
-    over [0, π]. ``rotation_bins``: bins of the rotation about the reference normal over a turn.
-    """
-
-    sampling_ratio: float = 0.05
-    angle_bins: int = 30
-    rotation_bins: int = 30
+``sampling_ratio``: model and scene sampling distance, and the distance quantisation step, as
+a fraction of the model's diameter. ``angle_bins``: bins of each of the three angle features
+over [0, π]. ``rotation_bins``: bins of the rotation about the reference normal over a turn.
+"""
 
 
 @dataclass(frozen=True)
@@ -253,7 +249,7 @@ class Model:
                 self.area,
                 rows if len(rows) else None,
                 special,
-                key,
+                params,
                 cached,
                 (self.vertices, self.faces),
             )

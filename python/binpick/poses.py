@@ -9,13 +9,15 @@ from typing import Any, Optional
 import numpy as np
 
 from . import _core
-from ._validate import as_float_array, as_points, as_transform, as_vector, check_finite, count, non_negative, positive
+from ._validate import as_float_array, as_points, as_transform, as_vector, native_config
 from .errors import InvalidInputError
 from .models import Model, estimate_normals
 
 __all__ = ["IcpResult", "icp", "PoseResult", "estimate_pose", "estimate_poses", "grasp_pose"]
 
-_KERNELS = ("none", "huber", "tukey", "cauchy")
+# The core's defaults, read once: the signatures below show them, the core writes them.
+_ICP = _core.IcpConfig()
+_POSE = _core.PoseConfig()
 
 
 @dataclass(frozen=True, repr=False)
@@ -38,6 +40,10 @@ class IcpResult:
     rmse: float
     num_inliers: int
 
+    @classmethod
+    def _from_native(cls, res: _core.IcpResult) -> IcpResult:
+        return cls(res.T_target_source, res.converged, res.iterations, res.fitness, res.rmse, res.num_inliers)
+
     def __repr__(self) -> str:
         return (
             f"IcpResult(converged={self.converged}, iterations={self.iterations}, fitness={self.fitness:.4f}, "
@@ -51,15 +57,15 @@ def icp(
     *,
     max_correspondence_distance: float,
     init: Any = None,
-    method: str = "point_to_plane",
+    method: str = _ICP.method,
     target_normals: Any = None,
-    max_iterations: int = 50,
-    rotation_tolerance: float = 1e-6,
-    translation_tolerance: float = 1e-4,
-    kernel: str = "none",
+    max_iterations: int = _ICP.max_iterations,
+    rotation_tolerance: float = _ICP.rotation_tolerance,
+    translation_tolerance: float = _ICP.translation_tolerance,
+    kernel: str = _ICP.kernel,
     kernel_scale: Optional[float] = None,
-    trim_fraction: float = 0.0,
-    num_threads: int = 0,
+    trim_fraction: float = _ICP.trim_fraction,
+    num_threads: int = _ICP.num_threads,
 ) -> IcpResult:
     """Registers ``source`` (N, 3) onto ``target`` (M, 3) with KD-tree ICP.
 
@@ -76,18 +82,26 @@ def icp(
         trim_fraction: fraction in [0, 0.9] of the farthest pairs dropped each iteration.
         num_threads: worker threads, 0 = all cores. The GIL is released while ICP runs.
     """
-    method_s = str(method)
-    if method_s not in ("point_to_point", "point_to_plane"):
-        raise InvalidInputError(f"method: unknown method {method!r}; use 'point_to_point' or 'point_to_plane'")
-    needed = 3 if method_s == "point_to_point" else 6
-    src = as_points(source, "source", min_points=needed)
+    config = native_config(
+        _core.IcpConfig,
+        method=method,
+        max_correspondence_distance=max_correspondence_distance,
+        max_iterations=max_iterations,
+        rotation_tolerance=rotation_tolerance,
+        translation_tolerance=translation_tolerance,
+        kernel=kernel,
+        kernel_scale=kernel_scale,
+        trim_fraction=trim_fraction,
+        num_threads=num_threads,
+    )
+    plane = config.method == "point_to_plane"
+    src = as_points(source, "source", min_points=6 if plane else 3)
     tgt = as_points(target, "target", min_points=3)
-    max_d = positive(max_correspondence_distance, "max_correspondence_distance")
     init_m = np.eye(4) if init is None else as_transform(init, "init")
     normals = None
-    if method_s == "point_to_plane":
+    if plane:
         if target_normals is None:
-            normals = estimate_normals(tgt, k=min(20, len(tgt)), num_threads=num_threads) if len(tgt) >= 3 else None
+            normals = estimate_normals(tgt, k=min(20, len(tgt)), num_threads=config.num_threads)
         else:
             normals = as_points(target_normals, "target_normals", min_points=0)
             if len(normals) != len(tgt):
@@ -96,26 +110,7 @@ def icp(
             normals = normals / np.where(lengths > 0, lengths, 1.0)[:, None]
             if (lengths == 0).any():
                 raise InvalidInputError(f"target_normals: row {int(np.argmax(lengths == 0))} is a zero vector")
-    kernel_s = str(kernel).lower()
-    if kernel_s not in _KERNELS:
-        raise InvalidInputError(f"kernel: unknown kernel {kernel!r}; use one of {', '.join(_KERNELS)}")
-    scale = max_d / 3.0 if kernel_scale is None else positive(kernel_scale, "kernel_scale")
-    raw = _core.icp(
-        src,
-        tgt,
-        normals,
-        init_m,
-        method_s,
-        max_d,
-        count(max_iterations, "max_iterations", minimum=1),
-        non_negative(rotation_tolerance, "rotation_tolerance", "rad"),
-        non_negative(translation_tolerance, "translation_tolerance", "mm"),
-        kernel_s,
-        scale,
-        non_negative(trim_fraction, "trim_fraction"),
-        count(num_threads, "num_threads"),
-    )
-    return IcpResult(**raw)
+    return IcpResult._from_native(_core.icp(src, tgt, normals, init_m, config))
 
 
 @dataclass(frozen=True, repr=False)
@@ -155,6 +150,21 @@ class PoseResult:
     occluded_fraction: float = float("nan")
     pickability: float = 1.0
 
+    @classmethod
+    def _from_native(cls, e: _core.PoseEstimate) -> PoseResult:
+        """The result of a core estimate; fractions it did not judge read NaN, an unranked pose 1.0."""
+        fields = {
+            name: getattr(e, name)
+            for name in ("T_scene_model", "T_scene_model_coarse", "score", "rmse", "indices", "timings", "method")
+        }
+        return cls(
+            **fields,
+            iterations=e.iterations,
+            visible_fraction=float("nan") if e.visible_fraction is None else e.visible_fraction,
+            occluded_fraction=float("nan") if e.occluded_fraction is None else e.occluded_fraction,
+            pickability=1.0 if e.pickability is None else e.pickability,
+        )
+
     def __repr__(self) -> str:
         t = self.T_scene_model[:3, 3]
         return (
@@ -165,29 +175,26 @@ class PoseResult:
         )
 
 
-_METHODS = ("auto", "ppf", "ccp", "centroid")
-
-
 def estimate_poses(
     scene: Any,
     model: Model,
     bin: Any = None,
     *,
     max_instances: int = 5,
-    method: str = "auto",
-    up: Any = (0.0, 0.0, 1.0),
+    method: str = _POSE.method,
+    up: Any = _POSE.up,
     viewpoint: Any = None,
     d_star: Optional[float] = None,
     min_points: Optional[int] = None,
-    max_normal_angle: float = np.radians(70.0),
+    max_normal_angle: float = _POSE.max_normal_angle,
     inlier_distance: Optional[float] = None,
-    min_fitness: float = 0.6,
-    min_coverage: float = 0.8,
+    min_fitness: float = _POSE.min_fitness,
+    min_coverage: float = _POSE.min_coverage,
     ccp_closer_radius: Optional[float] = None,
     ccp_tau: Optional[float] = None,
     reference_fraction: Optional[float] = None,
     max_hypotheses: Optional[int] = None,
-    num_threads: int = 0,
+    num_threads: int = _POSE.num_threads,
 ) -> list[PoseResult]:
     """Up to ``max_instances`` verified instances of ``model`` in ``scene``, most pickable first.
 
@@ -220,54 +227,32 @@ def estimate_poses(
         raise InvalidInputError(
             f"model: expected a binpick.Model, got {type(model).__name__}; build one with binpick.Model.from_mesh"
         )
-    pts = as_points(scene, "scene", min_points=10)
-    m = str(method).lower()
-    if m not in _METHODS:
-        raise InvalidInputError(f"method: unknown method {method!r}; use 'auto', 'ppf', 'ccp' or 'centroid'")
-    if m == "ccp" and not model.branches:
+    config = native_config(
+        _core.PoseConfig,
+        bin=None if bin is None else as_float_array(bin, "bin"),
+        up=as_vector(up, "up"),
+        method=method,
+        viewpoint=None if viewpoint is None else as_vector(viewpoint, "viewpoint"),
+        d_star=d_star,
+        min_points=min_points,
+        max_normal_angle=max_normal_angle,
+        inlier_distance=inlier_distance,
+        min_fitness=min_fitness,
+        min_coverage=min_coverage,
+        ccp_closer_radius=ccp_closer_radius,
+        ccp_tau=ccp_tau,
+        reference_fraction=reference_fraction,
+        max_hypotheses=max_hypotheses,
+        max_instances=max_instances,
+        num_threads=num_threads,
+    )
+    if config.method == "ccp" and not model.branches:
         raise InvalidInputError(
             "method: 'ccp' needs the model's cylindrical branches; "
             "declare them with Model.declare_branches, or use method='ppf'"
         )
-    box = None
-    if bin is not None:
-        box = as_float_array(bin, "bin")
-        if box.shape != (2, 3):
-            raise InvalidInputError(f"bin: expected ((xmin, ymin, zmin), (xmax, ymax, zmax)), got shape {box.shape}")
-        check_finite(box, "bin")
-        if not (box[1] > box[0]).all():
-            raise InvalidInputError(
-                f"bin: max corner {box[1].tolist()} must exceed min corner {box[0].tolist()} on every axis"
-            )
-    up_v = as_vector(up, "up")
-    if np.linalg.norm(up_v) == 0:
-        raise InvalidInputError("up: must be a non-zero direction")
-    vp = None if viewpoint is None else as_vector(viewpoint, "viewpoint")
-    if reference_fraction is not None:
-        reference_fraction = positive(reference_fraction, "reference_fraction")
-        if reference_fraction > 1:
-            raise InvalidInputError(f"reference_fraction: must be in (0, 1], got {reference_fraction}")
-    raw = _core.estimate_poses(
-        pts,
-        model.prepared(),
-        box,
-        up_v,
-        m,
-        None if d_star is None else positive(d_star, "d_star"),
-        None if min_points is None else count(min_points, "min_points", minimum=1),
-        positive(max_normal_angle, "max_normal_angle", "rad"),
-        None if inlier_distance is None else positive(inlier_distance, "inlier_distance"),
-        non_negative(min_fitness, "min_fitness"),
-        None if ccp_closer_radius is None else positive(ccp_closer_radius, "ccp_closer_radius"),
-        None if ccp_tau is None else positive(ccp_tau, "ccp_tau"),
-        count(num_threads, "num_threads"),
-        count(max_instances, "max_instances", minimum=1),
-        vp,
-        reference_fraction,
-        None if max_hypotheses is None else count(max_hypotheses, "max_hypotheses", minimum=1),
-        non_negative(min_coverage, "min_coverage"),
-    )
-    return [PoseResult(**r) for r in raw]
+    pts = as_points(scene, "scene", min_points=10)
+    return [PoseResult._from_native(e) for e in _core.estimate_poses(pts, model.prepared(), config)]
 
 
 def estimate_pose(scene: Any, model: Model, bin: Any = None, **options: Any) -> PoseResult:

@@ -4,6 +4,7 @@ whose bindings are the largest part of the module.)"""
 
 import ast
 import inspect
+import types
 from pathlib import Path
 
 import binpick
@@ -27,6 +28,10 @@ def _native_params(obj) -> list[str]:
     return [p for p in inspect.signature(obj).parameters if p not in ("self", "$self")]
 
 
+def _is_property(fn: ast.FunctionDef) -> bool:
+    return any(isinstance(d, ast.Name) and d.id == "property" for d in fn.decorator_list)
+
+
 def test_the_stub_lists_exactly_the_native_names():
     declared = _public(n.name for n in STUB.body if isinstance(n, (ast.FunctionDef, ast.ClassDef)))
     assert declared == _public(dir(_core))
@@ -44,5 +49,7 @@ def test_functions_and_methods_have_the_native_parameters():
                 if name == "__new__":
                     if cls.__text_signature__ is not None:
                         assert _params(fn) == _native_params(cls), node.name
+                elif _is_property(fn):
+                    assert isinstance(getattr(cls, name), (property, types.GetSetDescriptorType)), f"{node.name}.{name}"
                 else:
                     assert _params(fn) == _native_params(getattr(cls, name)), f"{node.name}.{name}"

@@ -1,5 +1,5 @@
 //! The one error type of the core. Every variant says what was wrong and how to fix it;
-//! the Python layer maps each kind to a specific exception class.
+//! the bindings map each variant to an exception of their own.
 
 use thiserror::Error;
 
@@ -98,21 +98,6 @@ impl Error {
         Error::BadFile {
             path: path.into(),
             problem: problem.into(),
-        }
-    }
-
-    /// The short name of the error kind; the Python layer picks its exception class by it.
-    pub fn kind(&self) -> &'static str {
-        match self {
-            Error::InvalidInput { .. } => "InvalidInputError",
-            Error::NonFinite { .. } => "NonFiniteError",
-            Error::TooFewPoints { .. } => "TooFewPointsError",
-            Error::Degenerate { .. } => "DegenerateCloudError",
-            Error::UnknownUnit { .. } => "UnknownUnitError",
-            Error::FileNotFound { .. } => "MeshFileNotFoundError",
-            Error::BadFile { .. } => "MeshFileError",
-            Error::WriteFailed { .. } => "FileWriteError",
-            Error::NoObjectFound { .. } => "NoObjectFound",
         }
     }
 }

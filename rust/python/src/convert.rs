@@ -1,9 +1,9 @@
 //! The one place where numpy arrays become nalgebra types and back.
 
-use binpick_core::Point;
+use binpick_core::{BinBox, BranchLayout, Part, Point, TriMesh};
 use nalgebra::{Isometry3, Matrix4, Vector3};
 use numpy::ndarray::Array2;
-use numpy::{PyArray1, PyArray2, PyReadonlyArray2};
+use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
 
 use crate::errors::invalid;
@@ -52,4 +52,127 @@ pub fn isometry_to_py<'py>(py: Python<'py>, t: &Isometry3<f64>) -> Bound<'py, Py
 /// Indices as a new int64 array.
 pub fn indices_to_py<'py>(py: Python<'py>, idx: &[usize]) -> Bound<'py, PyArray1<i64>> {
     PyArray1::from_vec(py, idx.iter().map(|&i| i as i64).collect())
+}
+
+/// A 3-element float64 array as a vector.
+pub fn vector3(arr: &PyReadonlyArray1<'_, f64>, arg: &str) -> PyResult<Vector3<f64>> {
+    let a = arr.as_array();
+    if a.len() != 3 {
+        return Err(invalid(arg, &format!("must have 3 elements, got {}", a.len())));
+    }
+    Ok(Vector3::new(a[0], a[1], a[2]))
+}
+
+/// A (2, 3) float64 array ((xmin, ymin, zmin), (xmax, ymax, zmax)) as a bin box (its values
+/// are checked where the box is used).
+pub fn bin_box(arr: &PyReadonlyArrayDyn<'_, f64>, arg: &str) -> PyResult<BinBox> {
+    let a = arr.as_array();
+    if a.shape() != [2, 3] {
+        return Err(invalid(
+            arg,
+            &format!(
+                "expected ((xmin, ymin, zmin), (xmax, ymax, zmax)), got shape {:?}",
+                a.shape()
+            ),
+        ));
+    }
+    let corner = |r: usize| Point::new(a[[r, 0]], a[[r, 1]], a[[r, 2]]);
+    Ok(BinBox {
+        min: corner(0),
+        max: corner(1),
+    })
+}
+
+/// A bin box as a new (2, 3) float64 array.
+pub fn bin_box_to_py<'py>(py: Python<'py>, b: &BinBox) -> Bound<'py, PyArray2<f64>> {
+    points_to_py(py, &[b.min, b.max])
+}
+
+/// Triangles as a new (M, 3) int64 array.
+pub fn faces_to_py<'py>(py: Python<'py>, faces: &[[u32; 3]]) -> Bound<'py, PyArray2<i64>> {
+    let flat: Vec<i64> = faces.iter().flat_map(|f| f.map(|v| v as i64)).collect();
+    PyArray2::from_owned_array(py, Array2::from_shape_vec((faces.len(), 3), flat).expect("m×3"))
+}
+
+/// Vertices (V, 3) and faces (M, 3) as a mesh; every face must index a vertex.
+pub fn mesh_from_py(vertices: &PyReadonlyArray2<'_, f64>, faces: &PyReadonlyArray2<'_, i64>) -> PyResult<TriMesh> {
+    let v = points(vertices, "vertices")?;
+    let f = faces.as_array();
+    if f.ncols() != 3 {
+        return Err(invalid(
+            "faces",
+            &format!("must have shape (M, 3), got {:?}", f.shape()),
+        ));
+    }
+    let mut out = Vec::with_capacity(f.nrows());
+    for (i, r) in f.rows().into_iter().enumerate() {
+        if r.iter().any(|&x| x < 0 || x >= v.len() as i64) {
+            return Err(invalid(
+                "faces",
+                &format!("row {i} {:?} indexes outside the {} vertices", r.to_vec(), v.len()),
+            ));
+        }
+        out.push([r[0] as u32, r[1] as u32, r[2] as u32]);
+    }
+    TriMesh::new(v, out).map_err(crate::errors::to_py)
+}
+
+/// Branch rows [dx, dy, dz, length, radius] (none or empty: no layout) and the special
+/// feature's direction as a branch layout.
+pub fn branch_layout(
+    branches: Option<PyReadonlyArray2<'_, f64>>,
+    special: Option<PyReadonlyArray1<'_, f64>>,
+) -> PyResult<Option<BranchLayout>> {
+    let Some(b) = branches else { return Ok(None) };
+    let a = b.as_array();
+    if a.ncols() != 5 {
+        return Err(invalid("branches", "rows must be [dx, dy, dz, length, radius]"));
+    }
+    if a.nrows() == 0 {
+        return Ok(None);
+    }
+    let special = special.map(|s| vector3(&s, "special")).transpose()?;
+    Ok(Some(BranchLayout {
+        directions: a
+            .rows()
+            .into_iter()
+            .map(|r| Vector3::new(r[0], r[1], r[2]).normalize())
+            .collect(),
+        lengths: a.rows().into_iter().map(|r| r[3]).collect(),
+        radius: a.rows().into_iter().map(|r| r[4]).fold(0.0, f64::max),
+        special: special.map(|s| s.normalize()),
+    }))
+}
+
+/// A part's mesh and branches: (vertices, faces, branch rows [dx, dy, dz, length, radius]).
+pub fn part_to_py<'py>(py: Python<'py>, part: Part) -> PartArrays<'py> {
+    let rows: Vec<f64> = part
+        .branches
+        .iter()
+        .flat_map(|b| [b.direction.x, b.direction.y, b.direction.z, b.length, b.radius])
+        .collect();
+    let branches = PyArray2::from_owned_array(py, Array2::from_shape_vec((part.branches.len(), 5), rows).expect("k×5"));
+    (
+        points_to_py(py, &part.mesh.vertices),
+        faces_to_py(py, &part.mesh.faces),
+        branches,
+    )
+}
+
+/// (vertices, faces, branch rows) of a built-in part.
+pub type PartArrays<'py> = (
+    Bound<'py, PyArray2<f64>>,
+    Bound<'py, PyArray2<i64>>,
+    Bound<'py, PyArray2<f64>>,
+);
+
+/// Rotations as nested (K, 3, 3) lists.
+pub fn rotations_to_rows(rotations: &[nalgebra::UnitQuaternion<f64>]) -> Vec<Vec<Vec<f64>>> {
+    rotations
+        .iter()
+        .map(|q| {
+            let m = q.to_rotation_matrix();
+            (0..3).map(|r| (0..3).map(|c| m[(r, c)]).collect()).collect()
+        })
+        .collect()
 }

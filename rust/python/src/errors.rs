@@ -1,25 +1,37 @@
-//! Mapping core errors and caught panics to the exception classes of `binpick.errors`.
+//! Mapping core errors and caught panics to the exception classes of `binpick.errors`: one
+//! exhaustive `match` over the core's error enum, so a new variant cannot go unmapped.
 
 use binpick_core::Error;
-use pyo3::exceptions::PyRuntimeError;
 use pyo3::prelude::*;
-use pyo3::types::PyType;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
-fn exception(py: Python<'_>, class: &str, message: String) -> PyErr {
-    let found = py
-        .import("binpick.errors")
-        .and_then(|m| m.getattr(class))
-        .and_then(|c| c.cast_into::<PyType>().map_err(PyErr::from));
-    match found {
-        Ok(ty) => PyErr::from_type(ty, message),
-        Err(_) => PyRuntimeError::new_err(format!("{class}: {message}")),
-    }
+mod classes {
+    pyo3::import_exception!(binpick.errors, InvalidInputError);
+    pyo3::import_exception!(binpick.errors, NonFiniteError);
+    pyo3::import_exception!(binpick.errors, TooFewPointsError);
+    pyo3::import_exception!(binpick.errors, DegenerateCloudError);
+    pyo3::import_exception!(binpick.errors, UnknownUnitError);
+    pyo3::import_exception!(binpick.errors, MeshFileNotFoundError);
+    pyo3::import_exception!(binpick.errors, MeshFileError);
+    pyo3::import_exception!(binpick.errors, FileWriteError);
+    pyo3::import_exception!(binpick.errors, NoObjectFound);
+    pyo3::import_exception!(binpick.errors, InternalError);
 }
 
-/// The Python exception for a core error: the class named by its kind, its message.
+/// The Python exception for a core error: its class of `binpick.errors`, its message.
 pub fn to_py(err: Error) -> PyErr {
-    Python::attach(|py| exception(py, err.kind(), err.to_string()))
+    let message = err.to_string();
+    match err {
+        Error::InvalidInput { .. } => classes::InvalidInputError::new_err(message),
+        Error::NonFinite { .. } => classes::NonFiniteError::new_err(message),
+        Error::TooFewPoints { .. } => classes::TooFewPointsError::new_err(message),
+        Error::Degenerate { .. } => classes::DegenerateCloudError::new_err(message),
+        Error::UnknownUnit { .. } => classes::UnknownUnitError::new_err(message),
+        Error::FileNotFound { .. } => classes::MeshFileNotFoundError::new_err(message),
+        Error::BadFile { .. } => classes::MeshFileError::new_err(message),
+        Error::WriteFailed { .. } => classes::FileWriteError::new_err(message),
+        Error::NoObjectFound { .. } => classes::NoObjectFound::new_err(message),
+    }
 }
 
 /// An `InvalidInputError` naming the argument.
@@ -40,7 +52,9 @@ pub fn run<T: Send>(py: Python<'_>, work: impl FnOnce() -> Result<T, Error> + Se
                 .map(|s| s.to_string())
                 .or_else(|| panic.downcast_ref::<String>().cloned())
                 .unwrap_or_else(|| "unknown panic".into());
-            Err(exception(py, "InternalError", format!("binpick's native core failed ({what}); this is a bug, please report it with the input that caused it")))
+            Err(classes::InternalError::new_err(format!(
+                "binpick's native core failed ({what}); this is a bug, please report it with the input that caused it"
+            )))
         }
     }
 }

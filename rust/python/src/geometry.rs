@@ -1,14 +1,14 @@
 //! Clouds, normals, voxels, meshes, PLY files and built-in parts.
 
-use crate::convert::{indices_to_py, points, points_to_py, vectors, vectors_to_py};
+use crate::convert::{faces_to_py, indices_to_py, mesh_from_py, part_to_py, points, points_to_py, vector3};
+use crate::convert::{vectors, vectors_to_py, PartArrays};
 use crate::errors::{invalid, run};
-use binpick_core::parts::{self, Part};
-use binpick_core::{estimate_normals as core_normals, unit_scale, Orientation, TriMesh};
+use binpick_core::parts;
+use binpick_core::{estimate_normals as core_normals, unit_scale, Orientation};
 use binpick_core::{read_mesh as core_read_mesh, read_ply as core_read_ply, write_ply as core_write_ply};
 use binpick_core::{sample_surface, voxel_downsample as core_voxel, with_threads};
 use binpick_core::{Density, KdIndex, Point};
 use nalgebra::Vector3;
-use numpy::ndarray::Array2;
 use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use std::path::PathBuf;
@@ -27,16 +27,9 @@ fn estimate_normals<'py>(
     num_threads: usize,
 ) -> PyResult<Arr<'py>> {
     let pts = points(&points_in, "points")?;
-    let vec3 = |a: &PyReadonlyArray1<'py, f64>, arg: &str| -> PyResult<Vector3<f64>> {
-        let s = a.as_slice()?;
-        if s.len() != 3 {
-            return Err(invalid(arg, &format!("must have 3 elements, got {}", s.len())));
-        }
-        Ok(Vector3::new(s[0], s[1], s[2]))
-    };
     let orientation = match (viewpoint, direction) {
-        (Some(v), _) => Orientation::TowardPoint(Point::from(vec3(&v, "viewpoint")?)),
-        (None, Some(d)) => Orientation::TowardDirection(vec3(&d, "direction")?),
+        (Some(v), _) => Orientation::TowardPoint(Point::from(vector3(&v, "viewpoint")?)),
+        (None, Some(d)) => Orientation::TowardDirection(vector3(&d, "direction")?),
         (None, None) => Orientation::TowardDirection(Vector3::z()),
     };
     let normals = run(py, move || {
@@ -63,36 +56,6 @@ fn voxel_downsample<'py>(
     let d = run(py, move || core_voxel(&pts, ns.as_deref(), voxel_size))?;
     let n_out = has_normals.then(|| vectors_to_py(py, &d.normals));
     Ok((points_to_py(py, &d.points), n_out, indices_to_py(py, &d.first_index)))
-}
-
-fn faces_to_py<'py>(py: Python<'py>, faces: &[[u32; 3]]) -> Bound<'py, PyArray2<i64>> {
-    let flat: Vec<i64> = faces.iter().flat_map(|f| f.map(|v| v as i64)).collect();
-    PyArray2::from_owned_array(py, Array2::from_shape_vec((faces.len(), 3), flat).expect("m×3"))
-}
-
-pub(crate) fn mesh_from_py(
-    vertices: &PyReadonlyArray2<'_, f64>,
-    faces: &PyReadonlyArray2<'_, i64>,
-) -> PyResult<TriMesh> {
-    let v = points(vertices, "vertices")?;
-    let f = faces.as_array();
-    if f.ncols() != 3 {
-        return Err(invalid(
-            "faces",
-            &format!("must have shape (M, 3), got {:?}", f.shape()),
-        ));
-    }
-    let mut out = Vec::with_capacity(f.nrows());
-    for (i, r) in f.rows().into_iter().enumerate() {
-        if r.iter().any(|&x| x < 0 || x >= v.len() as i64) {
-            return Err(invalid(
-                "faces",
-                &format!("row {i} {:?} indexes outside the {} vertices", r.to_vec(), v.len()),
-            ));
-        }
-        out.push([r[0] as u32, r[1] as u32, r[2] as u32]);
-    }
-    TriMesh::new(v, out).map_err(crate::errors::to_py)
 }
 
 /// Reads a mesh file and converts it to mm: (vertices, faces).
@@ -159,23 +122,8 @@ fn write_ply(
     run(py, move || core_write_ply(&path, &pts, ns.as_deref(), ascii))
 }
 
-fn part_to_py<'py>(py: Python<'py>, part: Part) -> (Arr<'py>, Bound<'py, PyArray2<i64>>, Arr<'py>) {
-    let rows: Vec<f64> = part
-        .branches
-        .iter()
-        .flat_map(|b| [b.direction.x, b.direction.y, b.direction.z, b.length, b.radius])
-        .collect();
-    let branches = PyArray2::from_owned_array(py, Array2::from_shape_vec((part.branches.len(), 5), rows).expect("k×5"));
-    (
-        points_to_py(py, &part.mesh.vertices),
-        faces_to_py(py, &part.mesh.faces),
-        branches,
-    )
-}
-
 /// The paper's tee: (vertices, faces, branches as rows [dx, dy, dz, length, radius]).
 #[pyfunction]
-#[allow(clippy::type_complexity)]
 fn part_tee<'py>(
     py: Python<'py>,
     outer_diameter: f64,
@@ -184,7 +132,7 @@ fn part_tee<'py>(
     boss_semi_axes: (f64, f64),
     boss_height: f64,
     resolution: f64,
-) -> PyResult<(Arr<'py>, Bound<'py, PyArray2<i64>>, Arr<'py>)> {
+) -> PyResult<PartArrays<'py>> {
     let p = parts::TeeParams {
         outer_diameter,
         run_length,
@@ -198,14 +146,13 @@ fn part_tee<'py>(
 
 /// An elbow or a cross: (vertices, faces, branches).
 #[pyfunction]
-#[allow(clippy::type_complexity)]
 fn part_fitting<'py>(
     py: Python<'py>,
     kind: &str,
     outer_diameter: f64,
     branch_length: f64,
     resolution: f64,
-) -> PyResult<(Arr<'py>, Bound<'py, PyArray2<i64>>, Arr<'py>)> {
+) -> PyResult<PartArrays<'py>> {
     let p = parts::FittingParams {
         outer_diameter,
         branch_length,

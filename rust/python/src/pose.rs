@@ -1,15 +1,69 @@
-//! Pose-estimation bindings: a prepared model (built once per Model) and estimate_poses.
+//! Pose-estimation bindings: a prepared model (built once per Model), the frozen [`PpfParams`]
+//! and [`PoseConfig`] in, [`PoseEstimate`]s out.
 
-use crate::convert::{indices_to_py, isometry_to_py, points, vectors};
-use crate::errors::{invalid, run};
-use crate::geometry::mesh_from_py;
-use binpick_core::{estimate_poses as core_estimate, CoarseMethod, PoseConfig, PoseEstimate, PoseModel};
-use binpick_core::{BinBox, BranchLayout, CcpConfig, CcpPathParams, DetectConfig, PpfConfig, PpfModel};
+use crate::convert::{bin_box, bin_box_to_py, branch_layout, indices_to_py, isometry_to_py, matrix4, mesh_from_py};
+use crate::convert::{points, rotations_to_rows, vector3, vectors};
+use crate::errors::{run, to_py};
+use binpick_core::{estimate_poses as core_estimate, isometry_from_matrix, CcpConfig, CoarseMethod, DetectConfig};
+use binpick_core::{PoseModel, PpfConfig, PpfModel};
 use nalgebra::{Point3, Vector3};
-use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyDict, PyList};
+use pyo3::types::{PyBytes, PyDict};
 use std::sync::Arc;
+
+/// Parameters of a model's point-pair-feature table (the core's `PpfConfig`); an argument left
+/// out takes the core's default.
+#[pyclass(frozen, eq, module = "binpick._core")]
+#[derive(PartialEq)]
+pub struct PpfParams {
+    inner: PpfConfig,
+}
+
+#[pymethods]
+impl PpfParams {
+    /// Keyword-only: `sampling_ratio` (model and scene sampling distance, and the distance step,
+    /// as a fraction of the model's diameter), `angle_bins` (over [0, π]), `rotation_bins` (over
+    /// a turn about the reference normal).
+    #[new]
+    #[pyo3(signature = (*, sampling_ratio=None, angle_bins=None, rotation_bins=None))]
+    fn new(sampling_ratio: Option<f64>, angle_bins: Option<u32>, rotation_bins: Option<u32>) -> Self {
+        let d = PpfConfig::default();
+        PpfParams {
+            inner: PpfConfig {
+                sampling_ratio: sampling_ratio.unwrap_or(d.sampling_ratio),
+                angle_bins: angle_bins.unwrap_or(d.angle_bins),
+                rotation_bins: rotation_bins.unwrap_or(d.rotation_bins),
+            },
+        }
+    }
+    /// Sampling distance as a fraction of the model's diameter.
+    #[getter]
+    fn sampling_ratio(&self) -> f64 {
+        self.inner.sampling_ratio
+    }
+    /// Bins of each angle feature over [0, π].
+    #[getter]
+    fn angle_bins(&self) -> u32 {
+        self.inner.angle_bins
+    }
+    /// Bins of the rotation about the reference normal over a turn.
+    #[getter]
+    fn rotation_bins(&self) -> u32 {
+        self.inner.rotation_bins
+    }
+    fn __hash__(&self) -> u64 {
+        let c = &self.inner;
+        c.sampling_ratio.to_bits() ^ (u64::from(c.angle_bins) << 32) ^ u64::from(c.rotation_bins)
+    }
+    fn __repr__(&self) -> String {
+        let c = &self.inner;
+        format!(
+            "PpfParams(sampling_ratio={:?}, angle_bins={}, rotation_bins={})",
+            c.sampling_ratio, c.angle_bins, c.rotation_bins
+        )
+    }
+}
 
 /// A model prepared for pose estimation (its search structures built once).
 #[pyclass(frozen, module = "binpick._core")]
@@ -19,49 +73,13 @@ pub struct PreparedModel {
     ppf_from_cache: bool,
 }
 
-fn vector3(s: &[f64], arg: &str) -> PyResult<Vector3<f64>> {
-    if s.len() != 3 {
-        return Err(invalid(arg, "must be a 3-vector"));
-    }
-    Ok(Vector3::new(s[0], s[1], s[2]))
-}
-
-fn layout_from(
-    branches: Option<PyReadonlyArray2<'_, f64>>,
-    special: Option<PyReadonlyArray1<'_, f64>>,
-) -> PyResult<Option<BranchLayout>> {
-    let Some(b) = branches else { return Ok(None) };
-    let a = b.as_array();
-    if a.ncols() != 5 {
-        return Err(invalid("branches", "rows must be [dx, dy, dz, length, radius]"));
-    }
-    if a.nrows() == 0 {
-        return Ok(None);
-    }
-    let special = match special {
-        Some(s) => Some(vector3(s.as_slice()?, "special")?.normalize()),
-        None => None,
-    };
-    Ok(Some(BranchLayout {
-        directions: a
-            .rows()
-            .into_iter()
-            .map(|r| Vector3::new(r[0], r[1], r[2]).normalize())
-            .collect(),
-        lengths: a.rows().into_iter().map(|r| r[3]).collect(),
-        radius: a.rows().into_iter().map(|r| r[4]).fold(0.0, f64::max),
-        special,
-    }))
-}
-
 #[pymethods]
 impl PreparedModel {
     /// Prepares points (N,3), normals (N,3), diameter and area; `branches` rows are
     /// [dx, dy, dz, length, radius]; `special` the special feature's direction or None.
-    /// `ppf` = (sampling_ratio, angle_bins, rotation_bins) builds the point-pair-feature table,
-    /// or loads it from `ppf_cache` (bytes of `ppf_bytes()`) when those are valid for it.
-    /// `mesh` = (vertices, faces) is the samples' surface: a model whose samples are sparse
-    /// refines against a dense sampling of it.
+    /// `ppf` builds the point-pair-feature table, or loads it from `ppf_cache` (bytes of
+    /// `ppf_bytes()`) when those are valid for it. `mesh` = (vertices, faces) is the samples'
+    /// surface: a model whose samples are sparse refines against a dense sampling of it.
     #[new]
     #[pyo3(signature = (points_in, normals, diameter, area, branches, special, ppf=None, ppf_cache=None, mesh=None))]
     #[allow(clippy::too_many_arguments)]
@@ -73,26 +91,22 @@ impl PreparedModel {
         area: f64,
         branches: Option<PyReadonlyArray2<'_, f64>>,
         special: Option<PyReadonlyArray1<'_, f64>>,
-        ppf: Option<(f64, u32, u32)>,
+        ppf: Option<&PpfParams>,
         ppf_cache: Option<Vec<u8>>,
         mesh: Option<(PyReadonlyArray2<'_, f64>, PyReadonlyArray2<'_, i64>)>,
     ) -> PyResult<Self> {
         let pts = points(&points_in, "model.points")?;
         let mesh = mesh.map(|(v, f)| mesh_from_py(&v, &f)).transpose()?;
         let ns = vectors(&normals, "model.normals")?;
-        let layout = layout_from(branches, special)?;
+        let layout = branch_layout(branches, special)?;
+        let ppf = ppf.map(|p| p.inner);
         let (inner, from_cache) = run(py, move || {
             let mut m = PoseModel::new(pts, ns, diameter, area, layout)?;
             if let Some(mesh) = &mesh {
                 m = m.with_surface_of(mesh)?;
             }
             let mut from_cache = false;
-            if let Some((sampling_ratio, angle_bins, rotation_bins)) = ppf {
-                let config = PpfConfig {
-                    sampling_ratio,
-                    angle_bins,
-                    rotation_bins,
-                };
+            if let Some(config) = ppf {
                 let cached = ppf_cache
                     .and_then(|b| PpfModel::from_bytes(&b).ok())
                     .filter(|t| t.config() == &config);
@@ -131,15 +145,7 @@ impl PreparedModel {
         let d = PyDict::new(py);
         d.set_item("center", s.center.coords.as_slice().to_vec())?;
         d.set_item("continuous_axis", s.continuous_axis.map(|a| a.as_slice().to_vec()))?;
-        let rows: Vec<Vec<Vec<f64>>> = s
-            .rotations
-            .iter()
-            .map(|q| {
-                let m = q.to_rotation_matrix();
-                (0..3).map(|r| (0..3).map(|c| m[(r, c)]).collect()).collect()
-            })
-            .collect();
-        d.set_item("rotations", rows)?;
+        d.set_item("rotations", rotations_to_rows(&s.rotations))?;
         Ok(d)
     }
 
@@ -149,138 +155,304 @@ impl PreparedModel {
         py: Python<'py>,
         t_scene_model: PyReadonlyArray2<'py, f64>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
-        let m = crate::convert::matrix4(&t_scene_model, "T_scene_model")?;
-        let t = binpick_core::isometry_from_matrix("T_scene_model", &m).map_err(crate::errors::to_py)?;
+        let m = matrix4(&t_scene_model, "T_scene_model")?;
+        let t = isometry_from_matrix("T_scene_model", &m).map_err(to_py)?;
         Ok(isometry_to_py(py, &self.inner.symmetries.canonical(&t)))
     }
+}
 
-    /// (rotation error rad, translation error mm) of `estimate` against `truth`, minimised over
-    /// the symmetries.
-    fn pose_error(
-        &self,
-        estimate: PyReadonlyArray2<'_, f64>,
-        truth: PyReadonlyArray2<'_, f64>,
-    ) -> PyResult<(f64, f64)> {
-        let a = binpick_core::isometry_from_matrix("estimate", &crate::convert::matrix4(&estimate, "estimate")?)
-            .map_err(crate::errors::to_py)?;
-        let b = binpick_core::isometry_from_matrix("truth", &crate::convert::matrix4(&truth, "truth")?)
-            .map_err(crate::errors::to_py)?;
-        Ok(self.inner.symmetries.pose_error(&a, &b))
+/// Parameters of pose estimation (the core's `PoseConfig`, with the CCP and PPF tunings the
+/// Python API exposes); an argument left out, or None, takes the core's default. Values are
+/// checked by the core when the estimate runs.
+#[pyclass(frozen, module = "binpick._core")]
+pub struct PoseConfig {
+    inner: binpick_core::PoseConfig,
+}
+
+#[pymethods]
+impl PoseConfig {
+    /// Keyword-only; see `binpick.estimate_poses` for each argument.
+    #[new]
+    #[pyo3(signature = (*, bin=None, up=None, method=None, viewpoint=None, d_star=None, min_points=None, max_normal_angle=None, inlier_distance=None, min_fitness=None, min_coverage=None, ccp_closer_radius=None, ccp_tau=None, reference_fraction=None, max_hypotheses=None, max_instances=None, num_threads=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        bin: Option<PyReadonlyArrayDyn<'_, f64>>,
+        up: Option<PyReadonlyArray1<'_, f64>>,
+        method: Option<&str>,
+        viewpoint: Option<PyReadonlyArray1<'_, f64>>,
+        d_star: Option<f64>,
+        min_points: Option<usize>,
+        max_normal_angle: Option<f64>,
+        inlier_distance: Option<f64>,
+        min_fitness: Option<f64>,
+        min_coverage: Option<f64>,
+        ccp_closer_radius: Option<f64>,
+        ccp_tau: Option<f64>,
+        reference_fraction: Option<f64>,
+        max_hypotheses: Option<usize>,
+        max_instances: Option<usize>,
+        num_threads: Option<usize>,
+    ) -> PyResult<Self> {
+        let d = binpick_core::PoseConfig::default();
+        let detect = DetectConfig {
+            reference_fraction: reference_fraction.unwrap_or(d.detect.reference_fraction),
+            max_hypotheses: max_hypotheses.unwrap_or(d.detect.max_hypotheses),
+            ..d.detect
+        };
+        let inner = binpick_core::PoseConfig {
+            bin: bin.map(|b| bin_box(&b, "bin")).transpose()?.or(d.bin),
+            up: up.map(|u| vector3(&u, "up")).transpose()?.unwrap_or(d.up),
+            method: method
+                .map(CoarseMethod::from_name)
+                .transpose()
+                .map_err(to_py)?
+                .unwrap_or(d.method),
+            d_star: d_star.or(d.d_star),
+            min_points: min_points.or(d.min_points),
+            max_normal_angle: max_normal_angle.unwrap_or(d.max_normal_angle),
+            inlier_distance: inlier_distance.or(d.inlier_distance),
+            min_fitness: min_fitness.unwrap_or(d.min_fitness),
+            min_coverage: min_coverage.unwrap_or(d.min_coverage),
+            ccp: CcpConfig {
+                closer_radius: ccp_closer_radius.or(d.ccp.closer_radius),
+                tau: ccp_tau.or(d.ccp.tau),
+            },
+            ccp_path: d.ccp_path,
+            detect,
+            viewpoint: match viewpoint {
+                Some(v) => Some(Point3::from(vector3(&v, "viewpoint")?)),
+                None => d.viewpoint,
+            },
+            max_instances: max_instances.unwrap_or(d.max_instances),
+            num_threads: num_threads.unwrap_or(d.num_threads),
+        };
+        Ok(PoseConfig { inner })
+    }
+
+    /// The bin box ((xmin, ymin, zmin), (xmax, ymax, zmax)), mm, or None.
+    #[getter]
+    fn bin<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray2<f64>>> {
+        self.inner.bin.as_ref().map(|b| bin_box_to_py(py, b))
+    }
+    /// Direction toward the sensor.
+    #[getter]
+    fn up(&self) -> (f64, f64, f64) {
+        triple(&self.inner.up)
+    }
+    /// `"auto"`, `"ppf"`, `"ccp"` or `"centroid"`.
+    #[getter]
+    fn method(&self) -> &'static str {
+        self.inner.method.name()
+    }
+    /// The sensor's position in the scene frame, mm, or None.
+    #[getter]
+    fn viewpoint(&self) -> Option<(f64, f64, f64)> {
+        self.inner.viewpoint.map(|p| triple(&p.coords))
+    }
+    /// d* of segmentation, mm (None: derived from the scan).
+    #[getter]
+    fn d_star(&self) -> Option<f64> {
+        self.inner.d_star
+    }
+    /// Smallest object region, points (None: derived from the scan and the model).
+    #[getter]
+    fn min_points(&self) -> Option<usize> {
+        self.inner.min_points
+    }
+    /// Largest angle between neighbouring normals inside one object, rad.
+    #[getter]
+    fn max_normal_angle(&self) -> f64 {
+        self.inner.max_normal_angle
+    }
+    /// Inlier distance of verification, mm (None: derived from the samplings).
+    #[getter]
+    fn inlier_distance(&self) -> Option<f64> {
+        self.inner.inlier_distance
+    }
+    /// CCP and centroid: smallest fraction of the object's points on the posed model.
+    #[getter]
+    fn min_fitness(&self) -> f64 {
+        self.inner.min_fitness
+    }
+    /// PPF: smallest confirmed fraction of the posed model's judged sensor-facing surface.
+    #[getter]
+    fn min_coverage(&self) -> f64 {
+        self.inner.min_coverage
+    }
+    /// CCP's s of Eq. 21, mm (None: from the branch radius).
+    #[getter]
+    fn ccp_closer_radius(&self) -> Option<f64> {
+        self.inner.ccp.closer_radius
+    }
+    /// CCP's τ of Eq. 25, mm (None: from the shortest branch).
+    #[getter]
+    fn ccp_tau(&self) -> Option<f64> {
+        self.inner.ccp.tau
+    }
+    /// PPF: fraction of the scene samples that vote.
+    #[getter]
+    fn reference_fraction(&self) -> f64 {
+        self.inner.detect.reference_fraction
+    }
+    /// PPF: pose clusters refined.
+    #[getter]
+    fn max_hypotheses(&self) -> usize {
+        self.inner.detect.max_hypotheses
+    }
+    /// Instances returned.
+    #[getter]
+    fn max_instances(&self) -> usize {
+        self.inner.max_instances
+    }
+    /// Worker threads; 0 = all cores.
+    #[getter]
+    fn num_threads(&self) -> usize {
+        self.inner.num_threads
+    }
+
+    fn __repr__(&self) -> String {
+        let c = &self.inner;
+        let bin = c
+            .bin
+            .map(|b| format!("({:?}, {:?})", triple(&b.min.coords), triple(&b.max.coords)));
+        format!(
+            "PoseConfig(bin={}, up={:?}, method='{}', viewpoint={}, d_star={}, min_points={}, max_normal_angle={:?}, \
+             inlier_distance={}, min_fitness={:?}, min_coverage={:?}, ccp_closer_radius={}, ccp_tau={}, \
+             reference_fraction={:?}, max_hypotheses={}, max_instances={}, num_threads={})",
+            bin.unwrap_or_else(|| "None".into()),
+            triple(&c.up),
+            c.method.name(),
+            c.viewpoint
+                .map_or("None".into(), |p| format!("{:?}", triple(&p.coords))),
+            or_none(c.d_star),
+            or_none(c.min_points),
+            c.max_normal_angle,
+            or_none(c.inlier_distance),
+            c.min_fitness,
+            c.min_coverage,
+            or_none(c.ccp.closer_radius),
+            or_none(c.ccp.tau),
+            c.detect.reference_fraction,
+            c.detect.max_hypotheses,
+            c.max_instances,
+            c.num_threads
+        )
     }
 }
 
-fn estimate_to_py<'py>(py: Python<'py>, est: &PoseEstimate) -> PyResult<Bound<'py, PyDict>> {
-    let d = PyDict::new(py);
-    d.set_item("T_scene_model", isometry_to_py(py, &est.t_scene_model))?;
-    d.set_item("T_scene_model_coarse", isometry_to_py(py, &est.t_scene_model_coarse))?;
-    d.set_item("score", est.score)?;
-    d.set_item("rmse", est.rmse)?;
-    d.set_item("indices", indices_to_py(py, &est.indices))?;
-    let t = PyDict::new(py);
-    for (k, v) in &est.timings {
-        t.set_item(*k, *v)?;
-    }
-    d.set_item("timings", t)?;
-    d.set_item("iterations", est.iterations)?;
-    d.set_item("method", est.method.name())?;
-    // Python reads NaN where a fraction was not judged and 1.0 for an unranked pose.
-    d.set_item("visible_fraction", est.visible_fraction.unwrap_or(f64::NAN))?;
-    d.set_item("occluded_fraction", est.occluded_fraction.unwrap_or(f64::NAN))?;
-    d.set_item("pickability", est.pickability.unwrap_or(1.0))?;
-    Ok(d)
+fn triple(v: &Vector3<f64>) -> (f64, f64, f64) {
+    (v.x, v.y, v.z)
 }
 
-/// Estimates up to `max_instances` instances, most pickable first; returns a list of dicts of
-/// the PoseResult fields.
+fn or_none<T: std::fmt::Debug>(v: Option<T>) -> String {
+    v.map_or("None".into(), |v| format!("{v:?}"))
+}
+
+/// A verified pose (the core's `PoseEstimate`).
+#[pyclass(frozen, module = "binpick._core")]
+pub struct PoseEstimate {
+    inner: binpick_core::PoseEstimate,
+}
+
+#[pymethods]
+impl PoseEstimate {
+    /// (4, 4) model (mesh) frame → scene frame.
+    #[getter(T_scene_model)]
+    fn t_scene_model<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        isometry_to_py(py, &self.inner.t_scene_model)
+    }
+    /// The coarse pose before ICP.
+    #[getter(T_scene_model_coarse)]
+    fn t_scene_model_coarse<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f64>> {
+        isometry_to_py(py, &self.inner.t_scene_model_coarse)
+    }
+    /// Quality in [0, 1].
+    #[getter]
+    fn score(&self) -> f64 {
+        self.inner.score
+    }
+    /// RMS distance of the inliers, mm.
+    #[getter]
+    fn rmse(&self) -> f64 {
+        self.inner.rmse
+    }
+    /// Scene indices of the points on the posed model.
+    #[getter]
+    fn indices<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
+        indices_to_py(py, &self.inner.indices)
+    }
+    /// Milliseconds per stage, in the order the stages ran.
+    #[getter]
+    fn timings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let t = PyDict::new(py);
+        for (k, v) in &self.inner.timings {
+            t.set_item(*k, *v)?;
+        }
+        Ok(t)
+    }
+    /// ICP iterations of the refinement.
+    #[getter]
+    fn iterations(&self) -> usize {
+        self.inner.iterations
+    }
+    /// The coarse method that found it.
+    #[getter]
+    fn method(&self) -> &'static str {
+        self.inner.method.name()
+    }
+    /// Share of the sensor-facing surface the scan confirms, or None where not judged.
+    #[getter]
+    fn visible_fraction(&self) -> Option<f64> {
+        self.inner.visible_fraction
+    }
+    /// Share of the sensor-facing surface under other objects, or None where not judged.
+    #[getter]
+    fn occluded_fraction(&self) -> Option<f64> {
+        self.inner.occluded_fraction
+    }
+    /// Rank score among the instances found, or None when not ranked.
+    #[getter]
+    fn pickability(&self) -> Option<f64> {
+        self.inner.pickability
+    }
+
+    fn __repr__(&self) -> String {
+        let e = &self.inner;
+        let t = e.t_scene_model.translation.vector;
+        format!(
+            "PoseEstimate(method='{}', score={:.3}, rmse={:.3} mm, points={}, t=[{:.2}, {:.2}, {:.2}] mm, pickability={})",
+            e.method.name(),
+            e.score,
+            e.rmse,
+            e.indices.len(),
+            t.x,
+            t.y,
+            t.z,
+            or_none(e.pickability)
+        )
+    }
+}
+
+/// Estimates up to `config.max_instances` instances, most pickable first.
 #[pyfunction]
-#[pyo3(signature = (scene, model, bin_box, up, method, d_star, min_points, max_normal_angle, inlier_distance, min_fitness, closer_radius, tau, num_threads, max_instances=1, viewpoint=None, reference_fraction=None, max_hypotheses=None, min_coverage=0.8))]
-#[allow(clippy::too_many_arguments)]
-fn estimate_poses<'py>(
-    py: Python<'py>,
-    scene: PyReadonlyArray2<'py, f64>,
+fn estimate_poses(
+    py: Python<'_>,
+    scene: PyReadonlyArray2<'_, f64>,
     model: &PreparedModel,
-    bin_box: Option<PyReadonlyArray2<'py, f64>>,
-    up: PyReadonlyArray1<'py, f64>,
-    method: &str,
-    d_star: Option<f64>,
-    min_points: Option<usize>,
-    max_normal_angle: f64,
-    inlier_distance: Option<f64>,
-    min_fitness: f64,
-    closer_radius: Option<f64>,
-    tau: Option<f64>,
-    num_threads: usize,
-    max_instances: usize,
-    viewpoint: Option<PyReadonlyArray1<'py, f64>>,
-    reference_fraction: Option<f64>,
-    max_hypotheses: Option<usize>,
-    min_coverage: f64,
-) -> PyResult<Bound<'py, PyList>> {
+    config: &PoseConfig,
+) -> PyResult<Vec<PoseEstimate>> {
     let pts = points(&scene, "scene")?;
-    let bin = match bin_box {
-        Some(b) => {
-            let c = points(&b, "bin")?;
-            if c.len() != 2 {
-                return Err(invalid("bin", "must be ((xmin, ymin, zmin), (xmax, ymax, zmax))"));
-            }
-            Some(BinBox { min: c[0], max: c[1] })
-        }
-        None => None,
-    };
-    let up = vector3(up.as_slice()?, "up")?;
-    let viewpoint = match viewpoint {
-        Some(v) => Some(Point3::from(vector3(v.as_slice()?, "viewpoint")?)),
-        None => None,
-    };
-    let method = match method {
-        "ccp" => CoarseMethod::Ccp,
-        "centroid" => CoarseMethod::Centroid,
-        "ppf" => CoarseMethod::Ppf,
-        "auto" => CoarseMethod::Auto,
-        other => {
-            return Err(invalid(
-                "method",
-                &format!("unknown coarse method {other:?}; use \"auto\", \"ppf\", \"ccp\" or \"centroid\""),
-            ))
-        }
-    };
-    let defaults = DetectConfig::default();
-    let detect = DetectConfig {
-        reference_fraction: reference_fraction.unwrap_or(defaults.reference_fraction),
-        max_hypotheses: max_hypotheses.unwrap_or(defaults.max_hypotheses),
-        ..defaults
-    };
-    if !(detect.reference_fraction > 0.0 && detect.reference_fraction <= 1.0) {
-        return Err(invalid("reference_fraction", "must be in (0, 1]"));
-    }
-    let cfg = PoseConfig {
-        bin,
-        up,
-        method,
-        d_star,
-        min_points,
-        max_normal_angle,
-        inlier_distance,
-        min_fitness,
-        min_coverage,
-        ccp: CcpConfig { closer_radius, tau },
-        ccp_path: CcpPathParams::default(),
-        detect,
-        viewpoint,
-        max_instances: max_instances.max(1),
-        num_threads,
-    };
+    let cfg = config.inner.clone();
     let model = model.inner.clone();
     let found = run(py, move || core_estimate(&pts, &model, &cfg))?;
-    let out = PyList::empty(py);
-    for est in &found {
-        out.append(estimate_to_py(py, est)?)?;
-    }
-    Ok(out)
+    Ok(found.into_iter().map(|inner| PoseEstimate { inner }).collect())
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PpfParams>()?;
     m.add_class::<PreparedModel>()?;
+    m.add_class::<PoseConfig>()?;
+    m.add_class::<PoseEstimate>()?;
     m.add_function(wrap_pyfunction!(estimate_poses, m)?)?;
     Ok(())
 }

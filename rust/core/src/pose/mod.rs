@@ -58,6 +58,7 @@ pub fn estimate_pose(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Re
 /// Estimates up to `cfg.max_instances` instances, most pickable first. CCP and the centroid
 /// baseline find the top object only; PPF finds every instance it can confirm.
 pub fn estimate_poses(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<PoseEstimate>> {
+    cfg.validate()?;
     crate::parallel::with_threads(cfg.num_threads, || dispatch(scene, model, cfg))
 }
 

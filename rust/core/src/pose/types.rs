@@ -2,6 +2,7 @@
 //! [`Timings`].
 
 use super::ccp_path::CcpPathParams;
+use crate::error::{Error, Result};
 use crate::geometry::{BinBox, Point};
 use crate::registration::ccp::CcpConfig;
 use crate::registration::ppf::DetectConfig;
@@ -31,6 +32,20 @@ impl CoarseMethod {
             CoarseMethod::Centroid => "centroid",
             CoarseMethod::Ppf => "ppf",
             CoarseMethod::Auto => "auto",
+        }
+    }
+
+    /// The method of a name as [`CoarseMethod::name`] spells it (any case).
+    pub fn from_name(name: &str) -> Result<Self> {
+        match name.to_ascii_lowercase().as_str() {
+            "ccp" => Ok(CoarseMethod::Ccp),
+            "centroid" => Ok(CoarseMethod::Centroid),
+            "ppf" => Ok(CoarseMethod::Ppf),
+            "auto" => Ok(CoarseMethod::Auto),
+            _ => Err(Error::invalid(
+                "method",
+                format!("unknown method {name:?}; use \"auto\", \"ppf\", \"ccp\" or \"centroid\""),
+            )),
         }
     }
 }
@@ -98,6 +113,54 @@ impl Default for PoseConfig {
     }
 }
 
+impl PoseConfig {
+    /// Checks every value; the error names the field and the allowed range. The bin box is
+    /// checked where it is used ([`crate::segment::crop_to_bin`]), `up` by the scene check.
+    pub fn validate(&self) -> Result<()> {
+        let positive = |name: &str, v: Option<f64>| match v {
+            Some(v) if !(v.is_finite() && v > 0.0) => Err(Error::invalid(
+                name,
+                format!("must be a positive finite number, got {v}"),
+            )),
+            _ => Ok(()),
+        };
+        let fraction = |name: &str, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(Error::invalid(name, format!("must be a finite number ≥ 0, got {v}")))
+            }
+        };
+        let at_least_one = |name: &str, v: Option<usize>| match v {
+            Some(0) => Err(Error::invalid(name, "must be at least 1, got 0")),
+            _ => Ok(()),
+        };
+        positive("d_star", self.d_star)?;
+        at_least_one("min_points", self.min_points)?;
+        positive("max_normal_angle", Some(self.max_normal_angle))?;
+        positive("inlier_distance", self.inlier_distance)?;
+        fraction("min_fitness", self.min_fitness)?;
+        fraction("min_coverage", self.min_coverage)?;
+        positive("ccp_closer_radius", self.ccp.closer_radius)?;
+        positive("ccp_tau", self.ccp.tau)?;
+        let r = self.detect.reference_fraction;
+        if !(r > 0.0 && r <= 1.0) {
+            return Err(Error::invalid(
+                "reference_fraction",
+                format!("must be in (0, 1], got {r}"),
+            ));
+        }
+        at_least_one("max_hypotheses", Some(self.detect.max_hypotheses))?;
+        at_least_one("max_instances", Some(self.max_instances))?;
+        if let Some(v) = self.viewpoint {
+            if !v.coords.iter().all(|c| c.is_finite()) {
+                return Err(Error::invalid("viewpoint", "must be a finite point"));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// A verified pose.
 #[derive(Debug, Clone)]
 pub struct PoseEstimate {
@@ -126,4 +189,82 @@ pub struct PoseEstimate {
     /// `None` when the pose was not ranked against other instances (a single CCP or centroid
     /// result, which is the most pickable by default).
     pub pickability: Option<f64>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn method_names_round_trip_and_unknown_names_are_named() {
+        for m in [
+            CoarseMethod::Ccp,
+            CoarseMethod::Centroid,
+            CoarseMethod::Ppf,
+            CoarseMethod::Auto,
+        ] {
+            assert_eq!(CoarseMethod::from_name(m.name()), Ok(m));
+            assert_eq!(CoarseMethod::from_name(&m.name().to_uppercase()), Ok(m));
+        }
+        assert!(matches!(CoarseMethod::from_name("fpfh"), Err(Error::InvalidInput { arg, .. }) if arg == "method"));
+    }
+
+    #[test]
+    fn the_default_is_valid_and_each_bad_value_is_named() {
+        assert_eq!(PoseConfig::default().validate(), Ok(()));
+        let d = PoseConfig::default;
+        let cases = [
+            (
+                "min_fitness",
+                PoseConfig {
+                    min_fitness: -0.1,
+                    ..d()
+                },
+            ),
+            (
+                "min_coverage",
+                PoseConfig {
+                    min_coverage: f64::NAN,
+                    ..d()
+                },
+            ),
+            (
+                "d_star",
+                PoseConfig {
+                    d_star: Some(0.0),
+                    ..d()
+                },
+            ),
+            (
+                "min_points",
+                PoseConfig {
+                    min_points: Some(0),
+                    ..d()
+                },
+            ),
+            (
+                "max_instances",
+                PoseConfig {
+                    max_instances: 0,
+                    ..d()
+                },
+            ),
+            (
+                "reference_fraction",
+                PoseConfig {
+                    detect: DetectConfig {
+                        reference_fraction: 1.5,
+                        ..DetectConfig::default()
+                    },
+                    ..d()
+                },
+            ),
+        ];
+        for (name, cfg) in cases {
+            assert!(
+                matches!(cfg.validate(), Err(Error::InvalidInput { ref arg, .. }) if arg == name),
+                "{name}"
+            );
+        }
+    }
 }

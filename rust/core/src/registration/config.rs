@@ -11,6 +11,28 @@ pub enum IcpMethod {
     PointToPlane,
 }
 
+impl IcpMethod {
+    /// The method's name as the Python API spells it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            IcpMethod::PointToPoint => "point_to_point",
+            IcpMethod::PointToPlane => "point_to_plane",
+        }
+    }
+
+    /// The method of a name as [`IcpMethod::name`] spells it.
+    pub fn from_name(name: &str) -> Result<Self> {
+        match name {
+            "point_to_point" => Ok(IcpMethod::PointToPoint),
+            "point_to_plane" => Ok(IcpMethod::PointToPlane),
+            _ => Err(Error::invalid(
+                "method",
+                format!("unknown method {name:?}; use \"point_to_point\" or \"point_to_plane\""),
+            )),
+        }
+    }
+}
+
 /// Iteratively-reweighted least-squares kernel applied to each correspondence's residual.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum RobustKernel {
@@ -49,7 +71,34 @@ impl RobustKernel {
         }
     }
 
-    fn scale(&self) -> Option<f64> {
+    /// The kernel of a name as [`RobustKernel::name`] spells it (any case), at `scale` mm; without
+    /// a scale, a third of the correspondence distance `reach` (mm).
+    pub fn from_name(name: &str, scale: Option<f64>, reach: f64) -> Result<Self> {
+        let k = scale.unwrap_or(reach / 3.0);
+        match name.to_ascii_lowercase().as_str() {
+            "none" => Ok(RobustKernel::None),
+            "huber" => Ok(RobustKernel::Huber(k)),
+            "tukey" => Ok(RobustKernel::Tukey(k)),
+            "cauchy" => Ok(RobustKernel::Cauchy(k)),
+            _ => Err(Error::invalid(
+                "kernel",
+                format!("unknown kernel {name:?}; use \"none\", \"huber\", \"tukey\" or \"cauchy\""),
+            )),
+        }
+    }
+
+    /// The kernel's name as the Python API spells it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            RobustKernel::None => "none",
+            RobustKernel::Huber(_) => "huber",
+            RobustKernel::Tukey(_) => "tukey",
+            RobustKernel::Cauchy(_) => "cauchy",
+        }
+    }
+
+    /// The kernel's scale, mm (`None` for plain least squares).
+    pub fn scale(&self) -> Option<f64> {
         match *self {
             RobustKernel::None => None,
             RobustKernel::Huber(k) | RobustKernel::Tukey(k) | RobustKernel::Cauchy(k) => Some(k),
@@ -148,7 +197,7 @@ impl IcpConfig {
             return Err(Error::invalid("max_iterations", "must be at least 1"));
         }
         if let Some(k) = self.kernel.scale() {
-            positive("kernel scale", k)?;
+            positive("kernel_scale", k)?;
         }
         if !(self.trim_fraction.is_finite() && (0.0..=0.9).contains(&self.trim_fraction)) {
             return Err(Error::invalid(
@@ -157,5 +206,28 @@ impl IcpConfig {
             ));
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip_and_the_kernel_scale_defaults_to_a_third_of_the_reach() {
+        for m in [IcpMethod::PointToPoint, IcpMethod::PointToPlane] {
+            assert_eq!(IcpMethod::from_name(m.name()), Ok(m));
+        }
+        assert_eq!(
+            RobustKernel::from_name("Tukey", None, 9.0),
+            Ok(RobustKernel::Tukey(3.0))
+        );
+        assert_eq!(
+            RobustKernel::from_name("huber", Some(2.0), 9.0),
+            Ok(RobustKernel::Huber(2.0))
+        );
+        assert_eq!(RobustKernel::from_name("none", None, 9.0).map(|k| k.scale()), Ok(None));
+        assert!(RobustKernel::from_name("gaussian", None, 9.0).is_err());
+        assert!(IcpMethod::from_name("nearest").is_err());
     }
 }
