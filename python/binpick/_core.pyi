@@ -20,8 +20,9 @@ _I32 = npt.NDArray[np.int32]
 _U8 = npt.NDArray[np.uint8]
 _Path = Union[str, "PathLike[str]"]
 
-# (width, height, fx, fy, cx, cy, [k1, k2, p1, p2, k3])
-_CameraArgs = tuple[int, int, float, float, float, float, list[float]]
+# The one camera model, for the renderer and triangulation alike (binpick.camera.camera_args):
+# (width px, height px, K (3, 3) with skew K[0, 1], dist [k1, k2, p1, p2, k3] (5,))
+_CameraArgs = tuple[int, int, _F64, _F64]
 # (ambient DN, lamp DN, lamp direction in the base frame, background DN)
 _LightingArgs = tuple[float, float, list[float], float]
 # (read_noise, shot_noise, speckle, reflections, blur)
@@ -146,14 +147,11 @@ def estimate_poses(
 
 # --- triangulation --------------------------------------------------------------------------
 
-def pixel_rays(width: int, height: int, k: _F64, dist: _F64, pixels: _F64) -> _F64:
+def pixel_rays(camera_args: _CameraArgs, pixels: _F64) -> _F64:
     """Undistorted rays (x, y, 1) through pixels (N, 2) of (u, v); NaN rows where the distortion cannot be inverted."""
 
 def triangulate_scan(
-    width: int,
-    height: int,
-    k: _F64,
-    dist: _F64,
+    camera_args: _CameraArgs,
     t_camera_laser0: _F64,
     t_flange_camera: _F64,
     angles: _F64,
