@@ -4,8 +4,8 @@
 //! `binpick.sim`: the bin centred at (400, 0), the camera 580 mm above its floor looking down.
 
 use binpick_core::parts::{tee, TeeParams};
-use binpick_core::sim::{BinSpec, Camera, Laser, Lighting, Material, Pile, PileParams, Scene, SensorNoise};
-use binpick_core::with_threads;
+use binpick_core::sim::{BinSpec, Laser, Lighting, Material, Pile, PileParams, Scene, SensorNoise};
+use binpick_core::{with_threads, Camera};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::PI;

@@ -157,6 +157,5 @@ def test_no_python_source_file_is_over_800_lines(root):
     assert _oversized(root) == []
 
 
-@pytest.mark.xfail(reason="the Rust files are split by the Rust side of issue 12, on its own branch", strict=False)
 def test_no_rust_source_file_is_over_800_lines():
     assert _oversized("rust") == []

@@ -8,7 +8,7 @@ only from inside the package.
 """
 
 from os import PathLike
-from typing import Any, Optional, Union
+from typing import Any, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -20,8 +20,9 @@ _I32 = npt.NDArray[np.int32]
 _U8 = npt.NDArray[np.uint8]
 _Path = Union[str, "PathLike[str]"]
 
-# (width, height, fx, fy, cx, cy, [k1, k2, p1, p2, k3])
-_CameraArgs = tuple[int, int, float, float, float, float, list[float]]
+# The one camera model, for the renderer and triangulation alike (binpick.camera.camera_args):
+# (width px, height px, K (3, 3) with skew K[0, 1], dist [k1, k2, p1, p2, k3] (5,))
+_CameraArgs = tuple[int, int, _F64, _F64]
 # (ambient DN, lamp DN, lamp direction in the base frame, background DN)
 _LightingArgs = tuple[float, float, list[float], float]
 # (read_noise, shot_noise, speckle, reflections, blur)
@@ -38,26 +39,35 @@ def _panic_for_test() -> None:
 
 # --- geometry -------------------------------------------------------------------------------
 
-def estimate_normals(points_in: _F64, k: int, viewpoint: Optional[_F64], direction: Optional[_F64], num_threads: int) -> _F64:
+def estimate_normals(points_in: _F64, k: int, viewpoint: _F64 | None, direction: _F64 | None, num_threads: int) -> _F64:
     """(N, 3) unit normals by k-NN PCA, facing ``viewpoint`` (a point) or else ``direction`` (default +z)."""
 
-def voxel_downsample(points_in: _F64, normals: Optional[_F64], voxel_size: float) -> tuple[_F64, Optional[_F64], _I64]:
+def voxel_downsample(points_in: _F64, normals: _F64 | None, voxel_size: float) -> tuple[_F64, _F64 | None, _I64]:
     """One point per ``voxel_size`` voxel: (points, normals or None, index of each voxel's first input point)."""
 
 def read_mesh(path: _Path, unit: str) -> tuple[_F64, _I64]:
-    """A triangle mesh from STL (binary/ASCII), PLY or OBJ, scaled from ``unit`` (mm|cm|m|in) to mm: (vertices, faces)."""
+    """A triangle mesh from STL (binary/ASCII), PLY or OBJ, scaled from ``unit`` (mm|cm|m|in) to mm:
+    (vertices, faces)."""
 
-def sample_mesh(vertices: _F64, faces: _I64, spacing: Optional[float], count: Optional[int], seed: int) -> tuple[_F64, _F64, float, float]:
-    """Surface samples every ``spacing`` mm or ``count`` of them (exactly one given): (points, normals, diameter mm, area mm²)."""
+def sample_mesh(
+    vertices: _F64, faces: _I64, spacing: float | None, count: int | None, seed: int
+) -> tuple[_F64, _F64, float, float]:
+    """Surface samples every ``spacing`` mm or ``count`` of them (exactly one given):
+    (points, normals, diameter mm, area mm²)."""
 
-def read_ply(path: _Path) -> tuple[_F64, Optional[_F64]]:
+def read_ply(path: _Path) -> tuple[_F64, _F64 | None]:
     """A PLY point cloud: (points, normals or None)."""
 
-def write_ply(path: _Path, points_in: _F64, normals: Optional[_F64], ascii: bool) -> None:
+def write_ply(path: _Path, points_in: _F64, normals: _F64 | None, ascii: bool) -> None:
     """Writes a PLY point cloud (binary little-endian unless ``ascii``)."""
 
 def part_tee(
-    outer_diameter: float, run_length: float, branch_length: float, boss_semi_axes: tuple[float, float], boss_height: float, resolution: float
+    outer_diameter: float,
+    run_length: float,
+    branch_length: float,
+    boss_semi_axes: tuple[float, float],
+    boss_height: float,
+    resolution: float,
 ) -> tuple[_F64, _I64, _F64]:
     """The paper's tee: (vertices, faces, branches as rows [dx, dy, dz, length, radius])."""
 
@@ -73,16 +83,16 @@ class IcpConfig:
     def __new__(
         cls,
         *,
-        method: Optional[str] = None,
-        max_correspondence_distance: Optional[float] = None,
-        max_iterations: Optional[int] = None,
-        rotation_tolerance: Optional[float] = None,
-        translation_tolerance: Optional[float] = None,
-        kernel: Optional[str] = None,
-        kernel_scale: Optional[float] = None,
-        trim_fraction: Optional[float] = None,
-        num_threads: Optional[int] = None,
-    ) -> "IcpConfig":
+        method: str | None = None,
+        max_correspondence_distance: float | None = None,
+        max_iterations: int | None = None,
+        rotation_tolerance: float | None = None,
+        translation_tolerance: float | None = None,
+        kernel: str | None = None,
+        kernel_scale: float | None = None,
+        trim_fraction: float | None = None,
+        num_threads: int | None = None,
+    ) -> IcpConfig:
         """``method`` ``"point_to_point"``|``"point_to_plane"``, ``kernel``
         ``"none"``|``"huber"``|``"tukey"``|``"cauchy"``; mm and rad."""
     @property
@@ -98,7 +108,7 @@ class IcpConfig:
     @property
     def kernel(self) -> str: ...
     @property
-    def kernel_scale(self) -> Optional[float]: ...
+    def kernel_scale(self) -> float | None: ...
     @property
     def trim_fraction(self) -> float: ...
     @property
@@ -120,7 +130,7 @@ class IcpResult:
     @property
     def num_inliers(self) -> int: ...
 
-def icp(source: _F64, target: _F64, target_normals: Optional[_F64], init: _F64, config: IcpConfig) -> IcpResult:
+def icp(source: _F64, target: _F64, target_normals: _F64 | None, init: _F64, config: IcpConfig) -> IcpResult:
     """Registers ``source`` onto ``target`` from ``init`` (point-to-plane needs ``target_normals``)."""
 
 class PpfParams:
@@ -128,8 +138,8 @@ class PpfParams:
     left out or None takes the core's default."""
 
     def __new__(
-        cls, *, sampling_ratio: Optional[float] = None, angle_bins: Optional[int] = None, rotation_bins: Optional[int] = None
-    ) -> "PpfParams":
+        cls, *, sampling_ratio: float | None = None, angle_bins: int | None = None, rotation_bins: int | None = None
+    ) -> PpfParams:
         """``sampling_ratio`` of the model's diameter; bins over [0, π] and over a turn."""
     @property
     def sampling_ratio(self) -> float: ...
@@ -148,12 +158,12 @@ class PreparedModel:
         normals: _F64,
         diameter: float,
         area: float,
-        branches: Optional[_F64],
-        special: Optional[_F64],
-        ppf: Optional[PpfParams] = None,
-        ppf_cache: Optional[bytes] = None,
-        mesh: Optional[tuple[_F64, _I64]] = None,
-    ) -> "PreparedModel":
+        branches: _F64 | None,
+        special: _F64 | None,
+        ppf: PpfParams | None = None,
+        ppf_cache: bytes | None = None,
+        mesh: tuple[_F64, _I64] | None = None,
+    ) -> PreparedModel:
         """From surface samples (N, 3), their normals, diameter and area; ``branches`` rows
         [dx, dy, dz, length, radius] (None or empty: no branch layout), ``special`` the special
         feature's direction or None; ``ppf`` builds the PPF table, or loads it from ``ppf_cache``
@@ -163,7 +173,7 @@ class PreparedModel:
         """Whether the PPF table came from ``ppf_cache``."""
     def ppf_pairs(self) -> int:
         """Model pairs in the PPF table (0 without one)."""
-    def ppf_bytes(self) -> Optional[bytes]:
+    def ppf_bytes(self) -> bytes | None:
         """The PPF table serialised for the cache, or None without one."""
     def symmetries(self) -> dict[str, Any]:
         """Dict with center (3,), continuous_axis (3,) or None, rotations (K, 3, 3), identity first."""
@@ -177,48 +187,48 @@ class PoseConfig:
     def __new__(
         cls,
         *,
-        bin: Optional[_F64] = None,
-        up: Optional[_F64] = None,
-        method: Optional[str] = None,
-        viewpoint: Optional[_F64] = None,
-        d_star: Optional[float] = None,
-        min_points: Optional[int] = None,
-        max_normal_angle: Optional[float] = None,
-        inlier_distance: Optional[float] = None,
-        min_fitness: Optional[float] = None,
-        min_coverage: Optional[float] = None,
-        ccp_closer_radius: Optional[float] = None,
-        ccp_tau: Optional[float] = None,
-        reference_fraction: Optional[float] = None,
-        max_hypotheses: Optional[int] = None,
-        max_instances: Optional[int] = None,
-        num_threads: Optional[int] = None,
-    ) -> "PoseConfig":
+        bin: _F64 | None = None,
+        up: _F64 | None = None,
+        method: str | None = None,
+        viewpoint: _F64 | None = None,
+        d_star: float | None = None,
+        min_points: int | None = None,
+        max_normal_angle: float | None = None,
+        inlier_distance: float | None = None,
+        min_fitness: float | None = None,
+        min_coverage: float | None = None,
+        ccp_closer_radius: float | None = None,
+        ccp_tau: float | None = None,
+        reference_fraction: float | None = None,
+        max_hypotheses: int | None = None,
+        max_instances: int | None = None,
+        num_threads: int | None = None,
+    ) -> PoseConfig:
         """``bin`` (2, 3) box corners, ``method`` ``"auto"``|``"ppf"``|``"ccp"``|``"centroid"``; mm and rad."""
     @property
-    def bin(self) -> Optional[_F64]: ...
+    def bin(self) -> _F64 | None: ...
     @property
     def up(self) -> tuple[float, float, float]: ...
     @property
     def method(self) -> str: ...
     @property
-    def viewpoint(self) -> Optional[tuple[float, float, float]]: ...
+    def viewpoint(self) -> tuple[float, float, float] | None: ...
     @property
-    def d_star(self) -> Optional[float]: ...
+    def d_star(self) -> float | None: ...
     @property
-    def min_points(self) -> Optional[int]: ...
+    def min_points(self) -> int | None: ...
     @property
     def max_normal_angle(self) -> float: ...
     @property
-    def inlier_distance(self) -> Optional[float]: ...
+    def inlier_distance(self) -> float | None: ...
     @property
     def min_fitness(self) -> float: ...
     @property
     def min_coverage(self) -> float: ...
     @property
-    def ccp_closer_radius(self) -> Optional[float]: ...
+    def ccp_closer_radius(self) -> float | None: ...
     @property
-    def ccp_tau(self) -> Optional[float]: ...
+    def ccp_tau(self) -> float | None: ...
     @property
     def reference_fraction(self) -> float: ...
     @property
@@ -248,25 +258,22 @@ class PoseEstimate:
     @property
     def method(self) -> str: ...
     @property
-    def visible_fraction(self) -> Optional[float]: ...
+    def visible_fraction(self) -> float | None: ...
     @property
-    def occluded_fraction(self) -> Optional[float]: ...
+    def occluded_fraction(self) -> float | None: ...
     @property
-    def pickability(self) -> Optional[float]: ...
+    def pickability(self) -> float | None: ...
 
 def estimate_poses(scene: _F64, model: PreparedModel, config: PoseConfig) -> list[PoseEstimate]:
     """Up to ``config.max_instances`` verified instances, most pickable first."""
 
 # --- triangulation --------------------------------------------------------------------------
 
-def pixel_rays(width: int, height: int, k: _F64, dist: _F64, pixels: _F64) -> _F64:
+def pixel_rays(camera_args: _CameraArgs, pixels: _F64) -> _F64:
     """Undistorted rays (x, y, 1) through pixels (N, 2) of (u, v); NaN rows where the distortion cannot be inverted."""
 
 def triangulate_scan(
-    width: int,
-    height: int,
-    k: _F64,
-    dist: _F64,
+    camera_args: _CameraArgs,
     t_camera_laser0: _F64,
     t_flange_camera: _F64,
     angles: _F64,
@@ -301,7 +308,7 @@ class SimPile:
         skin: float,
         decomposition_resolution: int,
         max_convex_hulls: int,
-    ) -> "SimPile":
+    ) -> SimPile:
         """Drops the parts (deterministic for ``seed``) and lets them settle."""
     def poses(self) -> tuple[_I64, _F64]:
         """(ids (N,), T_base_object (N, 4, 4)) of the parts still in the bin."""
@@ -321,7 +328,7 @@ class SimPile:
 class SimScene:
     """Meshes and their placed instances in the base frame, ray-cast by :meth:`view`."""
 
-    def __new__(cls) -> "SimScene":
+    def __new__(cls) -> SimScene:
         """An empty scene."""
     def add_mesh(self, vertices: _F64, faces: _I64, albedo: list[float], specular: float, shininess: float) -> int:
         """Adds a mesh (mm, its own frame) with its material; returns the mesh index."""
@@ -336,7 +343,9 @@ class SimScene:
     def nearest_surface(self, points_base: _F64) -> tuple[_F64, _I32]:
         """Exact distance (mm) from each base-frame point (N, 3) to the nearest surface and that
         surface's instance id; (inf, −1) in an empty scene."""
-    def view(self, camera_args: _CameraArgs, t_base_camera: _F64, lighting_args: _LightingArgs, num_threads: int) -> "SimView":
+    def view(
+        self, camera_args: _CameraArgs, t_base_camera: _F64, lighting_args: _LightingArgs, num_threads: int
+    ) -> SimView:
         """Casts one ray per pixel from ``t_base_camera``."""
 
 class SimView:
@@ -367,13 +376,17 @@ class SimView:
     ) -> npt.NDArray[np.uint8]:
         """(K, H, W, 3) RGB frames, one per motor angle (rad); frame k's noise is seeded by ``seed + k``."""
 
-def sim_convex_decomposition(vertices: _F64, faces: _I64, decomposition_resolution: int, max_convex_hulls: int) -> list[tuple[_F64, _I64]]:
+def sim_convex_decomposition(
+    vertices: _F64, faces: _I64, decomposition_resolution: int, max_convex_hulls: int
+) -> list[tuple[_F64, _I64]]:
     """Convex pieces (vertices, faces) enclosing a mesh, as piles collide with them."""
 
 def sim_max_interpenetration(vertices: _F64, faces: _I64, poses: _F64, samples: _F64) -> float:
     """Deepest interpenetration (mm) of mesh instances at ``poses`` (N, 4, 4), from surface ``samples`` (M, 3)."""
 
-def sim_bin_mesh(center: tuple[float, float], size: tuple[float, float, float], floor_z: float, wall_thickness: float) -> tuple[_F64, _I64]:
+def sim_bin_mesh(
+    center: tuple[float, float], size: tuple[float, float, float], floor_z: float, wall_thickness: float
+) -> tuple[_F64, _I64]:
     """The bin's render mesh (vertices, faces) in the base frame."""
 
 def sim_default_laser() -> _LaserArgs:
@@ -385,7 +398,7 @@ def sim_render_checkerboard(
     board: tuple[int, int, float, float],
     t_camera_board: _F64,
     lighting_args: _LightingArgs,
-    laser_args: Optional[_LaserArgs],
+    laser_args: _LaserArgs | None,
     angle: float,
     noise_args: _NoiseArgs,
     supersample: int,

@@ -1,6 +1,7 @@
 """Camera intrinsics: the pinhole-and-distortion model the measuring chain calibrates, the
 simulator renders with and triangulation inverts (the core holds the one implementation of the
-projection; this is its description on the Python side).
+projection, ``binpick_core::Camera``; this is its description on the Python side, handed to the
+native module by :func:`camera_args` alike for rendering and for triangulation).
 
 A leaf module: it imports nothing from binpick but the errors and the validation vocabulary.
 """
@@ -9,13 +10,14 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from ._validate import calibration_matrix, frozen_copy
-from .errors import CalibrationError
+from .errors import CalibrationError, InvalidInputError
 
-__all__ = ["CameraIntrinsics", "pinhole_matrix"]
+__all__ = ["CameraIntrinsics", "camera_args", "pinhole_matrix"]
 
 
 def pinhole_matrix(fx: float, fy: float, cx: float, cy: float, skew: float = 0.0) -> np.ndarray:
@@ -117,3 +119,14 @@ class CameraIntrinsics:
             f"CameraIntrinsics({self.width}×{self.height}, fx={K[0, 0]:.2f}, fy={K[1, 1]:.2f}, "
             f"cx={K[0, 2]:.2f}, cy={K[1, 2]:.2f}, dist={np.round(self.dist, 5).tolist()})"
         )
+
+
+def camera_args(camera: Any) -> tuple[int, int, np.ndarray, np.ndarray]:
+    """The camera as the native module takes it, for the renderer and triangulation alike:
+    ``(width, height, K, dist)``; anything but a :class:`CameraIntrinsics` raises InvalidInputError."""
+    if not isinstance(camera, CameraIntrinsics):
+        raise InvalidInputError(
+            "camera: expected a binpick.camera.CameraIntrinsics (CameraIntrinsics.pinhole(...) or "
+            f"binpick.sim.Camera(...)), got {type(camera).__name__}"
+        )
+    return camera.width, camera.height, np.ascontiguousarray(camera.K), np.ascontiguousarray(camera.dist)

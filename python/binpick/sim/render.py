@@ -16,7 +16,7 @@ import numpy as np
 
 from .. import _core
 from .._validate import as_points, as_transform, count, positive
-from ..camera import CameraIntrinsics
+from ..camera import CameraIntrinsics, camera_args
 from ..errors import InvalidInputError
 from ..models import Model
 from .cell import Bin, Cell, Laser, Lighting, SensorNoise
@@ -129,9 +129,7 @@ class World:
             raise InvalidInputError(f"cell: expected a binpick.sim.Cell, got {type(cell).__name__}")
         T_bf = cell.T_base_flange if T_base_flange is None else as_transform(T_base_flange, "T_base_flange")
         T_bc = T_bf @ cell.T_flange_camera
-        raw = self._scene.view(
-            _camera_args(cell.camera), T_bc, cell.lighting._args(), count(num_threads, "num_threads")
-        )
+        raw = self._scene.view(camera_args(cell.camera), T_bc, cell.lighting._args(), count(num_threads, "num_threads"))
         return View(raw, cell, T_bf)
 
 
@@ -194,19 +192,6 @@ class View:
         return self._raw.ambient_frame(noise._args(), count(seed, "seed"))
 
 
-def _camera_args(camera: CameraIntrinsics) -> tuple:
-    """The renderer's camera arguments: size, fx, fy, cx, cy, distortion (it models no skew)."""
-    if not isinstance(camera, CameraIntrinsics):
-        raise InvalidInputError(
-            f"camera: expected a binpick.camera.CameraIntrinsics (binpick.sim.Camera(...)), got {type(camera).__name__}"
-        )
-    if camera.skew != 0.0:
-        raise InvalidInputError(
-            f"camera: the renderer models no skew, got K[0, 1] = {camera.skew:g}; use a camera with K[0, 1] = 0"
-        )
-    return (camera.width, camera.height, camera.fx, camera.fy, camera.cx, camera.cy, [float(v) for v in camera.dist])
-
-
 def render_checkerboard(
     camera: CameraIntrinsics,
     T_camera_board: Any,
@@ -228,7 +213,7 @@ def render_checkerboard(
     lighting = lighting or Lighting(ambient=150.0, lamp=60.0)
     noise = noise or SensorNoise()
     return _core.sim_render_checkerboard(
-        _camera_args(camera),
+        camera_args(camera),
         (cols + 1, rows + 1, positive(square, "square"), float(margin)),
         as_transform(T_camera_board, "T_camera_board"),
         lighting._args(),

@@ -14,6 +14,7 @@ import numpy as np
 
 from .. import _core
 from ..calibration import CameraIntrinsics, CellCalibration
+from ..camera import camera_args
 
 
 def pose(rx: float = 0.0, ry: float = 0.0, rz: float = 0.0, t=(0.0, 0.0, 0.0)) -> np.ndarray:
@@ -136,9 +137,7 @@ def camera_rays(camera: CameraIntrinsics, pixels: np.ndarray | None = None) -> n
     if pixels is None:
         v, u = np.mgrid[0 : camera.height, 0 : camera.width]
         pixels = np.stack([u.ravel(), v.ravel()], axis=1).astype(np.float64)
-    rays = _core.pixel_rays(
-        camera.width, camera.height, camera.K, camera.dist, np.ascontiguousarray(pixels, dtype=np.float64)
-    )
+    rays = _core.pixel_rays(camera_args(camera), np.ascontiguousarray(pixels, dtype=np.float64))
     return rays / np.linalg.norm(rays, axis=1, keepdims=True)
 
 

@@ -11,7 +11,7 @@ import numpy as np
 from .. import _core
 from .._validate import as_angles, as_float_array, as_points, as_transform, check_finite, count
 from ..calibration._file import CellCalibration
-from ..camera import CameraIntrinsics
+from ..camera import CameraIntrinsics, camera_args
 from ..errors import InvalidInputError, ShapeError, SingularGeometryError
 
 __all__ = ["Cloud", "pixel_rays", "triangulate"]
@@ -45,18 +45,12 @@ class Cloud:
         return f"Cloud({len(self)} points from {frames} frames)"
 
 
-def _camera_args(camera: CameraIntrinsics) -> tuple:
-    if not isinstance(camera, CameraIntrinsics):
-        raise InvalidInputError(f"camera: expected a CameraIntrinsics, got {type(camera).__name__}")
-    return camera.width, camera.height, np.ascontiguousarray(camera.K), np.ascontiguousarray(camera.dist)
-
-
 def pixel_rays(pixels: np.ndarray, camera: CameraIntrinsics) -> np.ndarray:
     """Undistorted rays ``(x, y, 1)`` in the camera frame through ``pixels`` (N, 2) of (u, v).
 
     Raises SingularGeometryError if the distortion cannot be inverted at some pixel."""
     px = as_points(pixels, "pixels", columns=2, min_points=0)
-    rays = _core.pixel_rays(*_camera_args(camera), px)
+    rays = _core.pixel_rays(camera_args(camera), px)
     bad = ~np.isfinite(rays[:, 0])
     if bad.any():
         i = int(np.argmax(bad))
@@ -99,7 +93,7 @@ def triangulate(
     ang = as_angles(angles, "angles")
     poses = _poses(T_base_flanges, len(ang))
     pts, status, kept_pixels, kept = _core.triangulate_scan(
-        *_camera_args(calibration.camera),
+        camera_args(calibration.camera),
         np.ascontiguousarray(calibration.T_camera_laser),
         np.ascontiguousarray(calibration.T_flange_camera),
         ang,

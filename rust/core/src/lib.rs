@@ -11,11 +11,11 @@
 //! |---|---|
 //! | `error` | the one [`Error`] enum and [`Result`] |
 //! | `rng`, `parallel` | the seeded [`Rng`]; thread-count control ([`with_threads`]) |
-//! | `geometry` | [`Point`] and its checks, cloud statistics, rigid transforms, the one [`Plane`], [`BinBox`], the one Kabsch |
+//! | `geometry` | [`Point`] and its checks, cloud statistics, rigid transforms, the one [`Plane`], [`BinBox`], the one Kabsch, THE camera model ([`Camera`], [`RayTable`]) |
 //! | `search` | nearest-neighbour structures: [`KdIndex`], the bounded correspondence tree, the coarse nearest field |
 //! | `voxel`, `normals` | voxel grids and even subsampling; normal estimation |
 //! | `mesh` | [`TriMesh`], file readers and writers, surface sampling, SDF modelling, the built-in [`parts`] |
-//! | `triangulate` | the measuring chain: camera model, ray tables, laser-plane triangulation |
+//! | `triangulate` | the measuring chain: laser planes, ray–plane intersection, scans to base-frame points |
 //! | `segment` | scan spacing, bin cropping, support-plane removal, top-object segmentation (Table 2) |
 //! | `symmetry` | proper symmetries of a part, canonical poses, symmetry-aware pose errors |
 //! | `registration` | ICP and its configuration, CCP, verification evidence, point-pair features |
@@ -42,7 +42,7 @@ mod triangulate;
 mod voxel;
 
 pub use error::{Error, Result};
-pub use geometry::{centroid, isometry_from_matrix, transform_points, BinBox, Plane, Point};
+pub use geometry::{centroid, isometry_from_matrix, transform_points, BinBox, Camera, Plane, Point, RayTable};
 pub use mesh::io::{read_mesh, read_ply, write_ply, PlyData};
 pub use mesh::parts::{self, Part};
 pub use mesh::{sample_surface, unit_scale, Density, SurfaceSamples, TriMesh};
@@ -59,7 +59,7 @@ pub use rng::Rng;
 pub use search::{KdIndex, Neighbour};
 pub use symmetry::{detect_symmetries, Symmetries, SymmetryConfig};
 pub use triangulate::{
-    intersect_ray_plane, laser_plane, pixel_rays, triangulate, triangulate_into, Camera, FramePose, PointStatus,
-    RayTable, Sensor, Triangulation,
+    intersect_ray_plane, laser_plane, pixel_rays, triangulate, triangulate_into, FramePose, PointStatus, Sensor,
+    Triangulation,
 };
 pub use voxel::{subsample, voxel_downsample, Downsampled};

@@ -176,3 +176,31 @@ pub fn rotations_to_rows(rotations: &[nalgebra::UnitQuaternion<f64>]) -> Vec<Vec
         })
         .collect()
 }
+
+/// The camera as every binding takes it, from `binpick.camera.CameraIntrinsics`:
+/// `(width, height, K (3, 3), dist (5,) = [k1, k2, p1, p2, k3])`.
+pub type CameraArgs<'py> = (u32, u32, PyReadonlyArray2<'py, f64>, numpy::PyReadonlyArray1<'py, f64>);
+
+/// The one camera model (`binpick_core::Camera`) from its Python description; triangulation and
+/// the renderer build it here, the same way.
+pub fn camera(args: &CameraArgs<'_>) -> PyResult<binpick_core::Camera> {
+    let (width, height, k, dist) = args;
+    let k = k.as_array();
+    if k.shape() != [3, 3] {
+        return Err(invalid("K", &format!("must have shape (3, 3), got {:?}", k.shape())));
+    }
+    let d = dist.as_array();
+    if d.len() != 5 {
+        return Err(invalid(
+            "dist",
+            &format!("must hold 5 coefficients [k1, k2, p1, p2, k3], got {}", d.len()),
+        ));
+    }
+    let km = nalgebra::Matrix3::from_fn(|r, c| k[[r, c]]);
+    binpick_core::Camera::new(*width, *height, &km, [d[0], d[1], d[2], d[3], d[4]]).map_err(crate::errors::to_py)
+}
+
+/// A (4, 4) float64 array as a rigid transform, checked by the core's `isometry_from_matrix`.
+pub fn isometry(arr: &PyReadonlyArray2<'_, f64>, arg: &str) -> PyResult<Isometry3<f64>> {
+    binpick_core::isometry_from_matrix(arg, &matrix4(arr, arg)?).map_err(crate::errors::to_py)
+}

@@ -2,14 +2,12 @@
 //! of one robot pose (`SimView`, lit per laser angle) and checkerboard images. The Python
 //! package `binpick.sim` wraps these with validated, documented classes.
 
-use crate::convert::{matrix4, points};
+use crate::convert::{camera, isometry, points, CameraArgs};
 use crate::errors::{invalid, run};
 use binpick_core::sim::{convex_decomposition, max_interpenetration, BinSpec, Pile, PileParams, SettleReport};
-use binpick_core::sim::{
-    render_checkerboard, Camera, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View,
-};
-use binpick_core::{Error, Point, TriMesh};
-use nalgebra::{Isometry3, Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3};
+use binpick_core::sim::{render_checkerboard, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View};
+use binpick_core::{Error, Point};
+use nalgebra::{Isometry3, Matrix4, Vector3};
 use numpy::ndarray::{Array2, Array3};
 use numpy::{PyArray2, PyArray3, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
@@ -17,47 +15,9 @@ use std::sync::Arc;
 
 type Arr<'py> = Bound<'py, PyArray2<f64>>;
 
-/// A rigid transform from a 4×4 matrix already checked rigid by the Python layer.
-fn isometry(m: &Matrix4<f64>) -> Isometry3<f64> {
-    let r: Matrix3<f64> = m.fixed_view::<3, 3>(0, 0).into_owned();
-    let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(&r));
-    Isometry3::from_parts(Translation3::new(m[(0, 3)], m[(1, 3)], m[(2, 3)]), rot)
-}
-
-fn transform(arr: &PyReadonlyArray2<'_, f64>, arg: &str) -> PyResult<Isometry3<f64>> {
-    Ok(isometry(&matrix4(arr, arg)?))
-}
-
-fn mesh_in(vertices: &PyReadonlyArray2<'_, f64>, faces: &PyReadonlyArray2<'_, i64>) -> PyResult<TriMesh> {
-    let v = points(vertices, "vertices")?;
-    let f = faces.as_array();
-    if f.ncols() != 3 {
-        return Err(invalid(
-            "faces",
-            &format!("must have shape (M, 3), got {:?}", f.shape()),
-        ));
-    }
-    let n = v.len() as i64;
-    let mut out = Vec::with_capacity(f.nrows());
-    for (i, row) in f.rows().into_iter().enumerate() {
-        if row.iter().any(|&x| x < 0 || x >= n) {
-            return Err(invalid("faces", &format!("face {i} indexes outside the {n} vertices")));
-        }
-        out.push([row[0] as u32, row[1] as u32, row[2] as u32]);
-    }
-    Ok(TriMesh {
-        vertices: v,
-        faces: out,
-    })
-}
-
+/// Vertices and faces as new (V, 3) float64 and (M, 3) int64 arrays.
 fn mesh_out<'py>(py: Python<'py>, v: &[Point], f: &[[u32; 3]]) -> (Arr<'py>, Bound<'py, PyArray2<i64>>) {
-    let flat: Vec<f64> = v.iter().flat_map(|p| [p.x, p.y, p.z]).collect();
-    let faces: Vec<i64> = f.iter().flat_map(|t| t.map(|x| x as i64)).collect();
-    (
-        PyArray2::from_owned_array(py, Array2::from_shape_vec((v.len(), 3), flat).expect("n×3")),
-        PyArray2::from_owned_array(py, Array2::from_shape_vec((f.len(), 3), faces).expect("m×3")),
-    )
+    (crate::convert::points_to_py(py, v), crate::convert::faces_to_py(py, f))
 }
 
 fn poses_out<'py>(py: Python<'py>, poses: &[Isometry3<f64>]) -> Bound<'py, PyArray3<f64>> {
@@ -115,7 +75,7 @@ impl PySimPile {
         decomposition_resolution: u32,
         max_convex_hulls: u32,
     ) -> PyResult<Self> {
-        let mesh = mesh_in(&vertices, &faces)?;
+        let mesh = crate::convert::mesh_from_py(&vertices, &faces)?;
         let bin = bin_spec(bin_center, bin_size, floor_z, wall_thickness);
         let params = PileParams {
             seed,
@@ -187,7 +147,7 @@ fn sim_convex_decomposition<'py>(
     decomposition_resolution: u32,
     max_convex_hulls: u32,
 ) -> PyResult<Vec<(Arr<'py>, Bound<'py, PyArray2<i64>>)>> {
-    let mesh = mesh_in(&vertices, &faces)?;
+    let mesh = crate::convert::mesh_from_py(&vertices, &faces)?;
     let params = PileParams {
         decomposition_resolution,
         max_convex_hulls,
@@ -206,7 +166,7 @@ fn sim_max_interpenetration(
     poses: PyReadonlyArray3<'_, f64>,
     samples: PyReadonlyArray2<'_, f64>,
 ) -> PyResult<f64> {
-    let mesh = mesh_in(&vertices, &faces)?;
+    let mesh = crate::convert::mesh_from_py(&vertices, &faces)?;
     let p = poses.as_array();
     if p.shape()[1] != 4 || p.shape()[2] != 4 {
         return Err(invalid(
@@ -214,9 +174,10 @@ fn sim_max_interpenetration(
             &format!("must have shape (N, 4, 4), got {:?}", p.shape()),
         ));
     }
-    let t: Vec<Isometry3<f64>> = (0..p.shape()[0])
-        .map(|k| isometry(&Matrix4::from_fn(|r, c| p[[k, r, c]])))
-        .collect();
+    let t = (0..p.shape()[0])
+        .map(|k| binpick_core::isometry_from_matrix(&format!("poses[{k}]"), &Matrix4::from_fn(|r, c| p[[k, r, c]])))
+        .collect::<binpick_core::Result<Vec<_>>>()
+        .map_err(crate::errors::to_py)?;
     let s = points(&samples, "samples")?;
     run(py, move || max_interpenetration(&mesh, &t, &s))
 }
@@ -236,25 +197,12 @@ fn sim_bin_mesh<'py>(
     Ok(mesh_out(py, &m.vertices, &m.faces))
 }
 
-type CameraArgs = (usize, usize, f64, f64, f64, f64, [f64; 5]);
 type LightingArgs = (f64, f64, [f64; 3], f64);
 type NoiseArgs = (f64, f64, f64, f64, f64);
 /// The laser of a checkerboard view, as `laser` takes it.
 type LaserArgs<'py> = Option<(PyReadonlyArray2<'py, f64>, f64, f64, f64, [f64; 3], f64)>;
 /// Distances to the nearest surface and its instance ids.
 type Nearest<'py> = (Bound<'py, numpy::PyArray1<f64>>, Bound<'py, numpy::PyArray1<i32>>);
-
-fn camera(c: CameraArgs) -> Camera {
-    Camera {
-        width: c.0,
-        height: c.1,
-        fx: c.2,
-        fy: c.3,
-        cx: c.4,
-        cy: c.5,
-        dist: c.6,
-    }
-}
 
 fn lighting(l: LightingArgs) -> Lighting {
     Lighting {
@@ -285,7 +233,7 @@ fn laser(
     reference_distance: f64,
 ) -> PyResult<Laser> {
     Ok(Laser {
-        t_camera_laser0: transform(t, "T_camera_laser")?,
+        t_camera_laser0: isometry(t, "T_camera_laser")?,
         sheet_sigma,
         power,
         fan_angle,
@@ -321,7 +269,7 @@ impl PySimScene {
         specular: f64,
         shininess: f64,
     ) -> PyResult<usize> {
-        let mesh = mesh_in(&vertices, &faces)?;
+        let mesh = crate::convert::mesh_from_py(&vertices, &faces)?;
         let scene = &mut self.inner;
         run(py, move || {
             scene.add_mesh(
@@ -337,13 +285,13 @@ impl PySimScene {
 
     /// Places mesh `mesh` at `T_base_object` as instance `id`.
     fn add_instance(&mut self, mesh: usize, t_base_object: PyReadonlyArray2<'_, f64>, id: i32) -> PyResult<()> {
-        let t = transform(&t_base_object, "T_base_object")?;
+        let t = isometry(&t_base_object, "T_base_object")?;
         self.inner.add_instance(mesh, t, id).map_err(crate::errors::to_py)
     }
 
     /// Moves instance `id`.
     fn set_pose(&mut self, id: i32, t_base_object: PyReadonlyArray2<'_, f64>) -> PyResult<()> {
-        let t = transform(&t_base_object, "T_base_object")?;
+        let t = isometry(&t_base_object, "T_base_object")?;
         self.inner.set_pose(id, t).map_err(crate::errors::to_py)
     }
 
@@ -372,13 +320,13 @@ impl PySimScene {
     fn view(
         &self,
         py: Python<'_>,
-        camera_args: CameraArgs,
+        camera_args: CameraArgs<'_>,
         t_base_camera: PyReadonlyArray2<'_, f64>,
         lighting_args: LightingArgs,
         num_threads: usize,
     ) -> PyResult<PySimView> {
-        let t = transform(&t_base_camera, "T_base_camera")?;
-        let (cam, light) = (camera(camera_args), lighting(lighting_args));
+        let t = isometry(&t_base_camera, "T_base_camera")?;
+        let (cam, light) = (camera(&camera_args)?, lighting(lighting_args));
         let scene = self.inner.clone();
         let view = run(py, move || {
             binpick_core::with_threads(num_threads, || scene.view(&cam, &t, &light))
@@ -393,38 +341,41 @@ pub struct PySimView {
     inner: Arc<View>,
 }
 
+impl PySimView {
+    /// The image's (height, width), px.
+    fn shape(&self) -> (usize, usize) {
+        let c = self.inner.camera();
+        (c.height as usize, c.width as usize)
+    }
+}
+
 #[pymethods]
 impl PySimView {
     /// (H, W) float32 depth, mm, NaN where nothing is hit.
     fn depth<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<f32>> {
-        let c = self.inner.camera();
         PyArray2::from_owned_array(
             py,
-            Array2::from_shape_vec((c.height, c.width), self.inner.depth()).expect("h×w"),
+            Array2::from_shape_vec(self.shape(), self.inner.depth()).expect("h×w"),
         )
     }
 
     /// (H, W) int32 instance ids, −1 for none.
     fn ids<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray2<i32>> {
-        let c = self.inner.camera();
-        PyArray2::from_owned_array(
-            py,
-            Array2::from_shape_vec((c.height, c.width), self.inner.ids()).expect("h×w"),
-        )
+        PyArray2::from_owned_array(py, Array2::from_shape_vec(self.shape(), self.inner.ids()).expect("h×w"))
     }
 
     /// (H, W, 3) float32 surface points in the camera frame (NaN where none).
     fn points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f32>> {
-        let c = self.inner.camera();
+        let (h, w) = self.shape();
         let flat: Vec<f32> = self.inner.points().into_iter().flatten().collect();
-        PyArray3::from_owned_array(py, Array3::from_shape_vec((c.height, c.width, 3), flat).expect("h×w×3"))
+        PyArray3::from_owned_array(py, Array3::from_shape_vec((h, w, 3), flat).expect("h×w×3"))
     }
 
     /// (H, W, 3) float32 camera-facing unit normals in the camera frame.
     fn normals<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray3<f32>> {
-        let c = self.inner.camera();
+        let (h, w) = self.shape();
         let flat: Vec<f32> = self.inner.normals().into_iter().flatten().collect();
-        PyArray3::from_owned_array(py, Array3::from_shape_vec((c.height, c.width, 3), flat).expect("h×w×3"))
+        PyArray3::from_owned_array(py, Array3::from_shape_vec((h, w, 3), flat).expect("h×w×3"))
     }
 
     /// The frame without the laser.
@@ -437,8 +388,8 @@ impl PySimView {
         let view = self.inner.clone();
         let n = noise(noise_args);
         let img = run(py, move || view.ambient_frame(&n, seed))?;
-        let c = self.inner.camera();
-        Ok(image_out(py, img, c.height, c.width))
+        let (h, w) = self.shape();
+        Ok(image_out(py, img, h, w))
     }
 
     /// (K, H, W, 3) uint8 frames with the laser at each angle (rad); frame k's noise is seeded
@@ -479,8 +430,8 @@ impl PySimView {
                 Ok::<_, Error>(all)
             })
         })?;
-        let c = self.inner.camera();
-        let arr = numpy::ndarray::Array4::from_shape_vec((k, c.height, c.width, 3), frames).expect("k×h×w×3");
+        let (h, w) = self.shape();
+        let arr = numpy::ndarray::Array4::from_shape_vec((k, h, w, 3), frames).expect("k×h×w×3");
         Ok(numpy::PyArray4::from_owned_array(py, arr))
     }
 }
@@ -507,7 +458,7 @@ fn sim_default_laser(py: Python<'_>) -> PyResult<(Arr<'_>, f64, f64, f64, [f64; 
 #[allow(clippy::too_many_arguments)]
 fn sim_render_checkerboard<'py>(
     py: Python<'py>,
-    camera_args: CameraArgs,
+    camera_args: CameraArgs<'py>,
     board: (usize, usize, f64, f64),
     t_camera_board: PyReadonlyArray2<'py, f64>,
     lighting_args: LightingArgs,
@@ -517,15 +468,15 @@ fn sim_render_checkerboard<'py>(
     supersample: usize,
     seed: u64,
 ) -> PyResult<Bound<'py, PyArray3<u8>>> {
-    let cam = camera(camera_args);
-    let (h, w) = (cam.height, cam.width);
+    let cam = camera(&camera_args)?;
+    let (h, w) = (cam.height as usize, cam.width as usize);
     let b = Checkerboard {
         cols: board.0,
         rows: board.1,
         square: board.2,
         margin: board.3,
     };
-    let t = transform(&t_camera_board, "T_camera_board")?;
+    let t = isometry(&t_camera_board, "T_camera_board")?;
     let l = laser_args.map(|a| laser(&a.0, a.1, a.2, a.3, a.4, a.5)).transpose()?;
     let (light, n) = (lighting(lighting_args), noise(noise_args));
     let img = run(py, move || {

@@ -1,33 +1,12 @@
 //! Laser-line triangulation bindings.
 
-use crate::convert::{matrix4, vectors_to_py};
+use crate::convert::{camera, matrix4, vectors_to_py, CameraArgs};
 use crate::errors::{invalid, run};
 use binpick_core::{isometry_from_matrix, with_threads};
-use binpick_core::{pixel_rays, triangulate_into, Camera, FramePose, PointStatus, Sensor};
-use nalgebra::{Matrix3, Matrix4, Vector3};
+use binpick_core::{pixel_rays, triangulate_into, FramePose, PointStatus, Sensor};
+use nalgebra::{Matrix4, Vector3};
 use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::prelude::*;
-
-fn camera(
-    width: u32,
-    height: u32,
-    k: &PyReadonlyArray2<'_, f64>,
-    dist: &PyReadonlyArray1<'_, f64>,
-) -> PyResult<Camera> {
-    let k = k.as_array();
-    if k.shape() != [3, 3] {
-        return Err(invalid("K", &format!("must have shape (3, 3), got {:?}", k.shape())));
-    }
-    let d = dist.as_array();
-    if d.len() != 5 {
-        return Err(invalid(
-            "dist",
-            &format!("must hold 5 coefficients [k1, k2, p1, p2, k3], got {}", d.len()),
-        ));
-    }
-    let km = Matrix3::from_fn(|r, c| k[[r, c]]);
-    Camera::new(width, height, &km, [d[0], d[1], d[2], d[3], d[4]]).map_err(crate::errors::to_py)
-}
 
 fn pixel_list(arr: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 2]>> {
     let a = arr.as_array();
@@ -42,16 +21,13 @@ fn pixel_list(arr: &PyReadonlyArray2<'_, f64>) -> PyResult<Vec<[f64; 2]>> {
 
 /// Undistorted normalised rays (x, y, 1) of pixels; rows that cannot be undistorted are NaN.
 #[pyfunction]
-#[pyo3(signature = (width, height, k, dist, pixels))]
+#[pyo3(signature = (camera_args, pixels))]
 fn pixel_rays_py<'py>(
     py: Python<'py>,
-    width: u32,
-    height: u32,
-    k: PyReadonlyArray2<'py, f64>,
-    dist: PyReadonlyArray1<'py, f64>,
+    camera_args: CameraArgs<'py>,
     pixels: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<Bound<'py, pyo3::PyAny>> {
-    let cam = camera(width, height, &k, &dist)?;
+    let cam = camera(&camera_args)?;
     let px = pixel_list(&pixels)?;
     let rays = run(py, move || pixel_rays(&cam, &px))?;
     let nan = Vector3::repeat(f64::NAN);
@@ -72,14 +48,11 @@ type ScanArrays<'py> = (
 /// point (status 0) with their points, in input order; the pixels are the copy made of the
 /// input, for the caller to keep without another copy.
 #[pyfunction]
-#[pyo3(signature = (width, height, k, dist, t_camera_laser0, t_flange_camera, angles, t_base_flanges, pixels, frame_index, num_threads))]
+#[pyo3(signature = (camera_args, t_camera_laser0, t_flange_camera, angles, t_base_flanges, pixels, frame_index, num_threads))]
 #[allow(clippy::too_many_arguments)]
 fn triangulate_scan<'py>(
     py: Python<'py>,
-    width: u32,
-    height: u32,
-    k: PyReadonlyArray2<'py, f64>,
-    dist: PyReadonlyArray1<'py, f64>,
+    camera_args: CameraArgs<'py>,
     t_camera_laser0: PyReadonlyArray2<'py, f64>,
     t_flange_camera: PyReadonlyArray2<'py, f64>,
     angles: PyReadonlyArray1<'py, f64>,
@@ -88,7 +61,7 @@ fn triangulate_scan<'py>(
     frame_index: PyReadonlyArray1<'py, i64>,
     num_threads: usize,
 ) -> PyResult<ScanArrays<'py>> {
-    let cam = camera(width, height, &k, &dist)?;
+    let cam = camera(&camera_args)?;
     let laser = matrix4(&t_camera_laser0, "T_camera_laser")?;
     let hand_eye = matrix4(&t_flange_camera, "T_flange_camera")?;
     let angles: Vec<f64> = angles.as_array().to_vec();

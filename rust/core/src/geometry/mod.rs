@@ -1,10 +1,12 @@
 //! Geometry every stage shares: the point type and its checks, statistics of clouds, rigid
-//! transforms, the one [`Plane`], the bin box and the one Kabsch solver.
+//! transforms, the one [`Plane`], the bin box, the one Kabsch solver and the one camera model.
 
+mod camera;
 mod cloud;
 mod kabsch;
 mod plane;
 
+pub use camera::{Camera, RayTable};
 pub use cloud::{
     centroid, check_count, check_finite, check_spread, covariance, covariance_of, extreme_axis, isometry_from_matrix,
     principal_axes, transform_points, Point,

@@ -10,4 +10,4 @@ mod pile;
 mod render;
 
 pub use pile::{convex_decomposition, max_interpenetration, BinSpec, Hull, Pile, PileParams, SettleReport};
-pub use render::{render_checkerboard, Camera, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View};
+pub use render::{render_checkerboard, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View};

@@ -42,7 +42,7 @@ pub fn render_checkerboard(
     supersample: usize,
     seed: u64,
 ) -> Result<Vec<u8>> {
-    camera.validate()?;
+    let table = pixel_ray_grid(camera)?;
     noise.validate()?;
     if board.cols < 2 || board.rows < 2 || !(board.square > 0.0) || !(board.margin >= 0.0) {
         return Err(Error::invalid(
@@ -62,8 +62,7 @@ pub fn render_checkerboard(
             return Err(Error::invalid("angle", "must be finite"));
         }
     }
-    let (w, h) = (camera.width, camera.height);
-    let table = camera.ray_table();
+    let (w, h) = (camera.width as usize, camera.height as usize);
     let n = t_camera_board.rotation * Vector3::z();
     let p0 = Point::from(t_camera_board.translation.vector);
     let t_board_camera = t_camera_board.inverse();

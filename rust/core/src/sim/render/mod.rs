@@ -5,9 +5,9 @@
 //! then [`View::frame`] lights the laser line for one motor angle (cheap: shadow rays only near
 //! the line) and adds sensor noise. Frames are RGB, 8 bits, row-major.
 //!
-//! Conventions: OpenCV pinhole camera with distortion `[k1, k2, p1, p2, k3]`, camera frame x
-//! right, y down, z forward. The laser sheet is the plane x = 0 of the laser frame, light
-//! travelling along +z; the motor turns the projector about its own y axis:
+//! Conventions: the one camera model ([`crate::Camera`]: OpenCV pinhole with skew and distortion
+//! `[k1, k2, p1, p2, k3]`), camera frame x right, y down, z forward. The laser sheet is the
+//! plane x = 0 of the laser frame, light travelling along +z; the motor turns the projector about its own y axis:
 //! `T_camera_laser(θ) = T_camera_laser0 · Rot_y(θ)`.
 
 mod checkerboard;
@@ -18,16 +18,17 @@ mod tests;
 mod view;
 
 pub use checkerboard::{render_checkerboard, Checkerboard};
-pub use optics::{Camera, Laser, Lighting, Material, SensorNoise};
+pub use optics::{Laser, Lighting, Material, SensorNoise};
 pub use scene::Scene;
 pub use view::View;
 
 use super::convert;
 use crate::error::{Error, Result};
-use crate::geometry::Point;
+use crate::geometry::{Camera, Point};
 use crate::mesh::TriMesh;
 use crate::rng::Rng;
 use nalgebra::{Isometry3, Vector3};
+use optics::pixel_ray_grid;
 use parry3d::bounding_volume::Aabb;
 use parry3d::query::{PointQuery, Ray, RayCast};
 use rayon::prelude::*;

@@ -1,123 +1,35 @@
-//! The optics of the simulated sensor: the camera, the laser projector, materials, lighting and sensor noise.
+//! The optics of the simulated sensor: the camera's rays (from the one camera model,
+//! [`crate::Camera`]), the laser projector, materials, lighting and sensor noise.
 
 use super::*;
 
-/// An OpenCV pinhole camera with radial-tangential distortion.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Camera {
-    /// Image width, px.
-    pub width: usize,
-    /// Image height, px.
-    pub height: usize,
-    /// Focal length along x, px.
-    pub fx: f64,
-    /// Focal length along y, px.
-    pub fy: f64,
-    /// Principal point x, px (pixel centres at integer coordinates).
-    pub cx: f64,
-    /// Principal point y, px.
-    pub cy: f64,
-    /// Distortion `[k1, k2, p1, p2, k3]`.
-    pub dist: [f64; 5],
-}
+/// The largest image side the renderer draws, px (its buffers hold several values per pixel).
+const MAX_SIDE: u32 = 16384;
 
-impl Default for Camera {
-    /// The paper's camera (AVT Guppy F-080C, 1032 × 778) with an 8 mm-class lens, no distortion.
-    fn default() -> Self {
-        Camera {
-            width: 1032,
-            height: 778,
-            fx: 1600.0,
-            fy: 1600.0,
-            cx: 515.5,
-            cy: 388.5,
-            dist: [0.0; 5],
-        }
+/// Undistorted normalised rays `(x, y)` (`z = 1`) of every pixel centre, row-major, from the one
+/// camera model ([`Camera::ray`]): the rays the renderer casts are the ones triangulation
+/// inverts. NaN where the distortion cannot be inverted (such a pixel sees nothing).
+pub(super) fn pixel_ray_grid(camera: &Camera) -> Result<Vec<[f64; 2]>> {
+    camera.validate()?;
+    if camera.width > MAX_SIDE || camera.height > MAX_SIDE {
+        return Err(Error::invalid(
+            "camera",
+            format!(
+                "image size {}×{} is larger than the renderer's {MAX_SIDE} px a side; render a smaller image",
+                camera.width, camera.height
+            ),
+        ));
     }
-}
-
-impl Camera {
-    /// Checks sizes, focal lengths and distortion.
-    pub fn validate(&self) -> Result<()> {
-        if self.width == 0 || self.height == 0 || self.width > 16384 || self.height > 16384 {
-            return Err(Error::invalid(
-                "camera",
-                format!(
-                    "image size {}×{} must be between 1 and 16384 px",
-                    self.width, self.height
-                ),
-            ));
-        }
-        for (name, v) in [("fx", self.fx), ("fy", self.fy)] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(Error::invalid(name, format!("focal length must be positive, got {v}")));
-            }
-        }
-        if !(self.cx.is_finite() && self.cy.is_finite() && self.dist.iter().all(|d| d.is_finite())) {
-            return Err(Error::invalid(
-                "camera",
-                "principal point and distortion must be finite",
-            ));
-        }
-        Ok(())
-    }
-
-    /// Applies lens distortion to normalised image coordinates.
-    #[inline]
-    pub fn distort(&self, x: f64, y: f64) -> (f64, f64) {
-        let [k1, k2, p1, p2, k3] = self.dist;
-        let r2 = x * x + y * y;
-        let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-        (
-            x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x),
-            y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y,
-        )
-    }
-
-    /// Removes lens distortion from normalised image coordinates (fixed-point iteration).
-    pub fn undistort(&self, xd: f64, yd: f64) -> (f64, f64) {
-        if self.dist.iter().all(|d| *d == 0.0) {
-            return (xd, yd);
-        }
-        let [k1, k2, p1, p2, k3] = self.dist;
-        let (mut x, mut y) = (xd, yd);
-        for _ in 0..100 {
-            let r2 = x * x + y * y;
-            let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
-            let dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
-            let dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
-            let (nx, ny) = ((xd - dx) / radial, (yd - dy) / radial);
-            let step = (nx - x).abs() + (ny - y).abs();
-            x = nx;
-            y = ny;
-            if step < 1e-14 {
-                break;
-            }
-        }
-        (x, y)
-    }
-
-    /// The pixel where a point in the camera frame appears, or `None` behind the camera.
-    pub fn project(&self, p: &Point) -> Option<(f64, f64)> {
-        if p.z <= 1e-9 {
-            return None;
-        }
-        let (x, y) = self.distort(p.x / p.z, p.y / p.z);
-        Some((self.fx * x + self.cx, self.fy * y + self.cy))
-    }
-
-    /// Undistorted normalised coordinates of every pixel centre, row-major.
-    pub(super) fn ray_table(&self) -> Vec<[f64; 2]> {
-        (0..self.height)
-            .into_par_iter()
-            .flat_map_iter(|v| {
-                (0..self.width).map(move |u| {
-                    let (x, y) = self.undistort((u as f64 - self.cx) / self.fx, (v as f64 - self.cy) / self.fy);
-                    [x, y]
-                })
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    Ok((0..h)
+        .into_par_iter()
+        .flat_map_iter(|v| {
+            (0..w).map(move |u| match camera.ray(u as f64, v as f64) {
+                Some(r) => [r.x, r.y],
+                None => [f64::NAN; 2],
             })
-            .collect()
-    }
+        })
+        .collect())
 }
 
 /// The laser line projector on the flange, turned by the motor about its own y axis.

@@ -187,10 +187,9 @@ impl Scene {
     /// Casts one ray per pixel of `camera` at pose `t_base_camera`: the geometry every laser
     /// frame of this robot pose is lit from.
     pub fn view(&self, camera: &Camera, t_base_camera: &Isometry3<f64>, lighting: &Lighting) -> Result<View> {
-        camera.validate()?;
+        let table = pixel_ray_grid(camera)?;
         let placed = self.placed(t_base_camera);
-        let table = camera.ray_table();
-        let (w, h) = (camera.width, camera.height);
+        let (w, h) = (camera.width as usize, camera.height as usize);
         let lamp = (t_base_camera.inverse().rotation * lighting.lamp_direction)
             .try_normalize(1e-12)
             .unwrap_or_else(Vector3::z);
@@ -204,9 +203,14 @@ impl Scene {
                 let mut hits = Vec::with_capacity(w);
                 let mut shade = Vec::with_capacity(w);
                 for u in 0..w {
-                    let r = ray_at(u, v);
-                    let dir = r.normalize();
-                    match cast(&placed, &Point::origin(), &dir, f64::INFINITY) {
+                    let dir = ray_at(u, v).normalize();
+                    // A pixel whose ray the distortion model cannot give (NaN) sees nothing.
+                    let hit = if dir.x.is_finite() {
+                        cast(&placed, &Point::origin(), &dir, f64::INFINITY)
+                    } else {
+                        None
+                    };
+                    match hit {
                         None => {
                             hits.push(Hit::NONE);
                             let b = lighting.background as f32;
@@ -269,7 +273,7 @@ impl Scene {
             shade.extend(b);
         }
         Ok(View {
-            camera: camera.clone(),
+            camera: *camera,
             t_base_camera: *t_base_camera,
             placed,
             hits,

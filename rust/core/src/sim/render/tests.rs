@@ -20,20 +20,8 @@ fn small_camera() -> Camera {
         fy: 200.0,
         cx: 79.5,
         cy: 59.5,
+        skew: 0.0,
         dist: [0.0; 5],
-    }
-}
-
-#[test]
-fn undistort_inverts_distort() {
-    let cam = Camera {
-        dist: [-0.2, 0.05, 0.001, -0.002, 0.01],
-        ..Default::default()
-    };
-    for &(x, y) in &[(0.1, -0.2), (0.3, 0.25), (-0.31, 0.0)] {
-        let (xd, yd) = cam.distort(x, y);
-        let (xu, yu) = cam.undistort(xd, yd);
-        assert!((xu - x).abs() < 1e-10 && (yu - y).abs() < 1e-10);
     }
 }
 
@@ -95,8 +83,8 @@ fn laser_line_lands_where_the_sheet_meets_the_plane() {
     let u_expected = cam.fx * x / 500.0 + cam.cx;
     let row = 60;
     let (mut s, mut sw) = (0.0, 0.0);
-    for u in 0..cam.width {
-        let i = (row * cam.width + u) * 3;
+    for u in 0..cam.width as usize {
+        let i = (row * cam.width as usize + u) * 3;
         let e = on[i] as f64 - off[i] as f64;
         s += e * u as f64;
         sw += e;
@@ -170,4 +158,57 @@ fn an_occluder_casts_a_laser_shadow() {
         red(&clear),
         red(&shadowed)
     );
+}
+
+/// A camera with a realistic lens (barrel distortion moving the corners by about 8 px,
+/// decentring terms) and a skew term: what the renderer and triangulation must agree on.
+fn distorted_skewed_camera() -> Camera {
+    Camera {
+        width: 320,
+        height: 240,
+        fx: 410.0,
+        fy: 405.0,
+        cx: 161.3,
+        cy: 118.7,
+        skew: 1.7,
+        dist: [-0.12, 0.08, 0.001, -0.0007, -0.01],
+    }
+}
+
+#[test]
+fn renderer_and_triangulation_share_one_camera_model() {
+    let cam = distorted_skewed_camera();
+    // A large flat plate, tilted, filling the view.
+    let t_camera_plate = Isometry3::new(Vector3::new(20.0, -10.0, 450.0), Vector3::new(0.3, -0.2, 0.1));
+    let mut scene = Scene::new();
+    let m = scene.add_mesh(&plane_mesh(0.0, 3000.0), Material::default()).unwrap();
+    scene.add_instance(m, t_camera_plate, 1).unwrap();
+    let view = scene.view(&cam, &Isometry3::identity(), &Lighting::default()).unwrap();
+    let points = view.points();
+    let normal = t_camera_plate.rotation * Vector3::z();
+    let plane = crate::Plane {
+        normal,
+        offset: normal.dot(&t_camera_plate.translation.vector),
+    };
+    let w = cam.width as usize;
+    let pixels: Vec<[f64; 2]> = (0..points.len()).map(|i| [(i % w) as f64, (i / w) as f64]).collect();
+    let rays = crate::pixel_rays(&cam, &pixels).unwrap();
+    let table = crate::RayTable::shared(&cam);
+    let (mut worst_px, mut worst_mm) = (0.0f64, 0.0f64);
+    for ((p, &[u, v]), ray) in points.iter().zip(&pixels).zip(&rays) {
+        let rendered = Point::new(p[0] as f64, p[1] as f64, p[2] as f64);
+        assert!(rendered.z.is_finite(), "pixel ({u}, {v}) missed the plate");
+        // (a) The rendered surface point projects back to its pixel's centre.
+        let [pu, pv] = cam.project(&rendered).unwrap();
+        worst_px = worst_px.max((pu - u).hypot(pv - v));
+        // (b) The pixel's ray, as triangulation undistorts it (exactly and through the ray
+        // table the scan path uses), meets the known plane at the rendered point.
+        for r in [ray.unwrap(), table.ray(u, v).unwrap()] {
+            let q = crate::intersect_ray_plane(&r, &plane).unwrap();
+            worst_mm = worst_mm.max((q - rendered).norm());
+        }
+    }
+    eprintln!("render vs camera model: worst reprojection {worst_px:.2e} px, worst triangulation {worst_mm:.2e} mm");
+    assert!(worst_px < 0.05, "worst reprojection {worst_px} px");
+    assert!(worst_mm < 0.05, "worst triangulation {worst_mm} mm");
 }

@@ -97,7 +97,7 @@ impl View {
     /// The image under ambient light alone, with sensor noise.
     pub fn ambient_frame(&self, noise: &SensorNoise, seed: u64) -> Result<Vec<u8>> {
         noise.validate()?;
-        Ok(quantise(&self.shade, self.camera.width, noise, seed, u64::MAX))
+        Ok(quantise(&self.shade, self.camera.width as usize, noise, seed, u64::MAX))
     }
 
     /// The RGB frame the camera grabs with the laser at motor angle `theta` (rad): the scene
@@ -109,7 +109,7 @@ impl View {
         if !theta.is_finite() {
             return Err(Error::invalid("angle", format!("must be finite, got {theta}")));
         }
-        let w = self.camera.width;
+        let w = self.camera.width as usize;
         let t = laser.t_camera_laser(theta);
         let o = Point::from(t.translation.vector);
         let r = t.rotation.to_rotation_matrix();
@@ -194,7 +194,7 @@ impl View {
         o: &Point,
         strength: f64,
     ) {
-        let (w, h) = (self.camera.width, self.camera.height);
+        let (w, h) = (self.camera.width as usize, self.camera.height as usize);
         for &(i, irradiance) in lit {
             let hit = &self.hits[i];
             let p = Point::from(v3(&hit.p));
@@ -207,7 +207,7 @@ impl View {
                 continue;
             };
             let q = start + out * t;
-            let Some((qu, qv)) = self.camera.project(&q) else {
+            let Some([qu, qv]) = self.camera.project(&q) else {
                 continue;
             };
             let (ui, vi) = (qu.round(), qv.round());
