@@ -6,6 +6,20 @@ use crate::geometry::Point;
 use nalgebra::Vector3;
 use std::collections::HashMap;
 
+/// The largest voxel index (per axis, either sign) a grid here uses: 2^52, so that the index is
+/// exact in an f64 and its neighbours never overflow an i64.
+pub const MAX_VOXEL_INDEX: f64 = 4_503_599_627_370_496.0;
+
+/// The voxel of `p` on a grid of cell `1 / inv`, or `None` when an index exceeds
+/// [`MAX_VOXEL_INDEX`] or is not finite (the cast would saturate and merge distant points).
+pub(crate) fn voxel_index(p: &Point, inv: f64) -> Option<[i64; 3]> {
+    let f = |v: f64| {
+        let k = (v * inv).floor();
+        (k.abs() <= MAX_VOXEL_INDEX).then_some(k as i64)
+    };
+    Some([f(p.x)?, f(p.y)?, f(p.z)?])
+}
+
 /// Downsampled cloud: the voxel means, the averaged unit normals if normals were given,
 /// and for each output point the index of the first input point that fell in its voxel.
 #[derive(Debug, Clone)]
@@ -39,11 +53,16 @@ pub fn voxel_downsample(points: &[Point], normals: Option<&[Vector3<f64>]>, voxe
     let mut sums: Vec<(Vector3<f64>, Vector3<f64>, usize)> = Vec::new();
     let mut first_index = Vec::new();
     for (i, p) in points.iter().enumerate() {
-        let key = [
-            (p.x * inv).floor() as i64,
-            (p.y * inv).floor() as i64,
-            (p.z * inv).floor() as i64,
-        ];
+        let key = voxel_index(p, inv).ok_or_else(|| {
+            Error::invalid(
+                "points",
+                format!(
+                    "point {i} at {:?} lies more than {MAX_VOXEL_INDEX:.0} voxels of {voxel_size} mm from the \
+                     origin; shift the cloud near the origin or use a larger voxel_size",
+                    [p.x, p.y, p.z]
+                ),
+            )
+        })?;
         let slot = *slot_of.entry(key).or_insert_with(|| {
             sums.push((Vector3::zeros(), Vector3::zeros(), 0));
             first_index.push(i);
@@ -109,7 +128,13 @@ impl DiskGrid {
         for dx in -1..=1 {
             for dy in -1..=1 {
                 for dz in -1..=1 {
-                    if let Some(ids) = self.cells.get(&[key[0] + dx, key[1] + dy, key[2] + dz]) {
+                    // Saturating: cells merged far out only cost comparisons, as distances decide.
+                    let near = [
+                        key[0].saturating_add(dx),
+                        key[1].saturating_add(dy),
+                        key[2].saturating_add(dz),
+                    ];
+                    if let Some(ids) = self.cells.get(&near) {
                         if ids
                             .iter()
                             .any(|&k| (self.points[k as usize] - p).norm_squared() < self.r2)
@@ -149,5 +174,14 @@ mod tests {
         assert!((d.points[0] - Point::new(0.2, 0.3, 0.5)).norm() < 1e-12);
         assert_eq!(d.first_index, vec![0, 2]);
         assert!(voxel_downsample(&pts, None, 0.0).is_err());
+    }
+
+    #[test]
+    fn points_too_far_for_an_exact_voxel_index_are_refused_not_merged() {
+        let far = [0.0, 2e19, 4e19].map(|x| Point::new(x, 0.0, 0.0));
+        let err = voxel_downsample(&far, None, 1.0).unwrap_err();
+        assert!(err.to_string().contains("point 1"), "{err}");
+        let kept = subsample(&[Point::new(9e18, 0.0, 0.0), Point::new(1e19, 0.0, 0.0)], 1.0);
+        assert_eq!(kept, vec![0, 1]);
     }
 }

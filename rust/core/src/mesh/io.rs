@@ -98,7 +98,7 @@ impl Welder {
 fn parse_stl(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
     if bytes.len() >= 84 {
         let n = u32::from_le_bytes(bytes[80..84].try_into().unwrap()) as usize;
-        if 84 + 50 * n == bytes.len() {
+        if n.checked_mul(50).and_then(|b| b.checked_add(84)) == Some(bytes.len()) {
             return parse_stl_binary(bytes, n);
         }
     }
@@ -330,6 +330,9 @@ fn parse_ply(bytes: &[u8]) -> std::result::Result<PlyData, String> {
     let header = std::str::from_utf8(&bytes[..end.0]).map_err(|_| "the PLY header is not text")?;
     let (format, elements) = parse_header(header)?;
     let body = &bytes[end.1..];
+    for el in &elements {
+        check_element_fits(el, &format, body.len())?;
+    }
     let ascii = match format {
         PlyFormat::Ascii => Some(
             std::str::from_utf8(body)
@@ -355,6 +358,30 @@ fn parse_ply(bytes: &[u8]) -> std::result::Result<PlyData, String> {
         ));
     }
     Ok(out)
+}
+
+/// Refuses an element whose declared rows cannot fit in the body's `available` bytes, before any
+/// row is read: a binary row takes at least the sum of its scalar sizes (a list at least its count
+/// field), an ASCII row at least one character and one separator per property.
+fn check_element_fits(el: &Element, format: &PlyFormat, available: usize) -> std::result::Result<(), String> {
+    let min_row: usize = el
+        .props
+        .iter()
+        .map(|p| match (format, p) {
+            (PlyFormat::Ascii, _) => 2,
+            (_, Property::Scalar(_, t)) => t.size(),
+            (_, Property::List(_, c, _)) => c.size(),
+        })
+        .sum();
+    let needed = el.count.checked_mul(min_row).map(|b| b.saturating_sub(1));
+    match needed {
+        Some(b) if b <= available => Ok(()),
+        _ => Err(format!(
+            "element {} declares {} rows of at least {min_row} bytes each, but the body holds only {available} \
+             bytes; the header lies or the file is truncated",
+            el.name, el.count
+        )),
+    }
 }
 
 /// The body's format and its elements with their properties, from the header's lines.
@@ -466,32 +493,47 @@ fn read_element(el: &Element, body: &mut Body<'_>, out: &mut PlyData) -> std::re
     }
     let has_normals = is_vertex && nxi.is_some() && nyi.is_some() && nzi.is_some();
     let mut normals = Vec::new();
+    if el.props.is_empty() {
+        // Rows without properties hold no bytes: nothing to read, however many are declared.
+        return Ok(());
+    }
     let mut row = vec![0.0; el.props.len()];
-    for _ in 0..el.count {
+    for r in 0..el.count {
         let mut list: Vec<u32> = Vec::new();
         for (k, p) in el.props.iter().enumerate() {
             match p {
                 Property::Scalar(_, t) => row[k] = body.next(*t)?,
                 Property::List(name, ct, it) => {
                     let n = body.next(*ct)?;
-                    if !(0.0..1e6).contains(&n) {
-                        return Err(format!("a list of {n} items; the file is corrupt"));
+                    if !(0.0..1e6).contains(&n) || n.fract() != 0.0 {
+                        return Err(format!("{} row {r}: a list of {n} items; the file is corrupt", el.name));
                     }
                     let keep = is_face && (name == "vertex_indices" || name == "vertex_index");
                     for _ in 0..n as usize {
                         let v = body.next(*it)?;
                         if keep {
-                            list.push(v as u32);
+                            list.push(face_index(v, r)?);
                         }
                     }
                 }
             }
         }
         if is_vertex {
-            out.points
-                .push(Point::new(row[xi.unwrap()], row[yi.unwrap()], row[zi.unwrap()]));
+            let p = Point::new(row[xi.unwrap()], row[yi.unwrap()], row[zi.unwrap()]);
+            if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
+                return Err(format!(
+                    "vertex row {r} has a non-finite coordinate {p:?}; the file is corrupt"
+                ));
+            }
+            out.points.push(p);
             if has_normals {
-                normals.push(Vector3::new(row[nxi.unwrap()], row[nyi.unwrap()], row[nzi.unwrap()]));
+                let n = Vector3::new(row[nxi.unwrap()], row[nyi.unwrap()], row[nzi.unwrap()]);
+                if !n.iter().all(|v| v.is_finite()) {
+                    return Err(format!(
+                        "vertex row {r} has a non-finite normal {n:?}; the file is corrupt"
+                    ));
+                }
+                normals.push(n);
             }
         }
         if is_face && list.len() >= 3 {
@@ -504,6 +546,18 @@ fn read_element(el: &Element, body: &mut Body<'_>, out: &mut PlyData) -> std::re
         out.normals = Some(normals);
     }
     Ok(())
+}
+
+/// A face's vertex index as stored: a non-negative integer that fits a `u32` (checked against the
+/// vertex count once all elements are read).
+fn face_index(v: f64, row: usize) -> std::result::Result<u32, String> {
+    if v >= 0.0 && v.fract() == 0.0 && v <= u32::MAX as f64 {
+        Ok(v as u32)
+    } else {
+        Err(format!(
+            "face row {row}: vertex index {v} is not a non-negative integer; the file is corrupt"
+        ))
+    }
 }
 
 /// (end of the header text, start of the body) after the `end_header` line.
@@ -528,18 +582,20 @@ pub fn read_ply(path: &Path) -> Result<PlyData> {
     if data.points.is_empty() {
         return Err(Error::bad_file(shown, "the PLY file holds no vertex"));
     }
-    if let Err(Error::NonFinite { index, .. }) = crate::geometry::check_finite("points", &data.points) {
-        return Err(Error::bad_file(
-            shown,
-            format!("vertex {index} is not finite; the file is corrupt"),
-        ));
-    }
     Ok(data)
 }
 
 /// Writes points (and normals) as a PLY file, binary little-endian (float64) or ASCII.
 pub fn write_ply(path: &Path, points: &[Point], normals: Option<&[Vector3<f64>]>, ascii: bool) -> Result<()> {
     let shown = path.display().to_string();
+    if points.is_empty() {
+        // read_ply refuses a file without a vertex, so an empty cloud is refused here too: what
+        // write_ply writes, read_ply reads back.
+        return Err(Error::invalid(
+            "points",
+            "is empty; a PLY point cloud needs at least one point (skip writing an empty cloud)",
+        ));
+    }
     if let Some(n) = normals {
         if n.len() != points.len() {
             return Err(Error::invalid(
@@ -575,6 +631,10 @@ pub fn write_ply(path: &Path, points: &[Point], normals: Option<&[Vector3<f64>]>
         reason: e.to_string(),
     })
 }
+
+#[cfg(test)]
+#[path = "io_guards.rs"]
+mod guards;
 
 #[cfg(test)]
 mod tests {

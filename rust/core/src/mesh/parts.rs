@@ -108,7 +108,12 @@ fn check_resolution(res: f64, radius: f64) -> Result<()> {
     Ok(())
 }
 
-fn branches_mesh(branches: &[Branch], extra: impl Fn(&Point) -> f64 + Sync, res: f64, z_extent: f64) -> TriMesh {
+fn branches_mesh(
+    branches: &[Branch],
+    extra: impl Fn(&Point) -> f64 + Sync,
+    res: f64,
+    z_extent: f64,
+) -> Result<TriMesh> {
     let mut lo = Point::new(0.0, 0.0, 0.0);
     let mut hi = Point::new(0.0, 0.0, 0.0);
     for b in branches {
@@ -208,7 +213,7 @@ pub fn tee(p: &TeeParams) -> Result<Part> {
             Point::new(-half - r, -r, -r) - Vector3::repeat(2.0 * p.resolution),
             Point::new(half + r, p.branch_length + r, r.max(boss_h)) + Vector3::repeat(2.0 * p.resolution),
             p.resolution,
-        );
+        )?;
         m.drop_degenerate_faces();
         m
     };
@@ -256,7 +261,7 @@ fn fitting(p: &FittingParams, dirs: &[Vector3<f64>], corner_sphere: bool) -> Res
         },
         p.resolution,
         r,
-    );
+    )?;
     Ok(Part { mesh, branches })
 }
 
@@ -296,5 +301,25 @@ mod tests {
         })
         .is_err());
         assert_eq!(elbow(&FittingParams::default()).unwrap().branches.len(), 2);
+    }
+
+    #[test]
+    fn a_resolution_too_fine_for_the_grid_ceiling_is_refused_at_once() {
+        let t = std::time::Instant::now();
+        let err = tee(&TeeParams {
+            resolution: 1e-6,
+            ..Default::default()
+        })
+        .unwrap_err();
+        assert!(
+            err.to_string().contains("resolution") && err.to_string().contains("ceiling"),
+            "{err}"
+        );
+        assert!(t.elapsed().as_millis() < 100);
+        assert!(elbow(&FittingParams {
+            resolution: 1e-6,
+            ..Default::default()
+        })
+        .is_err());
     }
 }

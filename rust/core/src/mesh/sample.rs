@@ -26,6 +26,12 @@ pub struct SurfaceSamples {
     pub normals: Vec<Vector3<f64>>,
 }
 
+/// The most samples a [`Density::Count`] may ask for (10^7, about 0.5 GB of points and normals).
+pub const MAX_SAMPLES: usize = 10_000_000;
+
+/// The most samples a [`Density::Spacing`] may imply over the mesh's area (each draws 8 candidates).
+pub const MAX_SPACED_SAMPLES: f64 = 5e6;
+
 /// Ratio of the Poisson-disk radius to the nominal spacing: a maximal random disk packing with
 /// radius r holds about 0.70 / r² points per unit area; with 8 candidates per s² dart throwing
 /// reaches about 0.55 / r², so r = 0.75 s gives close to 1 / s².
@@ -68,6 +74,12 @@ pub fn sample_surface(mesh: &TriMesh, density: Density, seed: u64) -> Result<Sur
             if n == 0 {
                 return Err(Error::invalid("count", "must be at least 1"));
             }
+            if n > MAX_SAMPLES {
+                return Err(Error::invalid(
+                    "count",
+                    format!("{n} samples is over the ceiling of {MAX_SAMPLES}; ask for fewer"),
+                ));
+            }
             let (points, normals) = (0..n).map(|_| draw(&mut rng)).unzip();
             Ok(SurfaceSamples { points, normals })
         }
@@ -79,7 +91,7 @@ pub fn sample_surface(mesh: &TriMesh, density: Density, seed: u64) -> Result<Sur
                 ));
             }
             let expected = total / (s * s);
-            if expected > 5e6 {
+            if !(expected <= MAX_SPACED_SAMPLES) {
                 return Err(Error::invalid(
                     "spacing",
                     format!(
@@ -151,6 +163,18 @@ mod tests {
         for p in &s.points {
             let nn = idx.knn(p, 2);
             assert!(nn[1].distance_squared.sqrt() >= DISK_RATIO * 2.0 - 1e-9);
+        }
+    }
+
+    #[test]
+    fn counts_and_spacings_over_the_ceiling_are_refused_before_allocating() {
+        let m = unit_cube(10.0);
+        for n in [MAX_SAMPLES + 1, 1 << 63, usize::MAX] {
+            let err = sample_surface(&m, Density::Count(n), 1).unwrap_err();
+            assert!(err.to_string().contains("ceiling"), "{err}");
+        }
+        for s in [1e-9, f64::MIN_POSITIVE] {
+            assert!(sample_surface(&m, Density::Spacing(s), 1).is_err());
         }
     }
 

@@ -4,6 +4,7 @@
 //! neighbouring cubes share face by face); the zero crossing on each tetrahedron edge becomes a
 //! vertex shared by every tetrahedron on that edge, so the surface closes without cracks.
 
+use crate::error::{Error, Result};
 use crate::geometry::Point;
 use crate::mesh::TriMesh;
 use nalgebra::Vector3;
@@ -20,11 +21,29 @@ const KUHN: [[usize; 4]; 6] = [
     [0, 4, 6, 7],
 ];
 
+/// The most grid points [`mesh_sdf`] evaluates (2^26, about 0.5 GB of values): a finer
+/// `resolution` for the part's size is refused before the grid is allocated.
+pub const MAX_GRID_POINTS: f64 = 67_108_864.0;
+
 /// Meshes the surface `sdf = 0` (negative inside) within the box `lo..hi` on a grid of `cell` mm.
-/// The box must enclose the solid with at least one cell to spare.
-pub fn mesh_sdf<F: Fn(&Point) -> f64 + Sync>(sdf: F, lo: Point, hi: Point, cell: f64) -> TriMesh {
-    let n = ((hi - lo) / cell).map(|v| v.ceil() as usize + 1);
-    let (nx, ny, nz) = (n.x + 1, n.y + 1, n.z + 1);
+/// The box must enclose the solid with at least one cell to spare. A grid of more than
+/// [`MAX_GRID_POINTS`] points is refused as an invalid `resolution`.
+pub fn mesh_sdf<F: Fn(&Point) -> f64 + Sync>(sdf: F, lo: Point, hi: Point, cell: f64) -> Result<TriMesh> {
+    let n = ((hi - lo) / cell).map(|v| v.ceil() + 2.0);
+    let points = n.x * n.y * n.z;
+    if !(points.is_finite() && points <= MAX_GRID_POINTS) {
+        return Err(Error::invalid(
+            "resolution",
+            format!(
+                "{cell} mm over a {:.1} × {:.1} × {:.1} mm part needs {points:.3e} grid points, over the \
+                 ceiling of {MAX_GRID_POINTS:.0}; choose a coarser resolution",
+                hi.x - lo.x,
+                hi.y - lo.y,
+                hi.z - lo.z
+            ),
+        ));
+    }
+    let (nx, ny, nz) = (n.x as usize, n.y as usize, n.z as usize);
     let at = |i: usize, j: usize, k: usize| {
         Point::new(lo.x + i as f64 * cell, lo.y + j as f64 * cell, lo.z + k as f64 * cell)
     };
@@ -112,7 +131,7 @@ pub fn mesh_sdf<F: Fn(&Point) -> f64 + Sync>(sdf: F, lo: Point, hi: Point, cell:
     }
     let mut mesh = TriMesh { vertices, faces };
     mesh.drop_degenerate_faces();
-    mesh
+    Ok(mesh)
 }
 
 /// Signed distance to a capped cylinder of radius `r` around the segment `a`–`b`.
@@ -159,6 +178,15 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_grid_over_the_ceiling_is_refused_before_it_is_allocated() {
+        let c = Point::origin();
+        let lo = Point::new(-22.0, -22.0, -22.0);
+        let err = mesh_sdf(|p| sphere(p, &c, 20.0), lo, -lo, 1e-6).unwrap_err();
+        assert!(err.to_string().contains("resolution"), "{err}");
+        assert!(mesh_sdf(|p| sphere(p, &c, 20.0), lo, -lo, f64::MIN_POSITIVE).is_err());
+    }
+
+    #[test]
     fn sphere_mesh_is_closed_and_accurate() {
         let c = Point::origin();
         let m = mesh_sdf(
@@ -166,7 +194,8 @@ mod tests {
             Point::new(-22.0, -22.0, -22.0),
             Point::new(22.0, 22.0, 22.0),
             1.0,
-        );
+        )
+        .unwrap();
         let v = m.volume();
         let exact = 4.0 / 3.0 * std::f64::consts::PI * 8000.0;
         assert!((v - exact).abs() / exact < 0.01, "volume {v} vs {exact}");
