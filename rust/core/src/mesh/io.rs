@@ -634,7 +634,7 @@ pub fn write_ply(path: &Path, points: &[Point], normals: Option<&[Vector3<f64>]>
 
 #[cfg(test)]
 #[path = "io_guards.rs"]
-mod guards;
+pub(crate) mod guards;
 
 #[cfg(test)]
 mod tests {

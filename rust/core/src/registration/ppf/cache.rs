@@ -4,6 +4,9 @@ use super::*;
 
 const MAGIC: &[u8; 8] = b"BPPPF\x00\x00\x03";
 
+/// Bytes before the points: magic, two f64 and four u32.
+const HEADER_LEN: usize = 8 + 16 + 16;
+
 impl PpfModel {
     /// Serialises the model (for a cache on disk): a versioned little-endian byte layout.
     pub fn to_bytes(&self) -> Vec<u8> {
@@ -55,7 +58,10 @@ impl PpfModel {
         };
         let mut at = 0usize;
         let mut take = |n: usize| -> Result<&[u8]> {
-            let s = bytes.get(at..at + n).ok_or_else(|| bad("truncated"))?;
+            let s = at
+                .checked_add(n)
+                .and_then(|end| bytes.get(at..end))
+                .ok_or_else(|| bad("truncated"))?;
             at += n;
             Ok(s)
         };
@@ -79,6 +85,18 @@ impl PpfModel {
         if !(diameter.is_finite() && diameter > 0.0 && (4..=60_000).contains(&n)) || m > n * n {
             return Err(bad("invalid sizes"));
         }
+        // Nothing is allocated for rows the bytes do not hold: n points of 48 bytes, m pairs of 4
+        // and the 4-byte key count must all be present.
+        let needed = n
+            .checked_mul(48)
+            .and_then(|p| m.checked_mul(4).and_then(|e| p.checked_add(e)))
+            .and_then(|b| b.checked_add(4));
+        let after_header = bytes.len() - HEADER_LEN;
+        let Some(tail) = needed.and_then(|b| after_header.checked_sub(b)) else {
+            return Err(bad(&format!(
+                "it declares {n} points and {m} pairs but holds only {after_header} bytes after its header"
+            )));
+        };
         let mut points = Vec::with_capacity(n);
         let mut normals = Vec::with_capacity(n);
         for _ in 0..n {
@@ -115,7 +133,7 @@ impl PpfModel {
         };
         let keys = model.key_count();
         let used = u32_at(take(4)?) as usize;
-        if used > m.min(keys) {
+        if used > m.min(keys) || used.checked_mul(8) != Some(tail) {
             return Err(bad("inconsistent table"));
         }
         let mut counts = vec![0u32; keys + 1];
@@ -138,5 +156,48 @@ impl PpfModel {
         }
         model.offsets = counts;
         Ok(model)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::tests::{box_mesh, prepared};
+    use super::*;
+    use crate::mesh::{sample_surface, Density};
+
+    fn small_cache() -> (PpfModel, Vec<u8>) {
+        let mesh = box_mesh(20.0, 15.0, 10.0);
+        let s = sample_surface(&mesh, Density::Spacing(2.0), 3).unwrap();
+        let model = prepared(&s.points, &s.normals, mesh.diameter());
+        let bytes = model.to_bytes();
+        (model, bytes)
+    }
+
+    #[test]
+    fn lying_counts_fail_before_allocating_what_the_bytes_do_not_hold() {
+        let (model, bytes) = small_cache();
+        let n = model.points.len() as u32;
+        // m up to n² passes the old size check yet would reserve up to 14 GB of pairs.
+        for (field, value) in [(36, n * n), (36, n * n / 2), (32, 60_000), (32, n + 1)] {
+            let mut bad = bytes.clone();
+            bad[field..field + 4].copy_from_slice(&value.to_le_bytes());
+            let err = PpfModel::from_bytes(&bad).unwrap_err().to_string();
+            assert!(err.contains("ppf_cache"), "{err}");
+        }
+        let mut bad = bytes.clone();
+        bad.truncate(HEADER_LEN + 48 * n as usize);
+        assert!(PpfModel::from_bytes(&bad)
+            .unwrap_err()
+            .to_string()
+            .contains("holds only"));
+    }
+
+    #[test]
+    fn byte_mutation_fuzz_of_the_cache_never_panics() {
+        let (_, bytes) = small_cache();
+        let parse = |b: &[u8]| PpfModel::from_bytes(b).is_ok();
+        let (ok, err) = crate::mesh::io::guards::fuzz(&bytes, 300, 7, parse);
+        eprintln!("fuzz ppf cache: 300 cases, {ok} Ok, {err} Err, 0 panics");
+        assert_eq!(ok + err, 300);
     }
 }
