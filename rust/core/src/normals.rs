@@ -15,6 +15,10 @@ pub enum Orientation {
     TowardDirection(Vector3<f64>),
 }
 
+/// The most neighbours [`estimate_normals`] fits a plane to: the work grows with `k` per point
+/// and a local plane needs far fewer.
+pub const MAX_NORMALS_K: usize = 256;
+
 /// Estimates a unit normal per point from the PCA of its `k` nearest neighbours (itself included),
 /// flipped to face `orientation`. `index` must be built over `points`.
 pub fn estimate_normals(
@@ -29,8 +33,16 @@ pub fn estimate_normals(
             format!("must be at least 3 to fit a plane, got {k}"),
         ));
     }
+    if k > MAX_NORMALS_K {
+        return Err(Error::invalid(
+            "k",
+            format!("{k} neighbours is over the ceiling of {MAX_NORMALS_K}; 10 to 50 fit a plane well"),
+        ));
+    }
     check_finite("points", points)?;
     check_count("points", points, 3, "normals need at least 3 points")?;
+    // More neighbours than points is the whole cloud.
+    let k = k.min(points.len());
     if let Orientation::TowardDirection(d) = orientation {
         if !(d.norm() > 0.0) || d.iter().any(|v| !v.is_finite()) {
             return Err(Error::invalid(
@@ -73,6 +85,21 @@ pub fn normals_at(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn k_is_capped_at_the_cloud_and_refused_over_the_ceiling() {
+        let pts: Vec<Point> = (0..50)
+            .map(|i| Point::new((i % 10) as f64, (i / 10) as f64, 0.0))
+            .collect();
+        let idx = KdIndex::new(&pts);
+        let up = Orientation::TowardDirection(Vector3::z());
+        let ns = estimate_normals(&pts, &idx, 200, up).unwrap();
+        assert!(ns.iter().all(|n| (n - Vector3::z()).norm() < 1e-9));
+        for k in [MAX_NORMALS_K + 1, 5000, usize::MAX] {
+            let err = estimate_normals(&pts, &idx, k, up).unwrap_err();
+            assert!(err.to_string().contains("ceiling"), "{err}");
+        }
+    }
 
     #[test]
     fn plane_normals_face_the_viewpoint() {

@@ -91,6 +91,8 @@ pub fn intersect_ray_plane(dir: &Vector3<f64>, plane: &Plane) -> std::result::Re
 
 /// Checks a pixel list: finite, inside the image (half a pixel of margin), frame indices valid.
 fn check_pixels(camera: &Camera, pixels: &[[f64; 2]], frame_index: Option<(&[u32], usize)>) -> Result<()> {
+    // The fields are public: a camera built without Camera::new is checked (its size sets the ray table).
+    camera.validate()?;
     let (w, h) = (camera.width as f64 - 0.5, camera.height as f64 - 0.5);
     // A branch-free pass first (NaN fails every comparison); the loop below only names the culprit.
     let inside = pixels

@@ -12,6 +12,14 @@ use nalgebra::{Matrix3, Vector3};
 use rayon::prelude::*;
 use std::sync::{Arc, Mutex};
 
+/// The widest or tallest image binpick reads, pixels (as `MAX_IMAGE_SIDE` in
+/// `python/binpick/_validate.py`).
+pub const MAX_IMAGE_SIDE: u32 = 65_536;
+
+/// The most pixels of an image binpick reads (2^28, as `MAX_IMAGE_PIXELS` in
+/// `python/binpick/_validate.py`): ray tables and rendered images scale with it.
+pub const MAX_IMAGE_PIXELS: u64 = 1 << 28;
+
 /// An OpenCV pinhole camera with the five-coefficient distortion `[k1, k2, p1, p2, k3]`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Camera {
@@ -88,7 +96,8 @@ impl Camera {
         Ok(camera)
     }
 
-    /// Checks that the image is at least 2×2 pixels, everything is finite and the focal lengths
+    /// Checks that the image is at least 2×2 and at most [`MAX_IMAGE_SIDE`] a side and
+    /// [`MAX_IMAGE_PIXELS`] in all, everything is finite and the focal lengths
     /// are positive: what every user of the model (ray tables, triangulation, the renderer) needs.
     pub fn validate(&self) -> Result<()> {
         let (width, height) = (self.width, self.height);
@@ -96,6 +105,16 @@ impl Camera {
             return Err(Error::invalid(
                 "camera",
                 format!("image size {width}×{height} is too small; pass the sensor's size in pixels"),
+            ));
+        }
+        let pixels = width as u64 * height as u64;
+        if width > MAX_IMAGE_SIDE || height > MAX_IMAGE_SIDE || pixels > MAX_IMAGE_PIXELS {
+            return Err(Error::invalid(
+                "camera",
+                format!(
+                    "image size {width}×{height} ({pixels} pixels) is over binpick's ceiling of \
+                     {MAX_IMAGE_SIDE} pixels a side and {MAX_IMAGE_PIXELS} in all; pass the sensor's size in pixels"
+                ),
             ));
         }
         let numbers = [self.fx, self.fy, self.cx, self.cy, self.skew];
@@ -472,5 +491,21 @@ mod tests {
         .unwrap_err();
         assert!(e.to_string().contains("NaN"), "{e}");
         assert!(Camera::new(1032, 778, &Matrix3::zeros(), [0.0; 5]).is_err());
+        for (width, height) in [(200_000, 200_000), (65_537, 2), (40_000, 40_000), (u32::MAX, u32::MAX)] {
+            let e = Camera {
+                width,
+                height,
+                ..Default::default()
+            }
+            .validate()
+            .unwrap_err();
+            assert!(e.to_string().contains("ceiling"), "{e}");
+        }
+        let widest = Camera {
+            width: 65_536,
+            height: 4096,
+            ..Default::default()
+        };
+        assert!(widest.validate().is_ok());
     }
 }
