@@ -167,7 +167,11 @@ fn ransac_plane(
     trials: usize,
     rng: &mut Rng,
 ) -> Option<(Plane, Vec<usize>)> {
-    let mut best: Option<(Plane, usize)> = None;
+    // Distances are taken from a point of the scene, not the origin: far from the origin
+    // (1e12 mm and more) `n · p` alone has no digits left for a tolerance of a millimetre.
+    let o = points[*subset.first()?].coords;
+    let dist = |n: &Vector3<f64>, d: f64, p: &Point| (n.dot(&(p.coords - o)) - d).abs();
+    let mut best: Option<(Vector3<f64>, f64, usize)> = None;
     let step = (subset.len() / 4000).max(1);
     for _ in 0..trials {
         let (a, b, c) = (
@@ -176,26 +180,26 @@ fn ransac_plane(
             points[subset[rng.below(subset.len())]],
         );
         let n = (b - a).cross(&(c - a));
-        if n.norm() < 1e-9 {
+        if !(n.norm() >= 1e-9) {
             continue;
         }
         let n = n.normalize();
-        let d = n.dot(&a.coords);
+        let d = n.dot(&(a.coords - o));
         let count = subset
             .iter()
             .step_by(step)
-            .filter(|&&i| (n.dot(&points[i].coords) - d).abs() < tol)
+            .filter(|&&i| dist(&n, d, &points[i]) < tol)
             .count();
-        if best.as_ref().is_none_or(|b| count > b.1) {
-            best = Some((Plane { normal: n, offset: d }, count));
+        if best.as_ref().is_none_or(|b| count > b.2) {
+            best = Some((n, d, count));
         }
     }
-    let (plane, _) = best?;
+    let (n, d, _) = best?;
     // Refit on the inliers for an unbiased plane, then collect them.
     let inl: Vec<Point> = subset
         .iter()
         .map(|&i| points[i])
-        .filter(|p| (plane.normal.dot(&p.coords) - plane.offset).abs() < tol)
+        .filter(|p| dist(&n, d, p) < tol)
         .collect();
     if inl.len() < 3 {
         return None;
@@ -203,15 +207,19 @@ fn ransac_plane(
     let (c, cov) = covariance(&inl);
     let (_, axes) = principal_axes(&cov);
     let n = axes[2];
+    let d = n.dot(&(c.coords - o));
+    let inliers: Vec<usize> = subset
+        .iter()
+        .copied()
+        .filter(|&i| dist(&n, d, &points[i]) < tol)
+        .collect();
+    if inliers.len() < 3 {
+        return None;
+    }
     let refit = Plane {
         normal: n,
         offset: n.dot(&c.coords),
     };
-    let inliers = subset
-        .iter()
-        .copied()
-        .filter(|&i| (refit.normal.dot(&points[i].coords) - refit.offset).abs() < tol)
-        .collect();
     Some((refit, inliers))
 }
 
@@ -312,6 +320,29 @@ mod tests {
         assert!(planes[0].normal.z.abs() > 0.999);
         assert_eq!(keep.len(), 1600);
         assert!(keep.iter().all(|&i| i >= 20000));
+    }
+
+    #[test]
+    fn a_scene_far_from_the_origin_does_not_panic() {
+        let mut rng = Rng::new(2);
+        for offset in [1e16, 1e12, -1e16, 1e300] {
+            let pts: Vec<Point> = (0..5000)
+                .map(|i| {
+                    let z = if i % 5 == 0 {
+                        30.0 + rng.range(0.0, 10.0)
+                    } else {
+                        0.05 * rng.normal()
+                    };
+                    Point::new(
+                        offset + rng.range(0.0, 400.0),
+                        offset + rng.range(0.0, 300.0),
+                        offset + z,
+                    )
+                })
+                .collect();
+            let (keep, _) = remove_support_planes(&pts, 70.0, 0.5, 3);
+            assert!(keep.len() <= pts.len());
+        }
     }
 
     #[test]

@@ -56,6 +56,9 @@ impl PoseModel {
         if !(diameter.is_finite() && diameter > 0.0) {
             return Err(Error::invalid("model", "the model's diameter must be positive"));
         }
+        if let Some(layout) = &layout {
+            layout.validate()?;
+        }
         let spacing = point_spacing(&points, &KdIndex::new(&points));
         let symmetries = detect_symmetries(&points, &normals, &SymmetryConfig::default())?;
         let c = symmetries.center;

@@ -31,6 +31,59 @@ pub struct BranchLayout {
     pub special: Option<Vector3<f64>>,
 }
 
+/// The smallest angle between two declared branch directions, rad (10°): closer ones are one
+/// branch declared twice, and CCP could not tell them apart.
+pub const MIN_BRANCH_ANGLE: f64 = 10.0 * std::f64::consts::PI / 180.0;
+
+impl BranchLayout {
+    /// Checks the declaration: at least two branches, one length each, finite non-zero
+    /// directions no two within [`MIN_BRANCH_ANGLE`], positive lengths and radius, and a finite
+    /// non-zero special direction. Errors name `branches`.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |problem: String| Err(Error::invalid("branches", problem));
+        let n = self.directions.len();
+        if n < 2 || self.lengths.len() != n {
+            return bad(format!(
+                "{n} directions and {} lengths; declare at least two branches, one length each",
+                self.lengths.len()
+            ));
+        }
+        let finite = |v: &Vector3<f64>| v.iter().all(|x| x.is_finite()) && v.norm() > 1e-9;
+        if let Some(i) = self.directions.iter().position(|d| !finite(d)) {
+            return bad(format!("direction {i} is zero or not finite; give each branch's axis"));
+        }
+        if let Some(i) = self.lengths.iter().position(|l| !(l.is_finite() && *l > 0.0)) {
+            return bad(format!(
+                "length {i} must be a positive length in mm, got {}",
+                self.lengths[i]
+            ));
+        }
+        if !(self.radius.is_finite() && self.radius > 0.0) {
+            return bad(format!(
+                "the radius must be a positive length in mm, got {}",
+                self.radius
+            ));
+        }
+        if self.special.is_some_and(|s| !finite(&s)) {
+            return bad("the special direction is zero or not finite".into());
+        }
+        for i in 0..n {
+            for j in i + 1..n {
+                let cos = self.directions[i].normalize().dot(&self.directions[j].normalize());
+                if cos > MIN_BRANCH_ANGLE.cos() {
+                    return bad(format!(
+                        "directions {i} and {j} are {:.1}° apart, under {:.0}°: one branch declared twice; \
+                         declare each branch once",
+                        cos.clamp(-1.0, 1.0).acos().to_degrees(),
+                        MIN_BRANCH_ANGLE.to_degrees()
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
 /// Tuning of CCP; `None` fields take defaults derived from the layout.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct CcpConfig {
@@ -348,5 +401,30 @@ mod tests {
     fn injective_maps_count() {
         assert_eq!(injective_maps(3, 3).len(), 6);
         assert_eq!(injective_maps(2, 4).len(), 12);
+    }
+
+    #[test]
+    fn repeated_parallel_zero_or_nan_branches_are_refused_naming_branches() {
+        let tee = |directions: Vec<Vector3<f64>>| BranchLayout {
+            lengths: vec![40.0; directions.len()],
+            directions,
+            radius: 13.0,
+            special: Some(Vector3::z()),
+        };
+        let (x, y) = (Vector3::x(), Vector3::y());
+        assert!(tee(vec![x, -x, y]).validate().is_ok());
+        for bad in [
+            vec![x, x, x],
+            vec![x, Vector3::new(1.0, 0.01, 0.0), y],
+            vec![x, Vector3::zeros(), y],
+            vec![x, Vector3::new(f64::NAN, 0.0, 0.0), y],
+            vec![x],
+        ] {
+            let err = tee(bad.clone()).validate().unwrap_err();
+            assert!(err.to_string().starts_with("branches"), "{bad:?}: {err}");
+        }
+        let mut short = tee(vec![x, -x, y]);
+        short.lengths[1] = 0.0;
+        assert!(short.validate().is_err());
     }
 }
