@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 import binpick
+from _geometry import box_mesh, write_stl_ascii
 
 
 def _ply(tmp_path, text: bytes, name="x.ply"):
@@ -49,3 +50,41 @@ def test_write_ply_refuses_the_empty_cloud_read_ply_would_refuse(tmp_path):
     with pytest.raises(ValueError, match="points"):
         binpick.write_ply(path, np.zeros((0, 3)))
     assert not path.exists()
+
+
+def test_a_tee_too_fine_for_the_grid_ceiling_is_refused_at_once():
+    start = time.perf_counter()
+    with pytest.raises(binpick.InvalidInputError, match="resolution"):
+        binpick.parts.tee(resolution=1e-6)
+    assert time.perf_counter() - start < 2.0
+
+
+def test_a_sample_count_over_the_ceiling_is_refused(tmp_path):
+    path = tmp_path / "box.stl"
+    write_stl_ascii(path, *box_mesh((40.0, 30.0, 20.0)))
+    with pytest.raises(binpick.InvalidInputError, match="count"):
+        binpick.Model.from_mesh(path, count=10**12)
+
+
+def test_three_identical_branches_are_refused_naming_branches():
+    tee = binpick.parts.tee()
+    same = binpick.Branch(direction=(1.0, 0.0, 0.0), length=40.0, radius=13.0)
+    tee.declare_branches([same, same, same], special_direction=(0.0, 0.0, 1.0))
+    with pytest.raises(binpick.InvalidInputError, match="branches"):
+        tee.prepared()
+
+
+def test_voxelising_points_too_far_apart_is_refused_not_merged():
+    far = np.array([[0.0, 0.0, 0.0], [2e19, 0.0, 0.0], [4e19, 0.0, 0.0]])
+    with pytest.raises(binpick.InvalidInputError, match="points"):
+        binpick.voxel_downsample(far, 1.0)
+
+
+def test_a_scene_far_from_the_origin_ends_in_a_clear_error_not_a_panic():
+    rng = np.random.default_rng(0)
+    floor = np.column_stack([rng.uniform(0, 400, 4000), rng.uniform(0, 300, 4000), rng.normal(0, 0.05, 4000)])
+    top = np.column_stack([rng.uniform(100, 140, 1000), rng.uniform(100, 140, 1000), np.full(1000, 30.0)])
+    scene = np.vstack([floor, top]) + 1e16
+    with pytest.raises(binpick.BinpickError) as info:
+        binpick.estimate_pose(scene, binpick.parts.tee())
+    assert not isinstance(info.value, binpick.InternalError)

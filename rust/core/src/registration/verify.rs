@@ -44,7 +44,9 @@ impl HeightMap {
             lo = (lo.0.min(a), lo.1.min(b));
             hi = (hi.0.max(a), hi.1.max(b));
         }
-        if points.is_empty() {
+        // An empty scan, or one whose extent overflows an f64, gets a one-cell map that covers
+        // nothing beyond its first cell.
+        if points.is_empty() || !((hi.0 - lo.0).is_finite() && (hi.1 - lo.1).is_finite()) {
             lo = (0.0, 0.0);
             hi = (0.0, 0.0);
         }
@@ -283,6 +285,21 @@ pub fn coarse_inlier_fraction(points: &[Point], target: &IcpTarget, t_model_scen
 mod tests {
     use super::*;
     use nalgebra::{Translation3, UnitQuaternion};
+
+    #[test]
+    fn a_height_map_of_points_far_apart_is_bounded_and_does_not_hang() {
+        let far = [
+            Point::new(-1e308, 0.0, 0.0),
+            Point::new(1e308, 0.0, 0.0),
+            Point::new(0.0, 0.0, 1.0),
+        ];
+        let map = HeightMap::new(&far, &Vector3::z(), 1.0);
+        assert!(map.height.len() <= 4_000_000);
+        let offset = [Point::new(1e16, 1e16, 0.0), Point::new(1e16 + 400.0, 1e16 + 300.0, 0.0)];
+        let map = HeightMap::new(&offset, &Vector3::z(), 1.0);
+        assert!(map.height.len() <= 4_000_000);
+        assert!(map.top_at(&offset[0]).is_some());
+    }
 
     /// A 40 × 40 mm plate at z = 10 seen from above, judged as a model of itself.
     #[test]

@@ -37,7 +37,8 @@ pub struct NearestField {
 
 impl NearestField {
     /// Builds the field with cells of about `cell` mm over the points' bounding box grown by
-    /// `margin` mm on every side. `None` for an empty set or a non-positive cell.
+    /// `margin` mm on every side. `None` for an empty set, a non-positive cell or points whose
+    /// extent overflows an f64.
     pub fn new(points: &[Point], cell: f64, margin: f64) -> Option<NearestField> {
         if points.is_empty() || !(cell > 0.0) || !margin.is_finite() || points.len() >= (u32::MAX - 1) as usize {
             return None;
@@ -50,10 +51,14 @@ impl NearestField {
                 hi[d] = hi[d].max(p[d] + margin.max(0.0));
             }
         }
+        // Coordinates far apart (±1e308) overflow the extent to infinity: no grid covers them.
+        if (0..3).any(|d| !(hi[d] - lo[d]).is_finite()) {
+            return None;
+        }
         let mut cell = cell;
         let dims = loop {
             let dims: [usize; 3] = std::array::from_fn(|d| ((hi[d] - lo[d]) / cell).ceil().max(1.0) as usize);
-            if dims.iter().product::<usize>() <= MAX_CELLS {
+            if dims.iter().map(|&n| n as f64).product::<f64>() <= MAX_CELLS as f64 {
                 break dims;
             }
             cell *= 1.25;
@@ -165,6 +170,14 @@ fn dist2(p: &Point, q: &Point) -> f64 {
 mod tests {
     use super::*;
     use crate::rng::Rng;
+
+    #[test]
+    fn points_whose_extent_overflows_get_no_field_instead_of_a_hang() {
+        let far = [Point::new(-1e308, 0.0, 0.0), Point::new(1e308, 0.0, 0.0)];
+        assert!(NearestField::new(&far, 1.0, 0.0).is_none());
+        let apart = [Point::new(-1e16, 0.0, 0.0), Point::new(1e16, 1e16, 1e16)];
+        assert!(NearestField::new(&apart, 1.0, 0.0).is_some());
+    }
 
     /// The answer is never more than two cell diagonals farther than the true nearest point.
     #[test]
