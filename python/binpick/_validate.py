@@ -14,7 +14,16 @@ try:
 except ModuleNotFoundError:  # Python < 3.11
     import tomli as tomllib  # type: ignore[no-redef]
 
-from .errors import CalibrationError, DTypeError, InvalidInputError, NonFiniteError, ShapeError, TooFewPointsError
+from .errors import (
+    CalibrationError,
+    DTypeError,
+    InvalidInputError,
+    InvalidTypeError,
+    NonFiniteError,
+    ShapeError,
+    TooFewPointsError,
+    UnknownUnitError,
+)
 
 
 def as_float_array(value: Any, name: str) -> np.ndarray:
@@ -89,37 +98,99 @@ def check_rigid(arr: np.ndarray, name: str, error: type = InvalidInputError) -> 
     return arr
 
 
-def positive(value: Any, name: str, unit: str = "mm") -> float:
-    """A positive finite float, or InvalidInputError."""
+def _real(value: Any, name: str, unit: str = "") -> float:
+    """``value`` as a finite float: a bool, a string or any non-number is InvalidTypeError, NaN
+    or infinity InvalidInputError, each naming ``name``."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise InvalidTypeError(f"{name}: must be a number{_unit(unit)}, got {type(value).__name__} {value!r:.40}")
     try:
         v = float(value)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: must be a number ({unit}), got {value!r}") from None
-    if not np.isfinite(v) or v <= 0:
+    except OverflowError:  # an int beyond the float range
+        v = math.inf
+    if not math.isfinite(v):
+        raise InvalidInputError(f"{name}: must be a finite number{_unit(unit)}, got {value!r:.40}")
+    return v
+
+
+def positive(value: Any, name: str, unit: str = "mm") -> float:
+    """A positive finite float, or InvalidInputError (InvalidTypeError for a non-number)."""
+    v = _real(value, name, unit)
+    if v <= 0:
         raise InvalidInputError(f"{name}: must be a positive finite number ({unit}), got {value!r}")
     return v
 
 
 def non_negative(value: Any, name: str, unit: str = "") -> float:
-    """A finite float ≥ 0, or InvalidInputError."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InvalidInputError(
-            f"{name}: must be a number{(' (' + unit + ')') if unit else ''}, got {value!r}"
-        ) from None
-    if not np.isfinite(v) or v < 0:
+    """A finite float ≥ 0, or InvalidInputError (InvalidTypeError for a non-number)."""
+    v = _real(value, name, unit)
+    if v < 0:
         raise InvalidInputError(f"{name}: must be a finite number ≥ 0, got {value!r}")
     return v
 
 
-def count(value: Any, name: str, minimum: int = 0) -> int:
-    """An integer ≥ ``minimum``, or InvalidInputError."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise InvalidInputError(f"{name}: must be an integer, got {value!r}")
+def number(value: Any, name: str, low: float = -math.inf, high: float = math.inf, unit: str = "") -> float:
+    """A finite float in [low, high], or InvalidInputError (InvalidTypeError for a non-number)."""
+    v = _real(value, name, unit)
+    if not low <= v <= high:
+        raise InvalidInputError(f"{name}: {v:g}{_unit(unit)} is outside [{low:g}, {high:g}]; pass a value inside it")
+    return v
+
+
+#: Largest unsigned integer the native core takes (its ``usize``/``u64``).
+MAX_UNSIGNED = 2**64 - 1
+
+
+def count(value: Any, name: str, minimum: int = 0, maximum: int = MAX_UNSIGNED) -> int:
+    """An integer in [minimum, maximum], or InvalidInputError naming ``name``
+    (InvalidTypeError for a bool, a float or any non-integer)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise InvalidTypeError(f"{name}: must be an integer, got {type(value).__name__} {value!r:.40}")
     if value < minimum:
         raise InvalidInputError(f"{name}: must be at least {minimum}, got {value}")
+    if value > maximum:
+        raise InvalidInputError(f"{name}: must be at most {maximum}, got {value}")
     return int(value)
+
+
+#: Largest ``num_threads`` accepted; a request above the machine's cores (and up to this) is
+#: clamped to the cores by the binding, beyond it the request is refused as a mistake.
+MAX_THREADS = 256
+
+
+def thread_count(value: Any) -> int:
+    """Worker threads, 0 = all cores, at most :data:`MAX_THREADS` (the binding clamps any
+    request to the machine's cores)."""
+    return count(value, "num_threads", 0, MAX_THREADS)
+
+
+def optional_count(value: Any, name: str, minimum: int = 0, maximum: int = MAX_UNSIGNED) -> Optional[int]:
+    """None, or :func:`count`."""
+    return None if value is None else count(value, name, minimum, maximum)
+
+
+def optional_number(value: Any, name: str, low: float = -math.inf, high: float = math.inf) -> Optional[float]:
+    """None, or :func:`number`."""
+    return None if value is None else number(value, name, low, high)
+
+
+#: The length units binpick reads, each with its millimetres: written once, for meshes and arrays.
+LENGTH_UNITS = {
+    **dict.fromkeys(("mm", "millimeter", "millimetre", "millimeters", "millimetres"), 1.0),
+    **dict.fromkeys(("cm", "centimeter", "centimetre", "centimeters", "centimetres"), 10.0),
+    **dict.fromkeys(("m", "meter", "metre", "meters", "metres"), 1000.0),
+    **dict.fromkeys(("in", "inch", "inches"), 25.4),
+}
+
+
+def unit_scale(unit: Any) -> float:
+    """Millimetres per ``unit`` (:data:`LENGTH_UNITS`, case and surrounding spaces ignored), or
+    UnknownUnitError listing the accepted units."""
+    key = unit.strip().lower() if isinstance(unit, str) else None
+    if key not in LENGTH_UNITS:
+        raise UnknownUnitError(
+            f"unit: unknown unit {unit!r:.40}; use one of {', '.join(repr(u) for u in LENGTH_UNITS)}"
+        )
+    return LENGTH_UNITS[key]
 
 
 def native_config(cls: Any, **options: Any) -> Any:
@@ -147,20 +218,7 @@ def check_number(
     value: Any, name: str, *, low: Optional[float] = None, high: Optional[float] = None, unit: str = ""
 ) -> float:
     """``value`` as a finite float within [low, high], or InvalidInputError naming ``name``."""
-    if isinstance(value, bool):
-        raise InvalidInputError(f"{name}: must be a number{_unit(unit)}, got the boolean {value!r}")
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"{name}: must be a number{_unit(unit)}, got {value!r}") from None
-    if not math.isfinite(v):
-        raise InvalidInputError(f"{name}: must be finite, got {v}")
-    if (low is not None and v < low) or (high is not None and v > high):
-        raise InvalidInputError(
-            f"{name}: {v:g}{unit and ' ' + unit} is outside [{low}, {high}]{_unit(unit)}; "
-            "pass a value inside that range"
-        )
-    return v
+    return number(value, name, -math.inf if low is None else low, math.inf if high is None else high, unit)
 
 
 def check_int(value: Any, name: str, low: int, high: int) -> int:

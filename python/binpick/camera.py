@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ._validate import calibration_matrix, frozen_copy
+from ._validate import calibration_matrix, frozen_copy, image_size
 from .errors import CalibrationError, InvalidInputError
 
 __all__ = ["CameraIntrinsics", "camera_args", "pinhole_matrix"]
@@ -39,11 +39,9 @@ class CameraIntrinsics:
     dist: np.ndarray
 
     def __post_init__(self) -> None:
-        for field in ("width", "height"):
-            v = getattr(self, field)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 2:
-                raise CalibrationError(f"camera.{field}: must be an integer number of pixels ≥ 2, got {v!r}")
-            object.__setattr__(self, field, int(v))
+        width, height = image_size(self.width, self.height, "camera")
+        object.__setattr__(self, "width", width)
+        object.__setattr__(self, "height", height)
         K = calibration_matrix(self.K, "camera.K", (3, 3))
         dist = np.asarray(self.dist, dtype=np.float64).ravel() if not isinstance(self.dist, str) else self.dist
         dist = calibration_matrix(dist, "camera.dist", (5,))

@@ -10,6 +10,7 @@ from __future__ import annotations
 __all__ = [
     "BinpickError",
     "InvalidInputError",
+    "InvalidTypeError",
     "ShapeError",
     "DTypeError",
     "NonFiniteError",
@@ -40,6 +41,10 @@ class BinpickError(Exception):
 
 class InvalidInputError(BinpickError, ValueError):
     """An argument is wrong: its message names the argument, the problem and the fix."""
+
+
+class InvalidTypeError(InvalidInputError, TypeError):
+    """An argument has the wrong Python type (a string or a bool where a number is expected)."""
 
 
 class ShapeError(InvalidInputError):

@@ -13,7 +13,7 @@ from typing import Any, Optional
 import numpy as np
 
 from . import _core
-from ._validate import as_points, as_transform, as_vector, count, positive
+from ._validate import MAX_UNSIGNED, as_points, as_transform, as_vector, count, positive, thread_count, unit_scale
 from .errors import InvalidInputError
 from .transforms import pose_error
 
@@ -157,11 +157,10 @@ class Model:
         to millimetres and samples its surface: evenly at ``spacing`` mm, or ``count`` points.
         With neither, the spacing is 1/100 of the bounding-box diagonal."""
         path = os.fspath(path)
-        if not isinstance(unit, str):
-            raise InvalidInputError(f"unit: must be a string such as 'mm' or 'm', got {unit!r}")
-        vertices, faces = _core.read_mesh(path, unit)
+        unit_scale(unit)  # an unknown unit is refused before the file is read
+        vertices, faces = _core.read_mesh(path, "mm")
         label = name if name is not None else os.path.splitext(os.path.basename(path))[0]
-        return cls.from_arrays(vertices, faces, unit="mm", spacing=spacing, count=count, seed=seed, name=label)
+        return cls.from_arrays(vertices, faces, unit=unit, spacing=spacing, count=count, seed=seed, name=label)
 
     @classmethod
     def from_arrays(
@@ -177,13 +176,14 @@ class Model:
         branches: Sequence[Branch] = (),
         special_direction: Optional[Sequence[float]] = None,
     ) -> Model:
-        """A model from a vertex array (V, 3) in ``unit`` and a face index array (F, 3)."""
+        """A model from a vertex array (V, 3) in ``unit`` (those of :meth:`from_mesh`) and a face
+        index array (F, 3). At most :data:`MAX_SAMPLES` samples are drawn: a larger ``count``,
+        or a ``spacing`` so fine that it would ask for more, is refused before any allocation."""
         v = as_points(vertices, "vertices", min_points=3)
         f = np.asarray(faces)
         if f.ndim != 2 or f.shape[1] != 3 or f.dtype.kind not in "iu":
             raise InvalidInputError(f"faces: expected an (F, 3) integer array, got shape {f.shape} dtype {f.dtype}")
-        scale = _unit_scale(unit)
-        v = v * scale
+        v = v * unit_scale(unit)
         f = np.ascontiguousarray(f, dtype=np.int64)
         if spacing is not None and count is not None:
             raise InvalidInputError("spacing/count: give one of them, not both")
@@ -191,9 +191,10 @@ class Model:
             spacing = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))) / 100.0
         if spacing is not None:
             spacing = positive(spacing, "spacing")
+            _check_spacing(v, f, spacing)
         if count is not None:
             count = _count(count)
-        pts, nrm, diameter, area = _core.sample_mesh(v, f, spacing, count, int(seed))
+        pts, nrm, diameter, area = _core.sample_mesh(v, f, spacing, count, _seed(seed))
         return cls(
             v,
             f,
@@ -325,19 +326,30 @@ def _write_atomically(path: Path, data: Optional[bytes]) -> None:
         )
 
 
+#: Most surface samples a model may have (by ``count`` or ``spacing``): ten million points,
+#: far beyond any part's needs, so a mistyped count cannot allocate the machine's memory.
+MAX_SAMPLES = 10_000_000
+
+
 def _count(value: Any) -> int:
-    return count(value, "count", minimum=1)
+    return count(value, "count", 1, MAX_SAMPLES)
 
 
-_UNITS = {"mm": 1.0, "cm": 10.0, "m": 1000.0, "in": 25.4}
+def _seed(value: Any) -> int:
+    return count(value, "seed", 0, MAX_UNSIGNED)
 
 
-def _unit_scale(unit: Any) -> float:
-    from .errors import UnknownUnitError
-
-    if not isinstance(unit, str) or unit.strip().lower() not in _UNITS:
-        raise UnknownUnitError(f"unit: unknown unit {unit!r}; use one of 'mm', 'cm', 'm', 'in'")
-    return _UNITS[unit.strip().lower()]
+def _check_spacing(v: np.ndarray, f: np.ndarray, spacing: float) -> None:
+    """Refuses a spacing that would sample more than :data:`MAX_SAMPLES` points (area / spacing²)."""
+    if len(f) == 0 or f.min() < 0 or f.max() >= len(v):
+        return  # the binding names the bad face
+    tri = v[f]
+    area = 0.5 * float(np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum())
+    if area / spacing**2 > MAX_SAMPLES:
+        raise InvalidInputError(
+            f"spacing: {spacing:g} mm over {area:.4g} mm² would take about {area / spacing**2:.3g} samples, more "
+            f"than the {MAX_SAMPLES} binpick draws; pass a spacing of at least {np.sqrt(area / MAX_SAMPLES):.3g} mm"
+        )
 
 
 def read_ply(path: str | os.PathLike[str]) -> tuple[np.ndarray, Optional[np.ndarray]]:
@@ -362,13 +374,14 @@ def estimate_normals(
     direction: Any = (0.0, 0.0, 1.0),
     num_threads: int = 0,
 ) -> np.ndarray:
-    """Unit normals from the PCA of each point's ``k`` nearest neighbours, flipped to face
-    ``viewpoint`` (a point, e.g. the camera centre) when given, else ``direction`` (+z by default)."""
+    """Unit normals from the PCA of each point's ``k`` nearest neighbours (3 ≤ k ≤ the number of
+    points), flipped to face ``viewpoint`` (a point, e.g. the camera centre) when given, else
+    ``direction`` (+z by default). ``num_threads``: 0 = all cores, at most 256 (clamped to the cores)."""
     pts = as_points(points, "points", min_points=3)
-    k = count(k, "k", minimum=3)
+    k = count(k, "k", 3, len(pts))
     vp = None if viewpoint is None else as_vector(viewpoint, "viewpoint")
     d = None if viewpoint is not None else as_vector(direction, "direction")
-    return _core.estimate_normals(pts, k, vp, d, count(num_threads, "num_threads"))
+    return _core.estimate_normals(pts, k, vp, d, thread_count(num_threads))
 
 
 def voxel_downsample(

@@ -9,11 +9,29 @@ from typing import Any, Optional
 import numpy as np
 
 from . import _core
-from ._validate import as_float_array, as_points, as_transform, as_vector, native_config
+from ._validate import (
+    as_float_array,
+    as_points,
+    as_transform,
+    as_vector,
+    count,
+    native_config,
+    non_negative,
+    number,
+    optional_count,
+    optional_number,
+    positive,
+    thread_count,
+)
 from .errors import InvalidInputError
 from .models import Model, estimate_normals
 
 __all__ = ["IcpResult", "icp", "PoseResult", "estimate_pose", "estimate_poses", "grasp_pose"]
+
+#: Ceilings of the counts that size work or allocations: beyond them a value is a mistake.
+MAX_ITERATIONS = 100_000  # ICP updates
+MAX_INSTANCES = 1000  # poses estimate_poses returns
+MAX_HYPOTHESES = 100_000  # PPF pose clusters refined
 
 # The core's defaults, read once: the signatures below show them, the core writes them.
 _ICP = _core.IcpConfig()
@@ -74,25 +92,26 @@ def icp(
         init: initial (4, 4) ``T_target_source``; identity when None.
         method: ``"point_to_point"`` (closed-form SVD, as in the paper) or ``"point_to_plane"``
             (Gauss–Newton on SE(3); uses ``target_normals``, estimated from 20 neighbours if None).
-        max_iterations: upper bound on updates.
+        max_iterations: upper bound on updates, at most 100000.
         rotation_tolerance: stop when an update rotates less than this (radians) …
         translation_tolerance: … and translates less than this (mm).
         kernel: robust IRLS weighting, ``"none"``, ``"huber"``, ``"tukey"`` or ``"cauchy"``.
         kernel_scale: the kernel's scale in mm (default: a third of the correspondence distance).
         trim_fraction: fraction in [0, 0.9] of the farthest pairs dropped each iteration.
-        num_threads: worker threads, 0 = all cores. The GIL is released while ICP runs.
+        num_threads: worker threads, 0 = all cores, at most 256 (a request above the machine's
+            cores is clamped to them). The GIL is released while ICP runs; Ctrl-C stops the wait.
     """
     config = native_config(
         _core.IcpConfig,
         method=method,
-        max_correspondence_distance=max_correspondence_distance,
-        max_iterations=max_iterations,
-        rotation_tolerance=rotation_tolerance,
-        translation_tolerance=translation_tolerance,
+        max_correspondence_distance=positive(max_correspondence_distance, "max_correspondence_distance"),
+        max_iterations=count(max_iterations, "max_iterations", 0, MAX_ITERATIONS),
+        rotation_tolerance=non_negative(rotation_tolerance, "rotation_tolerance", "rad"),
+        translation_tolerance=non_negative(translation_tolerance, "translation_tolerance", "mm"),
         kernel=kernel,
-        kernel_scale=kernel_scale,
-        trim_fraction=trim_fraction,
-        num_threads=num_threads,
+        kernel_scale=optional_number(kernel_scale, "kernel_scale"),
+        trim_fraction=number(trim_fraction, "trim_fraction"),
+        num_threads=thread_count(num_threads),
     )
     plane = config.method == "point_to_plane"
     src = as_points(source, "source", min_points=6 if plane else 3)
@@ -196,7 +215,8 @@ def estimate_poses(
     max_hypotheses: Optional[int] = None,
     num_threads: int = _POSE.num_threads,
 ) -> list[PoseResult]:
-    """Up to ``max_instances`` verified instances of ``model`` in ``scene``, most pickable first.
+    """Up to ``max_instances`` (at most 1000) verified instances of ``model`` in ``scene``, most
+    pickable first. ``num_threads``: 0 = all cores, at most 256 (clamped to the machine's cores).
 
     ``scene`` is an (N, 3) cloud in mm with ``up`` (default +z) pointing out of the bin toward the
     sensor; ``viewpoint`` (optional) is the sensor's position in the scene frame, which orients
@@ -233,18 +253,18 @@ def estimate_poses(
         up=as_vector(up, "up"),
         method=method,
         viewpoint=None if viewpoint is None else as_vector(viewpoint, "viewpoint"),
-        d_star=d_star,
-        min_points=min_points,
-        max_normal_angle=max_normal_angle,
-        inlier_distance=inlier_distance,
-        min_fitness=min_fitness,
-        min_coverage=min_coverage,
-        ccp_closer_radius=ccp_closer_radius,
-        ccp_tau=ccp_tau,
-        reference_fraction=reference_fraction,
-        max_hypotheses=max_hypotheses,
-        max_instances=max_instances,
-        num_threads=num_threads,
+        d_star=optional_number(d_star, "d_star"),
+        min_points=optional_count(min_points, "min_points"),
+        max_normal_angle=number(max_normal_angle, "max_normal_angle"),
+        inlier_distance=optional_number(inlier_distance, "inlier_distance"),
+        min_fitness=number(min_fitness, "min_fitness"),
+        min_coverage=number(min_coverage, "min_coverage"),
+        ccp_closer_radius=optional_number(ccp_closer_radius, "ccp_closer_radius"),
+        ccp_tau=optional_number(ccp_tau, "ccp_tau"),
+        reference_fraction=optional_number(reference_fraction, "reference_fraction"),
+        max_hypotheses=optional_count(max_hypotheses, "max_hypotheses", 0, MAX_HYPOTHESES),
+        max_instances=count(max_instances, "max_instances", 1, MAX_INSTANCES),
+        num_threads=thread_count(num_threads),
     )
     if config.method == "ccp" and not model.branches:
         raise InvalidInputError(

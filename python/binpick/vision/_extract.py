@@ -8,7 +8,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .._validate import as_image
+from .._validate import as_image, count, number, positive
 from ..errors import InvalidInputError
 
 __all__ = ["extract_line", "laser_mask", "red_excess"]
@@ -36,10 +36,7 @@ def laser_mask(image: np.ndarray, threshold: float = 30.0) -> np.ndarray:
 
 
 def _threshold(value: Any) -> float:
-    try:
-        t = float(value)
-    except (TypeError, ValueError):
-        raise InvalidInputError(f"threshold: must be a number of grey levels (0–255), got {value!r}") from None
+    t = number(value, "threshold", unit="grey levels")
     if not 0 <= t < 255:
         raise InvalidInputError(
             f"threshold: {t:g} is outside 0–255; it is the chroma (Cr − 128) or grey level a line pixel must exceed"
@@ -84,12 +81,11 @@ def extract_line(
     Scan lines without a peak above ``threshold`` give no point.
     """
     t = _threshold(threshold)
-    if isinstance(window, bool) or not isinstance(window, (int, np.integer)) or not 1 <= window <= 50:
-        raise InvalidInputError(f"window: half-width must be an integer number of pixels in 1..50, got {window!r}")
+    window = count(window, "window", 1, 50)
     _choose("method", method, _METHODS)
     _choose("direction", direction, _DIRECTIONS)
-    if max_jump is not None and not (np.isfinite(max_jump) and max_jump > 0):
-        raise InvalidInputError(f"max_jump: must be a positive number of pixels or None, got {max_jump!r}")
+    if max_jump is not None:
+        max_jump = positive(max_jump, "max_jump", "pixels")
     signal = red_excess(image)
     if direction == "auto":
         lit_rows = np.count_nonzero(signal.max(axis=1) > t)

@@ -204,3 +204,37 @@ pub fn camera(args: &CameraArgs<'_>) -> PyResult<binpick_core::Camera> {
 pub fn isometry(arr: &PyReadonlyArray2<'_, f64>, arg: &str) -> PyResult<Isometry3<f64>> {
     binpick_core::isometry_from_matrix(arg, &matrix4(arr, arg)?).map_err(crate::errors::to_py)
 }
+
+/// Largest `num_threads` accepted: above the machine's cores a request is clamped to them, above
+/// this it is refused as a mistake (it would start that many OS threads).
+pub const MAX_THREADS: usize = 256;
+
+/// Worker threads for a native call: 0 (all cores) stays 0, a request above the machine's cores
+/// is clamped to them, beyond [`MAX_THREADS`] an `InvalidInputError`. Every binding that takes
+/// `num_threads` passes it through here, so no call starts more threads than there are cores.
+pub fn threads(num_threads: usize) -> PyResult<usize> {
+    if num_threads > MAX_THREADS {
+        return Err(invalid(
+            "num_threads",
+            &format!("{num_threads} is above the ceiling of {MAX_THREADS}; pass 0 for all cores"),
+        ));
+    }
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    Ok(num_threads.min(cores))
+}
+
+/// An optional whole-number argument of a config class in [0, `max`]: a bool or a non-integer
+/// is an `InvalidTypeError`, a negative or too large integer an `InvalidInputError` naming it.
+pub fn whole_number(value: Option<&Bound<'_, PyAny>>, arg: &str, max: u64) -> PyResult<Option<u64>> {
+    let Some(value) = value else { return Ok(None) };
+    if value.is_instance_of::<pyo3::types::PyBool>() || !value.is_instance_of::<pyo3::types::PyInt>() {
+        return Err(crate::errors::wrong_type(arg, "an integer", value));
+    }
+    match value.extract::<u64>() {
+        Ok(v) if v <= max => Ok(Some(v)),
+        _ => Err(invalid(
+            arg,
+            &format!("{value} is outside [0, {max}]; pass an integer inside that range"),
+        )),
+    }
+}

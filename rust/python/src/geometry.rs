@@ -1,7 +1,7 @@
 //! Clouds, normals, voxels, meshes, PLY files and built-in parts.
 
 use crate::convert::{faces_to_py, indices_to_py, mesh_from_py, part_to_py, points, points_to_py, vector3};
-use crate::convert::{vectors, vectors_to_py, PartArrays};
+use crate::convert::{threads, vectors, vectors_to_py, PartArrays};
 use crate::errors::{invalid, run};
 use binpick_core::parts;
 use binpick_core::{estimate_normals as core_normals, unit_scale, Orientation};
@@ -32,6 +32,7 @@ fn estimate_normals<'py>(
         (None, Some(d)) => Orientation::TowardDirection(vector3(&d, "direction")?),
         (None, None) => Orientation::TowardDirection(Vector3::z()),
     };
+    let num_threads = threads(num_threads)?;
     let normals = run(py, move || {
         with_threads(num_threads, || {
             let index = KdIndex::new(&pts);

@@ -2,7 +2,7 @@
 //! and [`PoseConfig`] in, [`PoseEstimate`]s out.
 
 use crate::convert::{bin_box, bin_box_to_py, branch_layout, indices_to_py, isometry_to_py, matrix4, mesh_from_py};
-use crate::convert::{points, rotations_to_rows, vector3, vectors};
+use crate::convert::{points, rotations_to_rows, threads, vector3, vectors, whole_number};
 use crate::errors::{run, to_py};
 use binpick_core::{estimate_poses as core_estimate, isometry_from_matrix, CcpConfig, CoarseMethod, DetectConfig};
 use binpick_core::{PoseModel, PpfConfig, PpfModel};
@@ -11,6 +11,10 @@ use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyAr
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 use std::sync::Arc;
+
+/// Largest bin count of a PPF feature accepted by [`PpfParams`] (the core checks its own range
+/// when the table is built; this only keeps the conversion from overflowing).
+const MAX_PPF_BINS: u32 = 1 << 16;
 
 /// Parameters of a model's point-pair-feature table (the core's `PpfConfig`); an argument left
 /// out takes the core's default.
@@ -27,15 +31,22 @@ impl PpfParams {
     /// a turn about the reference normal).
     #[new]
     #[pyo3(signature = (*, sampling_ratio=None, angle_bins=None, rotation_bins=None))]
-    fn new(sampling_ratio: Option<f64>, angle_bins: Option<u32>, rotation_bins: Option<u32>) -> Self {
+    fn new(
+        sampling_ratio: Option<f64>,
+        angle_bins: Option<&Bound<'_, PyAny>>,
+        rotation_bins: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<Self> {
         let d = PpfConfig::default();
-        PpfParams {
+        let bins = |v, arg, default: u32| -> PyResult<u32> {
+            Ok(whole_number(v, arg, u64::from(MAX_PPF_BINS))?.map_or(default, |b| b as u32))
+        };
+        Ok(PpfParams {
             inner: PpfConfig {
                 sampling_ratio: sampling_ratio.unwrap_or(d.sampling_ratio),
-                angle_bins: angle_bins.unwrap_or(d.angle_bins),
-                rotation_bins: rotation_bins.unwrap_or(d.rotation_bins),
+                angle_bins: bins(angle_bins, "angle_bins", d.angle_bins)?,
+                rotation_bins: bins(rotation_bins, "rotation_bins", d.rotation_bins)?,
             },
-        }
+        })
     }
     /// Sampling distance as a fraction of the model's diameter.
     #[getter]
@@ -224,7 +235,7 @@ impl PoseConfig {
                 None => d.viewpoint,
             },
             max_instances: max_instances.unwrap_or(d.max_instances),
-            num_threads: num_threads.unwrap_or(d.num_threads),
+            num_threads: num_threads.map(threads).transpose()?.unwrap_or(d.num_threads),
         };
         Ok(PoseConfig { inner })
     }

@@ -1,6 +1,6 @@
 //! ICP bindings: a frozen [`IcpConfig`] in, an [`IcpResult`] out.
 
-use crate::convert::{isometry_to_py, matrix4, points, vectors};
+use crate::convert::{isometry_to_py, matrix4, points, threads, vectors};
 use crate::errors::{run, to_py};
 use binpick_core::{icp as core_icp, isometry_from_matrix, IcpMethod, IcpTarget, RobustKernel};
 use numpy::{PyArray2, PyReadonlyArray2};
@@ -49,7 +49,7 @@ impl IcpConfig {
                 translation_tolerance: translation_tolerance.unwrap_or(d.translation_tolerance),
                 kernel,
                 trim_fraction: trim_fraction.unwrap_or(d.trim_fraction),
-                num_threads: num_threads.unwrap_or(d.num_threads),
+                num_threads: num_threads.map(threads).transpose()?.unwrap_or(d.num_threads),
                 approximate: d.approximate,
             },
         })

@@ -3,7 +3,7 @@
 //! package `binpick.sim` wraps these with validated, documented classes.
 
 use crate::convert::{camera, isometry, points, CameraArgs};
-use crate::errors::{invalid, run};
+use crate::errors::{invalid, run_borrowed};
 use binpick_core::sim::{convex_decomposition, max_interpenetration, BinSpec, Pile, PileParams, SettleReport};
 use binpick_core::sim::{render_checkerboard, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View};
 use binpick_core::{Error, Point};
@@ -88,7 +88,7 @@ impl PySimPile {
             max_convex_hulls,
             ..Default::default()
         };
-        let inner = run(py, move || Pile::drop(&mesh, count, &bin, &params))?;
+        let inner = run_borrowed(py, move || Pile::drop(&mesh, count, &bin, &params))?;
         Ok(PySimPile { inner })
     }
 
@@ -103,13 +103,13 @@ impl PySimPile {
     /// Removes part `id` and settles: (steps, simulated_time, settled, max_speed).
     fn remove(&mut self, py: Python<'_>, id: usize) -> PyResult<(usize, f64, bool, f64)> {
         let pile = &mut self.inner;
-        Ok(report(run(py, move || pile.remove(id))?))
+        Ok(report(run_borrowed(py, move || pile.remove(id))?))
     }
 
     /// Steps until at rest: (steps, simulated_time, settled, max_speed).
     fn settle(&mut self, py: Python<'_>) -> PyResult<(usize, f64, bool, f64)> {
         let pile = &mut self.inner;
-        Ok(report(run(py, move || Ok::<_, Error>(pile.settle()))?))
+        Ok(report(run_borrowed(py, move || Ok::<_, Error>(pile.settle()))?))
     }
 
     /// The last settling's (steps, simulated_time, settled, max_speed).
@@ -153,7 +153,7 @@ fn sim_convex_decomposition<'py>(
         max_convex_hulls,
         ..Default::default()
     };
-    let hulls = run(py, move || convex_decomposition(&mesh, &params))?;
+    let hulls = run_borrowed(py, move || convex_decomposition(&mesh, &params))?;
     Ok(hulls.iter().map(|(v, f)| mesh_out(py, v, f)).collect())
 }
 
@@ -179,7 +179,7 @@ fn sim_max_interpenetration(
         .collect::<binpick_core::Result<Vec<_>>>()
         .map_err(crate::errors::to_py)?;
     let s = points(&samples, "samples")?;
-    run(py, move || max_interpenetration(&mesh, &t, &s))
+    run_borrowed(py, move || max_interpenetration(&mesh, &t, &s))
 }
 
 /// The bin's render mesh (vertices, faces) in the base frame.
@@ -271,7 +271,7 @@ impl PySimScene {
     ) -> PyResult<usize> {
         let mesh = crate::convert::mesh_from_py(&vertices, &faces)?;
         let scene = &mut self.inner;
-        run(py, move || {
+        run_borrowed(py, move || {
             scene.add_mesh(
                 &mesh,
                 Material {
@@ -310,7 +310,7 @@ impl PySimScene {
     fn nearest_surface<'py>(&self, py: Python<'py>, points_base: PyReadonlyArray2<'py, f64>) -> PyResult<Nearest<'py>> {
         let pts = points(&points_base, "points")?;
         let scene = self.inner.clone();
-        let found = run(py, move || Ok::<_, Error>(scene.nearest_surface(&pts)))?;
+        let found = run_borrowed(py, move || Ok::<_, Error>(scene.nearest_surface(&pts)))?;
         let (d, ids): (Vec<f64>, Vec<i32>) = found.into_iter().unzip();
         Ok((numpy::PyArray1::from_vec(py, d), numpy::PyArray1::from_vec(py, ids)))
     }
@@ -328,7 +328,8 @@ impl PySimScene {
         let t = isometry(&t_base_camera, "T_base_camera")?;
         let (cam, light) = (camera(&camera_args)?, lighting(lighting_args));
         let scene = self.inner.clone();
-        let view = run(py, move || {
+        let num_threads = crate::convert::threads(num_threads)?;
+        let view = run_borrowed(py, move || {
             binpick_core::with_threads(num_threads, || scene.view(&cam, &t, &light))
         })?;
         Ok(PySimView { inner: Arc::new(view) })
@@ -387,7 +388,7 @@ impl PySimView {
     ) -> PyResult<Bound<'py, PyArray3<u8>>> {
         let view = self.inner.clone();
         let n = noise(noise_args);
-        let img = run(py, move || view.ambient_frame(&n, seed))?;
+        let img = run_borrowed(py, move || view.ambient_frame(&n, seed))?;
         let (h, w) = self.shape();
         Ok(image_out(py, img, h, w))
     }
@@ -421,7 +422,8 @@ impl PySimView {
         let n = noise(noise_args);
         let view = self.inner.clone();
         let k = angles.len();
-        let frames = run(py, move || {
+        let num_threads = crate::convert::threads(num_threads)?;
+        let frames = run_borrowed(py, move || {
             binpick_core::with_threads(num_threads, || {
                 let mut all = Vec::new();
                 for (i, a) in angles.iter().enumerate() {
@@ -441,7 +443,7 @@ impl PySimView {
 /// reference_distance mm).
 #[pyfunction]
 fn sim_default_laser(py: Python<'_>) -> PyResult<(Arr<'_>, f64, f64, f64, [f64; 3], f64)> {
-    let l = run(py, || Ok::<_, Error>(Laser::default()))?;
+    let l = run_borrowed(py, || Ok::<_, Error>(Laser::default()))?;
     Ok((
         crate::convert::isometry_to_py(py, &l.t_camera_laser0),
         l.sheet_sigma,
@@ -479,7 +481,7 @@ fn sim_render_checkerboard<'py>(
     let t = isometry(&t_camera_board, "T_camera_board")?;
     let l = laser_args.map(|a| laser(&a.0, a.1, a.2, a.3, a.4, a.5)).transpose()?;
     let (light, n) = (lighting(lighting_args), noise(noise_args));
-    let img = run(py, move || {
+    let img = run_borrowed(py, move || {
         render_checkerboard(
             &cam,
             &b,

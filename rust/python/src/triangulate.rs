@@ -1,7 +1,7 @@
 //! Laser-line triangulation bindings.
 
 use crate::convert::{camera, matrix4, vectors_to_py, CameraArgs};
-use crate::errors::{invalid, run};
+use crate::errors::{invalid, run_borrowed};
 use binpick_core::{isometry_from_matrix, with_threads};
 use binpick_core::{pixel_rays, triangulate_into, FramePose, PointStatus, Sensor};
 use nalgebra::{Matrix4, Vector3};
@@ -29,7 +29,7 @@ fn pixel_rays_py<'py>(
 ) -> PyResult<Bound<'py, pyo3::PyAny>> {
     let cam = camera(&camera_args)?;
     let px = pixel_list(&pixels)?;
-    let rays = run(py, move || pixel_rays(&cam, &px))?;
+    let rays = run_borrowed(py, move || pixel_rays(&cam, &px))?;
     let nan = Vector3::repeat(f64::NAN);
     let v: Vec<Vector3<f64>> = rays.into_iter().map(|r| r.unwrap_or(nan)).collect();
     Ok(vectors_to_py(py, &v).into_any())
@@ -119,7 +119,8 @@ fn triangulate_scan<'py>(
         ));
     }
     let idx: Vec<u32> = idx.iter().map(|&f| f as u32).collect();
-    let (status, kept) = run(py, move || {
+    let num_threads = crate::convert::threads(num_threads)?;
+    let (status, kept) = run_borrowed(py, move || {
         let sensor = Sensor {
             camera: cam,
             t_camera_laser0: isometry_from_matrix("T_camera_laser", &laser)?,
