@@ -175,7 +175,9 @@ def test_unknown_units_list_the_accepted_ones(tmp_path, unit):
 
 INTERRUPTED = textwrap.dedent(
     """
-    import sys, time, numpy as np, binpick
+    import signal, sys, time, numpy as np, binpick
+    # A shell's background job inherits SIGINT ignored; Ctrl-C at a terminal raises KeyboardInterrupt.
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     pts = np.random.default_rng(0).normal(size=(1_000_000, 3))
     print("ready", flush=True)
     t = time.monotonic()
