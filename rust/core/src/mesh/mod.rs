@@ -7,6 +7,8 @@ pub mod parts;
 pub mod sample;
 pub mod sdf;
 mod trimesh;
+#[cfg(test)]
+pub(crate) use trimesh::test_box;
 
 pub use sample::{sample_surface, Density, SurfaceSamples};
 pub use trimesh::{unit_scale, TriMesh};

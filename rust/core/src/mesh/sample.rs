@@ -120,30 +120,7 @@ mod tests {
     use super::*;
 
     fn unit_cube(size: f64) -> TriMesh {
-        let v: Vec<Point> = (0..8)
-            .map(|i| {
-                Point::new(
-                    size * (i & 1) as f64,
-                    size * ((i >> 1) & 1) as f64,
-                    size * ((i >> 2) & 1) as f64,
-                )
-            })
-            .collect();
-        let faces = vec![
-            [0, 2, 1],
-            [1, 2, 3],
-            [4, 5, 6],
-            [5, 7, 6],
-            [0, 1, 4],
-            [1, 5, 4],
-            [2, 6, 3],
-            [3, 6, 7],
-            [0, 4, 2],
-            [2, 4, 6],
-            [1, 3, 5],
-            [3, 7, 5],
-        ];
-        TriMesh::new(v, faces).unwrap()
+        crate::mesh::test_box(Point::origin(), Point::new(size, size, size))
     }
 
     #[test]

@@ -135,3 +135,30 @@ impl TriMesh {
         before - self.faces.len()
     }
 }
+
+/// An axis-aligned box from `lo` to `hi` as 12 outward-facing triangles: the test fixture of
+/// the crate's unit tests (vertex `i` takes `hi` on the axes whose bit is set in `i`).
+#[cfg(test)]
+pub(crate) fn test_box(lo: Point, hi: Point) -> TriMesh {
+    let v: Vec<Point> = (0..8)
+        .map(|i| {
+            let pick = |bit: usize, axis: usize| if (i >> bit) & 1 == 1 { hi[axis] } else { lo[axis] };
+            Point::new(pick(0, 0), pick(1, 1), pick(2, 2))
+        })
+        .collect();
+    let faces = vec![
+        [0, 2, 1],
+        [1, 2, 3],
+        [4, 5, 6],
+        [5, 7, 6],
+        [0, 1, 4],
+        [1, 5, 4],
+        [2, 6, 3],
+        [3, 6, 7],
+        [0, 4, 2],
+        [2, 4, 6],
+        [1, 3, 5],
+        [3, 7, 5],
+    ];
+    TriMesh::new(v, faces).unwrap()
+}

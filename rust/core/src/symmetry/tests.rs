@@ -6,27 +6,9 @@ use crate::mesh::TriMesh;
 type Mesh = (Vec<Point>, Vec<[u32; 3]>);
 
 fn cuboid(half: [f64; 3], offset: V3) -> Mesh {
-    let v = (0..8)
-        .map(|i| {
-            let s = |bit: usize, h: f64| if (i >> bit) & 1 == 1 { h } else { -h };
-            Point::from(V3::new(s(0, half[0]), s(1, half[1]), s(2, half[2])) + offset)
-        })
-        .collect();
-    let faces = vec![
-        [0, 2, 1],
-        [1, 2, 3],
-        [4, 5, 6],
-        [5, 7, 6],
-        [0, 1, 4],
-        [1, 5, 4],
-        [2, 6, 3],
-        [3, 6, 7],
-        [0, 4, 2],
-        [2, 4, 6],
-        [1, 3, 5],
-        [3, 7, 5],
-    ];
-    (v, faces)
+    let h = V3::from(half);
+    let m = crate::mesh::test_box(Point::from(offset - h), Point::from(offset + h));
+    (m.vertices, m.faces)
 }
 
 /// A right prism over a regular `sides`-gon with a vertex on +x, axis z, centred at the origin.

@@ -44,30 +44,10 @@ mod tests {
     use crate::voxel::subsample;
 
     pub(super) fn box_mesh(a: f64, b: f64, c: f64) -> crate::mesh::TriMesh {
-        let v: Vec<Point> = (0..8)
-            .map(|i| {
-                Point::new(
-                    a * ((i & 1) as f64 - 0.5),
-                    b * (((i >> 1) & 1) as f64 - 0.5),
-                    c * (((i >> 2) & 1) as f64 - 0.5),
-                )
-            })
-            .collect();
-        let faces = vec![
-            [0, 2, 1],
-            [1, 2, 3],
-            [4, 5, 6],
-            [5, 7, 6],
-            [0, 1, 4],
-            [1, 5, 4],
-            [2, 6, 3],
-            [3, 6, 7],
-            [0, 4, 2],
-            [2, 4, 6],
-            [1, 3, 5],
-            [3, 7, 5],
-        ];
-        crate::mesh::TriMesh::new(v, faces).unwrap()
+        crate::mesh::test_box(
+            Point::new(-a / 2.0, -b / 2.0, -c / 2.0),
+            Point::new(a / 2.0, b / 2.0, c / 2.0),
+        )
     }
 
     pub(super) fn prepared(points: &[Point], normals: &[Vector3<f64>], diameter: f64) -> PpfModel {
