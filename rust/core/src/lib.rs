@@ -57,7 +57,9 @@ pub use registration::ppf::{DetectConfig, PpfConfig, PpfModel};
 pub use registration::{icp, IcpConfig, IcpMethod, IcpResult, IcpTarget, RobustKernel};
 pub use rng::Rng;
 pub use search::{KdIndex, Neighbour};
-pub use symmetry::{detect_symmetries, Symmetries, SymmetryConfig};
+pub use symmetry::{
+    detect_near_symmetries, detect_symmetries, NearSymmetry, Symmetries, SymmetryConfig, NEAR_AGREEMENT,
+};
 pub use triangulate::{
     intersect_ray_plane, laser_plane, pixel_rays, triangulate, triangulate_into, FramePose, PointStatus, Sensor,
     Triangulation,

@@ -5,6 +5,7 @@
 //! model points on the scene), give the best few a short ICP, and the winner is refined on all
 //! of the object's points. Their tunables are [`CcpPathParams`].
 
+use super::judge::Judge;
 use super::scene::scene_indices;
 use super::{CoarseMethod, Laps, PoseConfig, PoseEstimate, PoseModel, Timings};
 use crate::error::{Error, Result};
@@ -173,6 +174,7 @@ pub(super) fn run(
     model: &PoseModel,
     cfg: &PoseConfig,
     method: CoarseMethod,
+    judge: &Judge,
     timings: &mut Timings,
 ) -> Result<PoseEstimate> {
     let mut laps = Laps::new(timings);
@@ -195,7 +197,7 @@ pub(super) fn run(
         };
         let object: Vec<Point> = region.iter().map(|&i| pts[i]).collect();
         laps.lap("segmentation");
-        match fit_region(scene, pts, &object, model, cfg, method, sampling, &mut laps) {
+        match fit_region(scene, pts, &object, model, cfg, method, sampling, judge, &mut laps) {
             Err(Error::NoObjectFound { reason }) => {
                 for &i in &region {
                     excluded[i] = true;
@@ -241,6 +243,7 @@ fn fit_region(
     cfg: &PoseConfig,
     method: CoarseMethod,
     sampling: Sampling,
+    judge: &Judge,
     laps: &mut Laps<'_>,
 ) -> Result<PoseEstimate> {
     reject_flat_region(object, model)?;
@@ -265,6 +268,9 @@ fn fit_region(
     let t_model_scene = refined.t_target_source;
     let (score, rmse) = verify(object, model, cfg, &t_model_scene, checks.tol)?;
     let t_scene_model = t_model_scene.inverse();
+    // The one judge every method passes: a pose the scan sees through, that shows too little of
+    // itself or that lies through the bin is no pose, and the next region is tried.
+    let evidence = judge.verdict(model, &t_scene_model, cfg)?;
     let indices = scene_indices(pts, model, &t_scene_model, checks.tol);
     laps.lap("verification");
     Ok(PoseEstimate {
@@ -276,8 +282,8 @@ fn fit_region(
         timings: Vec::new(),
         iterations: refined.iterations,
         method,
-        visible_fraction: None,
-        occluded_fraction: None,
+        visible_fraction: Some(evidence.visible_fraction()),
+        occluded_fraction: Some(evidence.occluded_fraction()),
         pickability: None,
     })
 }

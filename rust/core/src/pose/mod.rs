@@ -7,6 +7,7 @@
 //! otherwise the pipeline answers `NoObjectFound` rather than a guess.
 
 mod ccp_path;
+mod judge;
 mod model;
 mod ppf_path;
 mod scene;
@@ -21,6 +22,7 @@ pub use types::{CoarseMethod, PoseConfig, PoseEstimate, Timings};
 use crate::error::{Error, Result};
 use crate::geometry::Point;
 use ccp_path::run;
+use judge::Judge;
 use ppf_path::detect;
 use scene::{check_scene, remove_bin, DetectionScene};
 use std::time::Instant;
@@ -45,15 +47,17 @@ impl<'a> Laps<'a> {
     }
 }
 
-/// Estimates the pose of the top pickable object of `scene` (N×3, mm) against `model`.
+/// Estimates the pose of the top pickable object of `scene` (N×3, mm) against `model`: exactly
+/// the first of [`estimate_poses`] for the same configuration (the search does not depend on
+/// how many instances are asked for, up to [`SEARCH_INSTANCES`]).
 pub fn estimate_pose(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstimate> {
-    let one = PoseConfig {
-        max_instances: 1,
-        ..cfg.clone()
-    };
-    let mut all = estimate_poses(scene, model, &one)?;
+    let mut all = estimate_poses(scene, model, cfg)?;
     Ok(all.swap_remove(0))
 }
+
+/// The search (hypotheses voted, poses polished) is sized for at least this many instances, so
+/// that asking for fewer only truncates the answer.
+pub const SEARCH_INSTANCES: usize = 5;
 
 /// Estimates up to `cfg.max_instances` instances, most pickable first. CCP and the centroid
 /// baseline find the top object only; PPF finds every instance it can confirm.
@@ -76,7 +80,7 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
     let method = resolve_method(cfg.method, model);
     // Bin removal: PPF removes support planes itself, on its voxel grid.
     let clock = Instant::now();
-    let kept = remove_bin(
+    let (kept, removed) = remove_bin(
         scene,
         model,
         cfg,
@@ -86,7 +90,11 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
     let found = match method {
         CoarseMethod::Ccp | CoarseMethod::Centroid => {
-            vec![reindex(run(scene, &pts, model, cfg, method, &mut timings)?, &kept)]
+            let judge = Judge::new(scene, &pts, removed, model, cfg);
+            vec![reindex(
+                run(scene, &pts, model, cfg, method, &judge, &mut timings)?,
+                &kept,
+            )]
         }
         CoarseMethod::Ppf => detect_instances(scene, &pts, &kept, model, cfg, &mut timings)?.0,
         CoarseMethod::Auto => auto(scene, &pts, &kept, model, cfg, &mut timings)?,
@@ -137,15 +145,17 @@ fn auto(
 ) -> Result<Vec<PoseEstimate>> {
     let detected = detect_instances(scene, pts, kept, model, cfg, timings);
     let clock = Instant::now();
-    let ccp_kept = if cfg.bin.is_some() {
-        kept.to_vec()
+    let (ccp_kept, removed) = if cfg.bin.is_some() {
+        (kept.to_vec(), Vec::new())
     } else {
         remove_bin(scene, model, cfg, true)?
     };
-    timings.push(("ccp_bin_removal", clock.elapsed().as_secs_f64() * 1e3));
     let ccp_pts: Vec<Point> = ccp_kept.iter().map(|&i| scene[i]).collect();
+    let judge = Judge::new(scene, &ccp_pts, removed, model, cfg);
+    timings.push(("ccp_bin_removal", clock.elapsed().as_secs_f64() * 1e3));
     let mut ccp_timings = Vec::new();
-    let by_ccp = run(scene, &ccp_pts, model, cfg, CoarseMethod::Ccp, &mut ccp_timings).map(|e| reindex(e, &ccp_kept));
+    let by_ccp =
+        run(scene, &ccp_pts, model, cfg, CoarseMethod::Ccp, &judge, &mut ccp_timings).map(|e| reindex(e, &ccp_kept));
     timings.extend(ccp_timings.into_iter().map(|(name, ms)| (ccp_stage(name), ms)));
     match (detected, by_ccp) {
         (Ok((found, prepared)), Ok(c)) => Ok(arbitrate(found, c, &prepared, model, cfg.max_instances)),
@@ -176,8 +186,8 @@ fn arbitrate(
     model: &PoseModel,
     max_instances: usize,
 ) -> Vec<PoseEstimate> {
-    let e = prepared.judge(model, &c.t_scene_model);
-    let first = prepared.judge(model, &found[0].t_scene_model);
+    let e = prepared.judge.evidence(model, &c.t_scene_model);
+    let first = prepared.judge.evidence(model, &found[0].t_scene_model);
     if e.quality() > first.quality() {
         c.visible_fraction = Some(e.visible_fraction());
         c.occluded_fraction = Some(e.occluded_fraction());

@@ -8,7 +8,7 @@ use crate::registration::ppf::{PpfConfig, PpfModel};
 use crate::registration::IcpTarget;
 use crate::search::KdIndex;
 use crate::segment::point_spacing;
-use crate::symmetry::{detect_symmetries, Symmetries, SymmetryConfig};
+use crate::symmetry::{detect_near_symmetries, detect_symmetries, NearSymmetry, Symmetries, SymmetryConfig};
 use crate::voxel::subsample;
 use nalgebra::Vector3;
 
@@ -32,6 +32,9 @@ pub struct PoseModel {
     pub spacing: f64,
     /// The part's proper symmetries (about its surface centroid).
     pub symmetries: Symmetries,
+    /// Rotations that map most of the surface onto itself without being symmetries, with the
+    /// features that break them: the poses a scan must tell apart.
+    pub near_symmetries: Vec<NearSymmetry>,
     /// Largest distance of a surface point from the symmetry centre, mm.
     pub radius: f64,
     /// Smallest extent of the part along its principal axes, mm.
@@ -61,6 +64,7 @@ impl PoseModel {
         }
         let spacing = point_spacing(&points, &KdIndex::new(&points));
         let symmetries = detect_symmetries(&points, &normals, &SymmetryConfig::default())?;
+        let near_symmetries = detect_near_symmetries(&points, &normals, &symmetries, &SymmetryConfig::default())?;
         let c = symmetries.center;
         let radius = points.iter().map(|p| (p - c).norm()).fold(0.0, f64::max);
         let (_, cov) = crate::geometry::covariance(&points);
@@ -87,6 +91,7 @@ impl PoseModel {
             layout,
             spacing,
             symmetries,
+            near_symmetries,
             radius,
             thickness,
             ppf: None,

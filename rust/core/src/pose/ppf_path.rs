@@ -6,6 +6,7 @@
 //! height map and the reported indices), a voxel grid at a third of the PPF step (normals and
 //! ICP), and an even subsample at the PPF step (voting).
 
+use super::judge::Judge;
 use super::scene::{scene_indices, DetectionScene};
 use super::{CoarseMethod, Laps, PoseConfig, PoseEstimate, PoseModel, Timings};
 use crate::error::{Error, Result};
@@ -69,10 +70,10 @@ impl DetectionScene {
         let t_scene_model = r.t_target_source.inverse();
         let evidence = depth_evidence(
             model.target(),
-            &self.heights,
+            &self.judge.heights,
             &t_scene_model,
-            Self::probe_step(model, 300),
-            self.tol,
+            Judge::probe_step(model, 300),
+            self.judge.tol,
             false,
         );
         Some(Judged {
@@ -93,11 +94,11 @@ impl DetectionScene {
         if local.len() < 12 {
             return None;
         }
-        let fine = IcpConfig::robust_plane((3.0 * self.tol).max(0.5 * step), 20, 1e-6, 1e-4);
+        let fine = IcpConfig::robust_plane((3.0 * self.judge.tol).max(0.5 * step), 20, 1e-6, 1e-4);
         let r = icp(&local, model.target(), &j.t_scene_model.inverse(), &fine).ok()?;
         let t_scene_model = r.t_target_source.inverse();
-        let evidence = self.judge(model, &t_scene_model);
-        let tol2 = self.tol * self.tol;
+        let evidence = self.judge.evidence(model, &t_scene_model);
+        let tol2 = self.judge.tol * self.judge.tol;
         let mut sq = 0.0;
         // Every voxel point in reach, not the thinned ICP sample: supports are compared as sets.
         let support: Vec<usize> = self
@@ -131,17 +132,10 @@ impl DetectionScene {
     }
 }
 
-/// Of the surface nothing else covers, the least share the scan must confirm: a pose that hangs
-/// over cells without data (a part matched onto the faces of another shape) fails here.
-const MIN_SUPPORTED: f64 = 0.5;
-
-/// Whether a judged pose is an instance: the scan confirms it wherever it can judge, it shows
-/// enough of its surface, and not much of it hangs over cells without data.
-fn accepted(e: &Evidence, cfg: &PoseConfig) -> bool {
-    e.coverage() >= cfg.min_coverage
-        && e.seen >= 12
-        && e.visible_fraction() >= 0.08
-        && e.supported_fraction() >= MIN_SUPPORTED
+/// The instances the search is sized for: as many as asked, and never fewer than
+/// [`super::SEARCH_INSTANCES`], so that asking for fewer only truncates the answer.
+fn search_instances(cfg: &PoseConfig) -> usize {
+    cfg.max_instances.max(super::SEARCH_INSTANCES)
 }
 
 /// All instances found by PPF, most pickable first (at most `cfg.max_instances`), and the
@@ -169,7 +163,7 @@ pub(super) fn detect(
             ),
         });
     }
-    let out = estimates(instances, points, model, cfg, scene.tol);
+    let out = estimates(instances, points, model, cfg, scene.judge.tol);
     laps.lap("verification");
     Ok((out, scene))
 }
@@ -193,7 +187,7 @@ fn vote(
     let sparse_index = KdIndex::new(&sparse);
     laps.lap("normals");
     let detect_cfg = DetectConfig {
-        max_hypotheses: cfg.detect.max_hypotheses.max(8 * cfg.max_instances),
+        max_hypotheses: cfg.detect.max_hypotheses.max(8 * search_instances(cfg)),
         ..cfg.detect
     };
     let votes = ppf.vote(&sparse, &sparse_normals, &sparse_index, &detect_cfg);
@@ -223,7 +217,7 @@ fn screen_and_polish(
         .filter_map(|h| scene.screen(model, step, &h.t_scene_model))
         .collect();
     screened.sort_by(|a, b| b.evidence.quality().total_cmp(&a.evidence.quality()));
-    let polish_count = 2 * cfg.max_instances + 1;
+    let polish_count = 2 * search_instances(cfg) + 1;
     let min_gap = 0.5 * model.thickness;
     let mut chosen: Vec<&Judged> = Vec::with_capacity(polish_count);
     for j in &screened {
@@ -260,7 +254,7 @@ fn one_pose_per_instance(
     let mut instances: Vec<Judged> = Vec::new();
     for j in judged
         .into_iter()
-        .filter(|j| accepted(&j.evidence, cfg) && scene.physically_possible(model, &j.t_scene_model))
+        .filter(|j| scene.judge.check(&j.evidence, model, &j.t_scene_model, cfg).is_ok())
     {
         let shared = j.support.iter().filter(|&&i| owner[i]).count();
         if j.support.len() < 12 || shared as f64 > 0.3 * j.support.len() as f64 {
@@ -304,9 +298,13 @@ fn estimates(
         .collect()
 }
 
+/// An instance with more than this share of its facing surface under other objects is covered.
+const COVERED: f64 = 0.1;
+
 /// Pickability in [0, 1]: height among the instances (half), the confirmed share of the facing
 /// surface (a third) and freedom from parts on top (a sixth). Returns the instances with their
-/// pickability, most pickable first.
+/// pickability, uncovered instances first (a covered part is not picked while an uncovered one
+/// lies free), then most pickable first.
 fn rank(instances: Vec<Judged>, model: &PoseModel, cfg: &PoseConfig) -> Vec<(Judged, f64)> {
     let up = cfg.up.normalize();
     let heights: Vec<f64> = instances.iter().map(|j| j.center(model).coords.dot(&up)).collect();
@@ -325,6 +323,7 @@ fn rank(instances: Vec<Judged>, model: &PoseModel, cfg: &PoseConfig) -> Vec<(Jud
             (j, pick)
         })
         .collect();
-    ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let key = |(j, pick): &(Judged, f64)| pick + f64::from(u8::from(j.evidence.occluded_fraction() <= COVERED));
+    ranked.sort_by(|a, b| key(b).total_cmp(&key(a)));
     ranked
 }

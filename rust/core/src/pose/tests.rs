@@ -4,7 +4,7 @@
 
 use super::scene::{remove_bin, DetectionScene};
 use super::*;
-use crate::geometry::transform_points;
+use crate::geometry::{transform_points, BinBox};
 use crate::mesh::parts::{tee, TeeParams};
 use crate::mesh::{sample_surface, Density};
 use crate::registration::ccp::BranchLayout;
@@ -132,9 +132,16 @@ fn pure_noise_is_no_object() {
     let noise: Vec<Point> = (0..4000)
         .map(|_| Point::new(rng.range(300.0, 500.0), rng.range(-100.0, 100.0), rng.range(0.0, 150.0)))
         .collect();
-    // PPF's judge rejects noise. The CCP path's fitness check alone does not (it accepts a
-    // pose on a few noise points), so CCP, the centroid baseline and Auto are not asserted here.
-    assert_no_object(&noise, &[CoarseMethod::Ppf]);
+    // The one judge rejects a pose on noise whichever method proposed it.
+    assert_no_object(
+        &noise,
+        &[
+            CoarseMethod::Ppf,
+            CoarseMethod::Ccp,
+            CoarseMethod::Centroid,
+            CoarseMethod::Auto,
+        ],
+    );
 }
 
 #[test]
@@ -171,11 +178,11 @@ fn arbitration_keeps_the_better_verified_pose() {
     let auto = estimate_pose(&scene, model, &config(CoarseMethod::Auto)).unwrap();
     // Judge both on the terms the arbitration uses: the PPF path's prepared scene.
     let cfg = config(CoarseMethod::Auto);
-    let kept = remove_bin(&scene, model, &cfg, false).unwrap();
+    let (kept, _) = remove_bin(&scene, model, &cfg, false).unwrap();
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
     let prepared = DetectionScene::new(&scene, &pts, model, model.ppf.as_ref().unwrap(), &cfg).unwrap();
-    let q_ccp = prepared.judge(model, &by_ccp.t_scene_model).quality();
-    let q_ppf = prepared.judge(model, &by_ppf.t_scene_model).quality();
+    let q_ccp = prepared.judge.evidence(model, &by_ccp.t_scene_model).quality();
+    let q_ppf = prepared.judge.evidence(model, &by_ppf.t_scene_model).quality();
     let (winner, want) = if q_ccp > q_ppf {
         (&by_ccp, CoarseMethod::Ccp)
     } else {
@@ -186,5 +193,111 @@ fn arbitration_keeps_the_better_verified_pose() {
     // The CCP pose that wins is judged, so it reports the depth test's fractions.
     if want == CoarseMethod::Ccp {
         assert!(auto.visible_fraction.is_some() && by_ccp.visible_fraction.is_none());
+    }
+}
+
+/// The floor and walls of an empty 300 × 300 × 120 mm bin seen from above, every 2 mm.
+fn empty_bin() -> (Vec<Point>, BinBox) {
+    let mut pts = Vec::new();
+    for i in 0..150 {
+        for j in 0..150 {
+            pts.push(Point::new(250.0 + 2.0 * i as f64, -150.0 + 2.0 * j as f64, 0.0));
+        }
+    }
+    for k in 0..150 {
+        for h in 0..60 {
+            let (s, z) = (2.0 * k as f64, 2.0 * h as f64);
+            pts.push(Point::new(250.0 + s, -150.0, z));
+            pts.push(Point::new(250.0 + s, 150.0, z));
+            pts.push(Point::new(250.0, -150.0 + s, z));
+            pts.push(Point::new(550.0, -150.0 + s, z));
+        }
+    }
+    let bin = BinBox {
+        min: Point::new(250.0, -150.0, 0.0),
+        max: Point::new(550.0, 150.0, 120.0),
+    };
+    (pts, bin)
+}
+
+#[test]
+fn an_empty_bin_is_no_object_with_and_without_its_box() {
+    let (scene, bin) = empty_bin();
+    let (model, _) = tee_model();
+    for method in [
+        CoarseMethod::Ppf,
+        CoarseMethod::Ccp,
+        CoarseMethod::Centroid,
+        CoarseMethod::Auto,
+    ] {
+        for with_box in [false, true] {
+            let cfg = PoseConfig {
+                bin: with_box.then_some(bin),
+                ..config(method)
+            };
+            match estimate_poses(&scene, model, &cfg) {
+                Err(Error::NoObjectFound { .. }) => {}
+                other => panic!("{method:?}, box {with_box}: expected NoObjectFound, got {other:?}"),
+            }
+        }
+    }
+}
+
+#[test]
+fn a_pile_of_another_part_is_no_object() {
+    // Flat blocks 60 × 40 × 12 mm strewn on a floor: boxes, not tees.
+    let mut rng = Rng::new(11);
+    let block = crate::mesh::test_box(Point::new(-30.0, -20.0, -6.0), Point::new(30.0, 20.0, 6.0));
+    let mut scene: Vec<Point> = Vec::new();
+    for k in 0..6 {
+        let yaw = UnitQuaternion::from_scaled_axis(Vector3::z() * rng.range(-PI, PI));
+        let t = Translation3::new(330.0 + 60.0 * (k % 3) as f64, -40.0 + 80.0 * (k / 3) as f64, 6.0);
+        scene.extend(top_view(&block, &Isometry3::from_parts(t, yaw), k));
+    }
+    for i in 0..150 {
+        for j in 0..150 {
+            let p = Point::new(250.0 + 2.0 * i as f64, -150.0 + 2.0 * j as f64, 0.0);
+            if !scene.iter().any(|q| (q.x - p.x).abs() < 1.0 && (q.y - p.y).abs() < 1.0) {
+                scene.push(p);
+            }
+        }
+    }
+    assert_no_object(
+        &scene,
+        &[
+            CoarseMethod::Ppf,
+            CoarseMethod::Ccp,
+            CoarseMethod::Centroid,
+            CoarseMethod::Auto,
+        ],
+    );
+}
+
+#[test]
+fn the_judge_refuses_a_pose_through_the_floor_and_accepts_the_truth() {
+    let (model, mesh) = tee_model();
+    let mut rng = Rng::new(5);
+    let truth = random_pose(&mut rng);
+    let mut scene = top_view(mesh, &truth, 5);
+    let floor_z = scene.iter().map(|p| p.z).fold(f64::INFINITY, f64::min) - 0.5;
+    let c = truth * model.symmetries.center;
+    for i in -80..80 {
+        for j in -80..80 {
+            let p = Point::new(c.x + 2.0 * i as f64, c.y + 2.0 * j as f64, floor_z);
+            if (p - c).xy().norm() > model.radius {
+                scene.push(p);
+            }
+        }
+    }
+    let cfg = config(CoarseMethod::Ppf);
+    let (kept, removed) = remove_bin(&scene, model, &cfg, true).unwrap();
+    let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
+    let judge = super::judge::Judge::new(&scene, &pts, removed, model, &cfg);
+    assert!(!judge.supports.is_empty(), "the floor is a support");
+    assert!(judge.verdict(model, &truth, &cfg).is_ok());
+    let sunk = Translation3::new(0.0, 0.0, -0.5 * model.thickness) * truth;
+    match judge.verdict(model, &sunk, &cfg) {
+        Err(Error::NoObjectFound { reason }) => assert!(reason.contains("floor"), "{reason}"),
+        other => panic!("a pose half through the floor passed: {other:?}"),
     }
 }

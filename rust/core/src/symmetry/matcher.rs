@@ -135,6 +135,19 @@ impl<'a> Matcher<'a> {
         (n - fails) as f64 / n as f64
     }
 
+    /// Per sample (all of them, not the test subsample): whether `r` about `c` fails to map it
+    /// onto the surface.
+    pub(super) fn failures(&self, r: &Rot, c: &Point) -> Vec<bool> {
+        self.points
+            .iter()
+            .zip(&self.normals)
+            .map(|(p, n)| {
+                let m = c + r * (p - c);
+                self.correspond(&m, &(r * n), self.tol, true).is_none()
+            })
+            .collect()
+    }
+
     fn passes(&self, r: &Rot, c: &Point) -> bool {
         self.agreement(r, c) >= self.min_agreement
     }

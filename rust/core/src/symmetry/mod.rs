@@ -35,10 +35,12 @@ use std::f64::consts::{PI, TAU};
 
 mod groups;
 mod matcher;
+mod near;
 #[cfg(test)]
 mod tests;
 
 use matcher::Matcher;
+pub use near::{detect_near_symmetries, NearSymmetry, NEAR_AGREEMENT};
 
 type V3 = Vector3<f64>;
 type Rot = UnitQuaternion<f64>;

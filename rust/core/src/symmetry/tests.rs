@@ -361,3 +361,70 @@ fn bad_input_is_rejected() {
     assert!(none.is_trivial());
     assert_eq!(none.transforms(0.1).len(), 1);
 }
+
+/// Near-symmetries of `mesh` (sampled every `spacing` mm), with its proper group.
+fn near_of(mesh: Mesh, spacing: f64) -> (Symmetries, Vec<NearSymmetry>) {
+    let mesh = TriMesh::new(mesh.0, mesh.1).unwrap();
+    let s = sample_surface(&mesh, Density::Spacing(spacing), 3).unwrap();
+    let cfg = SymmetryConfig::default();
+    let sym = detect_symmetries(&s.points, &s.normals, &cfg).unwrap();
+    let near = detect_near_symmetries(&s.points, &s.normals, &sym, &cfg).unwrap();
+    (sym, near)
+}
+
+#[test]
+fn a_block_with_a_boss_has_its_three_half_turns_as_near_symmetries_broken_at_the_boss() {
+    // 60 × 40 × 20 mm block with a 12 × 12 × 3 mm boss on top near one corner.
+    let boss_centre = V3::new(20.0, 12.0, 11.5);
+    let block = merge(&[
+        cuboid([30.0, 20.0, 10.0], V3::zeros()),
+        cuboid([6.0, 6.0, 1.5], boss_centre),
+    ]);
+    let (sym, near) = near_of(block, 1.0);
+    assert!(sym.is_trivial(), "the boss breaks every symmetry: {sym:?}");
+    assert_eq!(near.len(), 3, "{near:?}");
+    for n in &near {
+        let angle = n.angle.expect("discrete");
+        assert!((angle - PI).abs() < 2f64.to_radians(), "half turns, got {angle}");
+        assert!([V3::x(), V3::y(), V3::z()].iter().any(|a| n.axis.dot(a).abs() > 0.999));
+        assert!(n.agreement >= NEAR_AGREEMENT && n.agreement < 0.98, "{}", n.agreement);
+        // The feature is the boss and the place it maps to: near the boss or its image.
+        let image = n.transform(0.0) * Point::from(boss_centre);
+        let near_boss = n
+            .feature
+            .iter()
+            .filter(|p| (p.coords - boss_centre).norm() < 9.0 || (*p - image).norm() < 9.0)
+            .count();
+        assert!(
+            near_boss as f64 > 0.9 * n.feature.len() as f64,
+            "{near_boss} of {}",
+            n.feature.len()
+        );
+    }
+}
+
+#[test]
+fn a_shaft_with_a_flat_has_a_continuous_near_axis_and_a_plain_shaft_none() {
+    // A 48-gon shaft, radius 10 mm, 80 mm long, round within the tolerance; with a 3 mm flat
+    // key on its side it is round no more.
+    let shaft = prism(48, 10.0, 40.0);
+    let (sym, near) = near_of(shaft.clone(), 1.0);
+    assert!(sym.continuous_axis.is_some());
+    assert!(
+        near.iter().all(|n| n.angle.is_some()),
+        "no continuous near axis: {near:?}"
+    );
+    let keyed = merge(&[shaft, cuboid([1.5, 2.0, 30.0], V3::new(10.5, 0.0, 0.0))]);
+    let (sym, near) = near_of(keyed, 1.0);
+    assert!(sym.continuous_axis.is_none(), "{sym:?}");
+    let cont = near.iter().find(|n| n.angle.is_none()).expect("a continuous near axis");
+    assert!(cont.axis.z.abs() > 0.999);
+    assert!(!cont.feature.is_empty());
+    // The feature is the key, but for a few samples at sampling gaps.
+    let off = cont.feature.iter().filter(|p| p.x <= 5.0).count();
+    assert!(
+        off * 50 <= cont.feature.len(),
+        "{off} of {} off the key",
+        cont.feature.len()
+    );
+}

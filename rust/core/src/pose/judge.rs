@@ -1,0 +1,215 @@
+//! The one judge every method's pose passes, whatever found it (CCP, the centroid baseline,
+//! PPF): the depth test against the scan's height map, a minimum of evidence relative to the
+//! part's visible surface, and no pose through the bin's floor or walls or the removed support
+//! planes.
+
+use super::{PoseConfig, PoseModel};
+use crate::error::{Error, Result};
+use crate::geometry::{BinBox, Plane, Point};
+use crate::registration::ppf::PpfConfig;
+use crate::registration::verify::{depth_evidence, Evidence, HeightMap};
+use nalgebra::{Isometry3, Vector3};
+
+/// Of the surface nothing else covers, the least share the scan must confirm: a pose that hangs
+/// over cells without data (a part matched onto the faces of another shape) fails here.
+const MIN_SUPPORTED: f64 = 0.5;
+/// The least share of the surface the sensor should see that the scan must confirm.
+const MIN_VISIBLE: f64 = 0.08;
+/// The fewest confirmed probe points (of about 2000 over the whole part).
+const MIN_SEEN: usize = 12;
+/// Probe points of the judge over the model's dense surface.
+const JUDGE_PROBES: usize = 2000;
+
+/// The scene as the judge sees it.
+pub(crate) struct Judge {
+    /// The height map of the whole scene (the bin's floor is evidence too: surface predicted
+    /// above a visible floor is surface where the sensor saw free space).
+    pub heights: HeightMap,
+    /// Depth-test and inlier tolerance, mm.
+    pub tol: f64,
+    /// Support surfaces no part can pass through: the bin's floor and walls (from the bin box),
+    /// or the floor-like support planes removed without one; normals point to the free side.
+    pub supports: Vec<Plane>,
+}
+
+/// The PPF step of `model` (its table's, or the default table's when it has none): the scale of
+/// the judge's tolerance and height-map cells.
+pub(super) fn judge_step(model: &PoseModel) -> f64 {
+    model
+        .ppf
+        .as_ref()
+        .map(|p| p.step())
+        .unwrap_or(PpfConfig::default().sampling_ratio * model.diameter)
+}
+
+/// Tolerance of the depth test and of inliers for a PPF step (mm): 0.12 of the step, not below
+/// 1 mm (scan noise and the voxel means' bias on curved surfaces).
+pub(super) fn tolerance(step: f64) -> f64 {
+    (0.12 * step).max(1.0)
+}
+
+/// Voxel size of the detection grid for a PPF step, mm.
+pub(super) fn voxel_size(step: f64) -> f64 {
+    (step / 3.0).max(0.5)
+}
+
+impl Judge {
+    /// The judge of `scene_all` for `model`: `removed` are the support planes bin removal took
+    /// out (unused with a bin box), `remaining` the points it kept.
+    pub fn new(
+        scene_all: &[Point],
+        remaining: &[Point],
+        removed: Vec<Plane>,
+        model: &PoseModel,
+        cfg: &PoseConfig,
+    ) -> Self {
+        let step = judge_step(model);
+        let tol = tolerance(step);
+        let up = cfg.up.normalize();
+        let supports = match &cfg.bin {
+            Some(bin) => bin_walls(bin),
+            None => floors_below(remaining, removed, &up, tol),
+        };
+        Judge {
+            heights: HeightMap::fitted(scene_all, &up, (0.5 * voxel_size(step)).max(1.0)),
+            tol,
+            supports,
+        }
+    }
+
+    /// Probe stride over the model's dense points for about `n` probes.
+    pub(super) fn probe_step(model: &PoseModel, n: usize) -> usize {
+        (model.target().points().len() / n.max(1)).max(1)
+    }
+
+    /// The depth test of a pose with the dense probe.
+    pub fn evidence(&self, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> Evidence {
+        depth_evidence(
+            model.target(),
+            &self.heights,
+            t_scene_model,
+            Self::probe_step(model, JUDGE_PROBES),
+            self.tol,
+            true,
+        )
+    }
+
+    /// Fraction of the posed part's surface more than twice the tolerance beyond a support.
+    fn through_supports(&self, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> f64 {
+        if self.supports.is_empty() {
+            return 0.0;
+        }
+        let pts = model.target().points();
+        let step = (pts.len() / 500).max(1);
+        let inside = pts
+            .iter()
+            .step_by(step)
+            .filter(|p| {
+                let q = t_scene_model * *p;
+                self.supports
+                    .iter()
+                    .any(|s| s.normal.dot(&q.coords) < s.offset - 2.0 * self.tol)
+            })
+            .count();
+        inside as f64 / pts.len().div_ceil(step) as f64
+    }
+
+    /// The verdict on a pose: its evidence when it passes [`Judge::check`], otherwise
+    /// `NoObjectFound` saying which test failed.
+    pub fn verdict(&self, model: &PoseModel, t_scene_model: &Isometry3<f64>, cfg: &PoseConfig) -> Result<Evidence> {
+        let e = self.evidence(model, t_scene_model);
+        self.check(&e, model, t_scene_model, cfg)?;
+        Ok(e)
+    }
+
+    /// Whether a pose with depth evidence `e` is an instance: the scan confirms it wherever it
+    /// can judge, it shows enough of its surface, not much of it hangs over cells without data
+    /// and it passes through no support. The error says which test failed.
+    pub fn check(
+        &self,
+        e: &Evidence,
+        model: &PoseModel,
+        t_scene_model: &Isometry3<f64>,
+        cfg: &PoseConfig,
+    ) -> Result<()> {
+        let fail = |what: String| Err(Error::NoObjectFound { reason: what });
+        let through = self.through_supports(model, t_scene_model);
+        if through >= 0.02 {
+            return fail(format!(
+                "the best pose puts {:.0} % of the part through the bin's floor or walls",
+                100.0 * through
+            ));
+        }
+        if e.coverage() < cfg.min_coverage {
+            return fail(format!(
+                "the scan confirms only {:.0} % of the best pose's surface where it can judge it (need {:.0} %); the rest is where the sensor saw free space",
+                100.0 * e.coverage(),
+                100.0 * cfg.min_coverage
+            ));
+        }
+        if e.seen < MIN_SEEN || e.visible_fraction() < MIN_VISIBLE {
+            return fail(format!(
+                "the scan shows only {:.0} % of the surface the best pose should show (need {:.0} %)",
+                100.0 * e.visible_fraction(),
+                100.0 * MIN_VISIBLE
+            ));
+        }
+        if e.supported_fraction() < MIN_SUPPORTED {
+            return fail(format!(
+                "{:.0} % of the best pose's uncovered surface lies over cells the scan holds nothing in (need at most {:.0} %)",
+                100.0 * (1.0 - e.supported_fraction()),
+                100.0 * (1.0 - MIN_SUPPORTED)
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The bin's floor and four walls, normals toward the inside.
+fn bin_walls(bin: &BinBox) -> Vec<Plane> {
+    let (lo, hi) = (bin.min.coords, bin.max.coords);
+    let mut walls = vec![Plane {
+        normal: Vector3::z(),
+        offset: lo.z,
+    }];
+    for k in 0..2 {
+        let e = Vector3::ith(k, 1.0);
+        walls.push(Plane {
+            normal: e,
+            offset: lo[k],
+        });
+        walls.push(Plane {
+            normal: -e,
+            offset: -hi[k],
+        });
+    }
+    walls
+}
+
+/// Of the removed support planes, the floors (which side of a wall is free is not known
+/// without the bin) with the scene above them (a bin's rim is a wide plane too, with parts
+/// below), normals toward `up`.
+fn floors_below(remaining: &[Point], planes: Vec<Plane>, up: &Vector3<f64>, tol: f64) -> Vec<Plane> {
+    planes
+        .into_iter()
+        .filter(|p| p.normal.dot(up).abs() > 0.8)
+        .map(|p| {
+            if p.normal.dot(up) > 0.0 {
+                p
+            } else {
+                Plane {
+                    normal: -p.normal,
+                    offset: -p.offset,
+                }
+            }
+        })
+        .filter(|p| {
+            remaining
+                .iter()
+                .filter(|q| p.normal.dot(&q.coords) < p.offset - 2.0 * tol)
+                .count()
+                * 50
+                < remaining.len()
+        })
+        .collect()
+}

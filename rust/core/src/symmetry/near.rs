@@ -1,0 +1,118 @@
+//! Near-symmetries: rotations that map most of a part's surface onto itself without being
+//! symmetries (a shaft whose keyway breaks its round, a plate with one cut corner, a tee whose
+//! boss stands proud of the run), and the surface regions that break each one — the feature a
+//! scan must show to tell the poses apart.
+//!
+//! They are found as the symmetry group of the same sample at a lower agreement
+//! ([`NEAR_AGREEMENT`]): its elements (and a continuous axis) that the proper group lacks are the
+//! near-symmetries, one per class modulo the proper group.
+
+use super::matcher::Matcher;
+use super::*;
+
+/// A rotation is a near-symmetry when it maps at least this fraction of the surface onto itself.
+pub const NEAR_AGREEMENT: f64 = 0.85;
+/// Turns of a continuous near axis whose failures intersect to its feature, degrees.
+const FEATURE_TURNS_DEG: [f64; 3] = [61.0, 131.0, 180.0];
+
+/// A rotation about [`Symmetries::center`] that maps most of the surface onto itself, or a
+/// continuous family of them about one axis.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NearSymmetry {
+    /// The point the axis passes through, model frame, mm (the centre of the near group: with
+    /// a feature off-centre it is not the surface centroid).
+    pub center: Point,
+    /// Unit axis of the rotation, model frame.
+    pub axis: Vector3<f64>,
+    /// The turn, radians; `None` for a continuous near axis (every turn about it nearly maps).
+    pub angle: Option<f64>,
+    /// Fraction of the surface samples the rotation maps onto the surface (for a continuous
+    /// axis, the least over a few turns).
+    pub agreement: f64,
+    /// Model-frame surface points that break it: the samples not mapped onto the surface by the
+    /// turn or by its inverse (for a continuous axis, those no turn maps: the feature itself).
+    pub feature: Vec<Point>,
+}
+
+impl NearSymmetry {
+    /// The turn as a model-frame transform about [`NearSymmetry::center`]; for a continuous
+    /// axis, the turn by `angle_if_continuous`.
+    pub fn transform(&self, angle_if_continuous: f64) -> Isometry3<f64> {
+        let r = rot(&self.axis, self.angle.unwrap_or(angle_if_continuous));
+        Isometry3::from_parts(Translation3::from(self.center.coords - r * self.center.coords), r)
+    }
+}
+
+/// The near-symmetries of a part from the same samples and normals as [`detect_symmetries`] and
+/// its proper group `proper`: at most a few, strongest first. A part whose surface no rotation
+/// maps at [`NEAR_AGREEMENT`] has none.
+pub fn detect_near_symmetries(
+    points: &[Point],
+    normals: &[Vector3<f64>],
+    proper: &Symmetries,
+    cfg: &SymmetryConfig,
+) -> Result<Vec<NearSymmetry>> {
+    let near_cfg = SymmetryConfig {
+        min_agreement: NEAR_AGREEMENT.min(cfg.min_agreement),
+        ..*cfg
+    };
+    // The same checks as detect_symmetries (it has run on these inputs already).
+    let unit: Vec<V3> = normals.iter().map(|n| n.normalize()).collect();
+    let matcher = Matcher::new(points, unit, &near_cfg)?;
+    let near = matcher.detect();
+    let c = near.center;
+    let mut found: Vec<NearSymmetry> = Vec::new();
+    if let (Some(a), None) = (near.continuous_axis, proper.continuous_axis) {
+        let turns: Vec<Rot> = FEATURE_TURNS_DEG.iter().map(|d| rot(&a, d.to_radians())).collect();
+        let mut broken = vec![true; points.len()];
+        let mut agreement = 1.0f64;
+        for r in &turns {
+            let fails = matcher.failures(r, &c);
+            agreement = agreement.min(1.0 - fails.iter().filter(|&&f| f).count() as f64 / points.len() as f64);
+            for (b, f) in broken.iter_mut().zip(fails) {
+                *b &= f;
+            }
+        }
+        found.push(NearSymmetry {
+            center: c,
+            axis: a.normalize(),
+            angle: None,
+            agreement,
+            feature: select(points, &broken),
+        });
+    }
+    // One representative per class modulo the proper group, the identity's class left out.
+    let mut classes: Vec<Rot> = proper.rotations.clone();
+    for g in near.rotations.iter() {
+        let known = classes
+            .iter()
+            .any(|k| proper.rotation_distance(k, g) < SAME_ROTATION.max(2f64.to_radians()));
+        // A turn about a continuous near axis is that axis's, not one of its own.
+        let along_near_axis = near
+            .continuous_axis
+            .is_some_and(|a| proper.continuous_axis.is_none() && same_line(&g.axis().map_or(a, |u| *u), &a, SAME_AXIS));
+        if known || along_near_axis {
+            continue;
+        }
+        classes.push(*g);
+        let mut fails = matcher.failures(g, &c);
+        for (f, h) in fails.iter_mut().zip(matcher.failures(&g.inverse(), &c)) {
+            *f |= h;
+        }
+        let agreement = 1.0 - fails.iter().filter(|&&f| f).count() as f64 / points.len() as f64;
+        let (axis, angle) = g.axis_angle().map_or((V3::z(), 0.0), |(u, t)| (u.into_inner(), t));
+        found.push(NearSymmetry {
+            center: c,
+            axis,
+            angle: Some(angle),
+            agreement,
+            feature: select(points, &fails),
+        });
+    }
+    found.sort_by(|x, y| y.agreement.total_cmp(&x.agreement));
+    Ok(found)
+}
+
+fn select(points: &[Point], mask: &[bool]) -> Vec<Point> {
+    points.iter().zip(mask).filter(|(_, &m)| m).map(|(p, _)| *p).collect()
+}
