@@ -220,3 +220,13 @@ def pile_view(model, count: int, seed: int, step: int, noise_seed: int = 0):
     view = sim.World.of_pile(pile, bin=cell.bin).view(cell)
     scene, ids = camera_cloud(view, cell, step=step, seed=noise_seed)
     return cell, pile, scene, ids
+
+
+def rendered_view(model, T_base_object: np.ndarray, rng: np.random.Generator, noise: float = 0.15) -> np.ndarray:
+    """What the simulated cell's camera sees of the part alone at ``T_base_object`` (base frame, mm)."""
+    from binpick import sim
+
+    cell = sim.Cell()
+    world = sim.World()
+    world.add_parts(model, [0], T_base_object[None])
+    return camera_cloud(world.view(cell), cell, step=1, seed=int(rng.integers(1 << 31)), noise=noise)[0]

@@ -7,7 +7,16 @@ import numpy as np
 import pytest
 
 import binpick
-from _geometry import camera_cloud, extruded_mesh, pile_view, random_rotation, revolved_mesh, rot, symmetric_pose_error
+from _geometry import (
+    camera_cloud,
+    extruded_mesh,
+    pile_view,
+    random_rotation,
+    rendered_view,
+    revolved_mesh,
+    rot,
+    symmetric_pose_error,
+)
 from binpick import sim
 
 # An L-bracket with unequal legs: no proper symmetry.
@@ -43,16 +52,6 @@ def known_symmetries(name: str, model: binpick.Model):
     six = [rot((0, 0, 1), k * np.pi / 3) for k in range(6)]
     flips = [rot((np.cos(a), np.sin(a), 0), np.pi) for a in np.arange(6) * np.pi / 6]
     return dict(rotations=six + flips, center=c)
-
-
-def rendered_view(
-    model: binpick.Model, T_base_object: np.ndarray, rng: np.random.Generator, noise: float = 0.15
-) -> np.ndarray:
-    """What the simulated cell's camera sees of the part alone at ``T_base_object`` (base frame, mm)."""
-    cell = sim.Cell()
-    world = sim.World()
-    world.add_parts(model, [0], T_base_object[None])
-    return camera_cloud(world.view(cell), cell, step=1, seed=int(rng.integers(1 << 31)), noise=noise)[0]
 
 
 def random_pose(rng: np.random.Generator) -> np.ndarray:

@@ -11,7 +11,7 @@ from . import _core, parts
 from .errors import *  # noqa: F401,F403 - the exception classes are public API
 from .errors import __all__ as _error_names
 from .models import Branch, Model, PpfParams, Symmetries, estimate_normals, read_ply, voxel_downsample, write_ply
-from .poses import IcpResult, PoseResult, estimate_pose, estimate_poses, grasp_pose, icp
+from .poses import Alternative, IcpResult, PoseResult, estimate_pose, estimate_poses, grasp_pose, icp
 
 __version__ = _core.__version__
 
@@ -55,6 +55,7 @@ __all__ = [
     "IcpResult",
     "Model",
     "PoseResult",
+    "Alternative",
     "PpfParams",
     "Symmetries",
     "estimate_normals",

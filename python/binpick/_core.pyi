@@ -177,6 +177,8 @@ class PreparedModel:
         """The PPF table serialised for the cache, or None without one."""
     def symmetries(self) -> dict[str, Any]:
         """Dict with center (3,), continuous_axis (3,) or None, rotations (K, 3, 3), identity first."""
+    def near_symmetries(self) -> list[dict[str, Any]]:
+        """Dicts with center (3,), axis (3,), angle (radians or None: continuous), agreement, feature (M, 3)."""
     def canonical(self, t_scene_model: _F64) -> _F64:
         """The canonical form of a (4, 4) pose under the symmetries."""
 
@@ -263,6 +265,16 @@ class PoseEstimate:
     def occluded_fraction(self) -> float | None: ...
     @property
     def pickability(self) -> float | None: ...
+    @property
+    def confidence(self) -> float: ...
+    @property
+    def ambiguous(self) -> bool: ...
+    @property
+    def alternatives(self) -> list[dict[str, Any]]: ...
+    @property
+    def free_axis(self) -> list[float] | None: ...
+    @property
+    def feature_evidence(self) -> dict[str, Any] | None: ...
 
 def estimate_poses(scene: _F64, model: PreparedModel, config: PoseConfig) -> list[PoseEstimate]:
     """Up to ``config.max_instances`` verified instances, most pickable first."""

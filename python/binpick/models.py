@@ -15,7 +15,7 @@ import numpy as np
 from . import _core
 from ._validate import MAX_UNSIGNED, as_points, as_transform, as_vector, count, positive, thread_count, unit_scale
 from .errors import InvalidInputError
-from .transforms import pose_error
+from .transforms import pose_error, rotation_about
 
 __all__ = [
     "Model",
@@ -75,6 +75,42 @@ class Symmetries:
     def __repr__(self) -> str:
         axis = "none" if self.continuous_axis is None else np.array2string(self.continuous_axis, precision=3)
         return f"Symmetries(discrete={len(self.rotations)}, continuous_axis={axis})"
+
+
+@dataclass(frozen=True)
+class NearSymmetry:
+    """A rotation that maps most of a part's surface onto itself without being a symmetry: the
+    poses it relates look alike to a scan that does not show the feature.
+
+    Attributes:
+        center: (3,) the point the axis passes through, model frame, mm.
+        axis: (3,) unit axis, model frame.
+        angle: the turn, radians; None for a continuous near axis (a shaft with a keyway: every
+            turn about it nearly maps the part onto itself).
+        agreement: fraction of the surface the turn maps onto the surface.
+        feature: (M, 3) model points that break it (the feature and where the turn moves it).
+    """
+
+    center: np.ndarray
+    axis: np.ndarray
+    angle: Optional[float]
+    agreement: float
+    feature: np.ndarray
+
+    @property
+    def transform(self) -> np.ndarray:
+        """(4, 4) the turn about ``center`` as a model-frame transform (identity for a
+        continuous axis, whose turns are all near-symmetries)."""
+        T = np.eye(4)
+        if self.angle is not None:
+            T[:3, :3] = rotation_about(self.axis, self.angle)
+            T[:3, 3] = self.center - T[:3, :3] @ self.center
+        return T
+
+    def __repr__(self) -> str:
+        turn = "continuous" if self.angle is None else f"{np.degrees(self.angle):.1f}°"
+        axis = np.array2string(self.axis, precision=3)
+        return f"NearSymmetry({turn} about {axis}, agreement={self.agreement:.3f}, feature={len(self.feature)} points)"
 
 
 def cache_dir() -> Optional[Path]:
@@ -279,6 +315,22 @@ class Model:
             continuous_axis=None if axis is None else np.asarray(axis, dtype=np.float64),
             rotations=np.asarray(raw["rotations"], dtype=np.float64).reshape(-1, 3, 3),
         )
+
+    @property
+    def near_symmetries(self) -> list[NearSymmetry]:
+        """Rotations that map most (at least 85 %) of the surface onto itself without being
+        symmetries, strongest first, each with the model points that break it: the poses a scan
+        must tell apart by the feature."""
+        return [
+            NearSymmetry(
+                center=np.asarray(n["center"], dtype=np.float64),
+                axis=np.asarray(n["axis"], dtype=np.float64),
+                angle=n["angle"],
+                agreement=float(n["agreement"]),
+                feature=np.asarray(n["feature"], dtype=np.float64),
+            )
+            for n in self.prepared().near_symmetries()
+        ]
 
     def canonical_pose(self, T_scene_model: Any) -> np.ndarray:
         """The canonical form of a pose under the part's symmetries: the same (4, 4) for any two

@@ -26,7 +26,7 @@ from ._validate import (
 from .errors import InvalidInputError
 from .models import Model, estimate_normals
 
-__all__ = ["IcpResult", "icp", "PoseResult", "estimate_pose", "estimate_poses", "grasp_pose"]
+__all__ = ["IcpResult", "icp", "Alternative", "PoseResult", "estimate_pose", "estimate_poses", "grasp_pose"]
 
 #: Ceilings of the counts that size work or allocations: beyond them a value is a mistake.
 MAX_ITERATIONS = 100_000  # ICP updates
@@ -132,6 +132,20 @@ def icp(
     return IcpResult._from_native(_core.icp(src, tgt, normals, init_m, config))
 
 
+@dataclass(frozen=True)
+class Alternative:
+    """A distinct pose the scan cannot rule out (see :attr:`PoseResult.alternatives`).
+
+    Attributes:
+        T_scene_model: (4, 4) model → scene.
+        evidence: what the scan says about it in the feature regions (as
+            :attr:`PoseResult.feature_evidence`).
+    """
+
+    T_scene_model: np.ndarray
+    evidence: dict
+
+
 @dataclass(frozen=True, repr=False)
 class PoseResult:
     """A verified pose of one object (see :func:`estimate_pose` and :func:`estimate_poses`).
@@ -154,7 +168,20 @@ class PoseResult:
             (NaN where not judged).
         occluded_fraction: share of that surface lying under other objects (NaN where not judged).
         pickability: rank score in [0, 1] among the instances found: height in the pile (half),
-            visible share (a third), nothing on top (a sixth).
+            visible share (a third), nothing on top (a sixth); uncovered instances come first.
+        confidence: in [0, 1], how likely the pose is pick-grade (rotation within 5°, translation
+            within 3 mm, modulo the part's symmetries). Calibrated: of the poses reported at
+            confidence ≥ c, at least a fraction c were pick-grade on the project's test sets
+            (``benches/near_symmetric.py`` prints the reliability table).
+        ambiguous: True when the scan cannot rule out a distinct alternative: a near-symmetric
+            flip whose deciding feature is out of sight, or a turn about a free axis.
+        alternatives: those alternatives, each an :class:`Alternative` (pose and evidence).
+        free_axis: (3,) unit axis, scene frame, through the part's symmetry centre, of a continuous
+            near-symmetry the scan cannot fix (a shaft whose keyway is out of sight): the turn
+            about it is unknown, and ``T_scene_model``'s turn about it is arbitrary. None otherwise.
+        feature_evidence: what the scan says in the near-symmetries' feature regions about the
+            pose kept (``fits``, ``misfits``, ``seen_through``, ``tolerance``, ``score``), or None
+            for a part without near-symmetries.
     """
 
     T_scene_model: np.ndarray
@@ -168,6 +195,11 @@ class PoseResult:
     visible_fraction: float = float("nan")
     occluded_fraction: float = float("nan")
     pickability: float = 1.0
+    confidence: float = 0.0
+    ambiguous: bool = False
+    alternatives: tuple = ()
+    free_axis: Optional[np.ndarray] = None
+    feature_evidence: Optional[dict] = None
 
     @classmethod
     def _from_native(cls, e: _core.PoseEstimate) -> PoseResult:
@@ -182,6 +214,11 @@ class PoseResult:
             visible_fraction=float("nan") if e.visible_fraction is None else e.visible_fraction,
             occluded_fraction=float("nan") if e.occluded_fraction is None else e.occluded_fraction,
             pickability=1.0 if e.pickability is None else e.pickability,
+            confidence=e.confidence,
+            ambiguous=e.ambiguous,
+            alternatives=tuple(Alternative(a["T_scene_model"], a["evidence"]) for a in e.alternatives),
+            free_axis=None if e.free_axis is None else np.asarray(e.free_axis, dtype=np.float64),
+            feature_evidence=e.feature_evidence,
         )
 
     def __repr__(self) -> str:
@@ -190,7 +227,8 @@ class PoseResult:
             f"PoseResult(method={self.method!r}, score={self.score:.3f}, "
             f"rmse={self.rmse:.3f} mm, points={len(self.indices)}, "
             f"t=[{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] mm, "
-            f"pickability={self.pickability:.2f}, total={sum(self.timings.values()):.1f} ms)"
+            f"pickability={self.pickability:.2f}, confidence={self.confidence:.2f}, "
+            f"ambiguous={self.ambiguous}, total={sum(self.timings.values()):.1f} ms)"
         )
 
 
@@ -276,8 +314,9 @@ def estimate_poses(
 
 
 def estimate_pose(scene: Any, model: Model, bin: Any = None, **options: Any) -> PoseResult:
-    """The pose of the top pickable object of ``scene`` against ``model``: the first of
-    :func:`estimate_poses` (the same keyword arguments, ``max_instances`` aside)."""
+    """The pose of the top pickable object of ``scene`` against ``model``: exactly the first of
+    :func:`estimate_poses` for the same keyword arguments (``max_instances`` aside: the search
+    does not depend on it, so asking for one instance only truncates the answer)."""
     if "max_instances" in options:
         raise InvalidInputError("max_instances: estimate_pose returns one pose; use estimate_poses for several")
     return estimate_poses(scene, model, bin, max_instances=1, **options)[0]

@@ -49,8 +49,8 @@ pub use mesh::{sample_surface, unit_scale, Density, SurfaceSamples, TriMesh};
 pub use normals::{estimate_normals, Orientation};
 pub use parallel::with_threads;
 pub use pose::{
-    estimate_pose, estimate_poses, CcpPathParams, CheckIcpParams, CoarseMethod, FineIcpParams, PoseConfig,
-    PoseEstimate, PoseModel, Timings,
+    estimate_pose, estimate_poses, Alternative, CcpPathParams, CheckIcpParams, CoarseMethod, FeatureEvidence,
+    FineIcpParams, PoseConfig, PoseEstimate, PoseModel, Timings, TrustParams,
 };
 pub use registration::ccp::{ccp, BranchLayout, CcpConfig, CcpResult};
 pub use registration::ppf::{DetectConfig, PpfConfig, PpfModel};

@@ -2,10 +2,10 @@
 //! and [`PoseConfig`] in, [`PoseEstimate`]s out.
 
 use crate::convert::{bin_box, bin_box_to_py, branch_layout, indices_to_py, isometry_to_py, matrix4, mesh_from_py};
-use crate::convert::{points, rotations_to_rows, threads, vector3, vectors, whole_number};
+use crate::convert::{points, points_to_py, rotations_to_rows, threads, vector3, vectors, whole_number};
 use crate::errors::{run, to_py};
 use binpick_core::{estimate_poses as core_estimate, isometry_from_matrix, CcpConfig, CoarseMethod, DetectConfig};
-use binpick_core::{PoseModel, PpfConfig, PpfModel};
+use binpick_core::{FeatureEvidence, PoseModel, PpfConfig, PpfModel};
 use nalgebra::{Point3, Vector3};
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
@@ -160,6 +160,24 @@ impl PreparedModel {
         Ok(d)
     }
 
+    /// The near-symmetries: dicts with `center` (3,), `axis` (3,), `angle` (radians, None for a
+    /// continuous near axis), `agreement` and `feature` (M, 3), the model points that break it.
+    fn near_symmetries<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        self.inner
+            .near_symmetries
+            .iter()
+            .map(|n| {
+                let d = PyDict::new(py);
+                d.set_item("center", n.center.coords.as_slice().to_vec())?;
+                d.set_item("axis", n.axis.as_slice().to_vec())?;
+                d.set_item("angle", n.angle)?;
+                d.set_item("agreement", n.agreement)?;
+                d.set_item("feature", points_to_py(py, &n.feature))?;
+                Ok(d)
+            })
+            .collect()
+    }
+
     /// The canonical form of a pose (4,4) under the symmetries.
     fn canonical<'py>(
         &self,
@@ -230,6 +248,7 @@ impl PoseConfig {
             },
             ccp_path: d.ccp_path,
             detect,
+            trust: d.trust,
             viewpoint: match viewpoint {
                 Some(v) => Some(Point3::from(vector3(&v, "viewpoint")?)),
                 None => d.viewpoint,
@@ -355,6 +374,16 @@ fn triple(v: &Vector3<f64>) -> (f64, f64, f64) {
     (v.x, v.y, v.z)
 }
 
+fn evidence_to_py<'py>(py: Python<'py>, e: &FeatureEvidence) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("fits", e.fits)?;
+    d.set_item("misfits", e.misfits)?;
+    d.set_item("seen_through", e.seen_through)?;
+    d.set_item("tolerance", e.tolerance)?;
+    d.set_item("score", e.score)?;
+    Ok(d)
+}
+
 fn or_none<T: std::fmt::Debug>(v: Option<T>) -> String {
     v.map_or("None".into(), |v| format!("{v:?}"))
 }
@@ -426,12 +455,51 @@ impl PoseEstimate {
     fn pickability(&self) -> Option<f64> {
         self.inner.pickability
     }
+    /// In [0, 1]: how likely the pose is pick-grade.
+    #[getter]
+    fn confidence(&self) -> f64 {
+        self.inner.confidence
+    }
+    /// Whether the scan cannot rule out a distinct alternative.
+    #[getter]
+    fn ambiguous(&self) -> bool {
+        self.inner.ambiguous
+    }
+    /// The alternatives the scan cannot rule out: dicts with `T_scene_model` (4, 4) and
+    /// `evidence` (a dict as `feature_evidence`).
+    #[getter]
+    fn alternatives<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        self.inner
+            .alternatives
+            .iter()
+            .map(|a| {
+                let d = PyDict::new(py);
+                d.set_item("T_scene_model", isometry_to_py(py, &a.t_scene_model))?;
+                d.set_item("evidence", evidence_to_py(py, &a.evidence)?)?;
+                Ok(d)
+            })
+            .collect()
+    }
+    /// Unit axis (scene frame) of a continuous near-symmetry the scan cannot fix, or None.
+    #[getter]
+    fn free_axis(&self) -> Option<Vec<f64>> {
+        self.inner.free_axis.map(|a| a.as_slice().to_vec())
+    }
+    /// The evidence in the feature regions of the pose kept, or None without near-symmetries.
+    #[getter]
+    fn feature_evidence<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        self.inner
+            .feature_evidence
+            .as_ref()
+            .map(|e| evidence_to_py(py, e))
+            .transpose()
+    }
 
     fn __repr__(&self) -> String {
         let e = &self.inner;
         let t = e.t_scene_model.translation.vector;
         format!(
-            "PoseEstimate(method='{}', score={:.3}, rmse={:.3} mm, points={}, t=[{:.2}, {:.2}, {:.2}] mm, pickability={})",
+            "PoseEstimate(method='{}', score={:.3}, rmse={:.3} mm, points={}, t=[{:.2}, {:.2}, {:.2}] mm, pickability={}, confidence={:.2}, ambiguous={})",
             e.method.name(),
             e.score,
             e.rmse,
@@ -439,7 +507,9 @@ impl PoseEstimate {
             t.x,
             t.y,
             t.z,
-            or_none(e.pickability)
+            or_none(e.pickability),
+            e.confidence,
+            if e.ambiguous { "True" } else { "False" }
         )
     }
 }

@@ -285,6 +285,11 @@ fn fit_region(
         visible_fraction: Some(evidence.visible_fraction()),
         occluded_fraction: Some(evidence.occluded_fraction()),
         pickability: None,
+        confidence: 0.0,
+        ambiguous: false,
+        alternatives: Vec::new(),
+        free_axis: None,
+        feature_evidence: None,
     })
 }
 

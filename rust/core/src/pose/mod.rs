@@ -13,10 +13,14 @@ mod ppf_path;
 mod scene;
 #[cfg(test)]
 mod tests;
+mod trust;
+#[cfg(test)]
+mod trust_tests;
 mod types;
 
 pub use ccp_path::{CcpPathParams, CheckIcpParams, FineIcpParams};
 pub use model::PoseModel;
+pub use trust::{Alternative, FeatureEvidence, TrustParams};
 pub use types::{CoarseMethod, PoseConfig, PoseEstimate, Timings};
 
 use crate::error::{Error, Result};
@@ -88,17 +92,21 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
     )?;
     let mut timings = vec![("bin_removal", clock.elapsed().as_secs_f64() * 1e3)];
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
-    let found = match method {
+    let (found, judge) = match method {
         CoarseMethod::Ccp | CoarseMethod::Centroid => {
             let judge = Judge::new(scene, &pts, removed, model, cfg);
-            vec![reindex(
-                run(scene, &pts, model, cfg, method, &judge, &mut timings)?,
-                &kept,
-            )]
+            let e = run(scene, &pts, model, cfg, method, &judge, &mut timings)?;
+            (vec![reindex(e, &kept)], judge)
         }
-        CoarseMethod::Ppf => detect_instances(scene, &pts, &kept, model, cfg, &mut timings)?.0,
+        CoarseMethod::Ppf => {
+            let (found, prepared) = detect_instances(scene, &pts, &kept, model, cfg, &mut timings)?;
+            (found, prepared.judge)
+        }
         CoarseMethod::Auto => auto(scene, &pts, &kept, model, cfg, &mut timings)?,
     };
+    let clock = Instant::now();
+    let found = trusted(found, scene, &pts, model, &judge, cfg);
+    timings.push(("trust", clock.elapsed().as_secs_f64() * 1e3));
     Ok(found
         .into_iter()
         .map(|e| PoseEstimate {
@@ -106,6 +114,36 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
             ..e
         })
         .collect())
+}
+
+/// Every estimate with its trust (see [`trust`]): a pose the scan shows to be a near-symmetric
+/// alternative of the truth is replaced by the one it supports.
+/// `pts` are the points left after bin removal (the comparison runs on them).
+fn trusted(
+    found: Vec<PoseEstimate>,
+    scene: &[Point],
+    pts: &[Point],
+    model: &PoseModel,
+    judge: &Judge,
+    cfg: &PoseConfig,
+) -> Vec<PoseEstimate> {
+    found
+        .into_iter()
+        .map(|mut e| {
+            let (t, kept) = trust::assess(&e, pts, model, judge, cfg);
+            if kept != e.t_scene_model {
+                e.t_scene_model = model.symmetries.canonical(&kept);
+                let idx = scene::scene_indices(scene, model, &e.t_scene_model, judge.tol);
+                e.indices = idx;
+            }
+            e.confidence = t.confidence;
+            e.ambiguous = t.ambiguous;
+            e.alternatives = t.alternatives;
+            e.free_axis = t.free_axis;
+            e.feature_evidence = t.evidence;
+            e
+        })
+        .collect()
 }
 
 /// Indices of the points a method saw (`kept` of the scene) become scene indices.
@@ -142,7 +180,7 @@ fn auto(
     model: &PoseModel,
     cfg: &PoseConfig,
     timings: &mut Timings,
-) -> Result<Vec<PoseEstimate>> {
+) -> Result<(Vec<PoseEstimate>, Judge)> {
     let detected = detect_instances(scene, pts, kept, model, cfg, timings);
     let clock = Instant::now();
     let (ccp_kept, removed) = if cfg.bin.is_some() {
@@ -158,9 +196,12 @@ fn auto(
         run(scene, &ccp_pts, model, cfg, CoarseMethod::Ccp, &judge, &mut ccp_timings).map(|e| reindex(e, &ccp_kept));
     timings.extend(ccp_timings.into_iter().map(|(name, ms)| (ccp_stage(name), ms)));
     match (detected, by_ccp) {
-        (Ok((found, prepared)), Ok(c)) => Ok(arbitrate(found, c, &prepared, model, cfg.max_instances)),
-        (Ok((found, _)), Err(_)) => Ok(found),
-        (Err(_), Ok(c)) => Ok(vec![c]),
+        (Ok((found, prepared)), Ok(c)) => {
+            let found = arbitrate(found, c, &prepared, model, cfg.max_instances);
+            Ok((found, prepared.judge))
+        }
+        (Ok((found, prepared)), Err(_)) => Ok((found, prepared.judge)),
+        (Err(_), Ok(c)) => Ok((vec![c], judge)),
         (Err(e), Err(_)) => Err(e),
     }
 }

@@ -293,6 +293,11 @@ fn estimates(
                 visible_fraction: Some(j.evidence.visible_fraction()),
                 occluded_fraction: Some(j.evidence.occluded_fraction()),
                 pickability: Some(pick),
+                confidence: 0.0,
+                ambiguous: false,
+                alternatives: Vec::new(),
+                free_axis: None,
+                feature_evidence: None,
             }
         })
         .collect()

@@ -37,7 +37,7 @@ fn tee_model() -> &'static (PoseModel, crate::mesh::TriMesh) {
 
 /// A pose of the part lying in a bin: any turn about the vertical, tilted up to 25°, about
 /// 400 mm from the origin.
-fn random_pose(rng: &mut Rng) -> Isometry3<f64> {
+pub(super) fn random_pose(rng: &mut Rng) -> Isometry3<f64> {
     let yaw = UnitQuaternion::from_scaled_axis(Vector3::z() * rng.range(-PI, PI));
     let tilt_axis = Vector3::new(rng.normal(), rng.normal(), 0.0).normalize();
     let tilt = UnitQuaternion::from_scaled_axis(tilt_axis * rng.range(0.0, 25f64.to_radians()));
@@ -47,7 +47,7 @@ fn random_pose(rng: &mut Rng) -> Isometry3<f64> {
 
 /// What a sensor straight above sees of the posed mesh: a dense surface sample, the highest
 /// point of each 0.8 mm cell of the xy plane.
-fn top_view(mesh: &crate::mesh::TriMesh, t_scene_model: &Isometry3<f64>, seed: u64) -> Vec<Point> {
+pub(super) fn top_view(mesh: &crate::mesh::TriMesh, t_scene_model: &Isometry3<f64>, seed: u64) -> Vec<Point> {
     let dense = sample_surface(mesh, Density::Spacing(0.5), seed).unwrap();
     let cell = 0.8;
     let mut top: HashMap<(i64, i64), Point> = HashMap::new();
@@ -63,7 +63,7 @@ fn top_view(mesh: &crate::mesh::TriMesh, t_scene_model: &Isometry3<f64>, seed: u
     pts
 }
 
-fn config(method: CoarseMethod) -> PoseConfig {
+pub(super) fn config(method: CoarseMethod) -> PoseConfig {
     PoseConfig {
         method,
         num_threads: 1,

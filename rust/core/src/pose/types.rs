@@ -2,6 +2,7 @@
 //! [`Timings`].
 
 use super::ccp_path::CcpPathParams;
+use super::trust::{Alternative, FeatureEvidence, TrustParams};
 use crate::error::{Error, Result};
 use crate::geometry::{BinBox, Point};
 use crate::registration::ccp::CcpConfig;
@@ -82,6 +83,8 @@ pub struct PoseConfig {
     pub ccp_path: CcpPathParams,
     /// PPF detection tuning.
     pub detect: DetectConfig,
+    /// Tunables of the disambiguation of near-symmetric poses and of the confidence.
+    pub trust: TrustParams,
     /// The sensor's position in the scene frame, mm, when known (orients the scan's normals;
     /// otherwise they face `up`).
     pub viewpoint: Option<Point>,
@@ -106,6 +109,7 @@ impl Default for PoseConfig {
             ccp: CcpConfig::default(),
             ccp_path: CcpPathParams::default(),
             detect: DetectConfig::default(),
+            trust: TrustParams::default(),
             viewpoint: None,
             max_instances: 1,
             num_threads: 0,
@@ -189,6 +193,18 @@ pub struct PoseEstimate {
     /// `None` when the pose was not ranked against other instances (a single CCP or centroid
     /// result, which is the most pickable by default).
     pub pickability: Option<f64>,
+    /// In [0, 1]: how likely the pose is pick-grade (calibrated: of the poses reported at
+    /// confidence ≥ c, at least a fraction c are).
+    pub confidence: f64,
+    /// Whether the scan cannot rule out a distinct alternative (a near-symmetric flip, a free axis).
+    pub ambiguous: bool,
+    /// The distinct poses the scan cannot rule out, each with its evidence.
+    pub alternatives: Vec<Alternative>,
+    /// The unit axis (scene frame, through the part's symmetry centre) of a continuous
+    /// near-symmetry the scan cannot fix, when there is one: the turn about it is unknown.
+    pub free_axis: Option<Vector3<f64>>,
+    /// The evidence in the feature regions of the pose kept (`None` without near-symmetries).
+    pub feature_evidence: Option<FeatureEvidence>,
 }
 
 #[cfg(test)]

@@ -10,8 +10,10 @@
 use super::matcher::Matcher;
 use super::*;
 
-/// A rotation is a near-symmetry when it maps at least this fraction of the surface onto itself.
-pub const NEAR_AGREEMENT: f64 = 0.85;
+/// A rotation is a near-symmetry when it maps at least this fraction of the surface onto itself
+/// (and less than a symmetry's [`SymmetryConfig::min_agreement`]). A flange's turn by one bolt
+/// pitch maps about 84 % of it when one locating hole breaks the pattern: 0.8 keeps it.
+pub const NEAR_AGREEMENT: f64 = 0.8;
 /// Turns of a continuous near axis whose failures intersect to its feature, degrees.
 const FEATURE_TURNS_DEG: [f64; 3] = [61.0, 131.0, 180.0];
 
@@ -73,13 +75,15 @@ pub fn detect_near_symmetries(
                 *b &= f;
             }
         }
-        found.push(NearSymmetry {
-            center: c,
-            axis: a.normalize(),
-            angle: None,
-            agreement,
-            feature: select(points, &broken),
-        });
+        if (NEAR_AGREEMENT..cfg.min_agreement).contains(&agreement) {
+            found.push(NearSymmetry {
+                center: c,
+                axis: a.normalize(),
+                angle: None,
+                agreement,
+                feature: select(points, &broken),
+            });
+        }
     }
     // One representative per class modulo the proper group, the identity's class left out.
     let mut classes: Vec<Rot> = proper.rotations.clone();
@@ -100,6 +104,11 @@ pub fn detect_near_symmetries(
             *f |= h;
         }
         let agreement = 1.0 - fails.iter().filter(|&&f| f).count() as f64 / points.len() as f64;
+        // The closure of the near turns holds products that map much less (or, where the
+        // proper detection rejected a turn the near one accepts, a symmetry): not near ones.
+        if !(NEAR_AGREEMENT..cfg.min_agreement).contains(&agreement) {
+            continue;
+        }
         let (axis, angle) = g.axis_angle().map_or((V3::z(), 0.0), |(u, t)| (u.into_inner(), t));
         found.push(NearSymmetry {
             center: c,

@@ -1,0 +1,408 @@
+//! Trust: how sure a verified pose is. Every near-symmetric alternative of the pose (a flip that
+//! only a boss tells apart, any turn about a shaft whose keyway decides) is posed, refined and
+//! compared with it on evidence fine enough to see the feature; the pose the scan supports is
+//! kept, the alternatives it cannot rule out are reported, and the confidence says how likely
+//! the pose is pick-grade.
+//!
+//! The comparison runs on the scan points near the places the near-symmetries' features can be
+//! (in the model frame: each feature and its images under the turns tried). There, a pose that
+//! puts the feature where the scan shows the base shape — or the base shape where the scan shows
+//! the feature, a hole or a cut corner — leaves points beyond the scan's noise; the judge's depth
+//! test adds the surface a pose predicts where the sensor saw free space.
+
+use super::judge::Judge;
+use super::{PoseConfig, PoseEstimate, PoseModel};
+use crate::geometry::Point;
+use crate::registration::{icp, IcpConfig};
+use nalgebra::{Isometry3, Vector3};
+use std::collections::HashSet;
+use std::f64::consts::TAU;
+
+/// Tunables of the disambiguation and the confidence.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrustParams {
+    /// Turns tried about a continuous near axis (evenly spaced). Default 24 (every 15°).
+    pub continuous_turns: usize,
+    /// With more turns than this, a quick look picks this many finalists. Default 3.
+    pub finalists: usize,
+    /// Scan points of the quick look's refinement and comparison, at most. Default 400.
+    pub quick_points: usize,
+    /// ICP iterations of the quick look. Default 6.
+    pub quick_iterations: usize,
+    /// Scan points each alternative is refined on, at most. Default 1500.
+    pub refine_points: usize,
+    /// ICP iterations of each alternative's refinement. Default 15.
+    pub iterations: usize,
+    /// Fine tolerance in standard deviations of the scan's noise about the pose. Default 3.
+    pub noise_sigmas: f64,
+    /// Smallest fine tolerance, mm. Default 0.2.
+    pub min_fine_tolerance: f64,
+    /// An alternative whose evidence trails the best by less than this many scan points cannot
+    /// be ruled out. Default 8.
+    pub min_margin: f64,
+    /// ... nor by less than this fraction of the points in the feature regions. Default 0.05.
+    pub margin_fraction: f64,
+    /// Poses closer than this rotation (rad, default 5°) ...
+    pub pick_rotation: f64,
+    /// ... and this translation (mm, default 3) are one pose (pick-grade of each other).
+    pub pick_translation: f64,
+}
+
+impl Default for TrustParams {
+    fn default() -> Self {
+        TrustParams {
+            continuous_turns: 24,
+            finalists: 3,
+            quick_points: 400,
+            quick_iterations: 6,
+            refine_points: 1500,
+            iterations: 15,
+            noise_sigmas: 3.0,
+            min_fine_tolerance: 0.2,
+            min_margin: 8.0,
+            margin_fraction: 0.05,
+            pick_rotation: 5f64.to_radians(),
+            pick_translation: 3.0,
+        }
+    }
+}
+
+/// What the scan says about one pose in the feature regions.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FeatureEvidence {
+    /// Scan points in the feature regions within the fine tolerance of the posed model.
+    pub fits: usize,
+    /// Scan points in the feature regions farther than the fine tolerance from it.
+    pub misfits: usize,
+    /// Probe points of the posed model (judge's depth test) where the sensor saw free space.
+    pub seen_through: usize,
+    /// The fine tolerance, mm.
+    pub tolerance: f64,
+    /// fits − misfits − seen-through (in scan points): higher is better supported.
+    pub score: f64,
+}
+
+/// A distinct pose the scan cannot rule out.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Alternative {
+    /// Model → scene.
+    pub t_scene_model: Isometry3<f64>,
+    /// Its evidence.
+    pub evidence: FeatureEvidence,
+}
+
+/// The verdict of [`assess`] on one pose.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Trust {
+    /// In [0, 1]: how likely the pose is pick-grade.
+    pub confidence: f64,
+    /// Whether the scan cannot rule out a distinct alternative.
+    pub ambiguous: bool,
+    /// Those alternatives.
+    pub alternatives: Vec<Alternative>,
+    /// The unit axis (scene frame, through the part's symmetry centre) of a continuous
+    /// near-symmetry the scan cannot fix: the part's turn about it is unknown.
+    pub free_axis: Option<Vector3<f64>>,
+    /// The evidence of the pose kept (`None` for a part without near-symmetries).
+    pub evidence: Option<FeatureEvidence>,
+}
+
+/// A candidate pose, refined, and where it came from.
+struct Candidate {
+    t_scene_model: Isometry3<f64>,
+    continuous: bool,
+}
+
+/// Confidence from the judge alone: how much of the surface the scan can judge confirms the
+/// pose (0.6 at the acceptance threshold, 0.99 at 95 % and above).
+fn base_confidence(coverage: f64, min_coverage: f64) -> f64 {
+    let span = (0.95 - min_coverage).max(1e-3);
+    0.6 + 0.39 * ((coverage - min_coverage) / span).clamp(0.0, 1.0)
+}
+
+/// Assesses `est` (a verified pose whose points are among `points`): with
+/// near-symmetries, poses and compares their alternatives and may replace the pose by the one
+/// the scan supports; returns the trust and the pose kept.
+pub(super) fn assess(
+    est: &PoseEstimate,
+    points: &[Point],
+    model: &PoseModel,
+    judge: &Judge,
+    cfg: &PoseConfig,
+) -> (Trust, Isometry3<f64>) {
+    let p = &cfg.trust;
+    let e0 = judge.evidence(model, &est.t_scene_model);
+    let base = base_confidence(e0.coverage(), cfg.min_coverage);
+    let center = est.t_scene_model * model.symmetries.center;
+    let reach = model.radius + 2.0 * judge.tol;
+    // One pass over the points beats building a tree for the few poses assessed.
+    let local: Vec<Point> = if model.near_symmetries.is_empty() {
+        Vec::new()
+    } else {
+        points
+            .iter()
+            .filter(|p| (*p - center).norm_squared() <= reach * reach)
+            .copied()
+            .collect()
+    };
+    if local.len() < 12 {
+        let trust = Trust {
+            confidence: base,
+            ..Trust::default()
+        };
+        return (trust, est.t_scene_model);
+    }
+    let (turns, region) = turns_and_region(model, p);
+    let sample: Vec<Point> = local
+        .iter()
+        .step_by(local.len().div_ceil(p.refine_points.max(1)))
+        .copied()
+        .collect();
+    let refine = IcpConfig::robust_plane(3.0 * judge.tol, p.iterations, 1e-5, 1e-3);
+    let polish = |turn: &Isometry3<f64>, pts: &[Point], cfg: &IcpConfig| {
+        let start = est.t_scene_model * turn;
+        icp(pts, model.fine_target(), &start.inverse(), cfg)
+            .ok()
+            .map(|r| r.t_target_source.inverse())
+    };
+    let region_cells = |t: &Isometry3<f64>| RegionCells::new(&region, t, (2.0 * model.spacing).max(judge.tol));
+    // Every candidate is `est` turned by a near-symmetry, so its feature and the place it turns
+    // the feature to both lie in the region posed by `est`: the scan points there judge them all.
+    let cells = region_cells(&est.t_scene_model);
+    let judged: Vec<Point> = local.iter().filter(|l| cells.contains(l)).copied().collect();
+    let tol0 = fine_tolerance(&sample, model, &est.t_scene_model, judge.tol, p);
+    // Many turns (a continuous near axis): a quick look on a thinned sample picks the finalists
+    // that get the full refinement and comparison.
+    let turns: Vec<(Isometry3<f64>, bool)> = if turns.len() > p.finalists {
+        let quick_cfg = IcpConfig {
+            max_iterations: p.quick_iterations,
+            ..refine.clone()
+        };
+        let thin = |v: &[Point], n: usize| -> Vec<Point> {
+            v.iter().step_by(v.len().div_ceil(n.max(1)).max(1)).copied().collect()
+        };
+        let (few, glance) = (thin(&sample, p.quick_points), thin(&judged, p.quick_points));
+        let mut quick: Vec<(f64, (Isometry3<f64>, bool))> = turns
+            .into_iter()
+            .filter_map(|(turn, continuous)| {
+                let t = polish(&turn, &few, &quick_cfg)?;
+                Some((
+                    feature_evidence(&glance, model, &t, tol0, 0, 0.0).score,
+                    (turn, continuous),
+                ))
+            })
+            .collect();
+        quick.sort_by(|x, y| y.0.total_cmp(&x.0));
+        quick.into_iter().take(p.finalists).map(|q| q.1).collect()
+    } else {
+        turns
+    };
+    let candidates: Vec<Candidate> = std::iter::once((Isometry3::identity(), false))
+        .chain(turns)
+        .filter_map(|(turn, continuous)| {
+            Some(Candidate {
+                t_scene_model: polish(&turn, &sample, &refine)?,
+                continuous,
+            })
+        })
+        .collect();
+    if candidates.is_empty() {
+        let trust = Trust {
+            confidence: base,
+            ..Trust::default()
+        };
+        return (trust, est.t_scene_model);
+    }
+    let tol = fine_tolerance(&sample, model, &candidates[0].t_scene_model, judge.tol, p);
+    let per_probe = local.len() as f64 / e0.seen.max(1) as f64;
+    let scored: Vec<(FeatureEvidence, bool)> = candidates
+        .iter()
+        .map(|c| {
+            let e = judge.evidence(model, &c.t_scene_model);
+            let ok = judge.check(&e, model, &c.t_scene_model, cfg).is_ok();
+            (
+                feature_evidence(&judged, model, &c.t_scene_model, tol, e.violated, per_probe),
+                ok,
+            )
+        })
+        .collect();
+    let best = (0..candidates.len())
+        .filter(|&i| scored[i].1 || i == 0)
+        .max_by(|&a, &b| scored[a].0.score.total_cmp(&scored[b].0.score))
+        .unwrap_or(0);
+    let margin = p.min_margin.max(p.margin_fraction * judged.len() as f64);
+    let kept = candidates[best].t_scene_model;
+    let mut alternatives: Vec<Alternative> = Vec::new();
+    let mut free = false;
+    let mut runner_up = f64::NEG_INFINITY;
+    for (i, c) in candidates.iter().enumerate() {
+        if i == best || !scored[i].1 {
+            continue;
+        }
+        let same = |t: &Isometry3<f64>| {
+            let (r, d) = model.symmetries.pose_error(&c.t_scene_model, t);
+            r < p.pick_rotation && d < p.pick_translation
+        };
+        if same(&kept) {
+            continue;
+        }
+        let s = scored[i].0.score;
+        runner_up = runner_up.max(s);
+        if scored[best].0.score - s < margin && !alternatives.iter().any(|a| same(&a.t_scene_model)) {
+            free |= c.continuous;
+            alternatives.push(Alternative {
+                t_scene_model: model.symmetries.canonical(&c.t_scene_model),
+                evidence: scored[i].0,
+            });
+        }
+    }
+    let base = if best == 0 {
+        base
+    } else {
+        base_confidence(judge.evidence(model, &kept).coverage(), cfg.min_coverage)
+    };
+    let lead = scored[best].0.score - runner_up;
+    let confidence = if alternatives.is_empty() {
+        // How far the best leads the runner-up, in margins: 1 margin halves the confidence, each
+        // further margin shrinks the doubt e-fold.
+        let decisive = if runner_up.is_finite() {
+            1.0 - 0.5 * (-(lead / margin - 1.0).max(0.0)).exp()
+        } else {
+            1.0
+        };
+        base * decisive
+    } else if free {
+        // The turn about the free axis is unknown: a pick-grade turn is as likely as its share
+        // of the circle.
+        base * (2.0 * p.pick_rotation / TAU)
+    } else {
+        base / (1 + alternatives.len()) as f64
+    };
+    let axis = model.near_symmetries.iter().find(|n| n.angle.is_none()).map(|n| n.axis);
+    let trust = Trust {
+        confidence,
+        ambiguous: !alternatives.is_empty(),
+        alternatives,
+        free_axis: axis.filter(|_| free).map(|a| kept.rotation * a),
+        evidence: Some(scored[best].0),
+    };
+    (trust, kept)
+}
+
+/// The turns of every near-symmetry (model frame; `true` for a continuous axis's), and the
+/// model-frame region where the features can lie: each feature under the identity and every turn.
+fn turns_and_region(model: &PoseModel, p: &super::TrustParams) -> (Vec<(Isometry3<f64>, bool)>, Vec<Point>) {
+    let mut turns = Vec::new();
+    let mut region = Vec::new();
+    for n in &model.near_symmetries {
+        let own: Vec<(Isometry3<f64>, bool)> = match n.angle {
+            Some(_) => vec![(n.transform(0.0), false)],
+            None => {
+                let k = p.continuous_turns.max(2);
+                (1..k).map(|i| (n.transform(TAU * i as f64 / k as f64), true)).collect()
+            }
+        };
+        region.extend(n.feature.iter().copied());
+        for (t, _) in &own {
+            region.extend(n.feature.iter().map(|q| t * q));
+            region.extend(n.feature.iter().map(|q| t.inverse() * q));
+        }
+        turns.extend(own);
+    }
+    (turns, region)
+}
+
+/// The fine tolerance: `noise_sigmas` robust standard deviations of the point-to-plane residuals
+/// of `local` about the pose (at least `min_fine_tolerance`, at most the judge's tolerance).
+fn fine_tolerance(
+    local: &[Point],
+    model: &PoseModel,
+    t_scene_model: &Isometry3<f64>,
+    tol: f64,
+    p: &TrustParams,
+) -> f64 {
+    let inv = t_scene_model.inverse();
+    let mut res: Vec<f64> = local
+        .iter()
+        .filter_map(|l| plane_residual(model, &(inv * l), tol))
+        .map(f64::abs)
+        .collect();
+    if res.len() < 12 {
+        return tol;
+    }
+    let mid = res.len() / 2;
+    let median = *res.select_nth_unstable_by(mid, f64::total_cmp).1;
+    (p.noise_sigmas * 1.4826 * median).clamp(p.min_fine_tolerance.min(tol), tol)
+}
+
+/// Distance of a model-frame point from the tangent plane of its nearest dense model point,
+/// when that point lies within `reach`.
+fn plane_residual(model: &PoseModel, q: &Point, reach: f64) -> Option<f64> {
+    let target = model.fine_target();
+    let (j, _) = target.search().nearest_within(&[q.x, q.y, q.z], reach * reach)?;
+    let n = target.normals().map(|n| n[j]);
+    Some(match n {
+        Some(n) => n.dot(&(q - target.points()[j])),
+        None => (q - target.points()[j]).norm(),
+    })
+}
+
+fn feature_evidence(
+    judged: &[Point],
+    model: &PoseModel,
+    t_scene_model: &Isometry3<f64>,
+    tol: f64,
+    violated: usize,
+    per_probe: f64,
+) -> FeatureEvidence {
+    let inv = t_scene_model.inverse();
+    let fits = judged
+        .iter()
+        .filter(|l| plane_residual(model, &(inv * *l), 3.0 * tol).is_some_and(|r| r.abs() <= tol))
+        .count();
+    let misfits = judged.len() - fits;
+    FeatureEvidence {
+        fits,
+        misfits,
+        seen_through: violated,
+        tolerance: tol,
+        score: fits as f64 - misfits as f64 - violated as f64 * per_probe,
+    }
+}
+
+/// The cells of a grid that lie within about one cell of a posed region: a cheap membership test
+/// for many scan points against a region of a few thousand.
+struct RegionCells {
+    cell: f64,
+    set: HashSet<[i64; 3]>,
+}
+
+impl RegionCells {
+    fn new(region: &[Point], t_scene_model: &Isometry3<f64>, cell: f64) -> Self {
+        let cell = cell.max(1e-3);
+        let own: HashSet<[i64; 3]> = region.iter().map(|p| key(&(t_scene_model * p), cell)).collect();
+        let mut set = HashSet::with_capacity(own.len() * 27);
+        for k in own {
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        set.insert([k[0] + dx, k[1] + dy, k[2] + dz]);
+                    }
+                }
+            }
+        }
+        RegionCells { cell, set }
+    }
+
+    fn contains(&self, p: &Point) -> bool {
+        self.set.contains(&key(p, self.cell))
+    }
+}
+
+fn key(p: &Point, cell: f64) -> [i64; 3] {
+    [
+        (p.x / cell).floor() as i64,
+        (p.y / cell).floor() as i64,
+        (p.z / cell).floor() as i64,
+    ]
+}

@@ -1,0 +1,111 @@
+//! The trust stage against known poses: a block whose only asymmetry is a small boss is
+//! recovered (and a flipped pose corrected) where the scan shows the boss, and reported
+//! ambiguous — the truth among the alternatives — where the boss faces away from the sensor.
+
+use super::tests::{config, top_view};
+use super::*;
+use crate::mesh::{sample_surface, test_box, Density, TriMesh};
+use crate::registration::ppf::PpfConfig;
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use std::f64::consts::PI;
+use std::sync::OnceLock;
+
+const BOSS: [f64; 3] = [20.0, 12.0, 11.5];
+
+/// A 60 × 40 × 20 mm block with a 12 × 12 × 3 mm boss on its top face near one corner.
+fn bossed_block() -> &'static (PoseModel, TriMesh) {
+    static MODEL: OnceLock<(PoseModel, TriMesh)> = OnceLock::new();
+    MODEL.get_or_init(|| {
+        let block = test_box(Point::new(-30.0, -20.0, -10.0), Point::new(30.0, 20.0, 10.0));
+        let b = Vector3::from(BOSS);
+        let boss = test_box(
+            Point::from(b - Vector3::new(6.0, 6.0, 1.5)),
+            Point::from(b + Vector3::new(6.0, 6.0, 1.5)),
+        );
+        let mut v = block.vertices.clone();
+        let mut f = block.faces.clone();
+        let base = v.len() as u32;
+        v.extend(boss.vertices);
+        f.extend(boss.faces.iter().map(|t| [t[0] + base, t[1] + base, t[2] + base]));
+        let mesh = TriMesh::new(v, f).unwrap();
+        let s = sample_surface(&mesh, Density::Spacing(1.0), 0).unwrap();
+        let mut model = PoseModel::new(s.points, s.normals, mesh.diameter(), mesh.area(), None).unwrap();
+        model.build_ppf(PpfConfig::default()).unwrap();
+        (model, mesh)
+    })
+}
+
+fn pick_grade(model: &PoseModel, a: &Isometry3<f64>, b: &Isometry3<f64>) -> bool {
+    let (r, t) = model.symmetries.pose_error(a, b);
+    r < 5f64.to_radians() && t < 3.0
+}
+
+fn posed(yaw: f64, upside_down: bool) -> Isometry3<f64> {
+    let flip = if upside_down {
+        UnitQuaternion::from_scaled_axis(Vector3::x() * PI)
+    } else {
+        UnitQuaternion::identity()
+    };
+    let r = UnitQuaternion::from_scaled_axis(Vector3::z() * yaw) * flip;
+    Isometry3::from_parts(Translation3::new(400.0, 10.0, 80.0), r)
+}
+
+#[test]
+fn the_block_has_three_near_half_turns() {
+    let (model, _) = bossed_block();
+    assert!(model.symmetries.is_trivial());
+    assert_eq!(model.near_symmetries.len(), 3);
+}
+
+#[test]
+fn a_boss_in_view_decides_the_pose_and_a_flipped_start_is_corrected() {
+    let (model, mesh) = bossed_block();
+    let cfg = config(CoarseMethod::Ppf);
+    for (k, yaw) in [0.3, 1.9, -2.4].into_iter().enumerate() {
+        let truth = posed(yaw, false);
+        let scene = top_view(mesh, &truth, k as u64);
+        let est = estimate_pose(&scene, model, &cfg).unwrap();
+        assert!(pick_grade(model, &est.t_scene_model, &truth), "yaw {yaw}");
+        assert!(!est.ambiguous, "yaw {yaw}: the boss is in view");
+        assert!(est.confidence > 0.8, "yaw {yaw}: confidence {}", est.confidence);
+        // Started from each near-symmetric turn of the truth, the trust stage turns it back.
+        let (kept, planes) = scene::remove_bin(&scene, model, &cfg, true).unwrap();
+        let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
+        let judge = judge::Judge::new(&scene, &pts, planes, model, &cfg);
+        for n in &model.near_symmetries {
+            let wrong = PoseEstimate {
+                t_scene_model: truth * n.transform(0.0),
+                ..est.clone()
+            };
+            let (trust, t) = trust::assess(&wrong, &pts, model, &judge, &cfg);
+            assert!(
+                pick_grade(model, &t, &truth),
+                "yaw {yaw}, turn about {:?}: not corrected",
+                n.axis
+            );
+            assert!(!trust.ambiguous);
+        }
+    }
+}
+
+#[test]
+fn a_boss_out_of_view_is_ambiguous_with_the_truth_among_the_alternatives() {
+    let (model, mesh) = bossed_block();
+    let cfg = config(CoarseMethod::Ppf);
+    for (k, yaw) in [0.7, -1.2].into_iter().enumerate() {
+        let truth = posed(yaw, true);
+        let scene = top_view(mesh, &truth, 10 + k as u64);
+        let est = estimate_pose(&scene, model, &cfg).unwrap();
+        assert!(est.ambiguous, "yaw {yaw}: the boss faces away");
+        assert!(est.confidence <= 0.5, "yaw {yaw}: confidence {}", est.confidence);
+        let candidates: Vec<Isometry3<f64>> = std::iter::once(est.t_scene_model)
+            .chain(est.alternatives.iter().map(|a| a.t_scene_model))
+            .collect();
+        assert!(
+            candidates.iter().any(|c| pick_grade(model, c, &truth)),
+            "yaw {yaw}: the truth is neither the pose nor an alternative"
+        );
+        // The turns that put the boss on top are ruled out: one alternative remains.
+        assert_eq!(est.alternatives.len(), 1, "yaw {yaw}");
+    }
+}

@@ -1,0 +1,152 @@
+"""Poses you can trust (issue 13): one judge for every method, near-symmetric parts recovered
+where the feature shows and flagged where it does not, a calibrated confidence, and
+``estimate_pose`` exactly the first of ``estimate_poses`` — on scenes the tests make."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import binpick
+from _geometry import camera_cloud, extruded_mesh, pile_view, rendered_view, rot
+from binpick import sim
+
+METHODS = ("auto", "ppf", "ccp", "centroid")
+VIEWPOINT = sim.Cell().T_base_camera[:3, 3]
+
+
+@pytest.fixture(scope="module")
+def tee():
+    return binpick.parts.tee()
+
+
+@pytest.fixture(scope="module")
+def plain_tee(tee):
+    """The paper's tee read as a plain mesh: no branches declared, only its geometry."""
+    return binpick.Model.from_arrays(tee.vertices, tee.faces, unit="mm", name="plain-tee")
+
+
+def pick_grade(model, T, truth) -> bool:
+    rot_err, trans_err = model.pose_error(T, truth)
+    return rot_err < 5 and trans_err < 3
+
+
+def lying(yaw: float, boss_up: bool, xy=(400.0, 0.0)) -> np.ndarray:
+    """The tee lying in the bin (its boss along +z in the model frame) turned by ``yaw``."""
+    T = np.eye(4)
+    T[:3, :3] = rot((0, 0, 1), yaw) @ (np.eye(3) if boss_up else rot((1, 0, 0), np.pi))
+    T[:3, 3] = [xy[0], xy[1], 40.0]
+    return T
+
+
+def test_the_tee_has_one_near_symmetry_broken_at_its_boss(plain_tee):
+    near = plain_tee.near_symmetries
+    assert plain_tee.symmetries.is_trivial
+    assert len(near) == 1
+    n = near[0]
+    assert n.angle is not None and abs(n.angle - np.pi) < np.radians(2)
+    assert 0.85 <= n.agreement < 0.98
+    # The feature is the boss (it stands out along +z) and the place the flip moves it to: far
+    # from the run's mid-plane, but for a few samples at sampling gaps.
+    assert (np.abs(n.feature[:, 2] - n.center[2]) > 5).mean() > 0.9
+    T = n.transform
+    np.testing.assert_allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-9)
+
+
+def test_a_boss_in_view_decides_the_flip_and_a_hidden_one_is_flagged(plain_tee):
+    rng = np.random.default_rng(13)
+    for yaw in (0.4, 2.2, -1.6):
+        truth = lying(yaw, boss_up=True)
+        res = binpick.estimate_pose(rendered_view(plain_tee, truth, rng), plain_tee, num_threads=1)
+        assert pick_grade(plain_tee, res.T_scene_model, truth), f"yaw {yaw}"
+        assert not res.ambiguous and res.confidence >= 0.9
+        truth = lying(yaw, boss_up=False)
+        res = binpick.estimate_pose(rendered_view(plain_tee, truth, rng), plain_tee, num_threads=1)
+        poses = [res.T_scene_model] + [a.T_scene_model for a in res.alternatives]
+        # Never confident-wrong: right, or flagged with the truth among the alternatives.
+        assert pick_grade(plain_tee, res.T_scene_model, truth) or (
+            res.ambiguous and any(pick_grade(plain_tee, T, truth) for T in poses)
+        ), f"yaw {yaw}"
+        if res.ambiguous:
+            assert res.confidence <= 0.5
+            assert all(set(a.evidence) >= {"fits", "misfits", "seen_through", "score"} for a in res.alternatives)
+
+
+def test_confidence_is_calibrated_on_a_seeded_set(plain_tee):
+    """Of the poses reported at confidence >= c, at least a fraction c are pick-grade."""
+    rng = np.random.default_rng(29)
+    reported = []
+    for k in range(12):
+        truth = lying(rng.uniform(-np.pi, np.pi), boss_up=bool(k % 2), xy=(rng.uniform(340, 460), rng.uniform(-40, 40)))
+        tilt = np.eye(4)
+        tilt[:3, :3] = rot(rng.normal(size=3), rng.uniform(0, np.radians(35)))
+        truth = truth @ tilt
+        try:
+            res = binpick.estimate_pose(rendered_view(plain_tee, truth, rng), plain_tee, num_threads=1)
+        except binpick.NoObjectFound:
+            continue
+        reported.append((res.confidence, pick_grade(plain_tee, res.T_scene_model, truth)))
+    conf = np.array([c for c, _ in reported])
+    good = np.array([g for _, g in reported])
+    assert len(reported) >= 10
+    assert (conf >= 0.9).sum() >= 4, "the confidence must also say when a pose is sure"
+    for c in (0.5, 0.7, 0.9):
+        sel = conf >= c
+        if sel.any():
+            assert good[sel].mean() >= c, f"confidence >= {c}: {good[sel].mean():.2f} pick-grade"
+
+
+def uniform_noise(seed: int) -> np.ndarray:
+    lo, hi = np.array([260.0, -90.0, 0.0]), np.array([540.0, 90.0, 80.0])
+    return np.random.default_rng(seed).uniform(lo, hi, (20000, 3))
+
+
+def empty_bin() -> np.ndarray:
+    cell = sim.Cell()
+    world = sim.World()
+    world.add_bin(cell.bin)
+    return camera_cloud(world.view(cell), cell, step=2)[0]
+
+
+@pytest.fixture(scope="module")
+def bracket_pile():
+    """Six L-brackets in the bin: a pile of another part. (Not the elbow: it is the tee less one
+    branch, so two thirds of a tee fit it exactly — see the closing note of issue 13.)"""
+    v, f = extruded_mesh([(0, 0), (80, 0), (80, 12), (12, 12), (12, 50), (0, 50)], 30.0)
+    return pile_view(binpick.Model.from_arrays(v, f, spacing=1.0, name="bracket"), 6, seed=3, step=2)[2]
+
+
+@pytest.mark.parametrize("scene_kind", ["noise", "empty bin", "other part"])
+def test_scenes_without_the_part_give_no_pose_for_every_method(tee, bracket_pile, scene_kind):
+    scenes = {"noise": lambda: uniform_noise(1), "empty bin": empty_bin, "other part": lambda: bracket_pile}
+    scene = scenes[scene_kind]()
+    for method in METHODS:
+        for box in (sim.Cell().bin.bounds, None):
+            with pytest.raises(binpick.NoObjectFound):
+                binpick.estimate_poses(scene, tee, bin=box, method=method, num_threads=1)
+
+
+@pytest.fixture(scope="module")
+def tee_pile(tee):
+    return pile_view(tee, 6, seed=8, step=2)
+
+
+@pytest.mark.parametrize("method", ["auto", "ppf"])
+def test_estimate_pose_is_exactly_the_first_of_estimate_poses(tee, tee_pile, method):
+    cell, pile, scene, _ = tee_pile
+    for box in (cell.bin.bounds, None):
+        one = binpick.estimate_pose(scene, tee, bin=box, method=method, num_threads=1)
+        first = binpick.estimate_poses(scene, tee, bin=box, method=method, num_threads=1)[0]
+        np.testing.assert_array_equal(one.T_scene_model, first.T_scene_model)
+        assert (one.score, one.confidence, one.ambiguous) == (first.score, first.confidence, first.ambiguous)
+        np.testing.assert_array_equal(one.indices, first.indices)
+
+
+def test_in_a_pile_an_uncovered_instance_comes_first(tee, tee_pile):
+    cell, pile, scene, _ = tee_pile
+    found = binpick.estimate_poses(scene, tee, bin=cell.bin.bounds, max_instances=5, num_threads=1)
+    uncovered = [r.occluded_fraction <= 0.1 for r in found]
+    assert any(uncovered)
+    assert uncovered[0], [round(r.occluded_fraction, 2) for r in found]
+    for r in found:
+        assert any(pick_grade(tee, r.T_scene_model, T) for T in pile.poses)
