@@ -4,15 +4,16 @@ near-symmetric parts, symmetric but for one small feature that decides the pose.
 The fittings are closed meshes in millimetres in the frame of the paper's Fig. 6b: the origin
 where the branch axes meet, x along the run, y along the side branch, z = x × y.
 
-The near-symmetric parts (:data:`NEAR_SYMMETRIC`) are centred on the origin, each with its
-feature and the proper symmetries that remain with it:
+The near-symmetric parts (:data:`NEAR_SYMMETRIC`; 35–150 mm) are centred on the origin, each with
+its feature and the proper symmetries that remain with it. Each feature changes more than 2 % of
+the surface, so that the symmetry detector (98 % agreement) does not take it for noise:
 
 =================  ==========================================  ===============================
 part               feature (the default sizes)                 proper symmetries left
 =================  ==========================================  ===============================
 ``keyed_shaft``    keyway 2 mm deep on +x, mid-length           the flip about x (2)
-``cut_plate``      one corner (+x, +y) cut 2.8 mm deep          the flip about the diagonal (2)
-``flange``         a locating notch 2.5 mm deep in the rim, +x  the flip about x (2)
+``cut_plate``      one corner (+x, +y) cut 3.0 mm deep          the flip about the diagonal (2)
+``flange``         a locating notch 3 mm deep in the rim, +x    the flip about x (2)
 ``notched_hex``    a notch 1.5 mm deep along the +y flat        the flip about y (2)
 ``bossed_rod``     a boss 2 mm proud on +z, mid-length          the half turn about z (2)
 =================  ==========================================  ===============================
@@ -188,7 +189,7 @@ def cut_plate(
 ) -> Model:
     """A square plate ``side`` × ``side`` × ``thickness`` mm (z through its thickness) with its
     (+x, +y) corner cut at 45°, ``cut`` mm along each edge: the cut reaches ``cut / √2`` mm deep
-    (2.8 mm by default) into the corner. Without the cut: the square plate's 8 symmetries; with
+    (3.0 mm by default) into the corner. Without the cut: the square plate's 8 symmetries; with
     it only the flip about the diagonal through the cut corner is left."""
     h = positive(side, "side") / 2
     t = positive(thickness, "thickness")
