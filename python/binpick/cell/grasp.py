@@ -36,6 +36,7 @@ __all__ = [
     "points_in_gripper",
     "grip_width",
     "plan_grasp",
+    "symmetry_maps",
 ]
 
 Waypoint = tuple[str, np.ndarray, bool]
@@ -129,6 +130,17 @@ def grip_width(gripper: GripperGeometry, model_points: np.ndarray, T_gripper_obj
     if not between.any():
         return None
     return float(2.0 * np.abs(local[between, 0]).max())
+
+
+def symmetry_maps(symmetries: Any) -> tuple[np.ndarray, ...]:
+    """A part's discrete proper symmetries (a :class:`binpick.models.Symmetries`) as 4×4
+    ``T_object_object`` maps, the turns about its centre, without the identity (which
+    :class:`GraspMatcher` adds). A continuous axis has no finite set of maps and is left out."""
+    c = np.asarray(symmetries.center, dtype=np.float64)
+    maps = np.tile(np.eye(4), (len(symmetries.rotations), 1, 1))
+    maps[:, :3, :3] = symmetries.rotations
+    maps[:, :3, 3] = c - maps[:, :3, :3] @ c
+    return tuple(S for S in maps if not np.allclose(S, np.eye(4)))
 
 
 class GraspMatcher:
