@@ -17,10 +17,11 @@ from .config import CellConfig, GripperGeometry, check_static_poses, sweep_angle
 from .frames import FrameSource, OpenCVCamera
 from .grasp import GraspMatcher, NoGraspError, branch_grasps, plan_grasp, symmetry_maps
 from .loop import Cell, ProgressPrinter
-from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult
+from .records import FAILURE_KINDS, Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult
 
 __all__ = [
     "CELL_FILE_EXAMPLE",
+    "FAILURE_KINDS",
     "Cell",
     "CellConfig",
     "CellFile",

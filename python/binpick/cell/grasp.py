@@ -43,7 +43,15 @@ Waypoint = tuple[str, np.ndarray, bool]
 
 
 class NoGraspError(BinpickError):
-    """The located part has no declared grasp that is reachable, collision-free and safe to approach."""
+    """The located part has no declared grasp that is reachable, collision-free and safe to approach.
+
+    ``reason`` says why in a few words, for the one line a skipped part gets in a report; the
+    message adds what to do about it.
+    """
+
+    def __init__(self, message: str, *, reason: Optional[str] = None) -> None:
+        super().__init__(message)
+        self.reason = reason if reason is not None else message
 
 
 def branch_grasps(model: Model, *, finger_width_mm: float = 20.0, steps: int = 72) -> dict[str, np.ndarray]:
@@ -261,8 +269,10 @@ def plan_grasp(
             rejected=MappingProxyType(dict(rejected)),
         )
         return plan, hits
+    why = ", ".join(f"{v} {k}" for k, v in rejected.items() if v)
     raise NoGraspError(
         f"none of the {len(config.grasps)} grasps of the located {config.model.name} can be used (rejected: "
         + ", ".join(f"{v} for {k}" for k, v in rejected.items() if v)
-        + "); declare more grasps, widen CellLimits.max_tool_tilt_rad, or let the pile be stirred"
+        + "); declare more grasps, widen CellLimits.max_tool_tilt_rad, or let the pile be stirred",
+        reason=f"none of {len(config.grasps)} grasps usable ({why})",
     )
