@@ -46,14 +46,18 @@ def _model(part: str, unit: str = "mm") -> Any:
     return Model.from_mesh(part, unit=unit)
 
 
-def _print_table(records: Sequence[Any], out: Any = None) -> None:
+def _print_table(report: Any, out: Any = None) -> None:
+    """The picks as a table (one row each: result, part removed, kind of failure, pose quality),
+    a line of totals (parts removed, failures by kind) and one line per failed pick."""
     out = out or sys.stdout
-    rows = [("pick", "result", "score", "rmse mm", "rot err °", "pos err mm", "grasp", "time s")]
-    for r in records:
+    rows = [("pick", "result", "removed", "failure", "score", "rmse mm", "rot err °", "pos err mm", "grasp", "time s")]
+    for r in report.records:
         rows.append(
             (
                 str(r.index),
                 "picked" if r.success else "failed",
+                "-" if r.picked_instance is None else f"part {r.picked_instance}",
+                r.failure or "-",
                 "-" if r.score is None else f"{r.score:.2f}",
                 "-" if r.rmse is None else f"{r.rmse:.2f}",
                 "-" if r.truth is None else f"{r.truth.rotation_error_deg:.2f}",
@@ -64,10 +68,19 @@ def _print_table(records: Sequence[Any], out: Any = None) -> None:
         )
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
     for k, row in enumerate(rows):
-        print("  ".join(c.ljust(w) for c, w in zip(row, widths)), file=out)
+        print("  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip(), file=out)
         if k == 0:
             print("  ".join("-" * w for w in widths), file=out)
-    for r in records:
+    removed = report.removed
+    failures = report.failures_by_kind()
+    print(
+        f"removed {len(removed)} part{'s' if len(removed) != 1 else ''}"
+        + (f" ({', '.join(map(str, removed))})" if removed else "")
+        + "; failures: "
+        + (", ".join(f"{n} {kind}" for kind, n in failures.items()) if failures else "none"),
+        file=out,
+    )
+    for r in report.records:
         if r.error:
             print(f"pick {r.index}: {r.error}", file=out)
 
@@ -148,16 +161,17 @@ def _demo(args: argparse.Namespace) -> int:
         failures = sim.emulator_failures
     written = _pictures(out, report, model, bin_bounds)
     print()
-    _print_table(report.records)
+    _print_table(report)
     print()
     for p in written:
         print(f"wrote {p}")
     if failures:
         print("emulator failures (a bug): " + "; ".join(failures), file=sys.stderr)
     picked = report.successes
+    last = report.records[-1]
     print(
         f"{picked} of {len(report.records)} picks succeeded in {time.perf_counter() - t0:.1f} s"
-        + (f"; stopped: {report.stopped}" if report.stopped else "")
+        + (f"; stopped at pick {last.index} ({last.failure or 'see above'})" if report.stopped else "")
     )
     if picked == 0:
         print(
@@ -198,7 +212,7 @@ def _pick(args: argparse.Namespace) -> int:
             return _dry_run(cell, out)
         report = cell.run(args.picks)
     written = _pictures(out, report, cell.config.model, cell.config.bin_bounds)
-    _print_table(report.records)
+    _print_table(report)
     for p in written:
         print(f"wrote {p}")
     if report.successes == 0:

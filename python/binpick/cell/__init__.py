@@ -15,12 +15,13 @@ from __future__ import annotations
 from .cell_file import CELL_FILE_EXAMPLE, CellFile, cell_from_file, config_from_file, load_cell_file
 from .config import CellConfig, GripperGeometry, check_static_poses, sweep_angles
 from .frames import FrameSource, OpenCVCamera
-from .grasp import GraspMatcher, NoGraspError, branch_grasps, plan_grasp
+from .grasp import GraspMatcher, NoGraspError, branch_grasps, plan_grasp, symmetry_maps
 from .loop import Cell, ProgressPrinter
-from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult
+from .records import FAILURE_KINDS, Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult
 
 __all__ = [
     "CELL_FILE_EXAMPLE",
+    "FAILURE_KINDS",
     "Cell",
     "CellConfig",
     "CellFile",
@@ -43,4 +44,5 @@ __all__ = [
     "load_cell_file",
     "plan_grasp",
     "sweep_angles",
+    "symmetry_maps",
 ]

@@ -16,13 +16,14 @@ __all__ = ["FrameSource", "OpenCVCamera"]
 
 class FrameSource(abc.ABC):
     """The camera as the pick loop sees it: told where the robot is before a sweep, then asked
-    for one frame per laser angle (after the motor has arrived)."""
+    for one frame per laser angle (after the motor has stopped; the frame is tagged with the
+    angle read at rest)."""
 
     def begin(self, T_base_flange: np.ndarray) -> None:
         """Called before a sweep with the flange pose read back from the robot."""
 
     def laser_at(self, angle: float) -> None:
-        """Called before each grab with the laser angle the motor reported (rad)."""
+        """Called before each grab with the laser angle the motor reported at rest (rad)."""
 
     @abc.abstractmethod
     def grab(self) -> np.ndarray:

@@ -36,13 +36,22 @@ __all__ = [
     "points_in_gripper",
     "grip_width",
     "plan_grasp",
+    "symmetry_maps",
 ]
 
 Waypoint = tuple[str, np.ndarray, bool]
 
 
 class NoGraspError(BinpickError):
-    """The located part has no declared grasp that is reachable, collision-free and safe to approach."""
+    """The located part has no declared grasp that is reachable, collision-free and safe to approach.
+
+    ``reason`` says why in a few words, for the one line a skipped part gets in a report; the
+    message adds what to do about it.
+    """
+
+    def __init__(self, message: str, *, reason: Optional[str] = None) -> None:
+        super().__init__(message)
+        self.reason = reason if reason is not None else message
 
 
 def branch_grasps(model: Model, *, finger_width_mm: float = 20.0, steps: int = 72) -> dict[str, np.ndarray]:
@@ -129,6 +138,17 @@ def grip_width(gripper: GripperGeometry, model_points: np.ndarray, T_gripper_obj
     if not between.any():
         return None
     return float(2.0 * np.abs(local[between, 0]).max())
+
+
+def symmetry_maps(symmetries: Any) -> tuple[np.ndarray, ...]:
+    """A part's discrete proper symmetries (a :class:`binpick.models.Symmetries`) as 4×4
+    ``T_object_object`` maps, the turns about its centre, without the identity (which
+    :class:`GraspMatcher` adds). A continuous axis has no finite set of maps and is left out."""
+    c = np.asarray(symmetries.center, dtype=np.float64)
+    maps = np.tile(np.eye(4), (len(symmetries.rotations), 1, 1))
+    maps[:, :3, :3] = symmetries.rotations
+    maps[:, :3, 3] = c - maps[:, :3, :3] @ c
+    return tuple(S for S in maps if not np.allclose(S, np.eye(4)))
 
 
 class GraspMatcher:
@@ -249,8 +269,10 @@ def plan_grasp(
             rejected=MappingProxyType(dict(rejected)),
         )
         return plan, hits
+    why = ", ".join(f"{v} {k}" for k, v in rejected.items() if v)
     raise NoGraspError(
         f"none of the {len(config.grasps)} grasps of the located {config.model.name} can be used (rejected: "
         + ", ".join(f"{v} for {k}" for k, v in rejected.items() if v)
-        + "); declare more grasps, widen CellLimits.max_tool_tilt_rad, or let the pile be stirred"
+        + "); declare more grasps, widen CellLimits.max_tool_tilt_rad, or let the pile be stirred",
+        reason=f"none of {len(config.grasps)} grasps usable ({why})",
     )

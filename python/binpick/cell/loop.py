@@ -325,7 +325,10 @@ class Cell:
                 return located, self.plan(located)
             except NoGraspError as exc:
                 last = exc
-                self.progress("plan", f"{exc}; trying the next part")
+                t = located.T_base_object[:3, 3]
+                self.progress(
+                    "skip", f"{self.config.model.name} at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm: {exc.reason}"
+                )
                 if len(located.indices) == 0:
                     break
                 excluded[located.indices] = True
@@ -337,7 +340,8 @@ class Cell:
         if any(np.linalg.norm(t - spot) < self.EMPTY_GRIP_RADIUS_MM for spot in self._empty_grips):
             raise NoGraspError(
                 f"the gripper closed on nothing at this located {self.config.model.name} "
-                f"({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm in an earlier pick of this run"
+                f"({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm in an earlier pick of this run",
+                reason="the gripper closed on nothing here earlier in this run",
             )
 
     def plan(self, located: Located) -> PickPlan:
@@ -372,7 +376,8 @@ class Cell:
         held = self._execute(plan)
         times["motion"] = _ms_since(t3)
         picked = self.truth.take_picked() if self.truth is not None else None
-        ok, error = self._judge_pick(located, held, picked)
+        failure, error = self._judge_pick(located, held, picked)
+        ok = failure is None
         times["total"] = _ms_since(t0)
         self.progress(
             "pick",
@@ -394,6 +399,7 @@ class Cell:
             truth=located.truth,
             picked_instance=picked,
             error=error,
+            failure=failure,
             timings=MappingProxyType(times),
         )
 
@@ -414,20 +420,23 @@ class Cell:
             times["plan"] = _ms_since(t1)
         return located, plan
 
-    def _judge_pick(self, located: Located, held: Optional[bool], picked: Optional[int]) -> tuple[bool, Optional[str]]:
-        """Whether the pick succeeded, and why not; remembers where the gripper closed on nothing."""
+    def _judge_pick(
+        self, located: Located, held: Optional[bool], picked: Optional[int]
+    ) -> tuple[Optional[str], Optional[str]]:
+        """The kind of failure of the pick (None when it succeeded, see :attr:`PickRecord.failure`)
+        and why; remembers where the gripper closed on nothing."""
         if held is False:
             self._empty_grips.append(located.T_base_object[:3, 3].copy())
-            return False, "the gripper closed on nothing (no part between the fingers)"
+            return "empty grip", "the gripper closed on nothing (no part between the fingers)"
         if self.truth is None:
-            return True, None
+            return None, None
         truth = located.truth
         ok = picked is not None and truth is not None and picked == truth.instance and truth.pick_grade
         if ok:
-            return True, None
+            return None, None
         if picked is None:
-            return False, "no part left the bin"
-        return False, (
+            return "nothing lifted", "no part left the bin"
+        return "wrong pose", (
             f"part {picked} left the bin, but the located pose was not pick-grade or belonged to part "
             f"{None if truth is None else truth.instance}"
         )
@@ -525,14 +534,16 @@ class Cell:
             times.update(record.timings)
             times["total"] = _ms_since(t0)
             return replace(record, timings=MappingProxyType(times)), None
-        except (NoObjectFound, NoGraspError) as exc:
-            return self._failed(i, scan, located, exc, t0, fault=False), f"pick {i}: {exc}"
+        except NoObjectFound as exc:
+            return self._failed(i, scan, located, exc, t0, failure="nothing found"), f"pick {i}: {exc}"
+        except NoGraspError as exc:
+            return self._failed(i, scan, located, exc, t0, failure="no grasp"), f"pick {i}: {exc}"
         except BinpickError as exc:
-            return self._failed(i, scan, located, exc, t0, fault=True), f"pick {i}: {type(exc).__name__}: {exc}"
+            return self._failed(i, scan, located, exc, t0, failure="fault"), f"pick {i}: {type(exc).__name__}: {exc}"
 
     @staticmethod
     def _failed(
-        i: int, scan: Optional[ScanResult], loc: Optional[Located], exc: BaseException, t0: float, *, fault: bool
+        i: int, scan: Optional[ScanResult], loc: Optional[Located], exc: BaseException, t0: float, *, failure: str
     ) -> PickRecord:
         res = None if loc is None else loc.result
         return PickRecord(
@@ -545,6 +556,7 @@ class Cell:
             points=0 if scan is None else len(scan.points),
             truth=None if loc is None else loc.truth,
             error=str(exc),
-            fault=fault,
+            fault=failure == "fault",
+            failure=failure,
             timings=MappingProxyType({"total": _ms_since(t0)}),
         )

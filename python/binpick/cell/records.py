@@ -9,7 +9,17 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["ScanResult", "PoseTruth", "Located", "PickPlan", "PickRecord", "RunReport"]
+__all__ = ["ScanResult", "PoseTruth", "Located", "PickPlan", "PickRecord", "RunReport", "FAILURE_KINDS"]
+
+#: What a failed pick attempt can have gone wrong with, in the order a pick meets them.
+FAILURE_KINDS: tuple[str, ...] = (
+    "nothing found",  # no part located in the scan
+    "no grasp",  # parts located, none with a usable grasp
+    "empty grip",  # the gripper closed on nothing
+    "nothing lifted",  # the gripper held, but no part left the bin
+    "wrong pose",  # a part left the bin, but the located pose was not pick-grade or not that part's
+    "fault",  # a device fault or safety refusal stopped the arm
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -82,7 +92,8 @@ class PickRecord:
 
     ``success``: the part was lifted out (with ground truth: the removed part is the located one and
     its pose was pick-grade); ``held``: what the gripper reported (None when it cannot tell);
-    ``error``: why the attempt failed, None on success; ``timings``: stage → ms.
+    ``error``: why the attempt failed, None on success; ``failure``: its kind, one of
+    :data:`FAILURE_KINDS` (None on success); ``timings``: stage → ms.
     """
 
     index: int
@@ -98,6 +109,7 @@ class PickRecord:
     picked_instance: Optional[int] = None
     error: Optional[str] = None
     fault: bool = False
+    failure: Optional[str] = None
     timings: Mapping[str, float] = field(default_factory=dict)
 
     def as_dict(self) -> dict:
@@ -122,6 +134,7 @@ class PickRecord:
             },
             "picked_instance": self.picked_instance,
             "error": self.error,
+            "failure": self.failure,
             "timings_ms": dict(self.timings),
         }
 
@@ -140,3 +153,13 @@ class RunReport:
     def successes(self) -> int:
         """How many picks succeeded."""
         return sum(r.success for r in self.records)
+
+    @property
+    def removed(self) -> tuple[int, ...]:
+        """The parts that left the bin, in order (with ground truth; a wrong-pose lift counts too)."""
+        return tuple(r.picked_instance for r in self.records if r.picked_instance is not None)
+
+    def failures_by_kind(self) -> dict[str, int]:
+        """Failed attempts per kind of :data:`FAILURE_KINDS` (the kinds that occurred, in that order)."""
+        counts = {kind: sum(r.failure == kind for r in self.records) for kind in FAILURE_KINDS}
+        return {kind: n for kind, n in counts.items() if n}

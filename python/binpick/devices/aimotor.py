@@ -16,7 +16,8 @@ against your unit's manual; the values are configurable where they are numbers):
 Limits of the protocol that the driver cannot paper over: replies carry no checksum and no
 device error, so a corrupted but in-range reply cannot be told from a good one; there is no
 goal read-back and no speed setting in the 4-byte commands used here (``MotorRange.max_speed_rad_s``
-is not sent), and the 'moving' state is inferred from the position.
+is not sent), and the 'moving' state is inferred from the position (stopped once it reads the same
+for ``MotorRange.settle_s``).
 """
 
 from __future__ import annotations

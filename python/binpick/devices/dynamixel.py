@@ -16,10 +16,11 @@ Packet (little-endian fields)::
 
 Instructions used: PING 0x01, READ 0x02 (address, length: 2 bytes each), WRITE 0x03 (address,
 data). Control-table addresses are those of the X series: torque enable 64, profile velocity
-112 (0.229 rpm units), goal position 116, moving 122, present position 132 (4 bytes, 4096 ticks
-per revolution). Reads are retried after a timeout or unusable status; writes are never sent
-twice: after a failed write the driver reads the address back and accepts it only if it holds
-the written value.
+112 (0.229 rpm units), goal position 116, moving 122, moving status 123 (bit 0 in position, bit 1
+profile ongoing), present position 132 (4 bytes, 4096 ticks per revolution). Reads are retried
+after a timeout or unusable status; writes are never sent twice: after a failed write the driver
+reads the address back and accepts it only if it holds the written value. A move is reported
+only once the motor's status says it has stopped, with the angle read after that.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from __future__ import annotations
 import math
 import struct
 from dataclasses import dataclass
-from typing import Union
+from typing import Optional, Union
 
 import serial
 
@@ -56,6 +57,9 @@ __all__ = [
     "ADDR_PROFILE_VELOCITY",
     "ADDR_GOAL_POSITION",
     "ADDR_MOVING",
+    "ADDR_MOVING_STATUS",
+    "MOVING_STATUS_IN_POSITION",
+    "MOVING_STATUS_PROFILE_ONGOING",
     "ADDR_PRESENT_POSITION",
     "crc16",
     "stuff",
@@ -80,6 +84,9 @@ ADDR_TORQUE_ENABLE = 64
 ADDR_PROFILE_VELOCITY = 112
 ADDR_GOAL_POSITION = 116
 ADDR_MOVING = 122
+ADDR_MOVING_STATUS = 123
+MOVING_STATUS_IN_POSITION = 0x01
+MOVING_STATUS_PROFILE_ONGOING = 0x02
 ADDR_PRESENT_POSITION = 132
 MAX_LENGTH = 1024  # longest LEN this driver accepts in a reply
 _MAX_GARBAGE = 512  # bytes skipped while looking for a header before giving up
@@ -445,11 +452,14 @@ class DynamixelMotor(LaserMotor):
         return self._angle(struct.unpack("<i", raw)[0])
 
     def is_moving(self) -> bool:
-        """The motor's own Moving flag."""
-        return self._still_moving()
+        """The motor's own status: Moving (address 122) set, or its motion profile still
+        running (Moving Status, address 123, bit 1), read together."""
+        moving, status = self.bus.read(self.config.motor_id, ADDR_MOVING, 2)
+        return bool(moving) or bool(status & MOVING_STATUS_PROFILE_ONGOING)
 
-    def _still_moving(self) -> bool:
-        return self.bus.read(self.config.motor_id, ADDR_MOVING, 1) != b"\x00"
+    def _angle_at_rest(self) -> Optional[float]:
+        """The present angle, read only once the motor's status says it has stopped."""
+        return None if self.is_moving() else self.present_angle()
 
     def _send_goal(self, angle_rad: float) -> None:
         self.bus.write(self.config.motor_id, ADDR_GOAL_POSITION, struct.pack("<i", self._ticks(angle_rad)))

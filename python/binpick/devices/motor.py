@@ -1,7 +1,7 @@
 """The interface every laser-motor driver offers, and the range and timing it is held to.
 
 The laser projector turns on one motor; scanning needs only: is it there, hold torque or not,
-go to an angle (radians, 0 at the motor's mechanical centre), where is it now, has it arrived.
+go to an angle (radians, 0 at the motor's mechanical centre), where is it now, has it stopped there.
 :class:`LaserMotor` implements the waiting and the range check once; drivers supply the bytes.
 """
 
@@ -31,6 +31,8 @@ class MotorRange:
         tolerance_rad: a goal counts as reached within this angle, radians.
         move_timeout_s: longest wait for one move, seconds.
         poll_interval_s: pause between two position reads while waiting, seconds.
+        settle_s: for a motor whose protocol reports no motion, how long its position must
+            read the same before it counts as stopped, seconds.
     """
 
     min_angle_rad: float = -math.pi / 2
@@ -39,6 +41,7 @@ class MotorRange:
     tolerance_rad: float = math.radians(0.5)
     move_timeout_s: float = 10.0
     poll_interval_s: float = 0.02
+    settle_s: float = 0.03
 
     def __post_init__(self) -> None:
         lo = check_number(self.min_angle_rad, "MotorRange.min_angle_rad", low=-math.pi, high=math.pi, unit="rad")
@@ -49,13 +52,15 @@ class MotorRange:
         check_number(self.tolerance_rad, "MotorRange.tolerance_rad", low=0.0, high=math.pi, unit="rad")
         check_number(self.move_timeout_s, "MotorRange.move_timeout_s", low=1e-3, unit="s")
         check_number(self.poll_interval_s, "MotorRange.poll_interval_s", low=1e-4, unit="s")
+        check_number(self.settle_s, "MotorRange.settle_s", low=0.0, unit="s")
 
 
 class LaserMotor(abc.ABC):
     """A rotary axis turning the laser projector; angles in radians.
 
     Subclasses implement :meth:`ping`, :meth:`enable`, :meth:`disable`, :meth:`present_angle`
-    and :meth:`_send_goal`; they may override :meth:`is_moving` when the device reports it.
+    and :meth:`_send_goal`; they override :meth:`is_moving` and :meth:`_angle_at_rest` when the
+    device reports whether it moves.
     """
 
     range: MotorRange
@@ -90,11 +95,12 @@ class LaserMotor(abc.ABC):
         return self._goal
 
     def is_moving(self) -> bool:
-        """Whether the motor is still away from its goal."""
+        """Whether the motor is turning now: the protocol's moving status where it has one (see
+        :meth:`_angle_at_rest`), else whether the position is away from the goal."""
         return self._goal is not None and abs(self.present_angle() - self._goal) > self.range.tolerance_rad
 
     def move_to(self, angle_rad: float, *, wait: bool = True) -> float:
-        """Sends goal ``angle_rad`` and (with ``wait``) returns the angle reached.
+        """Sends goal ``angle_rad`` and (with ``wait``) returns the angle the motor came to rest at.
 
         SafetyError, with nothing sent, when the angle is outside ``range``.
         """
@@ -111,25 +117,43 @@ class LaserMotor(abc.ABC):
         return self.wait_until_reached() if wait else a
 
     def wait_until_reached(self, timeout_s: Optional[float] = None) -> float:
-        """Polls until the goal is reached; returns the present angle. DeviceTimeout past the timeout."""
+        """Waits until the motor has stopped within the tolerance of its goal, then returns the
+        angle read at rest (the angle a frame is tagged with). DeviceTimeout past the timeout.
+
+        The stop is judged first and the angle read after it: an angle read while the motor still
+        turns is not where it stays.
+        """
         if self._goal is None:
             raise InvalidInputError("laser motor: no goal has been sent yet; call move_to first")
         limit = self.range.move_timeout_s if timeout_s is None else check_number(timeout_s, "timeout_s", low=0)
         deadline = time.monotonic() + limit
         while True:
-            angle = self.present_angle()
-            if abs(angle - self._goal) <= self.range.tolerance_rad and not self._still_moving():
+            angle = self._angle_at_rest()
+            if angle is not None and abs(angle - self._goal) <= self.range.tolerance_rad:
                 return angle
             if time.monotonic() > deadline:
+                here = self.present_angle()
                 raise DeviceTimeout(
-                    f"laser motor: still at {math.degrees(angle):.2f}° {limit} s after the goal "
+                    f"laser motor: still at {math.degrees(here):.2f}° "
+                    f"({'at rest' if angle is not None else 'moving'}) {limit} s after the goal "
                     f"{math.degrees(self._goal):.2f}° was sent; check torque, load and the speed limit"
                 )
             time.sleep(self.range.poll_interval_s)
 
-    def _still_moving(self) -> bool:
-        """A device-reported 'moving' flag, where the protocol has one."""
-        return False
+    def _angle_at_rest(self) -> Optional[float]:
+        """The present angle if the motor has stopped, else None.
+
+        This default is for protocols without a moving status: the motor counts as stopped when
+        its position reads the same for ``range.settle_s``. Drivers whose protocol reports
+        motion override it to ask that status first and read the angle after.
+        """
+        first = self.present_angle()
+        end = time.monotonic() + self.range.settle_s
+        while time.monotonic() < end:
+            time.sleep(self.range.poll_interval_s)
+            if self.present_angle() != first:
+                return None
+        return first
 
     def close(self) -> None:
         """Closes the serial port."""

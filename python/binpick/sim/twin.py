@@ -19,7 +19,7 @@ import numpy as np
 from .. import parts
 from .._validate import positive
 from ..cell.config import CellConfig, GripperGeometry
-from ..cell.grasp import GraspMatcher, grip_width
+from ..cell.grasp import GraspMatcher, grip_width, symmetry_maps
 from ..cell.loop import Cell, quiet
 from ..cell.records import PoseTruth
 from ..devices import (
@@ -37,7 +37,7 @@ from ..devices.emulators import ArmModel, DynamixelEmulator, GripperEmulator, Ro
 from ..devices.gripper import GTO
 from ..errors import InvalidInputError, NoObjectFound
 from ..models import Model
-from ..transforms import inverse, look_down, pose_error
+from ..transforms import inverse, look_down
 from .camera import SimCamera
 from .cell import Cell as Layout
 from .pile import Pile
@@ -208,7 +208,10 @@ class SimulatedCell:
         )
 
     def _config(self, limits: safety.CellLimits) -> CellConfig:
-        """The pick loop's view of the simulated cell: its exact calibration, bin, scan pose and arm."""
+        """The pick loop's view of the simulated cell: its exact calibration, bin, scan pose and
+        arm, and the part's symmetries (so that a grip of a part turned by one counts)."""
+        overrides = dict(self.config_overrides)
+        overrides.setdefault("symmetries", symmetry_maps(self.model.symmetries))
         return CellConfig(
             calibration=self.layout.calibration(),
             model=self.model,
@@ -220,7 +223,7 @@ class SimulatedCell:
             limits=limits,
             reachable=_Reach(SIM_ARM),
             num_threads=self.num_threads,
-            **self.config_overrides,
+            **overrides,
         )
 
     def _drivers(self, limits: safety.CellLimits) -> tuple[MelfaRobot, DynamixelMotor, ModbusGripper]:
@@ -347,12 +350,13 @@ class SimulatedCell:
 
     # -- ground truth
     def judge(self, T_base_object: np.ndarray) -> PoseTruth:
-        """The located pose against the nearest part of the pile (errors modulo the part's symmetries)."""
+        """The located pose against the nearest part of the pile, its errors modulo the part's
+        proper symmetries (:meth:`binpick.Model.pose_error`): a pose turned by a symmetry is as
+        good as the true one, as the BOP benchmark judges."""
         self.settle_pending()
-        syms = self.cell.config.symmetries if self.cell is not None else ()
         best = None
         for pid, T_bo in zip(self.pile.ids, self.pile.poses):
-            deg, mm = pose_error(T_base_object, T_bo, syms)
+            deg, mm = self.model.pose_error(T_base_object, T_bo)
             if best is None or mm < best.translation_error_mm:
                 best = PoseTruth(instance=int(pid), rotation_error_deg=deg, translation_error_mm=mm)
         if best is None:

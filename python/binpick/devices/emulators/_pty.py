@@ -68,6 +68,8 @@ class PtyEmulator:
     supported_faults = frozenset(Fault)
     #: the device's name in thread names and messages
     device = "device"
+    #: seconds between a request and its reply: the device's return delay (0 = at once)
+    reply_delay_s = 0.0
 
     def __init__(self) -> None:
         self._master, self._slave = os.openpty()
@@ -208,6 +210,8 @@ class PtyEmulator:
             reply = self._bad_crc(reply)
         elif fault is Fault.UNKNOWN_REPLY:
             reply = self._unknown_reply(request)
+        if self.reply_delay_s:
+            self._stop.wait(self.reply_delay_s)
         self._send_bytes(reply)
 
     def _send_bytes(self, data: bytes) -> None:

@@ -19,6 +19,7 @@ from ...errors import ChecksumError, ProtocolError
 from ..dynamixel import (
     ADDR_GOAL_POSITION,
     ADDR_MOVING,
+    ADDR_MOVING_STATUS,
     ADDR_PRESENT_POSITION,
     ADDR_PROFILE_VELOCITY,
     ADDR_TORQUE_ENABLE,
@@ -28,6 +29,8 @@ from ..dynamixel import (
     INST_READ,
     INST_STATUS,
     INST_WRITE,
+    MOVING_STATUS_IN_POSITION,
+    MOVING_STATUS_PROFILE_ONGOING,
     Packet,
     decode_packet,
     encode_packet,
@@ -90,6 +93,8 @@ class DynamixelEmulatorConfig:
         min_position: Min Position Limit, ticks.
         max_position: Max Position Limit, ticks.
         device_error: ERROR byte sent for the DEVICE_ERROR fault (1 = result fail, 0x80 = alert).
+        return_delay_s: time from a request to its status, s (the X series' default Return Delay
+            Time of 250 × 2 µs); the motor keeps turning meanwhile.
     """
 
     motor_id: int = 1
@@ -100,10 +105,12 @@ class DynamixelEmulatorConfig:
     min_position: int = 0
     max_position: int = 4095
     device_error: int = 0x01
+    return_delay_s: float = 500e-6
 
     def __post_init__(self) -> None:
         check_int(self.motor_id, "DynamixelEmulatorConfig.motor_id", 0, 252)
         check_number(self.max_speed_rad_s, "DynamixelEmulatorConfig.max_speed_rad_s", low=1e-6, unit="rad/s")
+        check_number(self.return_delay_s, "DynamixelEmulatorConfig.return_delay_s", low=0.0, high=0.5, unit="s")
 
 
 class DynamixelEmulator(PtyEmulator):
@@ -114,6 +121,7 @@ class DynamixelEmulator(PtyEmulator):
     def __init__(self, *, config: DynamixelEmulatorConfig = DynamixelEmulatorConfig()) -> None:
         super().__init__()
         self.config = config
+        self.reply_delay_s = config.return_delay_s
         t = bytearray(TABLE_SIZE)
         struct.pack_into("<H", t, 0, config.model_number)
         t[6], t[7], t[8], t[11] = config.firmware_version, config.motor_id, 1, 3  # fw, ID, 57600 baud, position mode
@@ -167,7 +175,9 @@ class DynamixelEmulator(PtyEmulator):
     def _refresh(self) -> None:
         pos = int(round(self.axis.position()))
         struct.pack_into("<i", self.table, ADDR_PRESENT_POSITION, pos)
-        self.table[ADDR_MOVING] = int(self.axis.moving())
+        moving = self.axis.moving()
+        self.table[ADDR_MOVING] = int(moving)
+        self.table[ADDR_MOVING_STATUS] = MOVING_STATUS_PROFILE_ONGOING if moving else MOVING_STATUS_IN_POSITION
 
     def _handle(self, request: Any) -> Optional[bytes]:
         with self._lock:

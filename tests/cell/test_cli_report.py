@@ -1,0 +1,55 @@
+"""What ``binpick demo`` prints about its picks: one line per skipped part, a picks table with
+the part removed and the kind of failure per pick, and a line of totals."""
+
+from __future__ import annotations
+
+import json
+import re
+
+from binpick.cell import PickRecord, PoseTruth, RunReport
+from binpick.cli import _print_table, main
+
+
+def test_totals_line_counts_removed_parts_and_failures_by_kind(capsys):
+    ok = PoseTruth(instance=3, rotation_error_deg=0.1, translation_error_mm=0.2)
+    records = (
+        PickRecord(index=1, success=True, picked_instance=3, truth=ok),
+        PickRecord(index=2, success=False, held=False, error="the gripper closed on nothing", failure="empty grip"),
+        PickRecord(index=3, success=False, picked_instance=5, error="part 5 left the bin", failure="wrong pose"),
+        PickRecord(index=4, success=False, error="none of the grasps can be used", failure="no grasp"),
+    )
+    report = RunReport(records=records, stopped="pick 4: none of the grasps can be used")
+    assert report.removed == (3, 5)
+    assert report.failures_by_kind() == {"no grasp": 1, "empty grip": 1, "wrong pose": 1}
+    _print_table(report)
+    lines = capsys.readouterr().out.splitlines()
+    header = lines[0].split()
+    assert header[:4] == ["pick", "result", "removed", "failure"]
+    assert lines[2].split()[:4] == ["1", "picked", "part", "3"]
+    assert "empty grip" in lines[3] and "wrong pose" in lines[4] and "no grasp" in lines[5]
+    assert lines[6] == "removed 2 parts (3, 5); failures: 1 no grasp, 1 empty grip, 1 wrong pose"
+    assert lines[7:] == [
+        "pick 2: the gripper closed on nothing",
+        "pick 3: part 5 left the bin",
+        "pick 4: none of the grasps can be used",
+    ]
+
+
+def test_demo_prints_one_line_per_skipped_part(tmp_path, capsys):
+    # In this pile the second scan finds two crosses lying flat, neither with a usable grasp.
+    out = tmp_path / "cross"
+    argv = ["demo", "--part", "cross", "--picks", "2", "--count", "3", "--frames", "60", "--seed", "1"]
+    code = main([*argv, "--out", str(out), "--d-star", "12", "--min-points", "500"])
+    text = capsys.readouterr().out
+    assert code == 0, text
+    skips = [line for line in text.splitlines() if re.match(r"\[\s*[\d.]+ s\] skip ", line)]
+    assert len(skips) >= 1, text
+    for line in skips:
+        assert re.search(r"skip\s+cross at \(-?[\d.]+, -?[\d.]+, -?[\d.]+\) mm: none of \d+ grasps usable \(", line)
+        assert len(line) < 160, line
+    assert "trying the next part" not in text and "declare more grasps" not in "\n".join(skips)
+    records = json.loads((out / "picks.json").read_text())["picks"]
+    assert [r["failure"] for r in records] == [None, "no grasp"]
+    removed = [r["picked_instance"] for r in records if r["picked_instance"] is not None]
+    assert f"removed 1 part ({removed[0]}); failures: 1 no grasp" in text
+    assert "stopped at pick 2 (no grasp)" in text
