@@ -72,16 +72,7 @@ def test_feature_depths(built):
     assert np.ptp(rod[rod[:, 2] > 11.0, 0]) == pytest.approx(10.0, abs=0.5)
 
 
-DETECTOR_FLIPS_THE_WRONG_AXIS = pytest.mark.xfail(
-    strict=True,
-    reason="the core's detector reports the notched hex's flip about x (which moves 4.6 % of its surface "
-    "more than 1.5 mm) instead of its flip about y (which moves none)",
-)
-
-
-@pytest.mark.parametrize(
-    "name", [pytest.param(n, marks=DETECTOR_FLIPS_THE_WRONG_AXIS) if n == "notched_hex" else n for n in NAMES]
-)
+@pytest.mark.parametrize("name", NAMES)
 def test_symmetries(built, name):
     part, base = built[name]
     sym = part.symmetries

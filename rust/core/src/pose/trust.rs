@@ -33,12 +33,12 @@ pub struct TrustParams {
     pub refine_points: usize,
     /// ICP iterations of each alternative's refinement. Default 15.
     pub iterations: usize,
-    /// Fine tolerance in standard deviations of the scan's noise about the pose. Default 3.
+    /// Fine tolerance in standard deviations of the scan's noise about the pose. Default 4.
     pub noise_sigmas: f64,
-    /// Smallest fine tolerance, mm. Default 0.2.
+    /// Smallest fine tolerance, mm. Default 0.3.
     pub min_fine_tolerance: f64,
     /// An alternative whose evidence trails the best by less than this many scan points cannot
-    /// be ruled out. Default 8.
+    /// be ruled out (the bench calls a feature in view at 15 points beyond 4σ). Default 15.
     pub min_margin: f64,
     /// ... nor by less than this fraction of the points in the feature regions. Default 0.05.
     pub margin_fraction: f64,
@@ -57,9 +57,9 @@ impl Default for TrustParams {
             quick_iterations: 6,
             refine_points: 1500,
             iterations: 15,
-            noise_sigmas: 3.0,
-            min_fine_tolerance: 0.2,
-            min_margin: 8.0,
+            noise_sigmas: 4.0,
+            min_fine_tolerance: 0.3,
+            min_margin: 15.0,
             margin_fraction: 0.05,
             pick_rotation: 5f64.to_radians(),
             pick_translation: 3.0,
@@ -142,6 +142,14 @@ pub(super) fn assess(
         points
             .iter()
             .filter(|p| (*p - center).norm_squared() <= reach * reach)
+            // Points on the floor or a wall lie in the plane of the part's faces that rest on
+            // it and would confirm material wherever a pose puts it: only the part's own count.
+            .filter(|p| {
+                judge
+                    .supports
+                    .iter()
+                    .all(|s| s.normal.dot(&p.coords) - s.offset > 2.0 * judge.tol)
+            })
             .copied()
             .collect()
     };

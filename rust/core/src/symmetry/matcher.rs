@@ -330,7 +330,7 @@ impl<'a> Matcher<'a> {
                 d.min(count - d) >= apart
             }) {
                 peaks.push(k);
-                if peaks.len() == 3 {
+                if peaks.len() == MAX_FLIP_PEAKS {
                     break;
                 }
             }

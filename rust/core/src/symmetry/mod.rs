@@ -47,7 +47,7 @@ type Rot = UnitQuaternion<f64>;
 
 /// The default [`SymmetryConfig::tolerance`] as a multiple of the median nearest-neighbour
 /// spacing of the samples.
-pub const TOLERANCE_PER_SPACING: f64 = 1.5;
+pub const TOLERANCE_PER_SPACING: f64 = 1.0;
 /// A rotated sample looks for its nearest sample within this multiple of the 90th-percentile
 /// nearest-neighbour spacing (at least the tolerance): far enough that gaps in the sampling do not
 /// fail a point that lies on the surface, also for independent uniform samples.
@@ -70,6 +70,10 @@ const EIGEN_SPLITS: usize = 4;
 const SCREEN_POINTS: usize = 128;
 /// Smallest soft score (in [0, 1]) of a candidate worth refining.
 const SCREEN_MIN: f64 = 0.5;
+/// Flip directions (the best-screened, at least 2° apart) refined and tested in full: a part whose
+/// small feature leaves one of a prism's flips leaves the others nearly passing too, and they
+/// screen alike, so a few peaks are not enough.
+const MAX_FLIP_PEAKS: usize = 12;
 /// Points used to refine an axis line.
 const REFINE_POINTS: usize = 400;
 const REFINE_ITERATIONS: usize = 6;
