@@ -457,18 +457,26 @@ def test_reconstruct_writes_the_scan_cloud_in_each_format(scan_folder, tmp_path,
     assert "without scan.json" in capsys.readouterr().err
 
 
-def test_estimate_takes_a_scan_folder_and_its_reconstructed_pcd(scan_folder, tmp_path, capsys):
+def test_the_readme_scene_commands_work_word_for_word(tmp_path, monkeypatch, capsys):
+    """simulate, reconstruct, then estimate from the scan folder and from its reconstructed PCD."""
+    import shlex
+    from pathlib import Path
+
     from binpick.cli import main
 
-    bounds = json.loads((scan_folder / "ground_truth.json").read_text())["bin"]
-    bin_args = ["--bin", *(str(v) for v in bounds[0] + bounds[1])]
-    png = str(tmp_path / "e.png")
-    assert main(["estimate", str(scan_folder), "tee", "--png", png, *bin_args]) == 0
-    from_scan = json.loads(capsys.readouterr().out)
-    assert _pick_grade(from_scan, scan_folder)
-    pcd = tmp_path / "scene.pcd"
-    assert main(["reconstruct", str(scan_folder), "--out", str(pcd)]) == 0
-    capsys.readouterr()
-    assert main(["estimate", str(pcd), "tee", "--png", png, *bin_args]) == 0
-    assert _pick_grade(json.loads(capsys.readouterr().out), scan_folder)
-    assert main(["estimate", str(pcd), "tee", "--png", png, "--scene-unit", "furlong"]) == 2
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
+    section = readme.split("### Scene files and scan folders", 1)[1]
+    block = section.split("```\n", 2)[1]
+    commands = [shlex.split(line) for line in block.splitlines() if line.strip()]
+    assert [c[:2] for c in commands] == [["binpick", "simulate"], ["binpick", "reconstruct"]] + [
+        ["binpick", "estimate"]
+    ] * 2
+    monkeypatch.chdir(tmp_path)
+    for argv in commands:
+        assert main(argv[1:]) == 0, " ".join(argv)
+        out = capsys.readouterr().out
+        if argv[1] == "estimate":  # the pose found is pick-grade against the simulated pile
+            assert _pick_grade(json.loads(out), tmp_path / "scan"), " ".join(argv)
+    assert read_scene(tmp_path / "scene.pcd").format == "pcd"
+    assert main(["estimate", "scene.pcd", "tee", "--scene-unit", "furlong"]) == 2
+    assert main(["estimate", "scan", "tee", "--scene-unit", "m"]) == 2
