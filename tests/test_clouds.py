@@ -402,6 +402,9 @@ def test_ply_with_a_unit_comment_and_unknown_files(tmp_path):
     )
     scene = read_scene(path)
     assert scene.file_unit == "m" and np.array_equal(scene.points, [[500, 0, 1000], [0, 250, 0]])
+    path.write_text(path.read_text().replace("0 0.25 0", "nan 0.25 0"))
+    with pytest.raises(MeshFileError, match="non-finite"):  # the core's PLY reader refuses it
+        read_scene(path)
     (tmp_path / "s.bin").write_bytes(b"\x00\x01")
     with pytest.raises(MeshFileError, match="not a scene format"):
         read_scene(tmp_path / "s.bin")

@@ -5,7 +5,8 @@
 
 Formats read:
 
-- PLY (ASCII or binary; :func:`binpick.read_ply`).
+- PLY (ASCII or binary; :func:`binpick.read_ply`, which refuses a non-finite vertex as a
+  corrupt file rather than dropping it).
 - PCD, versions 0.5–0.7 (0.6 and older have no VIEWPOINT, 0.5 may lack COUNT): any FIELDS with
   SIZE/TYPE/COUNT (float of 4 or 8 bytes, signed and unsigned integers of 1, 2, 4 or 8 bytes,
   COUNT > 1), organized (HEIGHT > 1) or not, DATA ``ascii``, ``binary`` (packed records, row by
@@ -18,7 +19,7 @@ Formats read:
 A file may say its length unit in a comment (``# unit: m`` in XYZ or PCD, ``comment unit: m`` in
 PLY); its points are then converted to millimetres. A file that says nothing is taken as mm
 unless the caller says otherwise. Points with a NaN or infinite coordinate (the holes of an
-organized cloud) are dropped and counted in :attr:`SceneCloud.dropped`.
+organized cloud) are dropped (PLY excepted, above) and counted in :attr:`SceneCloud.dropped`.
 
 Nothing in a header is trusted: every count and size is checked against the bytes present before
 anything is allocated for it, so a truncated, damaged or lying file raises
@@ -35,7 +36,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ._validate import LENGTH_UNITS, as_float_array, as_points, unit_scale
+from ._validate import as_float_array, as_points, unit_scale
 from .errors import FileWriteError, InvalidInputError, MeshFileError, MeshFileNotFoundError, UnknownUnitError
 
 __all__ = ["SceneCloud", "SCENE_FORMATS", "read_scene", "write_scene", "write_pcd", "lzf_decompress"]
@@ -197,13 +198,13 @@ def _format_of(path: str) -> str:
 
 
 def _declared_scale(path: str, declared: str) -> float:
-    key = declared.lower()
-    if key not in LENGTH_UNITS:
+    try:
+        return unit_scale(declared)
+    except UnknownUnitError:
         raise UnknownUnitError(
             f"{path}: declares the unit {declared!r:.40}, which binpick does not know; fix the comment "
             "(mm, cm, m or in) or pass the unit explicitly"
-        )
-    return LENGTH_UNITS[key]
+        ) from None
 
 
 def _unit_in(lines: list[bytes]) -> Optional[str]:
