@@ -16,9 +16,12 @@ from .poses import Alternative, IcpResult, PoseResult, estimate_pose, estimate_p
 __version__ = _core.__version__
 
 # Subpackages and names that pull in OpenCV, serial I/O or the simulator load on first use.
-_LAZY_MODULES = ("calibration", "camera", "cell", "devices", "scan", "sim", "transforms", "vision", "viz")
+_LAZY_MODULES = ("calibration", "camera", "clouds", "cell", "devices", "scan", "sim", "transforms", "vision", "viz")
 _LAZY_NAMES = {
     "Cloud": "vision",
+    "SceneCloud": "clouds",
+    "read_scene": "clouds",
+    "write_scene": "clouds",
     "extract_line": "vision",
     "triangulate": "vision",
     "reconstruct": "vision",

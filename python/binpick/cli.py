@@ -5,7 +5,9 @@
     binpick pick       the real cell from a cell file (TOML); --dry-run scans and locates only
     binpick simulate   render a simulated scan to a scan folder
     binpick emulate    serve one emulated device on a pty
-    binpick estimate   a scene cloud (PLY/NPY) and a part model → pose as JSON and a picture
+    binpick estimate   a scene (PLY/PCD/NPY/XYZ cloud or a scan folder) and a part model → pose as JSON
+                       and a picture
+    binpick reconstruct  a scan folder → a scene cloud file (PLY/PCD/XYZ/NPY)
     binpick calibrate  camera intrinsics from a folder of checkerboard images
     binpick bench      run the benchmarks of a source checkout
 
@@ -255,26 +257,47 @@ def _dry_run(cell: Any, out: Path) -> int:
 # --------------------------------------------------------------------------- estimate
 
 
-def _read_scene(path: str) -> Any:
-    import numpy as np
-
-    from .models import read_ply
+def _read_scene(path: str, unit: Optional[str] = None) -> Any:
+    """The scene cloud (N, 3) mm of ``path``: a scene file (PLY, PCD, NPY, XYZ) or a scan folder,
+    reconstructed."""
+    from .clouds import read_scene
 
     if not os.path.exists(path):
         raise _Usage(f"scene: {path} does not exist")
-    if path.lower().endswith(".npy"):
-        try:
-            return np.load(path)
-        except (OSError, ValueError) as exc:
-            raise InvalidInputError(f"{path}: cannot be read as a NumPy array ({exc})") from None
-    return read_ply(path)[0]
+    if os.path.isdir(path):
+        if unit is not None:
+            raise _Usage("--scene-unit: a scan folder is reconstructed in mm; leave the option out")
+        return _reconstruct_scan(path).points
+    return read_scene(path, unit=unit).points
+
+
+def _reconstruct_scan(folder: str) -> Any:
+    """The cloud of the scan folder ``folder`` (binpick.vision.reconstruct)."""
+    from .scan import load_scan
+    from .vision import reconstruct
+
+    if not os.path.isfile(os.path.join(folder, "scan.json")):
+        raise _Usage(f"{folder} is a folder without scan.json; give a scan folder or a scene file")
+    return reconstruct(load_scan(folder))
+
+
+def _reconstruct(args: argparse.Namespace) -> int:
+    from .clouds import write_scene
+
+    if not os.path.isdir(args.scan):
+        raise _Usage(f"SCAN_DIR: {args.scan} is not a folder; give a scan folder (binpick simulate writes one)")
+    t0 = time.perf_counter()
+    cloud = _reconstruct_scan(args.scan)
+    out = write_scene(args.out, cloud.points)
+    print(f"wrote {out}: {len(cloud)} points in {time.perf_counter() - t0:.1f} s")
+    return 0
 
 
 def _estimate(args: argparse.Namespace) -> int:
     from . import viz
     from .poses import estimate_poses
 
-    scene = _read_scene(args.scene)
+    scene = _read_scene(args.scene, args.scene_unit)
     model = _model(args.model, args.unit)
     bin_box = None if args.bin is None else (tuple(args.bin[:3]), tuple(args.bin[3:]))
     found = estimate_poses(
@@ -381,7 +404,7 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="binpick", description="Eye-in-hand laser-line bin picking.")
     p.add_argument("--version", action="version", version=f"binpick {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
-    for add in (_add_demo, _add_pick, _add_forwarded, _add_estimate, _add_calibrate, _add_bench):
+    for add in (_add_demo, _add_pick, _add_forwarded, _add_estimate, _add_reconstruct, _add_calibrate, _add_bench):
         add(sub)
     return p
 
@@ -451,10 +474,15 @@ def _add_estimate(sub: Any) -> None:
     t = sub.add_parser(
         "estimate",
         help="estimate a part's pose in a scene cloud",
-        description="Reads a scene (PLY, or NPY of shape (N, 3), mm) and a part, prints the pose as JSON "
-        "and writes a picture.",
+        description="Reads a scene (a PLY, PCD, NPY or XYZ cloud, mm, or a scan folder, reconstructed first) "
+        "and a part, prints the pose as JSON and writes a picture.",
     )
-    t.add_argument("scene", help="scene cloud: .ply or .npy (N, 3), mm")
+    t.add_argument("scene", help="scene: a .ply, .pcd, .npy or .xyz cloud (mm) or a scan folder")
+    t.add_argument(
+        "--scene-unit",
+        default=None,
+        help="unit of the scene file's coordinates (mm, cm, m, in); default: the unit the file declares, else mm",
+    )
     t.add_argument("model", help="built-in part (tee, elbow, cross) or a mesh file")
     t.add_argument("--unit", default="mm", help="unit of a mesh file (mm, cm, m, in)")
     t.add_argument(
@@ -476,6 +504,19 @@ def _add_estimate(sub: Any) -> None:
     t.add_argument("--png", default="estimate.png", help="picture to write (default estimate.png)")
     _pose_options(t)
     t.set_defaults(run=_estimate)
+
+
+def _add_reconstruct(sub: Any) -> None:
+    """``binpick reconstruct``."""
+    r = sub.add_parser(
+        "reconstruct",
+        help="reconstruct a scan folder into a scene cloud file",
+        description="Extracts the laser line of every frame of a scan folder, triangulates the points in the "
+        "robot's base frame (mm) and writes them as PLY, PCD, XYZ or NPY by the extension of --out.",
+    )
+    r.add_argument("scan", metavar="SCAN_DIR", help="scan folder (scan.json, calibration.toml, frames/)")
+    r.add_argument("--out", default="scene.ply", help="cloud file: .ply, .pcd, .xyz or .npy (default scene.ply)")
+    r.set_defaults(run=_reconstruct)
 
 
 def _add_calibrate(sub: Any) -> None:
