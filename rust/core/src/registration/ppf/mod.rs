@@ -39,6 +39,7 @@ use table::{turn_fraction, Frame};
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::error::Error;
     use crate::mesh::sample::{sample_surface, Density};
     use crate::rng::Rng;
     use crate::voxel::subsample;
@@ -172,5 +173,23 @@ mod tests {
         for p in &pts {
             assert!(keep.iter().any(|&i| (pts[i] - p).norm() < 5.0));
         }
+    }
+
+    #[test]
+    fn a_feature_table_over_the_key_ceiling_is_refused_before_it_is_built() {
+        assert_eq!(PpfConfig::default().validate(), Ok(()));
+        // 202 distance bins x 90^3 angle bins: 147 million keys, 590 MB of offsets.
+        let huge = PpfConfig {
+            sampling_ratio: 0.005,
+            angle_bins: 90,
+            ..PpfConfig::default()
+        };
+        assert!(matches!(huge.validate(), Err(Error::InvalidInput { arg, .. }) if arg == "angle_bins"));
+        let fine = PpfConfig {
+            sampling_ratio: 0.005,
+            angle_bins: 30,
+            ..PpfConfig::default()
+        };
+        assert_eq!(fine.validate(), Ok(()));
     }
 }

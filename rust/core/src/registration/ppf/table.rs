@@ -48,9 +48,26 @@ impl PpfConfig {
                 format!("must be between 6 and 180, got {}", self.rotation_bins),
             ));
         }
+        // The key table holds one offset per (distance, angle, angle, angle) bin: 4 bytes each.
+        let keys = ((1.0 / self.sampling_ratio).ceil() + 2.0) * f64::from(self.angle_bins).powi(3);
+        if keys > MAX_KEYS as f64 {
+            return Err(Error::invalid(
+                "angle_bins",
+                format!(
+                    "with sampling_ratio {} gives a feature table of {keys:.0} keys ({:.0} MB), over the ceiling of {MAX_KEYS} ({} MB); use fewer angle bins or a larger sampling_ratio",
+                    self.sampling_ratio,
+                    keys * 4.0 / 1e6,
+                    MAX_KEYS * 4 / 1_000_000
+                ),
+            ));
+        }
         Ok(())
     }
 }
+
+/// Largest key table of a feature table: 2^25 keys, 134 MB of offsets (the default table has
+/// 0.6 million).
+pub const MAX_KEYS: usize = 1 << 25;
 
 /// The local frame of an oriented point: `rotation * (x − origin)` puts the point at the origin
 /// with its normal along +x.
