@@ -38,9 +38,10 @@ pub struct TrustParams {
     /// Smallest fine tolerance, mm. Default 0.3.
     pub min_fine_tolerance: f64,
     /// An alternative whose evidence trails the best by less than this many scan points cannot
-    /// be ruled out (the bench calls a feature in view at 15 points beyond 4σ). Default 15.
+    /// be ruled out: twice the 15 points beyond 4σ at which the bench calls a feature in view,
+    /// so that one chance cluster of misfits does not decide. Default 30.
     pub min_margin: f64,
-    /// ... nor by less than this fraction of the points in the feature regions. Default 0.05.
+    /// ... nor by less than this fraction of the points in the feature regions. Default 0.1.
     pub margin_fraction: f64,
     /// Poses closer than this rotation (rad, default 5°) ...
     pub pick_rotation: f64,
@@ -59,8 +60,8 @@ impl Default for TrustParams {
             iterations: 15,
             noise_sigmas: 4.0,
             min_fine_tolerance: 0.3,
-            min_margin: 15.0,
-            margin_fraction: 0.05,
+            min_margin: 30.0,
+            margin_fraction: 0.1,
             pick_rotation: 5f64.to_radians(),
             pick_translation: 3.0,
         }
