@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import os
 import re
+import tokenize
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Optional
@@ -246,7 +247,7 @@ def _read_npy(path: str) -> tuple[np.ndarray, Optional[str]]:
     try:
         # Memory-mapped: numpy checks the header's shape against the file's size before any copy.
         arr = np.load(path, mmap_mode="r", allow_pickle=False)
-    except (OSError, ValueError, EOFError) as exc:
+    except (OSError, ValueError, EOFError, SyntaxError, tokenize.TokenError) as exc:  # numpy parses the header
         raise MeshFileError(
             f"{path}: cannot be read as a NumPy .npy array ({str(exc)[:200]}); save it with np.save"
         ) from None
