@@ -56,9 +56,19 @@ def as_points(value: Any, name: str, *, min_points: int = 1, columns: int = 3) -
     if arr.ndim != 2 or arr.shape[1] != columns:
         raise ShapeError(f"{name}: expected an (N, {columns}) array, got shape {arr.shape}")
     check_finite(arr, name)
+    if arr.size and float(np.abs(arr).max()) > MAX_COORDINATE:
+        raise InvalidInputError(
+            f"{name}: a coordinate of {float(np.abs(arr).max()):.3g} exceeds {MAX_COORDINATE:g} (a million km in mm), "
+            "where squared distances overflow; pass millimetres near the cell's origin"
+        )
     if arr.shape[0] < min_points:
         raise TooFewPointsError(f"{name}: has {arr.shape[0]} points but at least {min_points} are needed")
     return arr
+
+
+#: Largest coordinate magnitude :func:`as_points` takes: beyond about 1e154 squared distances
+#: overflow a float64, and nothing a cell measures is within orders of magnitude of 1e12 mm.
+MAX_COORDINATE = 1e12
 
 
 def as_vector(value: Any, name: str, size: int = 3) -> np.ndarray:

@@ -13,7 +13,17 @@ from typing import Any, Optional
 import numpy as np
 
 from . import _core
-from ._validate import MAX_UNSIGNED, as_points, as_transform, as_vector, count, positive, thread_count, unit_scale
+from ._validate import (
+    MAX_UNSIGNED,
+    as_points,
+    as_transform,
+    as_vector,
+    count,
+    number,
+    positive,
+    thread_count,
+    unit_scale,
+)
 from .errors import InvalidInputError
 from .transforms import pose_error, rotation_about
 
@@ -216,7 +226,10 @@ class Model:
         index array (F, 3). At most :data:`MAX_SAMPLES` samples are drawn: a larger ``count``,
         or a ``spacing`` so fine that it would ask for more, is refused before any allocation."""
         v = as_points(vertices, "vertices", min_points=3)
-        f = np.asarray(faces)
+        try:
+            f = np.asarray(faces)
+        except (ValueError, TypeError) as e:
+            raise InvalidInputError(f"faces: expected an (F, 3) integer array, got {type(faces).__name__} ({e})") from e
         if f.ndim != 2 or f.shape[1] != 3 or f.dtype.kind not in "iu":
             raise InvalidInputError(f"faces: expected an (F, 3) integer array, got shape {f.shape} dtype {f.dtype}")
         v = v * unit_scale(unit)
@@ -226,7 +239,7 @@ class Model:
         if spacing is None and count is None:
             spacing = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))) / 100.0
         if spacing is not None:
-            spacing = positive(spacing, "spacing")
+            spacing = number(spacing, "spacing", MIN_SPACING, MAX_SPACING, unit="mm")
             _check_spacing(v, f, spacing)
         if count is not None:
             count = _count(count)
@@ -389,6 +402,10 @@ def _count(value: Any) -> int:
 
 def _seed(value: Any) -> int:
     return count(value, "seed", 0, MAX_UNSIGNED)
+
+
+#: The sample spacing :meth:`Model.from_arrays` takes, mm: a micrometre to a kilometre.
+MIN_SPACING, MAX_SPACING = 1e-3, 1e6
 
 
 def _check_spacing(v: np.ndarray, f: np.ndarray, spacing: float) -> None:

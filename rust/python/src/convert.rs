@@ -225,6 +225,22 @@ pub fn threads(num_threads: usize) -> PyResult<usize> {
 
 /// An optional whole-number argument of a config class in [0, `max`]: a bool or a non-integer
 /// is an `InvalidTypeError`, a negative or too large integer an `InvalidInputError` naming it.
+/// A finite real number (an int or a float, not a bool) from an optional Python argument.
+pub fn real_number(value: Option<&Bound<'_, PyAny>>, arg: &str) -> PyResult<Option<f64>> {
+    let Some(value) = value else { return Ok(None) };
+    let numeric = value.is_instance_of::<pyo3::types::PyInt>() || value.is_instance_of::<pyo3::types::PyFloat>();
+    if value.is_instance_of::<pyo3::types::PyBool>() || !numeric {
+        return Err(crate::errors::wrong_type(arg, "a number", value));
+    }
+    match value.extract::<f64>() {
+        Ok(v) if v.is_finite() => Ok(Some(v)),
+        _ => {
+            let shown: String = value.to_string().chars().take(40).collect();
+            Err(invalid(arg, &format!("{shown} is not a finite number; pass one")))
+        }
+    }
+}
+
 pub fn whole_number(value: Option<&Bound<'_, PyAny>>, arg: &str, max: u64) -> PyResult<Option<u64>> {
     let Some(value) = value else { return Ok(None) };
     if value.is_instance_of::<pyo3::types::PyBool>() || !value.is_instance_of::<pyo3::types::PyInt>() {

@@ -2,7 +2,7 @@
 //! and [`PoseConfig`] in, [`PoseEstimate`]s out.
 
 use crate::convert::{bin_box, bin_box_to_py, branch_layout, indices_to_py, isometry_to_py, matrix4, mesh_from_py};
-use crate::convert::{points, points_to_py, rotations_to_rows, threads, vector3, vectors, whole_number};
+use crate::convert::{points, points_to_py, real_number, rotations_to_rows, threads, vector3, vectors, whole_number};
 use crate::errors::{run, to_py};
 use binpick_core::{estimate_poses as core_estimate, isometry_from_matrix, CcpConfig, CoarseMethod, DetectConfig};
 use binpick_core::{FeatureEvidence, PoseModel, PpfConfig, PpfModel};
@@ -32,7 +32,7 @@ impl PpfParams {
     #[new]
     #[pyo3(signature = (*, sampling_ratio=None, angle_bins=None, rotation_bins=None))]
     fn new(
-        sampling_ratio: Option<f64>,
+        sampling_ratio: Option<&Bound<'_, PyAny>>,
         angle_bins: Option<&Bound<'_, PyAny>>,
         rotation_bins: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
@@ -40,13 +40,14 @@ impl PpfParams {
         let bins = |v, arg, default: u32| -> PyResult<u32> {
             Ok(whole_number(v, arg, u64::from(MAX_PPF_BINS))?.map_or(default, |b| b as u32))
         };
-        Ok(PpfParams {
-            inner: PpfConfig {
-                sampling_ratio: sampling_ratio.unwrap_or(d.sampling_ratio),
-                angle_bins: bins(angle_bins, "angle_bins", d.angle_bins)?,
-                rotation_bins: bins(rotation_bins, "rotation_bins", d.rotation_bins)?,
-            },
-        })
+        let inner = PpfConfig {
+            sampling_ratio: real_number(sampling_ratio, "sampling_ratio")?.unwrap_or(d.sampling_ratio),
+            angle_bins: bins(angle_bins, "angle_bins", d.angle_bins)?,
+            rotation_bins: bins(rotation_bins, "rotation_bins", d.rotation_bins)?,
+        };
+        // Refused when built, not later when a model is prepared with them.
+        inner.validate().map_err(to_py)?;
+        Ok(PpfParams { inner })
     }
     /// Sampling distance as a fraction of the model's diameter.
     #[getter]
