@@ -8,11 +8,12 @@ from types import MappingProxyType, SimpleNamespace
 
 import numpy as np
 import pytest
+from _cell_helpers import located
 
 import binpick
 from binpick.cell import PickPlan
 from binpick.cell.grasp import pick_waypoints
-from binpick.cell.records import Located, ScanResult
+from binpick.cell.records import Located
 from binpick.errors import InvalidInputError, SafetyError
 from binpick.sim import SimulatedCell
 from binpick.transforms import look_down
@@ -50,15 +51,7 @@ def _plan(sim, *, drop=None, grasp_linear=True) -> PickPlan:
 
 
 def _located() -> Located:
-    scan = ScanResult(
-        cloud=SimpleNamespace(points=np.zeros((0, 3))),
-        angles=np.zeros(0),
-        T_base_flanges=np.zeros((0, 4, 4)),
-        frames=MappingProxyType({}),
-        timings=MappingProxyType({}),
-    )
-    result = SimpleNamespace(score=1.0, rmse=0.0, method="custom", timings={})
-    return Located(scan=scan, result=result, T_base_object=np.eye(4), indices=np.zeros(0, dtype=np.int64))
+    return located(np.eye(4), SimpleNamespace(score=1.0, rmse=0.0, method="custom", timings={}))
 
 
 def _motion_requests(sim) -> tuple[list, list]:
@@ -110,3 +103,54 @@ def test_a_valid_custom_plan_runs_through_the_lift(sim):
     record = sim.cell.pick(_located(), plan=_plan(sim))
     assert record.held is False  # nothing between the fingers: lifted, opened, not carried to the drop
     np.testing.assert_allclose(sim.robot_emulator.pose()[:3, 3], _plan(sim).pose("lift")[:3, 3], atol=0.05)
+
+
+def _descend(plan: PickPlan, dz: float) -> PickPlan:
+    """``plan`` with its approach and grasp lowered by ``dz`` mm (still vertical moves)."""
+    moved = []
+    for n, T, lin in plan.waypoints:
+        T = T.copy()
+        if n in ("approach", "grasp"):
+            T[2, 3] -= dz
+        moved.append((n, T, lin))
+    return replace(plan, waypoints=tuple(moved), T_base_flange=moved[2][1])
+
+
+def test_a_plan_whose_fingers_go_below_the_floor_moves_nothing(sim):
+    cfg = sim.cell.config
+    plan = _plan(sim)
+    grasp_z = plan.pose("grasp")[2, 3]
+    # Fingertips at the flange height minus the TCP offset minus their depth past the TCP.
+    tips = grasp_z - cfg.gripper.T_flange_gripper[2, 3] - cfg.gripper.tip_depth_mm
+    floor = float(cfg.bin_bounds[0][2])
+    low = _descend(plan, tips - floor + 29.0)  # the issue's case: fingertips 29 mm below the floor
+    with pytest.raises(SafetyError, match="plan waypoint 'grasp'.*bin's floor"):
+        sim.cell.check_plan(low)
+    _assert_refused_without_motion(sim, low, SafetyError, "bin's floor")
+
+
+def test_a_plan_whose_palm_crosses_a_wall_moves_nothing(sim):
+    cfg = sim.cell.config
+    lo, hi = cfg.bin_bounds
+    plan = _plan(sim)
+    # The TCP 30 mm above the floor puts the palm below the rim; half of it over the wall.
+    plan = _descend(plan, plan.pose("grasp")[2, 3] - (cfg.gripper.T_flange_gripper[2, 3] + float(lo[2]) + 30.0))
+    shifted = []
+    for n, T, lin in plan.waypoints:
+        T = T.copy()
+        if n != "drop":
+            T[1, 3] = float(hi[1]) - cfg.gripper.body_radius_mm / 2
+        shifted.append((n, T, lin))
+    plan = replace(plan, waypoints=tuple(shifted))
+    _assert_refused_without_motion(sim, plan, SafetyError, "plan waypoint 'grasp'.*bin's wall")
+
+
+def test_the_planner_skips_grasps_whose_gripper_hits_the_floor():
+    from binpick.cell.grasp import bin_clash
+
+    g = binpick.cell.GripperGeometry()
+    bounds = np.array([[250.0, -100.0, 0.0], [550.0, 100.0, 80.0]])
+    T_bf = look_down(400.0, 0.0, g.T_flange_gripper[2, 3] + g.tip_depth_mm + 1.0)  # tips 1 mm above
+    assert bin_clash(g, T_bf, bounds) is None
+    T_bf[2, 3] -= 2.0
+    assert bin_clash(g, T_bf, bounds).startswith("floor (1.0 mm below")

@@ -21,7 +21,7 @@ from ..devices import safety
 from ..errors import InvalidInputError, SafetyError
 from ..models import Model
 from ..transforms import laser_sweep, translation
-from .grasp import branch_grasps
+from .grasp import branch_grasps, mesh_grasps
 
 __all__ = ["CellConfig", "GripperGeometry", "check_static_poses", "sweep_angles"]
 
@@ -81,6 +81,29 @@ class GripperGeometry:
         body = (z < top) & (z >= top - self.body_length_mm) & (np.hypot(x, y) <= self.body_radius_mm)
         return finger | body
 
+    def outline(self, opening_mm: Optional[float] = None, *, sides: int = 16) -> np.ndarray:
+        """Points (M, 3, gripper frame) whose convex hull per piece covers the whole gripper with
+        the fingers ``opening_mm`` apart (``open_width_mm`` by default): the 8 corners of each
+        finger, ``sides`` points round the bottom and top of the body (palm) and round the flange
+        (a disc of the body's radius at the flange origin). Against a convex box such as the bin's
+        inner volume, checking these points checks every finger, the palm and the flange whole."""
+        gap = self.open_width_mm if opening_mm is None else positive(opening_mm, "opening_mm")
+        top = self.tip_depth_mm - self.finger_length_mm
+        t, w = self.finger_thickness_mm, self.finger_width_mm / 2
+        corners = [
+            (sign * (gap / 2 + dx), dy, z)
+            for sign in (-1.0, 1.0)
+            for dx in (0.0, t)
+            for dy in (-w, w)
+            for z in (top, self.tip_depth_mm)
+        ]
+        a = np.linspace(0.0, 2 * np.pi, sides, endpoint=False)
+        ring = np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)]) * self.body_radius_mm
+        palm = [ring + (0.0, 0.0, z) for z in (top, top - self.body_length_mm)]
+        T_gf = np.linalg.inv(self.T_flange_gripper)
+        flange = ring @ T_gf[:3, :3].T + T_gf[:3, 3]
+        return np.vstack([np.array(corners), *palm, flange])
+
     def between_fingers(self, points_gripper: np.ndarray) -> np.ndarray:
         """Which points (N, 3, in the gripper frame) lie in the slab the closing fingers sweep."""
         _, y, z = points_gripper.T
@@ -104,13 +127,23 @@ class CellConfig:
         frames: laser frames per scan pose.
         scan_angles: motor angles (rad) per scan pose; None = computed from the calibration to sweep the bin.
         grasps: name → ``T_gripper_object``; None = the model's declared grasps, or
-            :func:`~binpick.cell.branch_grasps` for a model with branches and no declared grasps.
+            :func:`~binpick.cell.branch_grasps` for a model with branches and no declared grasps,
+            or :func:`~binpick.cell.grasp.mesh_grasps` (sampled antipodal pairs) for any other mesh.
         gripper: the gripper's TCP and shape.
         limits: the cell's motion limits (also given to the robot driver).
         approach_distance_mm: the straight approach along the gripper axis before the grasp, mm.
         clearance_z_mm: flange height for travelling over the bin, mm; None = the approach height + 20 mm.
         max_collision_points: a grasp is refused when more scene points than this lie inside the open gripper
             (fingers or body), or more points of the located part's own model (at the located pose).
+        floor_clearance_mm: how far above the bin's floor every point of the gripper (fingers at
+            the planned opening, palm, flange) must stay along approach, grasp and retreat, mm; a
+            plan closer to the floor, or crossing the bin's walls below the rim, is refused.
+        min_confidence: a located pose whose ``confidence`` is lower is not picked (skipped with the
+            reason "low confidence"); 0.3 by default — poses that confident were pick-grade at
+            least 30 % of the time on the project's test sets (see PoseResult.confidence).
+        ambiguity_tolerance_deg: how closely (degrees) a grasp must land the same way on every
+            alternative of an ambiguous pose, and align with a free axis …
+        ambiguity_tolerance_mm: … and in translation, mm (see :func:`binpick.cell.grasp.grasp_filter`).
         max_candidates: parts tried per scan when the top part has no usable grasp.
         reachable: optional test ``T_base_flange → bool`` from the arm's kinematics; None = trust
             the controller (it refuses unreachable targets, and the cell then stops).
@@ -134,6 +167,10 @@ class CellConfig:
     approach_distance_mm: float = 40.0
     clearance_z_mm: Optional[float] = None
     max_collision_points: int = 15
+    floor_clearance_mm: float = 0.0
+    min_confidence: float = 0.3
+    ambiguity_tolerance_deg: float = 5.0
+    ambiguity_tolerance_mm: float = 3.0
     max_candidates: int = 5
     reachable: Optional[Callable[[np.ndarray], bool]] = None
     symmetries: Sequence[Any] = ()
@@ -152,6 +189,11 @@ class CellConfig:
             object.__setattr__(self, "clearance_z_mm", float(self.limits.approach_height_mm) + 20.0)
         count(self.max_collision_points, "max_collision_points")
         count(self.max_candidates, "max_candidates", 1)
+        non_negative(self.floor_clearance_mm, "floor_clearance_mm", "mm")
+        if not 0.0 <= float(self.min_confidence) <= 1.0:
+            raise InvalidInputError(f"min_confidence: expected a number in [0, 1], got {self.min_confidence!r}")
+        positive(self.ambiguity_tolerance_deg, "ambiguity_tolerance_deg", "deg")
+        positive(self.ambiguity_tolerance_mm, "ambiguity_tolerance_mm")
         object.__setattr__(
             self, "symmetries", tuple(as_transform(S, f"symmetries[{i}]") for i, S in enumerate(self.symmetries))
         )
@@ -188,11 +230,7 @@ class CellConfig:
             object.__setattr__(self, "scan_angles", angles)
 
     def _set_grasps(self) -> None:
-        grasps = (
-            self.grasps
-            if self.grasps is not None
-            else (self.model.grasps or branch_grasps(self.model, finger_width_mm=self.gripper.finger_width_mm))
-        )
+        grasps = self.grasps if self.grasps is not None else (self.model.grasps or self._generated_grasps())
         if not grasps:
             raise InvalidInputError(
                 f"grasps: the part {self.model.name!r} has no grasps; declare some with model.add_grasp"
@@ -200,6 +238,12 @@ class CellConfig:
         object.__setattr__(
             self, "grasps", MappingProxyType({str(k): as_transform(v, f"grasps[{k!r}]") for k, v in grasps.items()})
         )
+
+    def _generated_grasps(self) -> dict:
+        """Branch grasps for a part with cylindrical branches, else grasps sampled from its mesh."""
+        if self.model.branches:
+            return branch_grasps(self.model, finger_width_mm=self.gripper.finger_width_mm)
+        return mesh_grasps(self.model, self.gripper)
 
     def angles_for(self, i: int) -> np.ndarray:
         """The motor angles (rad) of scan pose ``i``."""

@@ -10,7 +10,7 @@ direction, the origin the TCP between the fingertips. Lengths in mm, transforms 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Optional
 
@@ -31,11 +31,14 @@ __all__ = [
     "NoGraspError",
     "GraspMatcher",
     "branch_grasps",
+    "mesh_grasps",
     "tool_tilt_deg",
     "pick_waypoints",
     "points_in_gripper",
+    "bin_clash",
     "grip_width",
     "plan_grasp",
+    "grasp_filter",
     "symmetry_maps",
 ]
 
@@ -94,6 +97,79 @@ def branch_grasps(model: Model, *, finger_width_mm: float = 20.0, steps: int = 7
     return grasps
 
 
+def mesh_grasps(
+    model: Model,
+    gripper: GripperGeometry,
+    *,
+    pairs: int = 24,
+    approaches: int = 12,
+    max_angle_deg: float = 15.0,
+) -> dict[str, np.ndarray]:
+    """Parallel-jaw grasps sampled from any part's surface samples (``model.points``/``normals``),
+    for a part without declared grasps or branches.
+
+    An antipodal pair is a sample and the nearest sample straight across it (along its inward
+    normal, within one sample spacing sideways) whose normal points back within
+    ``max_angle_deg``, no farther apart than the open fingers (``open_width_mm`` less 2 mm). Its
+    quality is the mean alignment of the two normals with the closing direction less the
+    distance from the pair's midpoint to the samples' centroid (the centre of mass of a shell,
+    a stand-in for the solid's) in units of the part's diameter. The best ``pairs`` pairs with
+    midpoints at least a finger width apart are kept; each is approached from ``approaches``
+    directions about the closing axis, the TCP at the midpoint (so the contacts lie within the
+    fingers' depth), both ways round the wrist. Returns name → ``T_gripper_object``; names say
+    the pair, the quality and the approach.
+    """
+    if not isinstance(model, Model):
+        raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}")
+    pts = np.asarray(model.points, dtype=np.float64)
+    nrm = np.asarray(model.normals, dtype=np.float64)
+    step = max(1, len(pts) // 600)
+    p, n = pts[::step], nrm[::step]
+    lateral_tol = max(float(model.spacing or 0.0), float(model.diameter) / 100.0, 0.5) * step**0.5
+    cos_tol = math.cos(math.radians(max_angle_deg))
+    widest = gripper.open_width_mm - 2.0
+    centre = pts.mean(axis=0)
+    found = []
+    for i in range(len(p)):
+        d = -n[i]
+        rel = p - p[i]
+        along = rel @ d
+        side = np.linalg.norm(rel - along[:, None] * d, axis=1)
+        ok = (along > 1.0) & (along <= widest) & (side <= lateral_tol) & ((n @ n[i]) <= -cos_tol)
+        if not ok.any():
+            continue
+        j = int(np.flatnonzero(ok)[np.argmin(along[ok])])
+        # The closing direction along the mean of the two inward normals (flat faces: exactly
+        # along their normal), the quality from the alignment of the contacts' line with it.
+        u = (n[j] - n[i]) / np.linalg.norm(n[j] - n[i])
+        mid = (p[i] + p[j]) / 2.0
+        line = (p[j] - p[i]) / np.linalg.norm(p[j] - p[i])
+        quality = (abs(n[i] @ line) + abs(n[j] @ line)) / 2.0 - np.linalg.norm(mid - centre) / model.diameter
+        found.append((float(quality), mid, u))
+    found.sort(key=lambda f: -f[0])
+    kept: list = []
+    for q, mid, u in found:
+        if all(np.linalg.norm(mid - m) >= gripper.finger_width_mm for _, m, _ in kept):
+            kept.append((q, mid, u))
+        if len(kept) == pairs:
+            break
+    grasps: dict[str, np.ndarray] = {}
+    for k, (q, mid, u) in enumerate(kept):
+        helper = np.array([0.0, 0.0, 1.0]) if abs(u[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        z0 = np.cross(u, helper)
+        z0 /= np.linalg.norm(z0)
+        for a in range(approaches):
+            z = rotation_about(u, 2 * math.pi * a / approaches) @ z0
+            for flip in (1.0, -1.0):
+                x = flip * u
+                T_object_gripper = np.eye(4)
+                T_object_gripper[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+                T_object_gripper[:3, 3] = mid
+                name = f"mesh{k}/q{q:.2f}/{round(360 * a / approaches)}°{'/flipped' if flip < 0 else ''}"
+                grasps[name] = inverse(T_object_gripper)
+    return grasps
+
+
 def tool_tilt_deg(T_base_flange: np.ndarray) -> float:
     """How far the tool axis (flange z) tilts from straight down, degrees."""
     return math.degrees(math.acos(max(-1.0, min(1.0, -float(T_base_flange[2, 2])))))
@@ -128,6 +204,40 @@ def points_in_gripper(gripper: GripperGeometry, points_base: np.ndarray, T_base_
     """How many of the points (N, 3, base frame) lie inside the open gripper at ``T_base_gripper``."""
     R, t = T_base_gripper[:3, :3], T_base_gripper[:3, 3]
     return int(gripper.occupied(points_base @ R - t @ R).sum())
+
+
+def bin_clash(
+    gripper: GripperGeometry, T_base_flange: np.ndarray, bin_bounds: np.ndarray, *, floor_clearance_mm: float = 0.0
+) -> Optional[str]:
+    """Why the whole gripper (open fingers, palm, flange: :meth:`GripperGeometry.outline`) at the
+    flange pose ``T_base_flange`` hits the bin ``bin_bounds`` ((lo, hi) of its inner volume, hi z
+    the rim), or None when it is clear: any point below the floor plus ``floor_clearance_mm``
+    ("floor", with how far below), or below the rim and outside the inner walls ("wall").
+
+    Each piece of the gripper is convex and the bin's inner volume too, so a straight move whose
+    two ends are clear is clear all along: checking a motion's waypoints checks its whole path."""
+    pts = gripper.outline() @ (T_base_flange @ gripper.T_flange_gripper)[:3, :3].T
+    pts += (T_base_flange @ gripper.T_flange_gripper)[:3, 3]
+    lo, hi = np.asarray(bin_bounds[0], dtype=np.float64), np.asarray(bin_bounds[1], dtype=np.float64)
+    below = lo[2] + floor_clearance_mm - float(pts[:, 2].min())
+    if below > 1e-9:
+        return f"floor ({below:.1f} mm below)"
+    inside = pts[pts[:, 2] < hi[2]]
+    if ((inside[:, :2] < lo[:2] - 1e-9) | (inside[:, :2] > hi[:2] + 1e-9)).any():
+        return "wall"
+    return None
+
+
+def plan_bin_clash(config: CellConfig, waypoints: Sequence[Waypoint]) -> Optional[tuple[str, str]]:
+    """(waypoint, why) of the first waypoint of a pick's motion in the bin (approach, grasp,
+    lift: the straight moves into and out of it) where :func:`bin_clash` finds the gripper
+    hitting the bin's floor or walls, or None."""
+    for name, T, _ in waypoints:
+        if name in ("approach", "grasp", "lift"):
+            why = bin_clash(config.gripper, T, config.bin_bounds, floor_clearance_mm=config.floor_clearance_mm)
+            if why is not None:
+                return name, why
+    return None
 
 
 def grip_width(gripper: GripperGeometry, model_points: np.ndarray, T_gripper_object: np.ndarray) -> Optional[float]:
@@ -223,6 +333,8 @@ def _refusal(
     """Why a grasp cannot be used (None when it can), and the scene points inside the gripper."""
     if config.reachable is not None and not all(config.reachable(T) for _, T, _ in waypoints):
         return "reach", 0
+    if plan_bin_clash(config, waypoints) is not None:
+        return "bin", 0
     hits = points_in_gripper(config.gripper, scene, T_bg)
     if hits > config.max_collision_points:
         return "collision", hits
@@ -235,19 +347,72 @@ def _refusal(
     return None, hits
 
 
+def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarray], bool]]:
+    """For a pose the scan cannot settle, the test ``T_base_gripper → bool`` a grasp must pass
+    (None when the pose is unambiguous and has no free axis):
+
+    - ``result.ambiguous``: the gripper pose, expressed against every alternative pose of the
+      part (``result.alternatives``), must land the fingers on it as one of the cell's grasps
+      does (within ``config.ambiguity_tolerance_deg`` / ``_mm``, modulo the part's symmetries) —
+      whichever of the poses is true, the grip is the same;
+    - ``result.free_axis`` (a continuous near-symmetry leaves the turn about it open): the TCP on
+      that axis and the fingers' width direction along it (a grasp across a shaft), so that any
+      turn about the axis leaves the grip unchanged.
+    """
+    tests = []
+    if getattr(result, "ambiguous", False) and getattr(result, "alternatives", ()):
+        matcher = GraspMatcher(
+            config.grasps,
+            config.symmetries,
+            tolerance_deg=config.ambiguity_tolerance_deg,
+            tolerance_mm=config.ambiguity_tolerance_mm,
+        )
+        alternatives = [np.asarray(a.T_scene_model, dtype=np.float64) for a in result.alternatives]
+        tests.append(lambda T_bg: all(matcher.within(matcher.error(inverse(T_bg) @ T_a)) for T_a in alternatives))
+    axis = getattr(result, "free_axis", None)
+    if axis is not None:
+        a = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
+        T_bo = np.asarray(result.T_scene_model, dtype=np.float64)
+        centre = np.asarray(config.model.symmetries.center, dtype=np.float64)
+        for near in config.model.near_symmetries:
+            if abs(float((T_bo[:3, :3] @ near.axis) @ a)) > 0.99:
+                centre = np.asarray(near.center, dtype=np.float64)
+                break
+        c = T_bo[:3, :3] @ centre + T_bo[:3, 3]
+        cos_tol = math.cos(math.radians(config.ambiguity_tolerance_deg))
+
+        def across(T_bg: np.ndarray) -> bool:
+            off = T_bg[:3, 3] - c
+            off_axis = float(np.linalg.norm(off - (off @ a) * a))
+            return abs(float(T_bg[:3, 1] @ a)) >= cos_tol and off_axis <= config.ambiguity_tolerance_mm
+
+        tests.append(across)
+    if not tests:
+        return None
+    return lambda T_bg: all(t(T_bg) for t in tests)
+
+
 def plan_grasp(
-    config: CellConfig, T_base_object: np.ndarray, scene: np.ndarray, here: np.ndarray
+    config: CellConfig,
+    T_base_object: np.ndarray,
+    scene: np.ndarray,
+    here: np.ndarray,
+    accept: Optional[Callable[[np.ndarray], bool]] = None,
 ) -> tuple[PickPlan, int]:
     """The most vertical declared grasp of the part at ``T_base_object`` that is within the tilt
     limit, reachable, clear of the ``scene`` points (base frame, the part's own left out) and of
     the part's own model at that pose, and whose whole motion from the flange pose ``here``
-    passes the safety rules; with the scene points inside its gripper. NoGraspError when none is."""
-    rejected = {"tilt": 0, "reach": 0, "collision": 0, "self-collision": 0, "safety": 0}
+    passes the safety rules, and which ``accept`` (``T_base_gripper → bool``, see
+    :func:`grasp_filter`) accepts; with the scene points inside its gripper. NoGraspError when none is."""
+    rejected = {"tilt": 0, "ambiguous": 0, "reach": 0, "bin": 0, "collision": 0, "self-collision": 0, "safety": 0}
     # The part's own points lie between the fingers and are not in the scene, but the gripper must
     # not run into its other branches either: those are checked against the model at the located
     # pose, which also covers the part's unseen underside.
     part = np.asarray(config.model.points) @ T_base_object[:3, :3].T + T_base_object[:3, 3]
     for tilt, name, T_bg, T_bf in _tilted_candidates(config, T_base_object, rejected):
+        if accept is not None and not accept(T_bg):
+            rejected["ambiguous"] += 1
+            continue
         waypoints = pick_waypoints(
             T_bf,
             T_bg,

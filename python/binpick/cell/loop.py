@@ -36,12 +36,12 @@ from ..devices import safety
 from ..devices.gripper import Gripper
 from ..devices.motor import LaserMotor
 from ..devices.robot import Robot
-from ..errors import BinpickError, DeviceError, InvalidInputError, NoObjectFound
+from ..errors import BinpickError, DeviceError, InvalidInputError, NoObjectFound, SafetyError
 from ..poses import estimate_pose
 from ..vision import extract_line, triangulate
 from .config import CellConfig, check_static_poses
 from .frames import FrameSource
-from .grasp import NoGraspError, plan_grasp
+from .grasp import NoGraspError, grasp_filter, plan_bin_clash, plan_grasp
 from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult
 
 __all__ = ["Cell", "PICK_MOVES", "ProgressPrinter", "quiet"]
@@ -351,7 +351,21 @@ class Cell:
         pts = np.asarray(located.scan.points)
         others = np.ones(len(pts), dtype=bool)
         others[located.indices] = False
-        plan, hits = plan_grasp(self.config, located.T_base_object, pts[others], self.robot.read_pose())
+        res = located.result
+        confidence = float(getattr(res, "confidence", 1.0))
+        if confidence < self.config.min_confidence:
+            raise NoGraspError(
+                f"the located {self.config.model.name} has confidence {confidence:.2f}, below the cell's "
+                f"min_confidence {self.config.min_confidence:.2f}; it is not picked",
+                reason="low confidence",
+            )
+        accept = grasp_filter(self.config, res)
+        try:
+            plan, hits = plan_grasp(self.config, located.T_base_object, pts[others], self.robot.read_pose(), accept)
+        except NoGraspError as exc:
+            if accept is not None and exc.reason.startswith("none") and "ambiguous" in exc.reason:
+                raise NoGraspError(str(exc), reason=f"ambiguous: {exc.reason}") from None
+            raise
         rejected = ", ".join(f"{v} {k}" for k, v in plan.rejected.items() if v) or "none rejected"
         self.progress(
             "plan",
@@ -475,6 +489,13 @@ class Cell:
         limits = self.config.limits
         poses = [safety.check_pose(plan.pose(n), limits, name=label) for n, label in zip(names, labels)]
         safety.check_sequence(self.robot.read_pose(), poses, flags, limits, names=labels)
+        clash = plan_bin_clash(self.config, list(zip(names, poses, flags)))
+        if clash is not None:
+            raise SafetyError(
+                f"plan waypoint {clash[0]!r}: the gripper (fingers open, palm, flange) would hit the bin's "
+                f"{clash[1]}; nothing was sent — choose a grasp that keeps the whole gripper inside the bin "
+                "and above its floor"
+            )
         return {name: (T, lin) for name, T, lin in zip(names, poses, flags)}
 
     def _execute(self, plan: PickPlan) -> Optional[bool]:

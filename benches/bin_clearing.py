@@ -1,0 +1,130 @@
+"""Issue 14's measurement: the simulated cell empties piles of 8-12 parts.
+
+Per part (tee, elbow, cross, and the real CAD parts of ../shared/data/parts in metres where
+present), seeds × piles: parts removed per pile, bins emptied, wrong-pose lifts (judged modulo
+the part's symmetries by the cell), grasps on nothing (the gripper closed empty), gripper-floor
+contacts (executed plans whose gripper outline reaches the bin floor), time per cycle by stage
+(ms), and the process CPU time per pick (it includes the simulator's renderer and emulators,
+which run in the same process, so it bounds binpick's own compute from above).
+
+    PYTHONPATH=python python benches/bin_clearing.py --quick
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+import binpick
+from binpick.sim import SimulatedCell
+
+PARTS_DIR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "parts"
+CAD = ("IPAGearShaft.stl", "IPARingScrew.stl")
+ESTIMATE = {"d_star": 12.0, "min_points": 500}
+STAGES = ("scan.move", "scan.sweep", "scan.extract", "locate+plan", "motion", "total")
+
+
+def _parts(quick: bool) -> list:
+    parts = [("tee", binpick.parts.tee), ("elbow", binpick.parts.elbow), ("cross", binpick.parts.cross)]
+    for name in CAD[:1] if quick else CAD:
+        path = PARTS_DIR / name
+        if path.exists():
+            parts.append((path.stem, lambda p=path: binpick.Model.from_mesh(p, unit="m")))
+        else:
+            print(f"skipped {name}: not found in {PARTS_DIR}")
+    return parts
+
+
+def _floor_gap(sim) -> list:
+    """Wraps the cell's plan check to record, per executed plan, the lowest gripper point above the floor (mm)."""
+    cell, gaps = sim.cell, []
+    check = cell.check_plan
+    gripper, floor = cell.config.gripper, float(cell.config.bin_bounds[0][2])
+
+    def recording(plan):
+        moves = check(plan)
+        lowest = min(
+            float(
+                (
+                    (gripper.outline() @ (T @ gripper.T_flange_gripper)[:3, :3].T)
+                    + (T @ gripper.T_flange_gripper)[:3, 3]
+                )[:, 2].min()
+            )
+            for name, (T, _) in moves.items()
+            if name in ("approach", "grasp", "lift")
+        )
+        gaps.append(lowest - floor)
+        return moves
+
+    cell.check_plan = recording
+    return gaps
+
+
+def run_pile(make, seed: int, count: int, frames: int) -> dict:
+    with SimulatedCell(make(), count=count, seed=seed, frames=frames, estimate_options=ESTIMATE) as sim:
+        gaps = _floor_gap(sim)
+        cpu0, wall0 = time.process_time(), time.perf_counter()
+        report = sim.cell.run(count + 2)
+        cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
+        left = len(sim.pile.ids)
+    recs = report.records
+    return {
+        "seed": seed,
+        "count": count,
+        "removed": count - left,
+        "emptied": left == 0,
+        "wrong_pose": sum(r.failure == "wrong pose" for r in recs),
+        "empty_grip": sum(r.failure == "empty grip" for r in recs),
+        "floor_contacts": sum(g <= 0.0 for g in gaps),
+        "cycles": len(recs),
+        "stages_ms": {s: float(np.mean([r.timings.get(s, 0.0) for r in recs])) for s in STAGES},
+        "cpu_s_per_pick": cpu / max(1, len(recs)),
+        "wall_s": wall,
+        "stopped": report.stopped,
+    }
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="one seed, piles of 8, 45 frames: a smoke run")
+    ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--out", default="bin_clearing.json")
+    args = ap.parse_args()
+    seeds = range(1) if args.quick else range(args.seeds)
+    frames = 45 if args.quick else 90
+    rows = {}
+    for name, make in _parts(args.quick):
+        piles = []
+        for s in seeds:
+            count = 8 if args.quick else 8 + s % 5
+            piles.append(run_pile(make, s, count, frames))
+            p = piles[-1]
+            print(
+                f"{name} seed {s}: removed {p['removed']}/{p['count']} in {p['cycles']} cycles, stopped: {p['stopped']}"
+            )
+        rows[name] = piles
+    print(
+        f"\n{'part':<14}{'removed':>9}{'emptied':>9}{'wrong':>7}{'empty':>7}{'floor':>7}"
+        f"{'scan ms':>9}{'loc+plan':>9}{'motion':>8}{'cpu s/pick':>11}"
+    )
+    for name, piles in rows.items():
+        n = sum(p["count"] for p in piles)
+        print(
+            f"{name:<14}{sum(p['removed'] for p in piles) / n:>8.0%} "
+            f"{sum(p['emptied'] for p in piles):>4}/{len(piles):<3}"
+            f"{sum(p['wrong_pose'] for p in piles):>7}{sum(p['empty_grip'] for p in piles):>7}"
+            f"{sum(p['floor_contacts'] for p in piles):>7}"
+            f"{np.mean([sum(p['stages_ms'][s] for s in STAGES[:3]) for p in piles]):>9.0f}"
+            f"{np.mean([p['stages_ms']['locate+plan'] for p in piles]):>9.0f}"
+            f"{np.mean([p['stages_ms']['motion'] for p in piles]):>8.0f}"
+            f"{np.mean([p['cpu_s_per_pick'] for p in piles]):>11.2f}"
+        )
+    Path(args.out).write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,101 @@
+"""Ambiguity-aware picking: an ambiguous pose is picked only with a grasp valid for every
+alternative, a pose with a free axis only with a grasp across that axis, a low-confidence pose not
+at all (issue 14 item 4)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from _cell_helpers import located
+
+import binpick
+from binpick.cell.grasp import NoGraspError, grasp_filter, plan_grasp
+from binpick.sim import SimulatedCell
+from binpick.transforms import rotation_about, translation
+
+
+@pytest.fixture(scope="module")
+def sim():
+    with SimulatedCell(binpick.parts.tee(), count=1, seed=0, frames=4) as s:
+        yield s
+
+
+def _pose(sim) -> np.ndarray:
+    """The tee lying flat in the middle of the bin, on its floor."""
+    lo, hi = sim.cell.config.bin_bounds
+    return translation(float(lo[0] + hi[0]) / 2, float(lo[1] + hi[1]) / 2, float(lo[2]) + 13.0)
+
+
+def _turned(T: np.ndarray, axis, deg: float, centre=(0.0, 0.0, 0.0)) -> np.ndarray:
+    S = np.eye(4)
+    S[:3, :3] = rotation_about(np.asarray(axis, dtype=np.float64), np.radians(deg))
+    c = np.asarray(centre, dtype=np.float64)
+    S[:3, 3] = c - S[:3, :3] @ c
+    return T @ S
+
+
+def _result(T, *, alternatives=(), free_axis=None, confidence=1.0):
+    return SimpleNamespace(
+        T_scene_model=T,
+        ambiguous=bool(alternatives),
+        alternatives=tuple(SimpleNamespace(T_scene_model=A, evidence=0.0) for A in alternatives),
+        free_axis=free_axis,
+        confidence=confidence,
+        score=1.0,
+        rmse=0.0,
+        method="custom",
+        timings={},
+    )
+
+
+def _plan(sim, result):
+    cfg = sim.cell.config
+    T = result.T_scene_model
+    return plan_grasp(cfg, T, np.zeros((0, 3)), sim.robot_emulator.pose(), grasp_filter(cfg, result))[0]
+
+
+def test_an_unambiguous_pose_is_planned_as_before(sim):
+    T = _pose(sim)
+    assert grasp_filter(sim.cell.config, _result(T)) is None
+    assert _plan(sim, _result(T)).grasp
+
+
+def test_an_ambiguous_pose_whose_alternative_moves_every_branch_is_skipped(sim):
+    T = _pose(sim)
+    other = _turned(T, (0, 0, 1), 37.0)  # no grasp of the tee lands the same way on both
+    with pytest.raises(NoGraspError) as err:
+        sim.cell.plan(located(T, _result(T, alternatives=[other])))
+    assert err.value.reason.startswith("ambiguous")
+
+
+def test_an_ambiguous_pose_is_picked_with_a_grasp_valid_for_both(sim):
+    cfg = sim.cell.config
+    T = _pose(sim)
+    # Flipped over about the stem's axis: the stem lies where it did, the crossbar's ends swap.
+    centre = cfg.model.near_symmetries[0].center
+    other = _turned(T, (0, 1, 0), 180.0, centre)
+    plan = _plan(sim, _result(T, alternatives=[other]))
+    from binpick.cell.grasp import GraspMatcher
+
+    m = GraspMatcher(cfg.grasps, cfg.symmetries, tolerance_deg=5.0, tolerance_mm=3.0)
+    T_bg = plan.T_base_gripper
+    assert m.within(m.error(np.linalg.inv(T_bg) @ T)) and m.within(m.error(np.linalg.inv(T_bg) @ other))
+
+
+def test_a_free_axis_allows_only_grasps_across_it(sim):
+    T = _pose(sim)
+    axis = np.array([0.0, 1.0, 0.0])  # the stem's axis, through the near-symmetry's centre
+    plan = _plan(sim, _result(T, free_axis=axis))
+    assert abs(plan.T_base_gripper[:3, 1] @ axis) > 0.99  # the fingers' width along the axis
+    assert plan.rejected["ambiguous"] > 0  # the grasps on the crossbar were left out
+
+
+def test_a_low_confidence_pose_is_not_picked(sim):
+    T = _pose(sim)
+    cfg = sim.cell.config
+    assert 0.0 < cfg.min_confidence < 1.0
+    with pytest.raises(NoGraspError) as err:
+        sim.cell.plan(located(T, _result(T, confidence=cfg.min_confidence / 2)))
+    assert err.value.reason == "low confidence"
