@@ -50,6 +50,11 @@ def check_finite(arr: np.ndarray, name: str) -> None:
         )
 
 
+#: Largest coordinate magnitude :func:`as_points` takes: beyond about 1e154 squared distances
+#: overflow a float64, and nothing a cell measures is within orders of magnitude of 1e12 mm.
+MAX_COORDINATE = 1e12
+
+
 def as_points(value: Any, name: str, *, min_points: int = 1, columns: int = 3) -> np.ndarray:
     """An (N, columns) float64 C-contiguous array with finite values and at least ``min_points`` rows."""
     arr = as_float_array(value, name)
@@ -64,11 +69,6 @@ def as_points(value: Any, name: str, *, min_points: int = 1, columns: int = 3) -
     if arr.shape[0] < min_points:
         raise TooFewPointsError(f"{name}: has {arr.shape[0]} points but at least {min_points} are needed")
     return arr
-
-
-#: Largest coordinate magnitude :func:`as_points` takes: beyond about 1e154 squared distances
-#: overflow a float64, and nothing a cell measures is within orders of magnitude of 1e12 mm.
-MAX_COORDINATE = 1e12
 
 
 def as_vector(value: Any, name: str, size: int = 3) -> np.ndarray:

@@ -189,11 +189,17 @@ fn auto(
         remove_bin(scene, model, cfg, true)?
     };
     let ccp_pts: Vec<Point> = ccp_kept.iter().map(|&i| scene[i]).collect();
-    let judge = Judge::new(scene, &ccp_pts, removed, model, cfg);
+    // One judge for both paths: PPF's, when it prepared the scene; CCP's own only without it.
+    let mut own: Option<Judge> = None;
     timings.push(("ccp_bin_removal", clock.elapsed().as_secs_f64() * 1e3));
     let mut ccp_timings = Vec::new();
-    let by_ccp =
-        run(scene, &ccp_pts, model, cfg, CoarseMethod::Ccp, &judge, &mut ccp_timings).map(|e| reindex(e, &ccp_kept));
+    let by_ccp = {
+        let judge = match &detected {
+            Ok((_, prepared)) => &prepared.judge,
+            Err(_) => own.get_or_insert_with(|| Judge::new(scene, &ccp_pts, removed, model, cfg)),
+        };
+        run(scene, &ccp_pts, model, cfg, CoarseMethod::Ccp, judge, &mut ccp_timings).map(|e| reindex(e, &ccp_kept))
+    };
     timings.extend(ccp_timings.into_iter().map(|(name, ms)| (ccp_stage(name), ms)));
     match (detected, by_ccp) {
         (Ok((found, prepared)), Ok(c)) => {
@@ -201,7 +207,7 @@ fn auto(
             Ok((found, prepared.judge))
         }
         (Ok((found, prepared)), Err(_)) => Ok((found, prepared.judge)),
-        (Err(_), Ok(c)) => Ok((vec![c], judge)),
+        (Err(e), Ok(c)) => own.map(|judge| (vec![c], judge)).ok_or(e),
         (Err(e), Err(_)) => Err(e),
     }
 }

@@ -162,11 +162,7 @@ pub(super) fn assess(
         return (trust, est.t_scene_model);
     }
     let (turns, region) = turns_and_region(model, p);
-    let sample: Vec<Point> = local
-        .iter()
-        .step_by(local.len().div_ceil(p.refine_points.max(1)))
-        .copied()
-        .collect();
+    let sample = thin(&local, p.refine_points);
     let refine = IcpConfig::robust_plane(3.0 * judge.tol, p.iterations, 1e-5, 1e-3);
     let polish = |turn: &Isometry3<f64>, pts: &[Point], cfg: &IcpConfig| {
         let start = est.t_scene_model * turn;
@@ -186,9 +182,6 @@ pub(super) fn assess(
         let quick_cfg = IcpConfig {
             max_iterations: p.quick_iterations,
             ..refine.clone()
-        };
-        let thin = |v: &[Point], n: usize| -> Vec<Point> {
-            v.iter().step_by(v.len().div_ceil(n.max(1)).max(1)).copied().collect()
         };
         let (few, glance) = (thin(&sample, p.quick_points), thin(&judged, p.quick_points));
         let mut quick: Vec<(f64, (Isometry3<f64>, bool))> = turns
@@ -300,7 +293,7 @@ pub(super) fn assess(
 
 /// The turns of every near-symmetry (model frame; `true` for a continuous axis's), and the
 /// model-frame region where the features can lie: each feature under the identity and every turn.
-fn turns_and_region(model: &PoseModel, p: &super::TrustParams) -> (Vec<(Isometry3<f64>, bool)>, Vec<Point>) {
+fn turns_and_region(model: &PoseModel, p: &TrustParams) -> (Vec<(Isometry3<f64>, bool)>, Vec<Point>) {
     let mut turns = Vec::new();
     let mut region = Vec::new();
     for n in &model.near_symmetries {
@@ -342,6 +335,11 @@ fn fine_tolerance(
     let mid = res.len() / 2;
     let median = *res.select_nth_unstable_by(mid, f64::total_cmp).1;
     (p.noise_sigmas * 1.4826 * median).clamp(p.min_fine_tolerance.min(tol), tol)
+}
+
+/// Every k-th point of `v`, so that at most about `n` remain.
+fn thin(v: &[Point], n: usize) -> Vec<Point> {
+    v.iter().step_by(v.len().div_ceil(n.max(1)).max(1)).copied().collect()
 }
 
 /// Distance of a model-frame point from the tangent plane of its nearest dense model point,
