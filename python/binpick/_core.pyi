@@ -37,6 +37,9 @@ __version__: str
 def _panic_for_test() -> None:
     """Panics inside the guarded region (raises InternalError); for the tests."""
 
+def _running_calls() -> int:
+    """How many native calls are still running, those interrupted by Ctrl-C included; for the tests."""
+
 # --- geometry -------------------------------------------------------------------------------
 
 def estimate_normals(points_in: _F64, k: int, viewpoint: _F64 | None, direction: _F64 | None, num_threads: int) -> _F64:

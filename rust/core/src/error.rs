@@ -52,6 +52,9 @@ pub enum Error {
         /// The unit as given.
         unit: String,
     },
+    /// The caller cancelled the call (Ctrl-C) before it finished; nothing it built was kept.
+    #[error("the call was cancelled before it finished; nothing it built was kept")]
+    Cancelled,
     /// A mesh or point-cloud file that does not exist or cannot be opened.
     #[error("{path}: cannot open the file ({reason}); check the path")]
     FileNotFound {

@@ -10,7 +10,7 @@
 //! | module | what it holds |
 //! |---|---|
 //! | `error` | the one [`Error`] enum and [`Result`] |
-//! | `rng`, `parallel` | the seeded [`Rng`]; thread-count control ([`with_threads`]) |
+//! | `rng`, `parallel`, `cancel` | the seeded [`Rng`]; thread-count control ([`with_threads`]); cooperative cancellation ([`CancelFlag`], [`cancel_scope`]) |
 //! | `geometry` | [`Point`] and its checks, cloud statistics, rigid transforms, the one [`Plane`], [`BinBox`], the one Kabsch, THE camera model ([`Camera`], [`RayTable`]) |
 //! | `search` | nearest-neighbour structures: [`KdIndex`], the bounded correspondence tree, the coarse nearest field |
 //! | `voxel`, `normals` | voxel grids and even subsampling; normal estimation |
@@ -25,6 +25,7 @@
 //! The names below are the crate's front door; the modules behind them are internal.
 #![warn(missing_docs)]
 
+mod cancel;
 mod error;
 mod geometry;
 mod mesh;
@@ -41,6 +42,7 @@ mod symmetry;
 mod triangulate;
 mod voxel;
 
+pub use cancel::{scope as cancel_scope, CancelFlag, Token as CancelToken};
 pub use error::{Error, Result};
 pub use geometry::{centroid, isometry_from_matrix, transform_points, BinBox, Camera, Plane, Point, RayTable};
 pub use mesh::io::{read_mesh, read_ply, write_ply, PlyData};

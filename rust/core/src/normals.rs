@@ -51,7 +51,9 @@ pub fn estimate_normals(
             ));
         }
     }
-    Ok(normals_at(points, points, index, k, orientation))
+    let normals = normals_at(points, points, index, k, orientation);
+    crate::cancel::check()?;
+    Ok(normals)
 }
 
 /// Unit normals at `queries` from the PCA of their `k` nearest points of `cloud` (`index` built
@@ -63,9 +65,13 @@ pub fn normals_at(
     k: usize,
     orientation: Orientation,
 ) -> Vec<Vector3<f64>> {
+    let cancel = crate::cancel::current();
     queries
         .par_iter()
         .map_init(Vec::new, |found, p| {
+            if cancel.requested() {
+                return Vector3::z();
+            }
             index.knn_into(p, k, found);
             let (_, cov) = covariance_of(found.iter().map(|f| &cloud[f.1 as usize]));
             let n = extreme_axis(&cov, false).unwrap_or_else(|| principal_axes(&cov).1[2]);

@@ -28,5 +28,7 @@ pub fn with_threads<R: Send>(num_threads: usize, f: impl FnOnce() -> R + Send) -
             })
             .clone()
     };
-    pool.install(f)
+    // The pool's threads do not see the caller's thread-locals: carry the call's cancel flag over.
+    let token = crate::cancel::current();
+    pool.install(move || crate::cancel::enter(token, f))
 }

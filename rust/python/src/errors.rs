@@ -1,10 +1,11 @@
 //! Mapping core errors and caught panics to the exception classes of `binpick.errors`: one
 //! exhaustive `match` over the core's error enum, so a new variant cannot go unmapped.
 
-use binpick_core::Error;
+use binpick_core::{cancel_scope, CancelFlag, Error};
 use pyo3::prelude::*;
 use std::any::Any;
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc::{channel, RecvTimeoutError};
 use std::time::Duration;
 
@@ -35,6 +36,7 @@ pub fn to_py(err: Error) -> PyErr {
         Error::BadFile { .. } => classes::MeshFileError::new_err(message),
         Error::WriteFailed { .. } => classes::FileWriteError::new_err(message),
         Error::NoObjectFound { .. } => classes::NoObjectFound::new_err(message),
+        Error::Cancelled => pyo3::exceptions::PyKeyboardInterrupt::new_err(message),
     }
 }
 
@@ -81,18 +83,49 @@ const SIGNAL_POLL: Duration = Duration::from_millis(50);
 /// Stack of the worker thread: as large as a main thread's, for the core's recursive builds.
 const WORKER_STACK: usize = 8 << 20;
 
+/// Worker threads of [`run`] still running, interrupted ones included.
+static RUNNING: AtomicUsize = AtomicUsize::new(0);
+
+/// How many native calls are still running, those abandoned on Ctrl-C included: the tests use it
+/// to see that an interrupted call stops its work rather than running on to its end.
+pub fn running_calls() -> usize {
+    RUNNING.load(Ordering::SeqCst)
+}
+
+/// Counts a worker thread of [`run`] for as long as it lives.
+struct Running;
+
+impl Running {
+    fn start() -> Self {
+        RUNNING.fetch_add(1, Ordering::SeqCst);
+        Running
+    }
+}
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        RUNNING.fetch_sub(1, Ordering::SeqCst);
+    }
+}
+
 /// Runs core work on owned data on a worker thread, panics caught as in [`run_borrowed`], while
 /// the calling thread waits with the GIL released and checks Python's signals every 50 ms: on
-/// Ctrl-C the call raises `KeyboardInterrupt` at once. The core has no cancellation hook, so the
-/// abandoned work runs on in the background to its end (or the process's) and its result is dropped.
+/// Ctrl-C the call raises `KeyboardInterrupt` at once and raises the work's cancel flag, so that
+/// the work stops at its next check (between iterations of its long loops) and its result, if
+/// any, is dropped; nothing half-built is cached.
 pub fn run<T: Send + 'static>(py: Python<'_>, work: impl FnOnce() -> Result<T, Error> + Send + 'static) -> PyResult<T> {
     let (tx, rx) = channel::<Outcome<T>>();
+    let flag = CancelFlag::new();
+    let worker_flag = flag.clone();
+    let running = Running::start();
     std::thread::Builder::new()
         .name("binpick-call".into())
         .stack_size(WORKER_STACK)
         .spawn(move || {
+            let _running = running;
+            let outcome = cancel_scope(&worker_flag, || catch_unwind(AssertUnwindSafe(work)));
             // The receiver is gone only when the caller was interrupted: nobody wants the result.
-            let _ = tx.send(catch_unwind(AssertUnwindSafe(work)));
+            let _ = tx.send(outcome);
         })
         .map_err(|e| classes::InternalError::new_err(format!("binpick cannot start a worker thread ({e})")))?;
     let mut rx = rx;
@@ -105,7 +138,12 @@ pub fn run<T: Send + 'static>(py: Python<'_>, work: impl FnOnce() -> Result<T, E
         rx = back;
         match received {
             Ok(outcome) => return outcome_to_py(outcome),
-            Err(RecvTimeoutError::Timeout) => py.check_signals()?,
+            Err(RecvTimeoutError::Timeout) => {
+                if let Err(interrupt) = py.check_signals() {
+                    flag.cancel();
+                    return Err(interrupt);
+                }
+            }
             Err(RecvTimeoutError::Disconnected) => {
                 return Err(classes::InternalError::new_err(
                     "binpick's worker thread ended without a result; this is a bug, please report it",

@@ -19,10 +19,17 @@ fn _panic_for_test(py: Python<'_>) -> PyResult<()> {
     })
 }
 
+/// How many native calls are still running, interrupted ones included (for the tests).
+#[pyfunction]
+fn _running_calls() -> usize {
+    errors::running_calls()
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     m.add_function(wrap_pyfunction!(_panic_for_test, m)?)?;
+    m.add_function(wrap_pyfunction!(_running_calls, m)?)?;
     geometry::register(m)?;
     registration::register(m)?;
     pose::register(m)?;

@@ -9,6 +9,14 @@ use std::collections::HashMap;
 use std::io::Write;
 use std::path::Path;
 
+/// What a reader stopped by a cancel says; nobody reads it, the caller has gone.
+const CANCELLED: &str = "reading was cancelled";
+
+/// Whether a reader at row `i` should stop: the call was cancelled (looked at every 2^16 rows).
+fn cancelled_at(i: usize) -> bool {
+    i.is_multiple_of(1 << 16) && crate::cancel::requested()
+}
+
 fn read_bytes(path: &Path) -> Result<Vec<u8>> {
     let shown = path.display().to_string();
     if path.is_dir() {
@@ -121,6 +129,9 @@ fn parse_stl_binary(bytes: &[u8], n: usize) -> std::result::Result<TriMesh, Stri
     let mut w = Welder::new();
     let mut faces = Vec::with_capacity(n);
     for t in 0..n {
+        if cancelled_at(t) {
+            return Err(CANCELLED.into());
+        }
         let base = 84 + 50 * t + 12;
         let mut corner = |k: usize| {
             let o = base + 12 * k;
@@ -140,6 +151,9 @@ fn parse_stl_ascii(text: &str) -> std::result::Result<TriMesh, String> {
     let mut faces = Vec::new();
     let mut corners: Vec<u32> = Vec::with_capacity(3);
     for (lineno, line) in text.lines().enumerate() {
+        if cancelled_at(lineno) {
+            return Err(CANCELLED.into());
+        }
         let mut it = line.split_whitespace();
         match it.next() {
             Some("vertex") => {
@@ -180,6 +194,9 @@ fn parse_obj(bytes: &[u8]) -> std::result::Result<TriMesh, String> {
     let mut vertices = Vec::new();
     let mut faces = Vec::new();
     for (lineno, line) in text.lines().enumerate() {
+        if cancelled_at(lineno) {
+            return Err(CANCELLED.into());
+        }
         let mut it = line.split_whitespace();
         match it.next() {
             Some("v") => {
@@ -499,6 +516,9 @@ fn read_element(el: &Element, body: &mut Body<'_>, out: &mut PlyData) -> std::re
     }
     let mut row = vec![0.0; el.props.len()];
     for r in 0..el.count {
+        if cancelled_at(r) {
+            return Err(CANCELLED.into());
+        }
         let mut list: Vec<u32> = Vec::new();
         for (k, p) in el.props.iter().enumerate() {
             match p {

@@ -47,9 +47,13 @@ pub fn mesh_sdf<F: Fn(&Point) -> f64 + Sync>(sdf: F, lo: Point, hi: Point, cell:
     let at = |i: usize, j: usize, k: usize| {
         Point::new(lo.x + i as f64 * cell, lo.y + j as f64 * cell, lo.z + k as f64 * cell)
     };
+    let cancel = crate::cancel::current();
     let values: Vec<f64> = (0..nx * ny * nz)
         .into_par_iter()
         .map(|g| {
+            if cancel.requested() {
+                return 1.0;
+            }
             let (i, j, k) = (g % nx, (g / nx) % ny, g / (nx * ny));
             let v = sdf(&at(i, j, k));
             // A value of exactly zero would put a vertex on a grid point; nudge it outside.
@@ -60,6 +64,7 @@ pub fn mesh_sdf<F: Fn(&Point) -> f64 + Sync>(sdf: F, lo: Point, hi: Point, cell:
             }
         })
         .collect();
+    crate::cancel::check()?;
     let gid = |i: usize, j: usize, k: usize| i + nx * (j + ny * k);
     let mut edge_vertex: HashMap<(usize, usize), u32> = HashMap::new();
     let mut vertices: Vec<Point> = Vec::new();

@@ -91,6 +91,7 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
         matches!(method, CoarseMethod::Ccp | CoarseMethod::Centroid),
     )?;
     let mut timings = vec![("bin_removal", clock.elapsed().as_secs_f64() * 1e3)];
+    crate::cancel::check()?;
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
     let (found, judge) = match method {
         CoarseMethod::Ccp | CoarseMethod::Centroid => {
@@ -105,8 +106,10 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
         CoarseMethod::Auto => auto(scene, &pts, &kept, model, cfg, &mut timings)?,
     };
     let clock = Instant::now();
+    crate::cancel::check()?;
     let found = trusted(found, scene, &pts, model, &judge, cfg);
     timings.push(("trust", clock.elapsed().as_secs_f64() * 1e3));
+    crate::cancel::check()?;
     Ok(found
         .into_iter()
         .map(|e| PoseEstimate {

@@ -282,16 +282,16 @@ pub fn icp(source: &[Point], target: &IcpTarget, init: &Isometry3<f64>, config: 
         "ICP cannot fix a rotation from points on a line; pass a cloud that covers a surface",
     )?;
     match config.method {
-        IcpMethod::PointToPoint => Ok(with_threads(config.num_threads, || {
-            run::<PointSums>(source, target, init, config)
-        })),
+        IcpMethod::PointToPoint => {
+            let result = with_threads(config.num_threads, || run::<PointSums>(source, target, init, config));
+            crate::cancel::check().map(|()| result)
+        }
         IcpMethod::PointToPlane => {
             if target.normals.is_none() {
                 return Err(Error::invalid("target_normals", "point-to-plane ICP needs target normals; estimate them first (binpick.estimate_normals) or use method=\"point_to_point\""));
             }
-            Ok(with_threads(config.num_threads, || {
-                run::<PlaneSums>(source, target, init, config)
-            }))
+            let result = with_threads(config.num_threads, || run::<PlaneSums>(source, target, init, config));
+            crate::cancel::check().map(|()| result)
         }
     }
 }
@@ -471,6 +471,9 @@ fn run<S: Sums>(source_in: &[Point], target: &IcpTarget, init: &Isometry3<f64>, 
     let mut iterations = 0;
     let mut last = Pass::<S>::zero();
     for _ in 0..config.max_iterations {
+        if crate::cancel::requested() {
+            break;
+        }
         let motion = Motion::new(&t_est, &t_prev, &c);
         let pass = if config.trim_fraction > 0.0 {
             matcher.trimmed_pass(&motion, &source, &mut last_match, config.kernel, config.trim_fraction)

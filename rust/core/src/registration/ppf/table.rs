@@ -176,6 +176,7 @@ impl PpfModel {
             entries: Vec::new(),
         };
         model.build_table();
+        crate::cancel::check()?;
         Ok(model)
     }
 
@@ -193,9 +194,13 @@ impl PpfModel {
     pub(super) fn build_table(&mut self) {
         let n = self.points.len();
         // Per reference point, the keys and α of its pairs; then a counting sort by key.
+        let cancel = crate::cancel::current();
         let rows: Vec<Vec<(u32, u16)>> = (0..n)
             .into_par_iter()
             .map(|i| {
+                if cancel.requested() {
+                    return Vec::new();
+                }
                 (0..n)
                     .filter(|&j| j != i)
                     .filter_map(|j| {

@@ -62,12 +62,16 @@ impl PpfModel {
         let n_model = self.points.len();
         let rot_bins = self.config.rotation_bins as usize;
         let chunk = (refs.len() / (4 * rayon::current_num_threads()).max(1)).max(1);
+        let cancel = crate::cancel::current();
         refs.par_chunks(chunk)
             .flat_map_iter(|chunk| {
                 let mut acc = vec![0u32; n_model * rot_bins];
                 let mut touched: Vec<u32> = Vec::new();
                 let mut out = Vec::new();
                 for &r in chunk {
+                    if cancel.requested() {
+                        break;
+                    }
                     self.vote_one(points, normals, index, r, &mut acc, &mut touched);
                     self.peaks(&acc, &touched, r, &points[r], &normals[r], cfg, &mut out);
                     for &c in &touched {
