@@ -99,7 +99,7 @@ def icp(
         kernel_scale: the kernel's scale in mm (default: a third of the correspondence distance).
         trim_fraction: fraction in [0, 0.9] of the farthest pairs dropped each iteration.
         num_threads: worker threads, 0 = all cores, at most 256 (a request above the machine's
-            cores is clamped to them). The GIL is released while ICP runs; Ctrl-C stops the wait.
+            cores is clamped to them). The GIL is released while ICP runs; Ctrl-C stops the call and its work.
     """
     config = native_config(
         _core.IcpConfig,
