@@ -2,7 +2,15 @@
 
 The emulator opens a pty pair with :func:`os.openpty`, puts it in raw mode and serves the master
 side from a background thread; a driver opens :attr:`PtyEmulator.slave_path` with pyserial like
-any serial port. Faults armed with :meth:`PtyEmulator.inject` change the next matching replies.
+any serial port, and may close and reopen it any number of times, as on a real serial line.
+Faults armed with :meth:`PtyEmulator.inject` change the next matching replies.
+
+Reopening: some kernels' ptys cannot hold a parity bit, and their ``tcsetattr`` fails with
+EINVAL when parity is the only change asked for — which is what pyserial asks when a driver
+reopens a port at the speed it last set (the MELFA line is 9600 8E2). A request that also changes
+the speed is accepted. So the emulator keeps the line's stored speed at :data:`IDLE_BAUD`, a
+speed no cell device uses, resetting it each time a driver has set another: every open then
+changes the speed and succeeds. The speed of a pty carries no meaning for the bytes.
 """
 
 from __future__ import annotations
@@ -10,6 +18,7 @@ from __future__ import annotations
 import enum
 import os
 import select
+import termios
 import threading
 import time
 import tty
@@ -18,7 +27,10 @@ from typing import Any, Callable, Optional
 
 from ...errors import InvalidInputError
 
-__all__ = ["Fault", "PtyEmulator"]
+__all__ = ["Fault", "PtyEmulator", "IDLE_BAUD"]
+
+#: The line speed the emulator's pty rests at between opens (see the module docstring).
+IDLE_BAUD = termios.B50
 
 
 class Fault(enum.Enum):
@@ -76,6 +88,7 @@ class PtyEmulator:
         tty.setraw(self._slave)
         tty.setraw(self._master)
         self.slave_path = os.ttyname(self._slave)
+        self._rest_line()
         self._stop = threading.Event()
         self._lock = threading.RLock()
         self._faults: list[_Armed] = []
@@ -162,11 +175,12 @@ class PtyEmulator:
         buf = bytearray()
         while not self._stop.is_set() and not self._closed:
             try:
+                self._rest_line()
                 ready, _, _ = select.select([self._master], [], [], 0.02)
                 if not ready:
                     continue
                 data = os.read(self._master, 4096)
-            except (OSError, ValueError):
+            except (OSError, ValueError, termios.error):
                 break
             buf += data
             for request in self._take_requests(buf):
@@ -213,6 +227,14 @@ class PtyEmulator:
         if self.reply_delay_s:
             self._stop.wait(self.reply_delay_s)
         self._send_bytes(reply)
+
+    def _rest_line(self) -> None:
+        """Puts the line's stored speed back to :data:`IDLE_BAUD` once a driver has set another,
+        so that the next open of the port changes the speed and is accepted (module docstring)."""
+        attrs = termios.tcgetattr(self._slave)
+        if attrs[4] != IDLE_BAUD or attrs[5] != IDLE_BAUD:
+            attrs[4] = attrs[5] = IDLE_BAUD
+            termios.tcsetattr(self._slave, termios.TCSANOW, attrs)
 
     def _send_bytes(self, data: bytes) -> None:
         try:
