@@ -11,7 +11,7 @@ Request, 8 bytes::
     op      u8  1 = FRAME: grab one frame as the camera sees the cell now
     zero    u16 0
 
-Reply header, :data:`HEADER_SIZE` (= 164) bytes, then ``length`` payload bytes::
+Reply header, :data:`HEADER_SIZE` (= 168) bytes, then ``length`` payload bytes::
 
     magic    4s   b"BPCR"
     version  u8   1

@@ -88,7 +88,6 @@ class PtyEmulator:
         tty.setraw(self._slave)
         tty.setraw(self._master)
         self.slave_path = os.ttyname(self._slave)
-        self._rest_line()
         self._stop = threading.Event()
         self._lock = threading.RLock()
         self._faults: list[_Armed] = []
@@ -96,6 +95,7 @@ class PtyEmulator:
         self._closed = False
         #: exceptions raised while handling requests (an emulator bug); tests assert it stays empty
         self.failures: list[str] = []
+        self._rest_line()
         self._thread = threading.Thread(target=self._serve, name=f"{self.device}-emulator", daemon=True)
 
     # -- public
@@ -180,7 +180,7 @@ class PtyEmulator:
                 if not ready:
                     continue
                 data = os.read(self._master, 4096)
-            except (OSError, ValueError, termios.error):
+            except (OSError, ValueError):
                 break
             buf += data
             for request in self._take_requests(buf):
@@ -192,6 +192,7 @@ class PtyEmulator:
                     self.failures.append(f"{request!r}: {type(exc).__name__}: {exc}")
                 if self._closed:
                     return
+                self._rest_line()
 
     def _pop_fault(self, request: Any) -> Optional[_Armed]:
         with self._lock:
@@ -231,10 +232,16 @@ class PtyEmulator:
     def _rest_line(self) -> None:
         """Puts the line's stored speed back to :data:`IDLE_BAUD` once a driver has set another,
         so that the next open of the port changes the speed and is accepted (module docstring)."""
-        attrs = termios.tcgetattr(self._slave)
-        if attrs[4] != IDLE_BAUD or attrs[5] != IDLE_BAUD:
-            attrs[4] = attrs[5] = IDLE_BAUD
-            termios.tcsetattr(self._slave, termios.TCSANOW, attrs)
+        if self._closed:
+            return
+        try:
+            attrs = termios.tcgetattr(self._slave)
+            if attrs[4] != IDLE_BAUD or attrs[5] != IDLE_BAUD:
+                attrs[4] = attrs[5] = IDLE_BAUD
+                termios.tcsetattr(self._slave, termios.TCSANOW, attrs)
+        except termios.error as exc:  # keep serving: only the next reopen can suffer
+            if not self._closed:
+                self.failures.append(f"resting the line at {IDLE_BAUD} baud: {exc}")
 
     def _send_bytes(self, data: bytes) -> None:
         try:
