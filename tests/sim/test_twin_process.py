@@ -24,7 +24,7 @@ import pytest
 import binpick
 from binpick.cell import FolderReplay, ReplayMismatchError, ScanRecorder, cell_from_file, load_cell_file
 from binpick.cell import camera_socket as wire
-from binpick.errors import DeviceTimeout, PortClosedError, ProtocolError, TruncatedReplyError
+from binpick.errors import CalibrationError, DeviceTimeout, PortClosedError, ProtocolError, TruncatedReplyError
 from binpick.scan import load_scan
 from binpick.sim import Cell as Layout
 from binpick.sim import SimCamera
@@ -149,7 +149,7 @@ def test_a_twin_frame_is_the_in_process_render_of_the_actual_pose_and_angle(twin
     np.testing.assert_array_equal(image, expected)
 
 
-def test_a_replayed_scan_gives_the_live_cloud(cell, tmp_path):
+def test_a_replayed_scan_gives_the_live_cloud(twin, cell, tmp_path):
     twin_camera = cell.camera
     cell.camera = ScanRecorder(twin_camera, cell.config.calibration, tmp_path)
     try:
@@ -157,15 +157,19 @@ def test_a_replayed_scan_gives_the_live_cloud(cell, tmp_path):
         folder = cell.camera.flush()
     finally:
         cell.camera = twin_camera
+        cell.close()  # the replay below opens the twin's ports again, from a cell file
     assert len(live.points) > 5000
     rebuilt = reconstruct(load_scan(folder))
     np.testing.assert_array_equal(np.asarray(rebuilt.points), np.asarray(live.points))
-    cell.camera = FolderReplay(folder)
-    try:
-        replayed = cell.scan()
-        assert cell.camera.remaining == 0
-    finally:
-        cell.camera = twin_camera
+    text = (twin.out / "cell.toml").read_text()
+    twin_camera_table = 'source = "twin"\nsocket = "camera.sock"'
+    assert twin_camera_table in text
+    replay_file = twin.out / "replay.toml"
+    replay_file.write_text(text.replace(twin_camera_table, f'source = "replay"\nfolder = "{folder}"'))
+    with cell_from_file(load_cell_file(replay_file)) as replaying:
+        assert isinstance(replaying.camera, FolderReplay)
+        replayed = replaying.scan()
+        assert replaying.camera.remaining == 0
     np.testing.assert_array_equal(np.asarray(replayed.points), np.asarray(live.points))
     replay = FolderReplay(folder)
     moved = live.T_base_flanges[0].copy()
@@ -175,6 +179,12 @@ def test_a_replayed_scan_gives_the_live_cloud(cell, tmp_path):
     replay.begin(live.T_base_flanges[0])
     with pytest.raises(ReplayMismatchError, match="recorded with the laser at"):
         replay.laser_at(live.angles[0] + 0.01)
+
+
+def test_pick_names_the_missing_calibration(twin, tmp_path):
+    (tmp_path / "cell.toml").write_text((twin.out / "cell.toml").read_text())
+    with pytest.raises(CalibrationError, match=r"calibration.toml does not exist; solve the cell's calibration"):
+        cell_from_file(load_cell_file(tmp_path / "cell.toml"))
 
 
 def test_the_twin_answers_a_bad_request_with_an_error_text(twin):
@@ -274,8 +284,7 @@ def test_a_silent_twin_times_out_and_an_absent_one_is_named(tmp_path):
         TwinCamera(tmp_path / "nobody.sock")
 
 
-def test_binpick_pick_removes_three_parts_in_three_attempts(twin, cell, tmp_path):
-    cell.close()  # the CLI opens the ports itself
+def test_binpick_pick_removes_three_parts_in_three_attempts(twin, tmp_path):
     before = twin.world()
     out = tmp_path / "pick"
     env = {"PYTHONPATH": str(ROOT / "python"), "PATH": "/usr/bin:/bin"}
