@@ -133,7 +133,7 @@ class _Snapshot:
 
 
 def test_a_twin_frame_is_the_in_process_render_of_the_actual_pose_and_angle(twin, cell):
-    cell.scan()  # the arm at the scan pose, the laser swept over the pile
+    cell.robot.move_to(cell.config.scan_poses[0])  # the arm at the scan pose (from above the approach height)
     cell.motor.move_to(0.02, wait=True)
     image = cell.camera.grab()
     frame = cell.camera.last
@@ -290,7 +290,18 @@ def test_binpick_pick_removes_three_parts_in_three_attempts(twin, tmp_path):
     env = {"PYTHONPATH": str(ROOT / "python"), "PATH": "/usr/bin:/bin"}
     t0 = time.perf_counter()
     done = subprocess.run(
-        [sys.executable, "-m", "binpick", "pick", str(twin.out / "cell.toml"), "--picks", "3", "--out", str(out)],
+        [
+            sys.executable,
+            "-m",
+            "binpick",
+            "pick",
+            str(twin.out / "cell.toml"),
+            "--picks",
+            "3",
+            "--out",
+            str(out),
+            "--save-scans",
+        ],
         capture_output=True,
         text=True,
         env=env,
@@ -306,6 +317,9 @@ def test_binpick_pick_removes_three_parts_in_three_attempts(twin, tmp_path):
     assert len(removed) == 3 and removed <= {p["id"] for p in before["in_bin"]}
     assert len(after["in_bin"]) == len(before["in_bin"]) - 3
     assert after["held"] is None
+    sweeps = sorted((out / "scans").iterdir())
+    assert [p.name for p in sweeps] == ["sweep_000", "sweep_001", "sweep_002"]
+    assert all(len(load_scan(p)) == FRAMES for p in sweeps)
     assert [c for c in after["collisions"] if c["with"] == "bin" or c["with"].startswith("robot")] == []
     print(f"twin start-up {twin.startup_s:.1f} s, binpick pick --picks 3 {pick_s:.1f} s")
 
