@@ -10,12 +10,19 @@ EINVAL when parity is the only change asked for — which is what pyserial asks 
 reopens a port at the speed it last set (the MELFA line is 9600 8E2). A request that also changes
 the speed is accepted. So the emulator keeps the line's stored speed at :data:`IDLE_BAUD`, a
 speed no cell device uses, resetting it each time a driver has set another: every open then
-changes the speed and succeeds. The speed of a pty carries no meaning for the bytes.
+changes the speed and succeeds. The speed of a pty carries no meaning for the bytes. The master
+side runs in packet mode with the slave's EXTPROC flag set, so the kernel tells the emulator
+(a TIOCPKT_IOCTL packet) each time a driver sets the line; the emulator resets the speed
+:data:`REST_DELAY_S` later — not at once, which could land inside the driver's own
+``tcsetattr`` and make it fail — and also checks it at every turn of its loop and after every
+request. A driver that reopens the port within those few milliseconds of opening it can still
+be refused.
 """
 
 from __future__ import annotations
 
 import enum
+import fcntl
 import os
 import select
 import termios
@@ -27,10 +34,16 @@ from typing import Any, Callable, Optional
 
 from ...errors import InvalidInputError
 
-__all__ = ["Fault", "PtyEmulator", "IDLE_BAUD"]
+__all__ = ["Fault", "PtyEmulator", "IDLE_BAUD", "REST_DELAY_S"]
 
 #: The line speed the emulator's pty rests at between opens (see the module docstring).
 IDLE_BAUD = termios.B50
+
+#: Seconds between a driver's change of the line's settings and the emulator's reset of its speed.
+REST_DELAY_S = 0.003
+
+_EXTPROC = getattr(termios, "EXTPROC", 0o200000)  # Linux's value when the module lacks the name
+_PKT_IOCTL = getattr(termios, "TIOCPKT_IOCTL", 0x40)
 
 
 class Fault(enum.Enum):
@@ -87,6 +100,10 @@ class PtyEmulator:
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)
         tty.setraw(self._master)
+        attrs = termios.tcgetattr(self._slave)
+        attrs[3] |= _EXTPROC
+        termios.tcsetattr(self._slave, termios.TCSANOW, attrs)
+        fcntl.ioctl(self._master, termios.TIOCPKT, (1).to_bytes(4, "little"))
         self.slave_path = os.ttyname(self._slave)
         self._stop = threading.Event()
         self._lock = threading.RLock()
@@ -173,16 +190,25 @@ class PtyEmulator:
     # -- machinery
     def _serve(self) -> None:
         buf = bytearray()
+        rest_at: Optional[float] = None
         while not self._stop.is_set() and not self._closed:
             try:
-                self._rest_line()
-                ready, _, _ = select.select([self._master], [], [], 0.02)
+                now = time.monotonic()
+                if rest_at is None or now >= rest_at:
+                    self._rest_line()
+                    rest_at = None
+                wait = 0.02 if rest_at is None else max(0.0, rest_at - now)
+                ready, _, _ = select.select([self._master], [], [], wait)
                 if not ready:
                     continue
-                data = os.read(self._master, 4096)
+                packet = os.read(self._master, 4097)
             except (OSError, ValueError):
                 break
-            buf += data
+            if not packet or packet[0] != 0:  # a control packet, no data
+                if packet and packet[0] & _PKT_IOCTL:
+                    rest_at = time.monotonic() + REST_DELAY_S
+                continue
+            buf += packet[1:]
             for request in self._take_requests(buf):
                 with self._lock:
                     self._requests.append(request)
