@@ -206,17 +206,24 @@ def _pick(args: argparse.Namespace) -> int:
         raise _Usage("give the cell file: binpick pick CELL.toml (binpick pick --example prints one)")
     if args.picks < 1:
         raise _Usage("--picks must be at least 1")
+    t0 = time.perf_counter()
     progress = ProgressPrinter()
     cell = cell_from_file(load_cell_file(args.config), progress=progress)
     out = Path(args.out)
+    recorder = None
+    if args.save_scans:
+        from .cell import ScanRecorder
+
+        recorder = cell.camera = ScanRecorder(cell.camera, cell.config.calibration, out / "scans")
     with cell:
         if args.dry_run:
             return _dry_run(cell, out)
         report = cell.run(args.picks)
     written = _pictures(out, report, cell.config.model, cell.config.bin_bounds)
     _print_table(report)
-    for p in written:
+    for p in written + ([] if recorder is None else recorder.saved):
         print(f"wrote {p}")
+    print(f"{report.successes} of {len(report.records)} picks succeeded in {time.perf_counter() - t0:.1f} s")
     if report.successes == 0:
         print("binpick pick: no part was picked — " + (report.stopped or "see the table"), file=sys.stderr)
         return 1
@@ -451,6 +458,12 @@ def _add_pick(sub: Any) -> None:
         help="only scan and locate: the arm goes to the scan pose, the gripper stays open",
     )
     k.add_argument("--out", default="binpick-pick", help="folder for the pictures (default ./binpick-pick)")
+    k.add_argument(
+        "--save-scans",
+        action="store_true",
+        help="also save every sweep's frames, laser angles and robot pose as a scan folder OUT/scans/sweep_NNN "
+        '(replay one with [camera] source = "replay", or `binpick reconstruct` it)',
+    )
     k.add_argument("--example", action="store_true", help="print an example cell file and exit")
     k.set_defaults(run=_pick)
 

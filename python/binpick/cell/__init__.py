@@ -2,7 +2,8 @@
 
 * :mod:`~binpick.cell.config` — :class:`CellConfig`, :class:`GripperGeometry`, the laser sweep
 * :mod:`~binpick.cell.records` — :class:`ScanResult`, :class:`Located`, :class:`PickPlan`, :class:`PickRecord`, …
-* :mod:`~binpick.cell.frames` — :class:`FrameSource` and :class:`OpenCVCamera`
+* :mod:`~binpick.cell.frames` — :class:`FrameSource`, :class:`OpenCVCamera`, :class:`TwinCamera`,
+  :class:`FolderReplay`, :class:`ScanRecorder`
 * :mod:`~binpick.cell.grasp` — grasp generation and checks as pure functions
 * :mod:`~binpick.cell.loop` — :class:`Cell`, the pick loop (the same for the simulated and the real cell)
 * :mod:`~binpick.cell.cell_file` — the real cell's TOML file
@@ -14,7 +15,7 @@ from __future__ import annotations
 
 from .cell_file import CELL_FILE_EXAMPLE, CellFile, cell_from_file, config_from_file, load_cell_file
 from .config import CellConfig, GripperGeometry, check_static_poses, sweep_angles
-from .frames import FrameSource, OpenCVCamera
+from .frames import FolderReplay, FrameSource, OpenCVCamera, ReplayMismatchError, ScanRecorder, TwinCamera
 from .grasp import GraspMatcher, NoGraspError, branch_grasps, plan_grasp, symmetry_maps
 from .loop import Cell, ProgressPrinter
 from .records import FAILURE_KINDS, Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult
@@ -31,6 +32,10 @@ __all__ = [
     "Located",
     "NoGraspError",
     "OpenCVCamera",
+    "FolderReplay",
+    "ReplayMismatchError",
+    "ScanRecorder",
+    "TwinCamera",
     "PickPlan",
     "PickRecord",
     "PoseTruth",

@@ -32,11 +32,11 @@ from ..devices import (
 from ..devices.gripper import Gripper
 from ..devices.motor import LaserMotor
 from ..devices.xyzabc import transform_from_xyzabc
-from ..errors import BinpickError, InvalidInputError, MeshFileNotFoundError
+from ..errors import BinpickError, CalibrationError, InvalidInputError, MeshFileNotFoundError
 from ..models import Model
 from ..poses import estimate_pose
 from .config import CellConfig, GripperGeometry, check_static_poses
-from .frames import FrameSource, OpenCVCamera
+from .frames import FolderReplay, FrameSource, OpenCVCamera, TwinCamera
 from .loop import Cell
 
 __all__ = ["CELL_FILE_EXAMPLE", "CellFile", "load_cell_file", "cell_from_file", "config_from_file"]
@@ -65,8 +65,8 @@ slave = 9
 baudrate = 115200
 
 [camera]
-source = "opencv"            # or "simulated": render a simulated pile (to try a configuration)
-device = 0
+source = "opencv"            # or "twin": the camera of `binpick emulate cell` (socket = "DIR/camera.sock"),
+device = 0                   # "replay": a recorded scan folder (folder = "scan"), "simulated": a rendered pile
 
 [part]
 model = "tee"                # built-in tee, elbow, cross, or a mesh file (STL, PLY, OBJ)
@@ -222,7 +222,13 @@ def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig
         if name in ("tee", "elbow", "cross")
         else Model.from_mesh(os.path.join(here, name), unit=f.text("part", "unit", "mm"))
     )
-    calibration = CellCalibration.load(os.path.join(here, f.text("cell", "calibration")))
+    calibration_path = os.path.join(here, f.text("cell", "calibration"))
+    if not os.path.exists(calibration_path):
+        raise CalibrationError(
+            f"{f.path}: [cell] calibration = {calibration_path} does not exist; solve the cell's calibration "
+            "(binpick calibrate) and write it there"
+        )
+    calibration = CellCalibration.load(calibration_path)
     tool = f.pose("cell", "tool", [0, 0, 150, 0, 0, 0])
     return CellConfig(
         calibration=calibration,
@@ -316,4 +322,14 @@ def _camera(f: CellFile, model: Model, num_threads: int) -> Callable[[], FrameSo
             return RenderedCamera(model, count=count, seed=seed, num_threads=num_threads)
 
         return rendered
-    raise InvalidInputError(f"{f.path}: [camera] source = {source!r:.40}; use 'opencv' or 'simulated'")
+    here = os.path.dirname(os.path.abspath(f.path))
+    if source == "twin":
+        path = os.path.join(here, f.text("camera", "socket", "camera.sock"))
+        timeout = f.number("camera", "timeout_s", 60.0)
+        return lambda: TwinCamera(path, timeout_s=timeout)
+    if source == "replay":
+        folder = os.path.join(here, f.text("camera", "folder"))
+        return lambda: FolderReplay(folder)
+    raise InvalidInputError(
+        f"{f.path}: [camera] source = {source!r:.40}; use 'opencv', 'twin', 'replay' or 'simulated'"
+    )

@@ -1,7 +1,9 @@
-"""``binpick emulate robot|motor|gripper``: one emulated device alone on a pty.
+"""``binpick emulate robot|motor|gripper``: one emulated device alone on a pty; ``binpick
+emulate cell --out DIR``: the whole cell's digital twin (:mod:`binpick.sim.twin_process`).
 
-It prints the pty's path (the serial port to give a driver or a terminal program) on the first
-line of standard output and serves until Ctrl-C.
+A single device prints the pty's path (the serial port to give a driver or a terminal program)
+on the first line of standard output and serves until Ctrl-C. The twin prints the paths of its
+files and ptys, then a line per event, and runs until Ctrl-C or SIGTERM.
 """
 
 from __future__ import annotations
@@ -22,13 +24,15 @@ __all__ = ["emulate_main"]
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="binpick emulate",
-        description="Serve one emulated cell device on a pseudo-terminal until Ctrl-C. The first line printed "
-        "is the pty path to open as the device's serial port.",
+        description="Serve one emulated cell device on a pseudo-terminal until Ctrl-C (the first line printed "
+        "is the pty path to open as the device's serial port), or the whole cell's digital twin: "
+        "`binpick emulate cell --out DIR` writes DIR/cell.toml for `binpick pick`.",
     )
     p.add_argument(
         "device",
-        choices=("robot", "motor", "gripper"),
-        help="robot: MELFA controller (R3 protocol); motor: laser motor; gripper: Modbus RTU gripper",
+        choices=("robot", "motor", "gripper", "cell"),
+        help="robot: MELFA controller (R3 protocol); motor: laser motor; gripper: Modbus RTU gripper; "
+        "cell: the digital twin (robot, laser motor and gripper on ptys, a pile with physics, a camera on a socket)",
     )
     p.add_argument(
         "--protocol",
@@ -43,8 +47,18 @@ def _parser() -> argparse.ArgumentParser:
         help="motor ID (default 1 for dynamixel, 0 for aimotor) or gripper slave address (default 9)",
     )
     p.add_argument(
-        "--speed-scale", type=float, default=1.0, help="robot: multiply every speed by this factor (default 1)"
+        "--speed-scale",
+        type=float,
+        default=1.0,
+        help="robot, cell: multiply every arm speed by this factor (default 1)",
     )
+    c = p.add_argument_group("cell")
+    c.add_argument("--out", default=None, help="cell: the folder for cell.toml, world.json and camera.sock (required)")
+    c.add_argument("--part", default="tee", help="cell: built-in part (tee, elbow, cross) or a mesh file (default tee)")
+    c.add_argument("--unit", default="mm", help="cell: unit of a mesh file (mm, cm, m, in)")
+    c.add_argument("--count", type=int, default=12, help="cell: parts dropped into the bin (default 12)")
+    c.add_argument("--seed", type=int, default=0, help="cell: seed of the pile and the sensor noise (default 0)")
+    c.add_argument("--frames", type=int, default=90, help="cell: laser frames per scan in cell.toml (default 90)")
     return p
 
 
@@ -66,6 +80,72 @@ def _build(args: argparse.Namespace) -> PtyEmulator:
     return DynamixelEmulator(config=DynamixelEmulatorConfig(motor_id=1 if args.id is None else args.id))
 
 
+def _take_signals() -> None:
+    # A process started in the background by a shell inherits SIGINT ignored, and Python then
+    # never raises KeyboardInterrupt: take Ctrl-C (and SIGTERM) explicitly so it always stops.
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        signal.signal(signal.SIGTERM, signal.default_int_handler)
+
+
+def _cell(args: argparse.Namespace) -> int:
+    """``binpick emulate cell``: the digital twin until Ctrl-C or SIGTERM (exit 0)."""
+    import os
+
+    from ..cell.loop import ProgressPrinter
+    from ..sim.twin_process import CellTwin
+
+    if not args.out:
+        print("binpick emulate cell: give the folder for the twin's files: --out DIR", file=sys.stderr)
+        return 2
+    if args.count < 1 or args.frames < 2:
+        print("binpick emulate cell: --count must be at least 1 and --frames at least 2", file=sys.stderr)
+        return 2
+    t0 = time.perf_counter()
+    progress = ProgressPrinter()
+    _take_signals()
+    stop = threading.Event()
+    try:
+        from ..cli import _model, _Usage
+
+        model = _model(args.part, args.unit)
+        ref = args.part if args.part in ("tee", "elbow", "cross") else os.path.abspath(args.part)
+        twin = CellTwin(
+            args.out,
+            model,
+            part_ref=ref,
+            unit=args.unit,
+            progress=progress,
+            count=args.count,
+            seed=args.seed,
+            frames=args.frames,
+            speed_scale=args.speed_scale,
+        )
+    except KeyboardInterrupt:
+        return 0
+    except (_Usage, BinpickError) as exc:
+        print(f"binpick emulate cell: {exc}", file=sys.stderr)
+        return 2
+    try:
+        twin.start()
+        progress(
+            "ready",
+            f"twin up in {time.perf_counter() - t0:.1f} s: cell file {twin.cell_file}, world {twin.world_file}, "
+            f"camera {twin.socket_path}, true calibration {twin.out / 'true_calibration.toml'}; "
+            "copy or solve calibration.toml next to cell.toml, then `binpick pick` it; Ctrl-C stops",
+        )
+        twin.run(stop)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        try:
+            twin.close()
+        except KeyboardInterrupt:
+            twin.close()
+    progress("stopped", f"{len(twin.world.removed)} parts removed; {twin.world_file} holds the last state")
+    return 0
+
+
 def emulate_main(argv: Optional[list[str]] = None) -> int:
     """Runs ``binpick emulate`` with ``argv`` (without the program name); returns the exit code.
 
@@ -75,16 +155,14 @@ def emulate_main(argv: Optional[list[str]] = None) -> int:
         args = _parser().parse_args(argv)
     except SystemExit as exc:  # argparse printed the usage and the problem
         return int(exc.code or 0)
+    if args.device == "cell":
+        return _cell(args)
     try:
         emulator = _build(args)
     except BinpickError as exc:
         print(f"binpick emulate: {exc}", file=sys.stderr)
         return 2
-    # A process started in the background by a shell inherits SIGINT ignored, and Python then
-    # never raises KeyboardInterrupt: take Ctrl-C (and SIGTERM) explicitly so it always stops.
-    if threading.current_thread() is threading.main_thread():
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-        signal.signal(signal.SIGTERM, signal.default_int_handler)
+    _take_signals()
     with emulator:
         print(emulator.slave_path, flush=True)
         print(

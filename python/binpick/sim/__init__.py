@@ -6,7 +6,9 @@ and the digital twin (:class:`SimulatedCell`): the pick loop on emulated devices
 * :mod:`~binpick.sim.pile`, :mod:`~binpick.sim.render` — physics piles and the renderer
 * :mod:`~binpick.sim.dataset` — simulated scans written to disk
 * :mod:`~binpick.sim.camera` — virtual cameras for the pick loop
-* :mod:`~binpick.sim.twin` — :class:`SimulatedCell`, its arm and limits
+* :mod:`~binpick.sim.twin` — :class:`TwinWorld` (the twin's pile and emulators), :class:`SimulatedCell`, its arm
+  and limits
+* :mod:`~binpick.sim.twin_process` — the twin as its own process (``binpick emulate cell``)
 
 >>> import binpick
 >>> from binpick import sim
@@ -21,7 +23,7 @@ from .cell import Bin, Camera, Cell, Laser, Lighting, SensorNoise, look_down, ro
 from .dataset import GLOSSY_PART_SPECULAR, SimulatedScan, contact_sheet, simulate_scan, write_scan
 from .pile import Pile, SettleReport, convex_decomposition, max_interpenetration
 from .render import BIN_ID, NO_SURFACE, TABLE_ID, View, World, render_checkerboard
-from .twin import SIM_ARM, SimulatedCell, sim_limits, simulated_cell
+from .twin import SIM_ARM, SimulatedCell, TwinWorld, sim_limits, simulated_cell
 
 __all__ = [
     "BIN_ID",
@@ -41,6 +43,7 @@ __all__ = [
     "SettleReport",
     "SimulatedScan",
     "TABLE_ID",
+    "TwinWorld",
     "View",
     "World",
     "contact_sheet",

@@ -5,12 +5,17 @@ the laser at the angle the motor emulator reports — driven by the same pick lo
 (:class:`binpick.cell.Cell`) as the real cell. The simulated gripper closes on a part only when
 the part really lies between its fingers; the part leaves the pile when the gripper lets go.
 
+:class:`TwinWorld` is the twin's physical side (pile, emulators, ground truth) that both the
+in-process :class:`SimulatedCell` and the twin process (``binpick emulate cell``,
+:mod:`binpick.sim.twin_process`) run; :class:`SimulatedCell` adds the drivers and the pick loop.
+
 Lengths in mm, angles in radians; transforms are 4×4 ``T_to_from``.
 """
 
 from __future__ import annotations
 
 import math
+import threading
 import time
 from typing import Any, Callable, Optional
 
@@ -42,7 +47,7 @@ from .camera import SimCamera
 from .cell import Cell as Layout
 from .pile import Pile
 
-__all__ = ["SimulatedCell", "simulated_cell", "sim_limits", "SIM_ARM"]
+__all__ = ["TwinWorld", "SimulatedCell", "simulated_cell", "sim_limits", "SIM_ARM"]
 
 
 def _sim_arm() -> ArmModel:
@@ -93,12 +98,14 @@ class _Reach:
         return True
 
 
-class SimulatedCell:
-    """The simulated cell: a settled pile, the three emulators on ptys, the real drivers on them,
-    the simulated camera, and the :class:`Cell` running the pick loop (``.cell``).
+class TwinWorld:
+    """The digital twin's physical world: a settled pile, the robot, laser-motor and gripper
+    emulators serving their protocols on ptys (the gripper's fingers stop on a part only when the
+    part lies between them, and a held part leaves the bin when let go outside it), and the
+    ground truth (:meth:`judge`, :meth:`take_picked`). :class:`binpick.sim.SimCamera` renders it.
 
-    Use as a context manager (it starts the emulators and opens the cell). It is also the cell's
-    ground truth (:meth:`judge`, :meth:`take_picked`).
+    Use as a context manager (starts and stops the emulators). Its state is changed under
+    :attr:`lock` (the gripper emulator's thread, the camera and the caller share it).
 
     Args:
         model: the part.
@@ -114,7 +121,7 @@ class SimulatedCell:
         speed_scale: speeds up the emulated arm (1 = real time).
         progress: stage printer (see :class:`ProgressPrinter`).
         num_threads: rendering and pose-estimation threads, 0 = all cores.
-        config_overrides: fields of :class:`CellConfig` to set (e.g. ``estimate_options``).
+        config_overrides: fields of :class:`CellConfig` to set (e.g. ``estimate_options``, ``limits``).
     """
 
     def __init__(
@@ -147,11 +154,13 @@ class SimulatedCell:
         self.progress = progress or quiet
         self.frames = frames
         self.count = count
+        self.limits = config_overrides.pop("limits", None) or sim_limits(self.layout, self.gripper_geometry)
         self.config_overrides = config_overrides
         lo, hi = self.layout.bin.bounds
         self.drop_pose = (
             drop_pose if drop_pose is not None else look_down(float(lo[0] + hi[0]) / 2, float(lo[1]) - 150.0, 350.0)
         )
+        self.lock = threading.RLock()
         t0 = time.perf_counter()
         self.pile = Pile(model, count, bin=self.layout.bin, seed=seed)
         self.progress(
@@ -161,12 +170,13 @@ class SimulatedCell:
         self._held: Optional[int] = None
         self._release_pending: Optional[int] = None
         self._picked: Optional[int] = None
-        self.cell: Optional[Cell] = None
+        self.config = self._config(self.limits)
         self._matcher: Optional[GraspMatcher] = None
+        self._gripper_config = GripperConfig(serial=SerialSettings(baudrate=115200, timeout_s=0.3), speed=255)
         self.robot_emulator = self.motor_emulator = self.gripper_emulator = None
 
     # -- life cycle
-    def __enter__(self) -> SimulatedCell:
+    def __enter__(self) -> TwinWorld:
         try:
             self.start()
         except BaseException:
@@ -177,23 +187,10 @@ class SimulatedCell:
     def __exit__(self, *exc: Any) -> None:
         self.close()
 
-    def start(self) -> Cell:
-        """Starts the emulators, opens the drivers on their ptys and the cell; returns the cell."""
+    def start(self) -> Any:
+        """Starts the emulators on their ptys."""
         self._start_emulators()
-        limits = self.config_overrides.pop("limits", None) or sim_limits(self.layout, self.gripper_geometry)
-        config = self._config(limits)
-        robot, motor, gripper = self._drivers(limits)
-        self.cell = Cell(
-            config,
-            robot=robot,
-            motor=motor,
-            gripper=gripper,
-            camera=SimCamera(self, seed=self.seed),
-            progress=self.progress,
-            truth=self,
-        )
-        self.cell.open()
-        return self.cell
+        return self
 
     def _start_emulators(self) -> None:
         self.robot_emulator = RobotEmulator(
@@ -206,6 +203,11 @@ class SimulatedCell:
             f"robot on {self.robot_emulator.slave_path}, laser motor on {self.motor_emulator.slave_path}, "
             f"gripper on {self.gripper_emulator.slave_path}",
         )
+
+    @property
+    def held(self) -> Optional[int]:
+        """The part the gripper holds now, or None."""
+        return self._held
 
     def _config(self, limits: safety.CellLimits) -> CellConfig:
         """The pick loop's view of the simulated cell: its exact calibration, bin, scan pose and
@@ -226,33 +228,8 @@ class SimulatedCell:
             **overrides,
         )
 
-    def _drivers(self, limits: safety.CellLimits) -> tuple[MelfaRobot, DynamixelMotor, ModbusGripper]:
-        """The real drivers opened on the emulators' ptys, with timings for an emulated cell."""
-        robot = MelfaRobot(
-            self.robot_emulator.slave_path,
-            limits=limits,
-            config=MelfaConfig(
-                serial=SerialSettings(baudrate=9600, parity="E", stopbits=2, timeout_s=1.0, retries=2),
-                initial_override_percent=min(50.0, limits.max_override_percent),
-                initial_linear_speed_mm_s=min(250.0, limits.max_linear_speed_mm_s),
-                poll_interval_s=0.01,
-                motion_timeout_s=30.0,
-            ),
-        )
-        motor = DynamixelMotor(
-            self.motor_emulator.slave_path,
-            config=DynamixelConfig(
-                serial=SerialSettings(baudrate=57600, timeout_s=0.2),
-                range=MotorRange(max_speed_rad_s=2 * math.pi, poll_interval_s=0.002),
-            ),
-        )
-        self._gripper_config = GripperConfig(serial=SerialSettings(baudrate=115200, timeout_s=0.3), speed=255)
-        return robot, motor, ModbusGripper(self.gripper_emulator.slave_path, config=self._gripper_config)
-
     def close(self) -> None:
-        """Closes the cell and stops the emulators."""
-        if self.cell is not None:
-            self.cell.close()
+        """Stops the emulators."""
         for emu in (self.robot_emulator, self.motor_emulator, self.gripper_emulator):
             if emu is not None:
                 emu.close()
@@ -281,8 +258,7 @@ class SimulatedCell:
     def grasp_matcher(self) -> GraspMatcher:
         """The declared grasps of the running cell, matched with the grip tolerances."""
         if self._matcher is None:
-            assert self.cell is not None
-            cfg = self.cell.config
+            cfg = self.config
             self._matcher = GraspMatcher(
                 cfg.grasps, cfg.symmetries, tolerance_deg=self.grip_tolerance_deg, tolerance_mm=self.grip_tolerance_mm
             )
@@ -311,42 +287,45 @@ class SimulatedCell:
     def on_gripper_command(self, closing: bool, emulator: Any) -> None:
         """Called by the gripper emulator on every motion command: on closing it finds the part
         between the fingers (the fingers stop on it); on opening a held part is let go."""
-        if closing:
-            hit = self.grip_check()
-            if hit is None:
-                emulator.object_at = None
-                self._held = None
+        with self.lock:
+            if closing:
+                hit = self.grip_check()
+                if hit is None:
+                    emulator.object_at = None
+                    self._held = None
+                else:
+                    pid, width = hit
+                    stroke = self._gripper_config.stroke_mm
+                    emulator.object_at = int(round((1.0 - min(width, stroke) / stroke) * 255))
+                    self._held = pid
             else:
-                pid, width = hit
-                stroke = self._gripper_config.stroke_mm
-                emulator.object_at = int(round((1.0 - min(width, stroke) / stroke) * 255))
-                self._held = pid
-        else:
-            emulator.object_at = None
-            if self._held is not None:
-                self._release_pending = self._held
-                self._held = None
+                emulator.object_at = None
+                if self._held is not None:
+                    self._release_pending = self._held
+                    self._held = None
 
     def settle_pending(self) -> None:
-        """Takes a released part out of the pile and lets the rest settle (done lazily, off the emulator thread)."""
-        pid = self._release_pending
-        if pid is not None:
-            self._release_pending = None
-            tcp = self.T_base_tcp()[:3, 3]
-            lo, hi = self.layout.bin.bounds
-            inside = bool((tcp[:2] >= lo[:2]).all() and (tcp[:2] <= hi[:2]).all() and tcp[2] < hi[2] + 20)
-            if inside:
-                self.pile.settle()  # let go above the pile: it falls back in
-                return
-            t0 = time.perf_counter()
-            report = self.pile.remove(pid)
-            self.removed.append(pid)
-            self._picked = pid
-            self.progress(
-                "physics",
-                f"part {pid} left the bin; {len(self.pile)} remain, settled in {time.perf_counter() - t0:.1f} s "
-                f"({report.steps} steps)",
-            )
+        """Takes a released part out of the pile and lets the rest settle (done lazily: by the
+        camera before it renders, the judge, or the twin process's world ticks)."""
+        with self.lock:
+            pid = self._release_pending
+            if pid is not None:
+                self._release_pending = None
+                tcp = self.T_base_tcp()[:3, 3]
+                lo, hi = self.layout.bin.bounds
+                inside = bool((tcp[:2] >= lo[:2]).all() and (tcp[:2] <= hi[:2]).all() and tcp[2] < hi[2] + 20)
+                if inside:
+                    self.pile.settle()  # let go above the pile: it falls back in
+                    return
+                t0 = time.perf_counter()
+                report = self.pile.remove(pid)
+                self.removed.append(pid)
+                self._picked = pid
+                self.progress(
+                    "physics",
+                    f"part {pid} left the bin; {len(self.pile)} remain, settled in {time.perf_counter() - t0:.1f} s "
+                    f"({report.steps} steps)",
+                )
 
     # -- ground truth
     def judge(self, T_base_object: np.ndarray) -> PoseTruth:
@@ -370,10 +349,65 @@ class SimulatedCell:
         return pid
 
 
+class SimulatedCell(TwinWorld):
+    """The simulated cell in one process: the :class:`TwinWorld` (pile, emulators on ptys), the
+    real drivers opened on those ptys, the simulated camera, and the :class:`Cell` running the
+    pick loop (``.cell``). Use as a context manager (it starts the emulators and opens the cell);
+    it is also the cell's ground truth. The arguments are :class:`TwinWorld`'s."""
+
+    def __init__(self, model: Model, **kwargs: Any) -> None:
+        super().__init__(model, **kwargs)
+        self.cell: Optional[Cell] = None
+
+    def start(self) -> Cell:
+        """Starts the emulators, opens the drivers on their ptys and the cell; returns the cell."""
+        self._start_emulators()
+        robot, motor, gripper = self._drivers(self.limits)
+        self.cell = Cell(
+            self.config,
+            robot=robot,
+            motor=motor,
+            gripper=gripper,
+            camera=SimCamera(self, seed=self.seed),
+            progress=self.progress,
+            truth=self,
+        )
+        self.cell.open()
+        return self.cell
+
+    def _drivers(self, limits: safety.CellLimits) -> tuple[MelfaRobot, DynamixelMotor, ModbusGripper]:
+        """The real drivers opened on the emulators' ptys, with timings for an emulated cell."""
+        robot = MelfaRobot(
+            self.robot_emulator.slave_path,
+            limits=limits,
+            config=MelfaConfig(
+                serial=SerialSettings(baudrate=9600, parity="E", stopbits=2, timeout_s=1.0, retries=2),
+                initial_override_percent=min(50.0, limits.max_override_percent),
+                initial_linear_speed_mm_s=min(250.0, limits.max_linear_speed_mm_s),
+                poll_interval_s=0.01,
+                motion_timeout_s=30.0,
+            ),
+        )
+        motor = DynamixelMotor(
+            self.motor_emulator.slave_path,
+            config=DynamixelConfig(
+                serial=SerialSettings(baudrate=57600, timeout_s=0.2),
+                range=MotorRange(max_speed_rad_s=2 * math.pi, poll_interval_s=0.002),
+            ),
+        )
+        return robot, motor, ModbusGripper(self.gripper_emulator.slave_path, config=self._gripper_config)
+
+    def close(self) -> None:
+        """Closes the cell and stops the emulators."""
+        if self.cell is not None:
+            self.cell.close()
+        super().close()
+
+
 class _SimGripperEmulator(GripperEmulator):
     """The Modbus gripper emulator whose fingers stop on the simulated part between them."""
 
-    def __init__(self, sim: SimulatedCell) -> None:
+    def __init__(self, sim: TwinWorld) -> None:
         super().__init__()
         self.sim = sim
 

@@ -2,14 +2,30 @@
 
 The emulator opens a pty pair with :func:`os.openpty`, puts it in raw mode and serves the master
 side from a background thread; a driver opens :attr:`PtyEmulator.slave_path` with pyserial like
-any serial port. Faults armed with :meth:`PtyEmulator.inject` change the next matching replies.
+any serial port, and may close and reopen it any number of times, as on a real serial line.
+Faults armed with :meth:`PtyEmulator.inject` change the next matching replies.
+
+Reopening: some kernels' ptys cannot hold a parity bit, and their ``tcsetattr`` fails with
+EINVAL when parity is the only change asked for — which is what pyserial asks when a driver
+reopens a port at the speed it last set (the MELFA line is 9600 8E2). A request that also changes
+the speed is accepted. So the emulator keeps the line's stored speed at :data:`IDLE_BAUD`, a
+speed no cell device uses, resetting it each time a driver has set another: every open then
+changes the speed and succeeds. The speed of a pty carries no meaning for the bytes. The master
+side runs in packet mode with the slave's EXTPROC flag set, so the kernel tells the emulator
+(a TIOCPKT_IOCTL packet) each time a driver sets the line; the emulator resets the speed
+:data:`REST_DELAY_S` later — not at once, which could land inside the driver's own
+``tcsetattr`` and make it fail — and also checks it at every turn of its loop and after every
+request. A driver that reopens the port within those few milliseconds of opening it can still
+be refused.
 """
 
 from __future__ import annotations
 
 import enum
+import fcntl
 import os
 import select
+import termios
 import threading
 import time
 import tty
@@ -18,7 +34,16 @@ from typing import Any, Callable, Optional
 
 from ...errors import InvalidInputError
 
-__all__ = ["Fault", "PtyEmulator"]
+__all__ = ["Fault", "PtyEmulator", "IDLE_BAUD", "REST_DELAY_S"]
+
+#: The line speed the emulator's pty rests at between opens (see the module docstring).
+IDLE_BAUD = termios.B50
+
+#: Seconds between a driver's change of the line's settings and the emulator's reset of its speed.
+REST_DELAY_S = 0.003
+
+_EXTPROC = getattr(termios, "EXTPROC", 0o200000)  # Linux's value when the module lacks the name
+_PKT_IOCTL = getattr(termios, "TIOCPKT_IOCTL", 0x40)
 
 
 class Fault(enum.Enum):
@@ -75,6 +100,10 @@ class PtyEmulator:
         self._master, self._slave = os.openpty()
         tty.setraw(self._slave)
         tty.setraw(self._master)
+        attrs = termios.tcgetattr(self._slave)
+        attrs[3] |= _EXTPROC
+        termios.tcsetattr(self._slave, termios.TCSANOW, attrs)
+        fcntl.ioctl(self._master, termios.TIOCPKT, (1).to_bytes(4, "little"))
         self.slave_path = os.ttyname(self._slave)
         self._stop = threading.Event()
         self._lock = threading.RLock()
@@ -83,6 +112,7 @@ class PtyEmulator:
         self._closed = False
         #: exceptions raised while handling requests (an emulator bug); tests assert it stays empty
         self.failures: list[str] = []
+        self._rest_line()
         self._thread = threading.Thread(target=self._serve, name=f"{self.device}-emulator", daemon=True)
 
     # -- public
@@ -160,15 +190,25 @@ class PtyEmulator:
     # -- machinery
     def _serve(self) -> None:
         buf = bytearray()
+        rest_at: Optional[float] = None
         while not self._stop.is_set() and not self._closed:
             try:
-                ready, _, _ = select.select([self._master], [], [], 0.02)
+                now = time.monotonic()
+                if rest_at is None or now >= rest_at:
+                    self._rest_line()
+                    rest_at = None
+                wait = 0.02 if rest_at is None else max(0.0, rest_at - now)
+                ready, _, _ = select.select([self._master], [], [], wait)
                 if not ready:
                     continue
-                data = os.read(self._master, 4096)
+                packet = os.read(self._master, 4097)
             except (OSError, ValueError):
                 break
-            buf += data
+            if not packet or packet[0] != 0:  # a control packet, no data
+                if packet and packet[0] & _PKT_IOCTL:
+                    rest_at = time.monotonic() + REST_DELAY_S
+                continue
+            buf += packet[1:]
             for request in self._take_requests(buf):
                 with self._lock:
                     self._requests.append(request)
@@ -178,6 +218,7 @@ class PtyEmulator:
                     self.failures.append(f"{request!r}: {type(exc).__name__}: {exc}")
                 if self._closed:
                     return
+                self._rest_line()
 
     def _pop_fault(self, request: Any) -> Optional[_Armed]:
         with self._lock:
@@ -213,6 +254,20 @@ class PtyEmulator:
         if self.reply_delay_s:
             self._stop.wait(self.reply_delay_s)
         self._send_bytes(reply)
+
+    def _rest_line(self) -> None:
+        """Puts the line's stored speed back to :data:`IDLE_BAUD` once a driver has set another,
+        so that the next open of the port changes the speed and is accepted (module docstring)."""
+        if self._closed:
+            return
+        try:
+            attrs = termios.tcgetattr(self._slave)
+            if attrs[4] != IDLE_BAUD or attrs[5] != IDLE_BAUD:
+                attrs[4] = attrs[5] = IDLE_BAUD
+                termios.tcsetattr(self._slave, termios.TCSANOW, attrs)
+        except termios.error as exc:  # keep serving: only the next reopen can suffer
+            if not self._closed:
+                self.failures.append(f"resting the line at {IDLE_BAUD} baud: {exc}")
 
     def _send_bytes(self, data: bytes) -> None:
         try:

@@ -1,0 +1,182 @@
+"""The twin camera's wire protocol: frames over a Unix-domain socket (version 1).
+
+The digital twin (``binpick emulate cell``) serves its camera on ``DIR/camera.sock``; the pick
+process reads it with :class:`binpick.cell.TwinCamera`. One connection carries any number of
+request/reply exchanges, one at a time. All integers little-endian.
+
+Request, 8 bytes::
+
+    magic   4s  b"BPCQ"
+    version u8  1
+    op      u8  1 = FRAME: grab one frame as the camera sees the cell now
+    zero    u16 0
+
+Reply header, :data:`HEADER_SIZE` (= 168) bytes, then ``length`` payload bytes::
+
+    magic    4s   b"BPCR"
+    version  u8   1
+    status   u8   0 = a frame follows, 1 = an error: the payload is its UTF-8 message
+    dtype    u8   1 = uint8 (the only pixel type)
+    channels u8   3 (BGR)
+    height   u32  rows, px
+    width    u32  columns, px
+    frame    u64  the frame counter (the sensor noise of frame k is seeded with seed + k)
+    angle    f64  the laser motor's actual angle when the frame was exposed, rad
+    pose     16 f64  the flange's actual pose T_base_flange (row-major 4×4, mm)
+    length   u64  payload bytes: height·width·channels for a frame, the message's for an error
+
+Both sides check everything: the server answers a request it cannot read with an error reply
+and closes; the client refuses a header whose magic, version, status, type, shape or length is
+not what the protocol allows, or a payload that stops short (:class:`~binpick.errors.DeviceError`
+subclasses naming what was wrong).
+"""
+
+from __future__ import annotations
+
+import socket
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validate import MAX_IMAGE_PIXELS
+from ..errors import DeviceTimeout, PortClosedError, ProtocolError, TruncatedReplyError
+
+__all__ = [
+    "PROTOCOL_VERSION",
+    "OP_FRAME",
+    "HEADER_SIZE",
+    "REQUEST_SIZE",
+    "MAX_ERROR_BYTES",
+    "Frame",
+    "encode_request",
+    "decode_request",
+    "encode_frame",
+    "encode_error",
+    "read_reply",
+    "recv_exact",
+]
+
+PROTOCOL_VERSION = 1
+OP_FRAME = 1
+STATUS_FRAME = 0
+STATUS_ERROR = 1
+DTYPE_UINT8 = 1
+
+_REQUEST = struct.Struct("<4sBBH")
+_HEADER = struct.Struct("<4sBBBBIIQd16dQ")
+REQUEST_SIZE = _REQUEST.size
+HEADER_SIZE = _HEADER.size
+REQUEST_MAGIC = b"BPCQ"
+REPLY_MAGIC = b"BPCR"
+
+#: Longest error message read, bytes.
+MAX_ERROR_BYTES = 1 << 16
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """One frame as the twin sent it: the image (uint8 BGR (H, W, 3)), its counter, and the
+    laser angle (rad) and flange pose ``T_base_flange`` (mm) at exposure."""
+
+    image: np.ndarray
+    counter: int
+    angle: float
+    T_base_flange: np.ndarray
+
+
+def encode_request(op: int = OP_FRAME) -> bytes:
+    """A request of operation ``op``."""
+    return _REQUEST.pack(REQUEST_MAGIC, PROTOCOL_VERSION, int(op), 0)
+
+
+def decode_request(data: bytes) -> int:
+    """The operation of a request; ProtocolError naming what is wrong with one this server cannot serve."""
+    if len(data) != REQUEST_SIZE:
+        raise ProtocolError(f"camera request: expected {REQUEST_SIZE} bytes, got {len(data)}")
+    magic, version, op, zero = _REQUEST.unpack(data)
+    if magic != REQUEST_MAGIC:
+        raise ProtocolError(f"camera request: magic is {magic!r}, not {REQUEST_MAGIC!r}; not a binpick camera client")
+    if version != PROTOCOL_VERSION:
+        raise ProtocolError(f"camera request: protocol version {version}; this twin speaks version {PROTOCOL_VERSION}")
+    if op != OP_FRAME or zero != 0:
+        raise ProtocolError(f"camera request: unknown operation {op} (only {OP_FRAME} = FRAME exists)")
+    return op
+
+
+def encode_frame(image: np.ndarray, counter: int, angle: float, T_base_flange: np.ndarray) -> bytes:
+    """The reply carrying ``image`` (uint8 (H, W, 3)), header then pixels."""
+    img = np.ascontiguousarray(image, dtype=np.uint8)
+    h, w, c = img.shape
+    pose = np.asarray(T_base_flange, dtype=np.float64).reshape(16)
+    head = _HEADER.pack(
+        REPLY_MAGIC, PROTOCOL_VERSION, STATUS_FRAME, DTYPE_UINT8, c, h, w, int(counter), float(angle), *pose, img.nbytes
+    )
+    return head + img.tobytes()
+
+
+def encode_error(message: str) -> bytes:
+    """The reply carrying an error message (cut to :data:`MAX_ERROR_BYTES`)."""
+    text = message.encode("utf-8", "replace")[:MAX_ERROR_BYTES]
+    return (
+        _HEADER.pack(REPLY_MAGIC, PROTOCOL_VERSION, STATUS_ERROR, 0, 0, 0, 0, 0, 0.0, *([0.0] * 16), len(text)) + text
+    )
+
+
+def recv_exact(sock: socket.socket, n: int, what: str) -> bytearray:
+    """Exactly ``n`` bytes from ``sock``: DeviceTimeout when none come within the socket's timeout,
+    TruncatedReplyError when the peer stops part-way, PortClosedError when it hung up before any."""
+    buf = bytearray()
+    while len(buf) < n:
+        try:
+            chunk = sock.recv(min(n - len(buf), 1 << 20))
+        except socket.timeout:
+            if buf:
+                raise TruncatedReplyError(
+                    f"{what}: {len(buf)} of {n} bytes arrived, then nothing within {sock.gettimeout()} s"
+                ) from None
+            raise DeviceTimeout(f"{what}: no answer within {sock.gettimeout()} s; is the twin still running?") from None
+        except OSError as exc:
+            raise PortClosedError(f"{what}: the connection failed ({exc}); is the twin still running?") from None
+        if not chunk:
+            if buf:
+                raise TruncatedReplyError(f"{what}: the twin hung up after {len(buf)} of {n} bytes")
+            raise PortClosedError(f"{what}: the twin closed the connection; is it still running?")
+        buf += chunk
+    return buf
+
+
+def read_reply(sock: socket.socket, *, where: str = "camera") -> Frame:
+    """Reads one reply: the frame, or the twin's error message raised as ProtocolError. Every
+    header field is checked before the payload is read, and the payload's length against the shape."""
+    head = recv_exact(sock, HEADER_SIZE, f"{where} reply header")
+    magic, version, status, dtype, channels, height, width, counter, angle, *rest = _HEADER.unpack(head)
+    pose, length = rest[:16], rest[16]
+    if magic != REPLY_MAGIC:
+        raise ProtocolError(
+            f"{where}: the reply starts {magic!r}, not {REPLY_MAGIC!r}; the socket is not a twin camera"
+        )
+    if version != PROTOCOL_VERSION:
+        raise ProtocolError(f"{where}: the twin speaks protocol version {version}, this client {PROTOCOL_VERSION}")
+    if status == STATUS_ERROR:
+        if length > MAX_ERROR_BYTES:
+            raise ProtocolError(f"{where}: an error reply declares {length} bytes, more than {MAX_ERROR_BYTES}")
+        text = recv_exact(sock, length, f"{where} error message").decode("utf-8", "replace")
+        raise ProtocolError(f"{where}: the twin refused: {text}")
+    if status != STATUS_FRAME:
+        raise ProtocolError(f"{where}: unknown reply status {status}")
+    if dtype != DTYPE_UINT8 or channels != 3:
+        raise ProtocolError(f"{where}: pixel type {dtype} with {channels} channels; expected uint8 BGR (1, 3)")
+    if not (2 <= width and 2 <= height and width * height <= MAX_IMAGE_PIXELS):
+        raise ProtocolError(f"{where}: the header declares a {width}×{height} frame, outside what binpick reads")
+    if length != width * height * channels:
+        raise ProtocolError(
+            f"{where}: the header declares {length} payload bytes for a {width}×{height}×{channels} frame "
+            f"({width * height * channels} expected)"
+        )
+    T = np.array(pose, dtype=np.float64).reshape(4, 4)
+    if not (np.isfinite(T).all() and np.isfinite(angle)):
+        raise ProtocolError(f"{where}: the header's pose or laser angle is not finite")
+    data = recv_exact(sock, length, f"{where} frame {counter}")
+    image = np.frombuffer(data, dtype=np.uint8).reshape(height, width, channels)
+    return Frame(image=image, counter=int(counter), angle=float(angle), T_base_flange=T)

@@ -1,0 +1,351 @@
+"""The digital twin as its own process: ``binpick emulate cell --out DIR``.
+
+It runs a :class:`~binpick.sim.twin.TwinWorld` (the settled pile with physics, the robot, laser
+motor and gripper emulators on ptys) and serves its camera — :class:`~binpick.sim.SimCamera`
+rendering from the emulated arm's actual pose with the laser at the motor emulator's actual
+angle — on the Unix-domain socket ``DIR/camera.sock`` (protocol:
+:mod:`binpick.cell.camera_socket`). It writes into ``DIR``:
+
+* ``cell.toml`` — the cell file for ``binpick pick``: the ptys, ``[camera] source = "twin"``,
+  the bin, scan and drop poses, the tool, the limits, and ``calibration = "calibration.toml"``:
+  the calibration the integrator solves (``binpick pick`` needs that file);
+* ``true_calibration.toml`` — the twin's exact calibration, for checking a solved one only;
+* ``world.json`` — kept current (:data:`WORLD_VERSION`): the parts in the bin with their poses,
+  ``removed`` (parts taken out), ``held`` (the part in the gripper), ``collisions`` (the robot's
+  alarms and every contact of the gripper with the bin or a part that the twin saw), the arm's
+  pose and the laser angle.
+
+Every file is written atomically (a temporary file, then :func:`os.replace`). The twin runs
+until SIGINT or SIGTERM and then exits 0, leaving the files (the socket is removed).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import socket
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable, Optional
+
+import numpy as np
+
+from ..cell import camera_socket as wire
+from ..devices.xyzabc import xyzabc_from_transform
+from ..errors import BinpickError
+from ..models import Model
+from ..transforms import inverse
+from .camera import SimCamera
+from .twin import TwinWorld
+
+__all__ = ["CellTwin", "WORLD_VERSION", "write_atomic"]
+
+#: The version of world.json's layout.
+WORLD_VERSION = 1
+
+#: Most model points checked against the gripper per part and tick (evenly thinned).
+_CONTACT_POINTS = 400
+
+
+def write_atomic(path: Path, text: str) -> None:
+    """Writes ``text`` to ``path`` through a temporary file and :func:`os.replace`, so a reader
+    sees the old file or the new one, never a part."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def _toml_list(values: Any) -> str:
+    return "[" + ", ".join(f"{float(v) + 0.0:.6f}" for v in values) + "]"
+
+
+def _pose_deg(T: np.ndarray) -> list[float]:
+    """[X, Y, Z, A, B, C] with A, B, C in degrees, as the cell file writes poses."""
+    v = xyzabc_from_transform(T)
+    return [*v[:3], *np.degrees(v[3:])]
+
+
+class _CameraServer:
+    """Serves the twin's camera on a Unix-domain socket, one thread per connection; each frame
+    is rendered under the world's lock from where the arm and the laser really are."""
+
+    def __init__(self, world: TwinWorld, path: Path, progress: Callable[[str, str], None]) -> None:
+        self.world = world
+        self.path = path
+        self.progress = progress
+        self.camera = SimCamera(world, seed=world.seed)
+        self.frames = 0
+        self._key: Optional[tuple[bytes, bytes]] = None
+        self._view_pose = np.eye(4)
+        self._stop = threading.Event()
+        self._conns: list[socket.socket] = []
+        if path.exists() or path.is_symlink():
+            path.unlink()
+        self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self._sock.bind(str(path))
+        self._sock.listen(8)
+        self._sock.settimeout(0.2)
+        self._thread = threading.Thread(target=self._accept, name="twin-camera", daemon=True)
+        self._thread.start()
+
+    def _accept(self) -> None:
+        while not self._stop.is_set():
+            try:
+                conn, _ = self._sock.accept()
+            except socket.timeout:
+                continue
+            except OSError:
+                return
+            self._conns.append(conn)
+            threading.Thread(target=self._serve, args=(conn,), name="twin-camera-client", daemon=True).start()
+
+    def _serve(self, conn: socket.socket) -> None:
+        conn.settimeout(None)
+        self.progress("camera", "a client connected")
+        try:
+            while not self._stop.is_set():
+                try:
+                    request = wire.recv_exact(conn, wire.REQUEST_SIZE, "camera request")
+                except BinpickError:
+                    return  # the client hung up (or sent a part of a request and hung up)
+                try:
+                    wire.decode_request(bytes(request))
+                except BinpickError as exc:
+                    conn.sendall(wire.encode_error(str(exc)))
+                    return  # the stream cannot be trusted past a bad request
+                conn.sendall(self._frame_reply())
+        except OSError:
+            pass
+        finally:
+            conn.close()
+            self.progress("camera", "a client disconnected")
+
+    def _frame_reply(self) -> bytes:
+        try:
+            with self.world.lock:
+                self.world.settle_pending()
+                pose = self.world.robot_emulator.pose()
+                key = (np.round(pose, 6).tobytes(), self.world.pile.poses.tobytes())
+                if key != self._key:
+                    t0 = time.perf_counter()
+                    self.camera.begin(pose)
+                    self._key, self._view_pose = key, pose
+                    self.progress(
+                        "camera",
+                        f"view from flange ({pose[0, 3]:.1f}, {pose[1, 3]:.1f}, {pose[2, 3]:.1f}) mm cast in "
+                        f"{(time.perf_counter() - t0) * 1e3:.0f} ms; {self.frames} frames served so far",
+                    )
+                angle = self.world.laser_angle()
+                image = self.camera.grab()
+                counter, self.frames = self.frames, self.frames + 1
+            return wire.encode_frame(image, counter, angle, self._view_pose)
+        except BinpickError as exc:
+            return wire.encode_error(f"{type(exc).__name__}: {exc}")
+
+    def close(self) -> None:
+        self._stop.set()
+        self._sock.close()
+        for conn in self._conns:
+            try:
+                conn.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                pass
+        self._thread.join(timeout=2.0)
+        if self.path.exists():
+            self.path.unlink()
+
+
+class CellTwin:
+    """The twin process's content: the :class:`TwinWorld`, its camera server and its files.
+
+    Args:
+        out: the folder for cell.toml, true_calibration.toml, world.json and camera.sock.
+        model: the part.
+        part_ref: how cell.toml names the part (a built-in name, or the mesh file's absolute path).
+        unit: the mesh file's unit, for cell.toml.
+        progress: stage printer.
+        world_options: :class:`TwinWorld` arguments (count, seed, frames, speed_scale, …).
+    """
+
+    def __init__(
+        self,
+        out: Any,
+        model: Model,
+        *,
+        part_ref: str,
+        unit: str = "mm",
+        progress: Callable[[str, str], None],
+        **world_options: Any,
+    ) -> None:
+        self.out = Path(out)
+        self.out.mkdir(parents=True, exist_ok=True)
+        self.part_ref, self.unit, self.progress = part_ref, unit, progress
+        self.world = TwinWorld(model, progress=progress, **world_options)
+        self.camera: Optional[_CameraServer] = None
+        self.collisions: list[dict] = []
+        self._contact: set[str] = set()
+        self._last_world = ""
+        self._t0 = time.time()
+        self._points = model.points[:: max(1, len(model.points) // _CONTACT_POINTS)]
+
+    @property
+    def cell_file(self) -> Path:
+        return self.out / "cell.toml"
+
+    @property
+    def world_file(self) -> Path:
+        return self.out / "world.json"
+
+    @property
+    def socket_path(self) -> Path:
+        return self.out / "camera.sock"
+
+    def start(self) -> CellTwin:
+        """Starts the emulators and the camera, writes the files."""
+        self.world.start()
+        self.camera = _CameraServer(self.world, self.socket_path, self.progress)
+        write_atomic(self.out / "true_calibration.toml", self.world.config.calibration.to_toml())
+        write_atomic(self.cell_file, self.cell_toml())
+        self.tick()
+        return self
+
+    def close(self) -> None:
+        """Stops the camera and the emulators; world.json keeps the last state."""
+        if self.camera is not None:
+            self.camera.close()
+        try:
+            self.tick()
+        finally:
+            self.world.close()
+
+    def cell_toml(self) -> str:
+        """The cell file of the twin (see the module docstring)."""
+        w = self.world
+        lo, hi = w.layout.bin.bounds
+        lim = w.limits
+        part = json.dumps(self.part_ref)
+        return f"""\
+# binpick cell file written by `binpick emulate cell`: the digital twin's ports, camera and poses.
+# Lengths in mm; poses as [X, Y, Z, A, B, C] with A, B, C in degrees (MELFA: R = Rz(C)·Ry(B)·Rx(A)).
+
+[robot]
+port = "{w.robot_emulator.slave_path}"   # MELFA controller emulator, R3 protocol
+baudrate = 9600
+override_percent = {min(50.0, lim.max_override_percent):g}
+linear_speed_mm_s = {min(250.0, lim.max_linear_speed_mm_s):g}
+
+[motor]
+port = "{w.motor_emulator.slave_path}"   # laser motor emulator
+protocol = "dynamixel"
+id = 1
+baudrate = 57600
+
+[gripper]
+kind = "modbus"
+port = "{w.gripper_emulator.slave_path}"   # Modbus RTU gripper emulator
+slave = 9
+baudrate = 115200
+
+[camera]
+source = "twin"
+socket = "camera.sock"        # relative to this file
+
+[part]
+model = {part}
+unit = "{self.unit}"
+
+[cell]
+calibration = "calibration.toml"   # the one you solve (binpick calibrate); the twin's own is true_calibration.toml
+bin_min_mm = {_toml_list(lo)}
+bin_max_mm = {_toml_list(hi)}
+scan_pose = {_toml_list(_pose_deg(w.layout.T_base_flange))}
+drop_pose = {_toml_list(_pose_deg(w.drop_pose))}
+frames = {int(w.frames)}
+tool = {_toml_list(_pose_deg(w.gripper_geometry.T_flange_gripper))}
+
+[limits]
+workspace_min_mm = {_toml_list(lim.workspace_min_mm)}
+workspace_max_mm = {_toml_list(lim.workspace_max_mm)}
+approach_height_mm = {lim.approach_height_mm:.6f}
+max_tool_tilt_deg = {math.degrees(lim.max_tool_tilt_rad):.6f}
+max_lateral_below_mm = {lim.max_lateral_below_mm:.6f}
+max_override_percent = {lim.max_override_percent:g}
+max_linear_speed_mm_s = {lim.max_linear_speed_mm_s:g}
+"""
+
+    # -- the world's state
+    def tick(self) -> None:
+        """Settles a released part, looks for contacts, and rewrites world.json when it changed."""
+        with self.world.lock:
+            self.world.settle_pending()
+            self._check_contacts()
+            doc = self.world_state()
+        text = json.dumps(doc, indent=1)
+        key = json.dumps({k: v for k, v in doc.items() if k != "time_s"})
+        if key != self._last_world:
+            self._last_world = key
+            write_atomic(self.world_file, text)
+
+    def world_state(self) -> dict:
+        """world.json's content (see the module docstring); call under the world's lock."""
+        w = self.world
+        return {
+            "version": WORLD_VERSION,
+            "units": "mm, rad",
+            "part": w.model.name,
+            "time_s": round(time.time() - self._t0, 3),
+            "in_bin": [
+                {"id": int(i), "T_base_object": T.tolist()} for i, T in zip(w.pile.ids, np.asarray(w.pile.poses))
+            ],
+            "removed": [int(i) for i in w.removed],
+            "held": w.held,
+            "collisions": list(self.collisions),
+            "T_base_flange": w.robot_emulator.pose().tolist(),
+            "laser_angle": w.laser_angle(),
+            "frames_served": 0 if self.camera is None else self.camera.frames,
+        }
+
+    def _check_contacts(self) -> None:
+        """Records each new contact: a robot alarm, the gripper (fingers open as far as the
+        emulator has them, palm, flange) inside a bin wall or under its floor, a finger or the
+        palm inside a part other than the one held."""
+        w = self.world
+        now: dict[str, int] = {}
+        alarm = w.robot_emulator.alarm
+        if alarm:
+            now[f"robot alarm {alarm}"] = 0
+        T_bg = w.T_base_tcp()
+        stroke = w._gripper_config.stroke_mm
+        opening = stroke * (1.0 - w.gripper_emulator.axis.position() / 255.0)
+        g = w.gripper_geometry
+        outline = g.outline(max(opening, 1.0)) @ T_bg[:3, :3].T + T_bg[:3, 3]
+        lo, hi = w.layout.bin.bounds
+        t = w.layout.bin.wall_thickness
+        in_outer = ((outline[:, :2] >= lo[:2] - t) & (outline[:, :2] <= hi[:2] + t)).all(axis=1)
+        in_outer &= (outline[:, 2] >= lo[2] - t) & (outline[:, 2] <= hi[2])
+        in_inner = ((outline >= lo) & (outline <= hi)).all(axis=1)
+        n_bin = int((in_outer & ~in_inner).sum())
+        if n_bin:
+            now["bin"] = n_bin
+        T_gb = inverse(T_bg)
+        for pid, T_bo in zip(w.pile.ids, np.asarray(w.pile.poses)):
+            if int(pid) == w.held:
+                continue
+            T_go = T_gb @ T_bo
+            inside = int(g.occupied(self._points @ T_go[:3, :3].T + T_go[:3, 3]).sum())
+            if inside:
+                now[f"part {int(pid)}"] = inside
+        for what, n in now.items():
+            if what not in self._contact:
+                event = {"time_s": round(time.time() - self._t0, 3), "with": what, "points": n}
+                event["T_base_flange"] = w.robot_emulator.pose().tolist()
+                self.collisions.append(event)
+                self.progress("COLLISION", f"the gripper touches {what} ({n} points)")
+        self._contact = set(now)
+
+    def run(self, stop: threading.Event, *, tick_s: float = 0.1) -> None:
+        """Ticks the world until ``stop`` is set."""
+        while not stop.wait(tick_s):
+            self.tick()
