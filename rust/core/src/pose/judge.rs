@@ -3,6 +3,7 @@
 //! part's visible surface, and no pose through the bin's floor or walls or the removed support
 //! planes.
 
+use super::outline::outline;
 use super::{PoseConfig, PoseModel};
 use crate::error::{Error, Result};
 use crate::geometry::{BinBox, Plane, Point};
@@ -17,6 +18,13 @@ const MIN_SUPPORTED: f64 = 0.5;
 const MIN_VISIBLE: f64 = 0.08;
 /// The fewest confirmed probe points (of about 2000 over the whole part).
 const MIN_SEEN: usize = 12;
+/// Of the confirmed outline of a pose's sensor-facing faces, the most past which the scan's
+/// surface may go on in the face's plane: more is a piece of a larger shape. A rod laid along a
+/// longer cylinder continues past one of its two ends at least (half its facing outline); a
+/// plate touching a neighbour edge to edge at one height, past one side of four (a quarter).
+const MAX_CONTINUED: f64 = 0.4;
+/// The fewest confirmed outline cells for the outline test to decide.
+const MIN_OUTLINE: usize = 4;
 /// Probe points of the judge over the model's dense surface.
 const JUDGE_PROBES: usize = 2000;
 
@@ -159,6 +167,14 @@ impl Judge {
                 "{:.0} % of the best pose's uncovered surface lies over cells the scan holds nothing in (need at most {:.0} %)",
                 100.0 * (1.0 - e.supported_fraction()),
                 100.0 * (1.0 - MIN_SUPPORTED)
+            ));
+        }
+        let o = outline(self, model, t_scene_model);
+        if o.counted >= MIN_OUTLINE && o.continued_fraction() > MAX_CONTINUED {
+            return fail(format!(
+                "past {:.0} % of the best pose's outline the scan's surface goes on (at most {:.0} %): it fits a piece of a larger shape, not the part",
+                100.0 * o.continued_fraction(),
+                100.0 * MAX_CONTINUED
             ));
         }
         Ok(())

@@ -9,6 +9,9 @@
 mod ccp_path;
 mod judge;
 mod model;
+mod outline;
+#[cfg(test)]
+mod outline_tests;
 mod ppf_path;
 mod scene;
 #[cfg(test)]

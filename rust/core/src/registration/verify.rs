@@ -126,6 +126,16 @@ impl HeightMap {
         (Some(a as usize * self.size.1 + b as usize), h)
     }
 
+    /// The map's in-plane axes (unit, orthogonal to [`HeightMap::up`] and to each other).
+    pub fn axes(&self) -> (Vector3<f64>, Vector3<f64>) {
+        (self.e1, self.e2)
+    }
+
+    /// Edge of a cell, mm.
+    pub fn cell(&self) -> f64 {
+        self.cell
+    }
+
     /// Height of the scan's top surface over `p`'s cell, or `None` where nothing was scanned.
     #[inline]
     pub fn top_at(&self, p: &Point) -> Option<(f64, Point)> {
