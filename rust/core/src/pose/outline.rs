@@ -41,6 +41,14 @@ impl Outline {
     }
 }
 
+/// One posed surface sample: its point and normal in the scene, its footprint cell, its height.
+struct Posed {
+    q: Point,
+    n: Vector3<f64>,
+    key: (i64, i64),
+    h: f64,
+}
+
 /// The top surface of a posed part on a grid: per cell the highest posed point and its normal.
 struct Footprint {
     origin: (i64, i64),
@@ -73,7 +81,7 @@ pub(crate) fn outline(judge: &Judge, model: &PoseModel, t_scene_model: &Isometry
     };
     // Cells no finer than the samples, so that the footprint has no holes between them.
     let g = map.cell().max(1.5 * model.spacing);
-    let posed: Vec<(Point, Vector3<f64>, (i64, i64), f64)> = target
+    let posed: Vec<Posed> = target
         .points()
         .iter()
         .zip(normals)
@@ -83,13 +91,21 @@ pub(crate) fn outline(judge: &Judge, model: &PoseModel, t_scene_model: &Isometry
                 (q.coords.dot(&e1) / g).floor() as i64,
                 (q.coords.dot(&e2) / g).floor() as i64,
             );
-            (q, t_scene_model.rotation * n, key, q.coords.dot(&up))
+            Posed {
+                q,
+                n: t_scene_model.rotation * n,
+                key,
+                h: q.coords.dot(&up),
+            }
         })
         .collect();
     let (lo, hi) = posed
         .iter()
         .fold(((i64::MAX, i64::MAX), (i64::MIN, i64::MIN)), |(l, h), x| {
-            ((l.0.min(x.2 .0), l.1.min(x.2 .1)), (h.0.max(x.2 .0), h.1.max(x.2 .1)))
+            (
+                (l.0.min(x.key.0), l.1.min(x.key.1)),
+                (h.0.max(x.key.0), h.1.max(x.key.1)),
+            )
         });
     if posed.is_empty() {
         return Outline::default();
@@ -103,10 +119,10 @@ pub(crate) fn outline(judge: &Judge, model: &PoseModel, t_scene_model: &Isometry
         size,
         top: vec![None; size.0 * size.1],
     };
-    for (q, n, (a, b), h) in &posed {
-        let k = fp.cell_of(*a, *b).expect("inside the bounds just taken");
-        if fp.top[k].is_none_or(|(_, _, top)| *h > top) {
-            fp.top[k] = Some((*q, *n, *h));
+    for x in &posed {
+        let k = fp.cell_of(x.key.0, x.key.1).expect("inside the bounds just taken");
+        if fp.top[k].is_none_or(|(_, _, top)| x.h > top) {
+            fp.top[k] = Some((x.q, x.n, x.h));
         }
     }
     let tol = judge.tol;
