@@ -117,6 +117,8 @@ class LaserCalibration:
         x0 = x0 - (x0 @ axis) * axis
         x0 /= np.linalg.norm(x0)
         z0 = np.cross(x0, axis)
+        if z0[2] < 0:  # the light travels away from the camera (+z_L into the scene): turn the frame by π about y
+            x0, z0 = -x0, -z0
         # Every sheet contains the axis: n_k · o = d_k; the row `axis · o = 0` picks the point nearest the camera.
         origin, *_ = np.linalg.lstsq(np.vstack([normals, axis]), np.append(offsets, 0.0), rcond=None)
         T = np.eye(4)

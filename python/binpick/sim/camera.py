@@ -29,6 +29,9 @@ __all__ = ["SimCamera", "RenderedCamera"]
 
 
 _RAYS: dict[tuple, np.ndarray] = {}
+#: Samples per pixel side of the board's image: the pixel integrates the light over its area;
+#: 4 × 4 keeps the aliasing of the squares' edges below the corner detector's noise.
+_SUPERSAMPLE = 4
 
 
 def _pixel_rays(camera: CameraIntrinsics) -> np.ndarray:
@@ -86,6 +89,7 @@ class _BoardLayer:
             laser=lay.laser,
             angle=angle,
             noise=lay.noise,
+            supersample=_SUPERSAMPLE,
             seed=seed,
         )
         return np.where(self.mask[:, :, None], img, rgb)
