@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 import shutil
 import time
+from contextlib import ExitStack
 
 import numpy as np
 import pytest
@@ -64,12 +65,12 @@ def test_laser_plane_within_a_tenth_of_a_degree_at_every_angle(captured):
     for a in angles:
         n, n0 = cal.T_camera_laser_at(a)[:3, 0], truth.T_camera_laser_at(a)[:3, 0]
         assert np.degrees(np.arccos(min(1.0, abs(n @ n0)))) < 0.1, np.degrees(a)
-        # The sheets agree where the camera measures: the optical axis crossing, within 0.3 mm.
+        # The sheets agree where the boards were seen (470–630 mm): the optical axis crossing, within 1 mm.
         o, o0 = cal.T_camera_laser_at(a)[:3, 3], truth.T_camera_laser_at(a)[:3, 3]
         z = (n @ o) / n[2] if abs(n[2]) > 1e-6 else np.nan
         z0 = (n0 @ o0) / n0[2] if abs(n0[2]) > 1e-6 else np.nan
-        if np.isfinite(z0) and 300 < z0 < 900:
-            assert abs(z - z0) < 0.3
+        if np.isfinite(z0) and 450 < z0 < 650:
+            assert abs(z - z0) < 1.0
 
 
 def test_table1_procedure_is_reported(captured):
@@ -97,7 +98,9 @@ def test_plan_leaving_the_limits_is_refused_before_anything_moves(tmp_path):
         plan = calibration_plan(layout.board.center, T_flange_camera=layout.T_flange_camera)
         before = sim.robot_emulator.pose()
         tight = CellLimits(workspace_min_mm=(100.0, -200.0, 60.0), workspace_max_mm=(650.0, 350.0, 700.0))
-        with pytest.raises(SafetyError, match="calibration station 'board00'.*outside the cell's workspace"):
+        with pytest.raises(
+            SafetyError, match=r"calibration station 'board\d\d': y = -\d+\.\d mm is outside the cell's workspace"
+        ):
             capture(cell.robot, cell.motor, cell.camera, plan, tmp_path / "c", limits=tight)
         assert np.array_equal(sim.robot_emulator.pose(), before)
         assert not (tmp_path / "c").exists()
@@ -123,3 +126,66 @@ def test_corrupt_or_incomplete_capture_gives_a_clear_error(captured, tmp_path):
         solve(bad)
     with pytest.raises(CalibrationError, match="manifest is missing"):
         solve(tmp_path)
+
+
+def test_cli_solve_prints_the_table_and_writes_the_files(captured, tmp_path, capsys):
+    from binpick.cli import main
+
+    out = tmp_path / "calibration.toml"
+    code = main(["calibrate", "solve", str(captured[0]), "--out", str(out)])
+    printed = capsys.readouterr()
+    assert code == 0, printed.err
+    loaded, solved = CellCalibration.load(out), captured[2].calibration  # a second solve: same to rounding
+    assert np.allclose(loaded.camera.K, solved.camera.K, rtol=1e-6)
+    assert np.allclose(loaded.T_flange_camera, solved.T_flange_camera, atol=1e-4)
+    assert (tmp_path / "calibration_residuals.png").exists()
+    for word in ("fx", "tsai", "park", "horaud", "andreff", "daniilidis", "laser", "table 1"):
+        assert word in printed.out
+
+
+def test_cli_capture_refuses_a_plan_outside_the_cell_file_limits(tmp_path, capsys):
+    from binpick.cli import main
+    from binpick.devices.emulators import DynamixelEmulator, GripperEmulator, RobotEmulator, RobotEmulatorConfig
+    from binpick.sim import SIM_ARM
+
+    with ExitStack() as stack:
+        robot, motor, gripper = (
+            stack.enter_context(e)
+            for e in (RobotEmulator(config=RobotEmulatorConfig(arm=SIM_ARM)), DynamixelEmulator(), GripperEmulator())
+        )
+        ports = "".join(
+            f'[{n}]\nport = "{e.slave_path}"\n' for n, e in zip(("robot", "motor", "gripper"), (robot, motor, gripper))
+        )
+        cfg = tmp_path / "cell.toml"
+        cfg.write_text(
+            ports
+            + """
+[camera]
+source = "simulated"
+[part]
+model = "tee"
+[cell]
+calibration = "not_yet.toml"
+bin_min_mm = [250.0, -100.0, 0.0]
+bin_max_mm = [550.0, 100.0, 80.0]
+scan_pose = [400.0, 0.0, 620.0, 180.0, 0.0, 0.0]
+drop_pose = [400.0, -250.0, 350.0, 180.0, 0.0, 0.0]
+[calibration_board]
+pattern = [9, 6]
+square_mm = 20.0
+center_mm = [400.0, -250.0, -5.0]
+[limits]
+workspace_min_mm = [100.0, -200.0, 60.0]
+workspace_max_mm = [650.0, 350.0, 700.0]
+approach_height_mm = 270.0
+"""
+        )
+        before = robot.pose()
+        code = main(["calibrate", "capture", str(cfg), "--out", str(tmp_path / "cap")])
+        err = capsys.readouterr().err
+        assert code == 1, err
+        assert "SafetyError: calibration station" in err and "nothing was sent" in err
+        assert np.array_equal(robot.pose(), before)
+        assert motor.failures == robot.failures == []
+    assert not (tmp_path / "cap").exists()
+    assert main(["calibrate", "capture", str(cfg)]) == 2  # --out is required

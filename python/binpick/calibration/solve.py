@@ -107,8 +107,9 @@ def load_capture(folder: str | os.PathLike) -> Capture:
     for i, st in enumerate(stations):
         where = f"stations[{i}]."
         names.append(str(_field(st, "name", str, where, source)))
+        raw = _field(st, "T_base_flange", list, where, source)
         try:
-            T = np.asarray(_field(st, "T_base_flange", list, where, source), dtype=np.float64)
+            T = np.asarray(raw, dtype=np.float64)
             poses.append(check_rigid(T, f"{source}: {where}T_base_flange", CalibrationError))
         except (ValueError, TypeError):
             raise CalibrationError(
