@@ -348,6 +348,8 @@ def _calibrate(args: argparse.Namespace) -> int:
         return _calibrate_solve(target[1], args)
     if len(target) != 1:
         raise _Usage("calibrate: give one folder of checkerboard images, or `capture CELL.toml` or `solve DIR`")
+    if args.out is not None:
+        raise _Usage("--out: applies to `calibrate capture` and `calibrate solve`; FOLDER's intrinsics print as JSON")
     return _calibrate_folder(args)
 
 

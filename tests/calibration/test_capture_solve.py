@@ -189,3 +189,19 @@ approach_height_mm = 270.0
         assert motor.failures == robot.failures == []
     assert not (tmp_path / "cap").exists()
     assert main(["calibrate", "capture", str(cfg)]) == 2  # --out is required
+
+
+def test_cli_folder_of_images_still_gives_the_intrinsics(captured, tmp_path, capsys):
+    from binpick.cli import main
+
+    folder = tmp_path / "boards"
+    folder.mkdir()
+    for png in sorted((captured[0] / "frames").glob("board*_00.png")):
+        shutil.copy(png, folder / png.name)
+    code = main(["calibrate", str(folder), "--pattern", "9x6", "--square", "20"])
+    printed = capsys.readouterr()
+    assert code == 0, printed.err
+    doc = json.loads(printed.out)
+    assert abs(doc["K"][0][0] / captured[3].camera.K[0, 0] - 1) < 1e-3
+    assert len(doc["views"]) == len(list(folder.iterdir()))
+    assert main(["calibrate", str(folder), "--out", "x.toml"]) == 2

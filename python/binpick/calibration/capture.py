@@ -145,7 +145,7 @@ def _looking_at(target: np.ndarray, azimuth: float, tilt: float, distance: float
     x = np.array([1.0, 0.0, 0.0]) - z[0] * z
     x /= np.linalg.norm(x)
     T = np.eye(4)
-    T[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1) @ rotation_about([0.0, 0.0, 1.0], roll)[:3, :3]
+    T[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1) @ rotation_about([0.0, 0.0, 1.0], roll)
     T[:3, 3] = target - z * distance
     return T
 
