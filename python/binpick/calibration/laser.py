@@ -124,6 +124,8 @@ class LaserCalibration:
         T = np.eye(4)
         T[:3, :3] = np.stack([x0, axis, z0], axis=1)
         T[:3, 3] = origin
+        T = _refine(T, [p[inl] for p, (_, _, inl) in zip(pts, fits)], theta)
+        x0, z0, origin = T[:3, 0], T[:3, 2], T[:3, 3]
         per_angle, all_res = [], []
         for th, p, (_, _, inl) in zip(theta, pts, fits):
             n = np.cos(th) * x0 - np.sin(th) * z0
@@ -138,3 +140,44 @@ class LaserCalibration:
             rms=float(np.sqrt(np.mean(res**2))),
             per_angle_rms=np.array(per_angle),
         )
+
+
+def _sheet_residuals(T: np.ndarray, points: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """Signed distance of each point to the sheet of ``T_camera_laser = T`` at its angle."""
+    normals = np.cos(theta)[:, None] * T[:3, 0] - np.sin(theta)[:, None] * T[:3, 2]
+    return np.einsum("ij,ij->i", points - T[:3, 3], normals)
+
+
+def _refine(T: np.ndarray, points: Sequence[np.ndarray], angles: np.ndarray, iterations: int = 20) -> np.ndarray:
+    """Gauss–Newton on the projector pose: every inlier point's distance to the sheet at its own
+    angle, over the pose's rotation and origin at once (the per-angle planes above are fitted one
+    by one, so their errors pass into the axis unweighted). The origin is then moved along the
+    axis to the point nearest the camera centre (the model cannot see where on the axis it is)."""
+    from ..transforms import rotation_about
+
+    pts = np.concatenate(points)
+    theta = np.concatenate([np.full(len(p), a) for p, a in zip(points, angles)])
+    eps = 1e-6
+
+    def moved(T: np.ndarray, step: np.ndarray) -> np.ndarray:
+        out = T.copy()
+        angle = float(np.linalg.norm(step[:3]))
+        if angle > 0:
+            out[:3, :3] = rotation_about(step[:3] / angle, angle) @ T[:3, :3]
+        out[:3, 3] = T[:3, 3] + step[3:]
+        return out
+
+    for _ in range(iterations):
+        r = _sheet_residuals(T, pts, theta)
+        J = np.empty((len(r), 6))
+        for k in range(6):
+            d = np.zeros(6)
+            d[k] = eps
+            J[:, k] = (_sheet_residuals(moved(T, d), pts, theta) - r) / eps
+        step, *_ = np.linalg.lstsq(J, -r, rcond=None)  # min-norm: the slide along the axis stays put
+        T = moved(T, step)
+        if np.linalg.norm(step[:3]) < 1e-10 and np.linalg.norm(step[3:]) < 1e-7:
+            break
+    axis = T[:3, 1]
+    T[:3, 3] -= (T[:3, 3] @ axis) * axis
+    return T
