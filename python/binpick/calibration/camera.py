@@ -95,7 +95,8 @@ class CameraCalibration:
 
     ``camera``: the intrinsics; ``rms``: the RMS reprojection error over all corners (pixels);
     ``per_view_rms``: that error per used view; ``views``: indices of the images where the
-    board was found; ``T_camera_boards``: the board pose in each used view.
+    board was found; ``T_camera_boards``: the board pose in each used view; ``corners``: the
+    corners found in each used view, (N, 2) px.
     """
 
     camera: CameraIntrinsics
@@ -103,6 +104,7 @@ class CameraCalibration:
     per_view_rms: np.ndarray
     views: np.ndarray
     T_camera_boards: tuple[np.ndarray, ...]
+    corners: tuple[np.ndarray, ...] = ()
 
     def __repr__(self) -> str:
         return f"CameraCalibration({self.camera!r}, rms={self.rms:.3f} px over {len(self.views)} views)"
@@ -153,5 +155,10 @@ def calibrate_camera(
     camera = CameraIntrinsics(width=width, height=height, K=K, dist=np.ravel(dist)[:5])
     poses = tuple(_pose(r, t) for r, t in zip(rvecs, tvecs))
     return CameraCalibration(
-        camera=camera, rms=float(rms), per_view_rms=np.array(per_view), views=np.array(views), T_camera_boards=poses
+        camera=camera,
+        rms=float(rms),
+        per_view_rms=np.array(per_view),
+        views=np.array(views),
+        T_camera_boards=poses,
+        corners=tuple(c.reshape(-1, 2).astype(np.float64) for c in corners),
     )

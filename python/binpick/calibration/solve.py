@@ -1,6 +1,7 @@
 """Solving a capture (:func:`binpick.calibration.capture.capture`) into the cell's calibration:
 camera intrinsics with distortion from every board frame (OpenCV), the board pose in each,
-hand-eye by all five OpenCV methods (the stillest board kept), the laser sheet at each motor
+hand-eye by all five OpenCV methods (the stillest board kept), both refined together by
+eye-in-hand bundle adjustment (:mod:`.refine`), the laser sheet at each motor
 angle and its rotation axis from the line on the board at the laser stations, and the paper's
 Table 1 procedure (the angle at which the line crosses the principal point, at several board
 distances) for comparison. :func:`solve` returns a :class:`Solution`; :meth:`Solution.save`
@@ -21,11 +22,12 @@ from .._validate import check_rigid
 from ..camera import CameraIntrinsics
 from ..errors import BinpickError, CalibrationError, FileWriteError, InvalidInputError
 from ._file import CellCalibration, _toml_row
-from .camera import CameraCalibration, calibrate_camera
+from .camera import CameraCalibration, board_object_points, board_pose, calibrate_camera
 from .capture import MANIFEST_VERSION
 from .hand_eye import HandEyeCalibration, calibrate_hand_eye
 from .laser import LaserCalibration, laser_points_on_board
 from .projector import ProjectorCalibration, axis_depth, calibrate_projector
+from .refine import EyeInHandRefinement, refine_eye_in_hand
 
 __all__ = ["Capture", "Solution", "load_capture", "solve"]
 
@@ -138,14 +140,17 @@ class Solution:
 
     ``calibration``: the :class:`CellCalibration`; ``camera``: the intrinsics fit (per-view RMS);
     ``view_names``: the station of each used view; ``hand_eye``: every method's transform and
-    residuals; ``laser``: the sheet per angle and the rotation axis; ``projector``: the paper's
-    Table 1 fit (None when the laser stations do not give three crossings of the principal point);
+    residuals; ``refined``: the intrinsics and hand-eye refined together from the best method by
+    eye-in-hand bundle adjustment (what ``calibration`` holds); ``laser``: the sheet per angle
+    and the rotation axis; ``projector``: the paper's Table 1 fit (None when the laser stations
+    do not give three crossings of the principal point);
     ``seconds``: time per step."""
 
     calibration: CellCalibration
     camera: CameraCalibration
     view_names: tuple[str, ...]
     hand_eye: HandEyeCalibration
+    refined: EyeInHandRefinement
     laser: LaserCalibration
     projector: Optional[ProjectorCalibration]
     seconds: dict
@@ -165,6 +170,11 @@ class Solution:
             lines.append(f"{name} = {{ mm = {mm!r}, deg = {deg!r} }}")
         lines += [
             "",
+            "[residuals.refined]",
+            "# intrinsics and hand-eye refined together (eye-in-hand bundle adjustment): what this file holds",
+            f"rms_px = {self.refined.rms!r}",
+            f"per_view_rms_px = {_toml_row(self.refined.per_view_rms)}",
+            "",
             "[residuals.laser]",
             f"rms_mm = {self.laser.rms!r}",
             f"angles_rad = {_toml_row(self.laser.angles)}",
@@ -182,10 +192,12 @@ class Solution:
         rows = [
             f"camera   {cam.width}x{cam.height}  fx {cam.K[0, 0]:.2f}  fy {cam.K[1, 1]:.2f}  "
             f"cx {cam.K[0, 2]:.2f}  cy {cam.K[1, 2]:.2f}  dist {np.round(cam.dist, 5).tolist()}",
-            f"         reprojection RMS {self.camera.rms:.3f} px over {len(self.view_names)} views "
+            f"         reprojection RMS {self.camera.rms:.3f} px over {len(self.view_names)} views, free board poses "
             f"(worst {self.camera.per_view_rms.max():.3f} px)",
             "hand-eye (board stillness in the base frame):",
             *("  " + line for line in self.hand_eye.residual_table().splitlines()),
+            f"refined  intrinsics and hand-eye together from {self.hand_eye.method} (eye-in-hand bundle "
+            f"adjustment): reprojection RMS {self.refined.rms:.3f} px, {self.refined.iterations} iterations",
             f"laser    {len(self.laser.angles)} angles, sheet RMS {self.laser.rms:.4f} mm "
             f"(worst angle {self.laser.per_angle_rms.max():.4f} mm); origin "
             f"{np.round(self.calibration.T_camera_laser[:3, 3], 2).tolist()} mm, axis "
@@ -286,8 +298,12 @@ def solve(capture_dir: str | os.PathLike) -> Solution:
     t1 = time.perf_counter()
     used = [int(v) for v in cam.views]
     view_names = tuple(cap.names[v] for v in used)
-    board_of = dict(zip(used, cam.T_camera_boards))
-    hand_eye = calibrate_hand_eye([cap.T_base_flanges[v] for v in used], list(cam.T_camera_boards))
+    flanges = [cap.T_base_flanges[v] for v in used]
+    hand_eye = calibrate_hand_eye(flanges, list(cam.T_camera_boards))
+    obj = board_object_points(cap.pattern, cap.square)
+    refined = refine_eye_in_hand(obj, cam.corners, flanges, cam.camera, hand_eye.T_flange_camera, cam.T_camera_boards)
+    camera = refined.camera
+    board_of = {v: board_pose(c, camera, cap.pattern, cap.square) for v, c in zip(used, cam.corners)}
     t2 = time.perf_counter()
     by_goal: dict[float, list[tuple[float, np.ndarray]]] = {}
     crossings: list[tuple[float, float]] = []
@@ -306,14 +322,14 @@ def solve(capture_dir: str | os.PathLike) -> Solution:
             if len(uv) == 0:
                 continue
             try:
-                pts = laser_points_on_board(uv, cam.camera, T_cb)
+                pts = laser_points_on_board(uv, camera, T_cb)
             except BinpickError:
                 continue
             on = _on_board(pts, T_cb, cap.pattern, cap.square)
             if on.sum() >= _MIN_LINE_POINTS:
                 samples.append((angle, uv[on]))
                 by_goal.setdefault(round(goal, 9), []).append((angle, pts[on]))
-        theta = _principal_crossing(samples, cam.camera)
+        theta = _principal_crossing(samples, camera)
         if theta is not None:
             crossings.append((axis_depth(T_cb), theta))
     usable = {g: v for g, v in by_goal.items() if len(v) >= 2}
@@ -337,7 +353,7 @@ def solve(capture_dir: str | os.PathLike) -> Solution:
             projector = None
     t3 = time.perf_counter()
     calibration = CellCalibration(
-        camera=cam.camera, T_camera_laser=laser.T_camera_laser, T_flange_camera=hand_eye.T_flange_camera
+        camera=camera, T_camera_laser=laser.T_camera_laser, T_flange_camera=refined.T_flange_camera
     )
     seconds = {"intrinsics": t1 - t0, "hand-eye": t2 - t1, "laser": t3 - t2}
-    return Solution(calibration, cam, view_names, hand_eye, laser, projector, seconds)
+    return Solution(calibration, cam, view_names, hand_eye, refined, laser, projector, seconds)
