@@ -340,7 +340,11 @@ def solve(capture_dir: str | os.PathLike) -> Solution:
         )
     goals = sorted(usable)
     angles = [float(np.mean([a for a, _ in usable[g]])) for g in goals]
-    laser = LaserCalibration.fit(angles, [np.concatenate([p for _, p in usable[g]]) for g in goals])
+    laser = LaserCalibration.fit(
+        angles,
+        [np.concatenate([p for _, p in usable[g]]) for g in goals],
+        point_angles=[np.concatenate([np.full(len(p), a) for a, p in usable[g]]) for g in goals],
+    )
     projector = None
     if len(crossings) >= 3:
         # The paper counts the angle from the sheet parallel to the optical axis; the motor's zero
