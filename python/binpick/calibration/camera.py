@@ -33,8 +33,13 @@ def board_object_points(pattern: tuple[int, int], square: float) -> np.ndarray:
     return np.stack([gx.ravel(), gy.ravel(), np.zeros(cols * rows)], axis=1) * sq
 
 
-def find_checkerboard(image: np.ndarray, pattern: tuple[int, int]) -> np.ndarray | None:
-    """The checkerboard's inner corners to sub-pixel accuracy, (N, 2) float64, or None if not found."""
+def find_checkerboard(image: np.ndarray, pattern: tuple[int, int], *, orient: bool = False) -> np.ndarray | None:
+    """The checkerboard's inner corners to sub-pixel accuracy, (N, 2) float64, or None if not found.
+
+    ``orient``: put the corners in the board's own order whatever the view — the first corner is
+    the one whose diagonal square away from the grid is dark (OpenCV's order turns with the image,
+    which would give a board seen upside down a different frame; a board with an even number of
+    squares along one side tells its two ends apart by colour)."""
     img = as_image(image, "image")
     grey = cv2.cvtColor(img, cv2.COLOR_BGR2GRAY) if img.ndim == 3 else img
     size = _pattern(pattern)
@@ -45,7 +50,24 @@ def find_checkerboard(image: np.ndarray, pattern: tuple[int, int]) -> np.ndarray
         return None
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
     corners = cv2.cornerSubPix(grey, corners, (7, 7), (-1, -1), criteria)
-    return corners.reshape(-1, 2).astype(np.float64)
+    corners = corners.reshape(-1, 2).astype(np.float64)
+    return _oriented(grey, corners, size) if orient else corners
+
+
+def _oriented(grey: np.ndarray, corners: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """``corners`` or the same reversed, so that the square diagonally outside the first corner
+    is darker than its neighbour outside the first row (board frame squares (−1, −1) and (0, −1))."""
+    cols = size[0]
+    c0, step_x, step_y = corners[0], corners[1] - corners[0], corners[cols] - corners[0]
+
+    def sample(p: np.ndarray) -> float:
+        u, v = int(round(p[0])), int(round(p[1]))
+        h, w = grey.shape
+        return float(grey[min(max(v, 0), h - 1), min(max(u, 0), w - 1)])
+
+    diagonal = sample(c0 - 0.5 * step_x - 0.5 * step_y)
+    beside = sample(c0 + 0.5 * step_x - 0.5 * step_y)
+    return corners if diagonal <= beside else corners[::-1].copy()
 
 
 def _pose(rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
@@ -73,7 +95,8 @@ class CameraCalibration:
 
     ``camera``: the intrinsics; ``rms``: the RMS reprojection error over all corners (pixels);
     ``per_view_rms``: that error per used view; ``views``: indices of the images where the
-    board was found; ``T_camera_boards``: the board pose in each used view.
+    board was found; ``T_camera_boards``: the board pose in each used view; ``corners``: the
+    corners found in each used view, (N, 2) px.
     """
 
     camera: CameraIntrinsics
@@ -81,19 +104,27 @@ class CameraCalibration:
     per_view_rms: np.ndarray
     views: np.ndarray
     T_camera_boards: tuple[np.ndarray, ...]
+    corners: tuple[np.ndarray, ...] = ()
 
     def __repr__(self) -> str:
         return f"CameraCalibration({self.camera!r}, rms={self.rms:.3f} px over {len(self.views)} views)"
 
 
 def calibrate_camera(
-    images: Sequence[np.ndarray], pattern: tuple[int, int], square: float, *, flags: int = 0, min_views: int = 3
+    images: Sequence[np.ndarray],
+    pattern: tuple[int, int],
+    square: float,
+    *,
+    flags: int = 0,
+    min_views: int = 3,
+    orient: bool = False,
 ) -> CameraCalibration:
     """Intrinsics and distortion ``[k1, k2, p1, p2, k3]`` from checkerboard images.
 
     ``pattern`` is (columns, rows) of inner corners, ``square`` the square size in mm. Images
     where the board is not found are skipped; fewer than ``min_views`` usable views is an error.
-    The reprojection error is reported overall and per view.
+    The reprojection error is reported overall and per view. ``orient``: see :func:`find_checkerboard`
+    (needed when the board poses are used together, as hand-eye does).
     """
     imgs = list(images)
     if not imgs:
@@ -105,7 +136,7 @@ def calibrate_camera(
     obj = board_object_points(pattern, square).astype(np.float32)
     corners, views = [], []
     for i, im in enumerate(imgs):
-        c = find_checkerboard(im, pattern)
+        c = find_checkerboard(im, pattern, orient=orient)
         if c is not None:
             corners.append(c.astype(np.float32).reshape(-1, 1, 2))
             views.append(i)
@@ -124,5 +155,10 @@ def calibrate_camera(
     camera = CameraIntrinsics(width=width, height=height, K=K, dist=np.ravel(dist)[:5])
     poses = tuple(_pose(r, t) for r, t in zip(rvecs, tvecs))
     return CameraCalibration(
-        camera=camera, rms=float(rms), per_view_rms=np.array(per_view), views=np.array(views), T_camera_boards=poses
+        camera=camera,
+        rms=float(rms),
+        per_view_rms=np.array(per_view),
+        views=np.array(views),
+        T_camera_boards=poses,
+        corners=tuple(c.reshape(-1, 2).astype(np.float64) for c in corners),
     )

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Optional
 
 import numpy as np
 
@@ -87,13 +88,20 @@ class LaserCalibration:
 
     @classmethod
     def fit(
-        cls, angles: Sequence[float], points: Sequence[np.ndarray], *, inlier_distance: float = 0.5
+        cls,
+        angles: Sequence[float],
+        points: Sequence[np.ndarray],
+        *,
+        inlier_distance: float = 0.5,
+        point_angles: Optional[Sequence[np.ndarray]] = None,
     ) -> LaserCalibration:
         """Fits the projector from the sheet's points at each motor angle.
 
         ``points[k]`` (N_k, 3) are lit points in the camera frame (from :func:`laser_points_on_board`
         on two or more board poses) seen at motor angle ``angles[k]`` (radians); at least three
-        distinct angles are needed.
+        distinct angles are needed. ``point_angles[k]`` (N_k,), if given, is the angle each point
+        was really seen at (a motor stops within a tick of its goal, so the stations of one set
+        differ slightly): the per-angle planes use ``angles[k]``, the final joint fit each point's own.
         """
         theta = as_angles(angles, "angles")
         pts = [as_points(p, f"points[{k}]", min_points=3) for k, p in enumerate(points)]
@@ -117,15 +125,25 @@ class LaserCalibration:
         x0 = x0 - (x0 @ axis) * axis
         x0 /= np.linalg.norm(x0)
         z0 = np.cross(x0, axis)
+        if z0[2] < 0:  # the light travels away from the camera (+z_L into the scene): turn the frame by π about y
+            x0, z0 = -x0, -z0
         # Every sheet contains the axis: n_k · o = d_k; the row `axis · o = 0` picks the point nearest the camera.
         origin, *_ = np.linalg.lstsq(np.vstack([normals, axis]), np.append(offsets, 0.0), rcond=None)
         T = np.eye(4)
         T[:3, :3] = np.stack([x0, axis, z0], axis=1)
         T[:3, 3] = origin
+        if point_angles is None:
+            own = [np.full(len(p), th) for p, th in zip(pts, theta)]
+        else:
+            if len(point_angles) != len(pts):
+                raise CalibrationError(
+                    f"point_angles: {len(point_angles)} arrays for {len(pts)} point sets; give one per set"
+                )
+            own = [as_angles(a, f"point_angles[{k}]", size=len(p)) for k, (a, p) in enumerate(zip(point_angles, pts))]
+        T = _refine(T, [p[inl] for p, (_, _, inl) in zip(pts, fits)], [a[inl] for a, (_, _, inl) in zip(own, fits)])
         per_angle, all_res = [], []
-        for th, p, (_, _, inl) in zip(theta, pts, fits):
-            n = np.cos(th) * x0 - np.sin(th) * z0
-            res = (p[inl] - origin) @ n
+        for p, a, (_, _, inl) in zip(pts, own, fits):
+            res = _sheet_residuals(T, p[inl], a[inl])
             per_angle.append(float(np.sqrt(np.mean(res**2))))
             all_res.append(res)
         res = np.concatenate(all_res)
@@ -136,3 +154,46 @@ class LaserCalibration:
             rms=float(np.sqrt(np.mean(res**2))),
             per_angle_rms=np.array(per_angle),
         )
+
+
+def _sheet_residuals(T: np.ndarray, points: np.ndarray, theta: np.ndarray) -> np.ndarray:
+    """Signed distance of each point to the sheet of ``T_camera_laser = T`` at its angle."""
+    normals = np.cos(theta)[:, None] * T[:3, 0] - np.sin(theta)[:, None] * T[:3, 2]
+    return np.einsum("ij,ij->i", points - T[:3, 3], normals)
+
+
+def _refine(
+    T: np.ndarray, points: Sequence[np.ndarray], angles: Sequence[np.ndarray], iterations: int = 20
+) -> np.ndarray:
+    """Gauss–Newton on the projector pose: every inlier point's distance to the sheet at its own
+    angle, over the pose's rotation and origin at once (the per-angle planes above are fitted one
+    by one, so their errors pass into the axis unweighted). The origin is then moved along the
+    axis to the point nearest the camera centre (the model cannot see where on the axis it is)."""
+    from ..transforms import rotation_about
+
+    pts = np.concatenate(points)
+    theta = np.concatenate(angles)
+    eps = 1e-6
+
+    def moved(T: np.ndarray, step: np.ndarray) -> np.ndarray:
+        out = T.copy()
+        angle = float(np.linalg.norm(step[:3]))
+        if angle > 0:
+            out[:3, :3] = rotation_about(step[:3] / angle, angle) @ T[:3, :3]
+        out[:3, 3] = T[:3, 3] + step[3:]
+        return out
+
+    for _ in range(iterations):
+        r = _sheet_residuals(T, pts, theta)
+        J = np.empty((len(r), 6))
+        for k in range(6):
+            d = np.zeros(6)
+            d[k] = eps
+            J[:, k] = (_sheet_residuals(moved(T, d), pts, theta) - r) / eps
+        step, *_ = np.linalg.lstsq(J, -r, rcond=None)  # min-norm: the slide along the axis stays put
+        T = moved(T, step)
+        if np.linalg.norm(step[:3]) < 1e-10 and np.linalg.norm(step[3:]) < 1e-7:
+            break
+    axis = T[:3, 1]
+    T[:3, 3] -= (T[:3, 3] @ axis) * axis
+    return T

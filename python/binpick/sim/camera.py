@@ -1,26 +1,106 @@
 """Virtual cameras for the pick loop (:class:`binpick.cell.FrameSource` s): the simulated cell's
 camera (:class:`SimCamera`, rendering the pile from where the emulated robot and laser motor
 really are) and :class:`RenderedCamera` (a pile of a part rendered from the poses the drivers
-report, to try a cell configuration without a camera)."""
+report, to try a cell configuration without a camera). Both see the layout's calibration board
+(:class:`binpick.sim.CalibrationBoard`) where it lies: per pixel the nearer of the board and the
+ray-cast scene, the laser line drawn on the board as on the scene (the board's laser light is
+not shadowed by objects between projector and board: keep the board clear of the bin's shadow)."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Optional
 
 import numpy as np
 
 from .._validate import as_transform
+from ..camera import CameraIntrinsics
 from ..cell.frames import FrameSource
 from ..errors import InvalidInputError
 from ..models import Model
+from ..transforms import inverse
 from .cell import Cell as Layout
 from .pile import Pile
-from .render import World
+from .render import View, World, render_checkerboard
 
 if TYPE_CHECKING:  # annotations only: twin builds a SimCamera
     from .twin import SimulatedCell
 
 __all__ = ["SimCamera", "RenderedCamera"]
+
+
+_RAYS: dict[tuple, np.ndarray] = {}
+#: Samples per pixel side of the board's image: the pixel integrates the light over its area;
+#: 4 × 4 keeps the aliasing of the squares' edges below the corner detector's noise.
+_SUPERSAMPLE = 4
+
+
+def _pixel_rays(camera: CameraIntrinsics) -> np.ndarray:
+    """The undistorted ray (x, y, 1) of every pixel centre, (H·W, 3), cached per camera."""
+    from ..vision._triangulate import pixel_rays
+
+    key = (camera.width, camera.height, camera.K.tobytes(), camera.dist.tobytes())
+    if key not in _RAYS:
+        v, u = np.mgrid[0 : camera.height, 0 : camera.width]
+        _RAYS.clear()  # one camera per process in practice; do not grow without bound
+        _RAYS[key] = pixel_rays(np.stack([u.ravel(), v.ravel()], axis=1).astype(np.float64), camera)
+    return _RAYS[key]
+
+
+class _BoardLayer:
+    """The layout's calibration board seen from one robot pose: where it is nearer than the
+    ray-cast scene (``mask``), and its image with the laser at an angle composed over a frame."""
+
+    def __init__(self, layout: Layout, view: View, T_base_flange: np.ndarray) -> None:
+        board = layout.board
+        self.layout = layout
+        self.T_camera_board = inverse(T_base_flange @ layout.T_flange_camera) @ board.T_base_board
+        cam = layout.camera
+        rays = _pixel_rays(cam)
+        n, p0 = self.T_camera_board[:3, 2], self.T_camera_board[:3, 3]
+        denom = rays @ n
+        with np.errstate(divide="ignore", invalid="ignore"):
+            depth = np.where(np.abs(denom) > 1e-12, (n @ p0) / denom, -1.0)
+        local = (rays * depth[:, None] - p0) @ self.T_camera_board[:3, :3]
+        (xmin, ymin), (xmax, ymax) = board.extent
+        on = (depth > 0) & (local[:, 0] >= xmin) & (local[:, 0] <= xmax) & (local[:, 1] >= ymin)
+        on &= local[:, 1] <= ymax
+        scene = view.depth.ravel().astype(np.float64)
+        nearer = np.isnan(scene) | (depth < scene)
+        self.mask = (on & nearer).reshape(cam.height, cam.width)
+
+    @classmethod
+    def of(cls, layout: Layout, view: View, T_base_flange: np.ndarray) -> Optional[_BoardLayer]:
+        """The layer, or None when the layout has no board or the camera does not see it."""
+        if layout.board is None:
+            return None
+        layer = cls(layout, view, T_base_flange)
+        return layer if layer.mask.any() else None
+
+    def over(self, rgb: np.ndarray, angle: float, seed: int) -> np.ndarray:
+        """``rgb`` (the scene's frame) with the board drawn where it is nearer, the laser at ``angle``."""
+        lay, board = self.layout, self.layout.board
+        img = render_checkerboard(
+            lay.camera,
+            self.T_camera_board,
+            pattern=board.pattern,
+            square=board.square,
+            margin=board.margin,
+            lighting=lay.lighting,
+            laser=lay.laser,
+            angle=angle,
+            noise=lay.noise,
+            supersample=_SUPERSAMPLE,
+            seed=seed,
+        )
+        return np.where(self.mask[:, :, None], img, rgb)
+
+
+def _frame(view: View, board: Optional[_BoardLayer], angle: float, seed: int) -> np.ndarray:
+    """The BGR frame of ``view`` (and the board, if seen) with the laser at ``angle``."""
+    rgb = view.frame(angle, seed=seed)
+    if board is not None:
+        rgb = board.over(rgb, angle, seed)
+    return np.ascontiguousarray(rgb[:, :, ::-1])
 
 
 class SimCamera(FrameSource):
@@ -30,7 +110,8 @@ class SimCamera(FrameSource):
     def __init__(self, sim: SimulatedCell, *, seed: int = 0) -> None:
         self.sim = sim
         self.seed = int(seed)
-        self._view = None
+        self._view: Optional[View] = None
+        self._board: Optional[_BoardLayer] = None
         self._frame = 0
 
     def begin(self, T_base_flange: np.ndarray) -> None:
@@ -38,16 +119,16 @@ class SimCamera(FrameSource):
         world = World.of_pile(self.sim.pile)
         actual = self.sim.robot_emulator.pose()
         self._view = world.view(self.sim.layout, actual, num_threads=self.sim.num_threads)
+        self._board = _BoardLayer.of(self.sim.layout, self._view, actual)
 
     def grab(self) -> np.ndarray:
         if self._view is None:
             raise InvalidInputError(
                 "camera: call begin(T_base_flange) before grab(); the cell does this at each scan pose"
             )
-        angle = self.sim.laser_angle()
-        rgb = self._view.frame(angle, seed=self.seed + self._frame)
+        img = _frame(self._view, self._board, self.sim.laser_angle(), self.seed + self._frame)
         self._frame += 1
-        return np.ascontiguousarray(rgb[:, :, ::-1])
+        return img
 
 
 class RenderedCamera(FrameSource):
@@ -62,14 +143,15 @@ class RenderedCamera(FrameSource):
         self.world = World.of_pile(self.pile)
         self.seed = int(seed)
         self.num_threads = int(num_threads)
-        self._view = None
+        self._view: Optional[View] = None
+        self._board: Optional[_BoardLayer] = None
         self._angle = 0.0
         self._frame = 0
 
     def begin(self, T_base_flange: np.ndarray) -> None:
-        self._view = self.world.view(
-            self.layout, as_transform(T_base_flange, "T_base_flange"), num_threads=self.num_threads
-        )
+        T = as_transform(T_base_flange, "T_base_flange")
+        self._view = self.world.view(self.layout, T, num_threads=self.num_threads)
+        self._board = _BoardLayer.of(self.layout, self._view, T)
 
     def laser_at(self, angle: float) -> None:
         self._angle = float(angle)
@@ -79,6 +161,6 @@ class RenderedCamera(FrameSource):
             raise InvalidInputError(
                 "camera: call begin(T_base_flange) before grab(); the cell does this at each scan pose"
             )
-        rgb = self._view.frame(self._angle, seed=self.seed + self._frame)
+        img = _frame(self._view, self._board, self._angle, self.seed + self._frame)
         self._frame += 1
-        return np.ascontiguousarray(rgb[:, :, ::-1])
+        return img

@@ -6,12 +6,16 @@ Default layout (robot base frame, +z up, mm): the bin's inner floor at z = 0, ce
 looking straight down, the camera 40 mm below it (hand-eye ``T_flange_camera``), so the camera
 is about 500 mm above a pile; the laser projector 130 mm to the camera's +x on the flange, its
 sheet at motor angle 0 crossing the optical axis 520 mm out; the sweep covers the bin.
+A calibration checkerboard (:class:`CalibrationBoard`: 9 × 6 inner corners, 20 mm squares, 15 mm
+white border, on a 3 mm plate) lies face up on the table beside the bin, its centre at
+(400, −250, −5): out of the scan pose's view, where the arm can look at it from many angles.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Optional
 
 import numpy as np
 
@@ -21,7 +25,7 @@ from ..camera import CameraIntrinsics
 from ..errors import InvalidInputError
 from ..transforms import laser_sweep, look_down, rot_y
 
-__all__ = ["Camera", "Laser", "Lighting", "SensorNoise", "Bin", "Cell", "rot_y", "look_down"]
+__all__ = ["CalibrationBoard", "Camera", "Laser", "Lighting", "SensorNoise", "Bin", "Cell", "rot_y", "look_down"]
 
 
 def Camera(  # named like a class: it builds the simulated camera, as binpick.sim.Camera(...) always has
@@ -169,9 +173,40 @@ class Bin:
 
 
 @dataclass(frozen=True)
+class CalibrationBoard:
+    """A printed checkerboard lying in the cell: ``pattern`` = (columns, rows) of inner corners,
+    ``square`` and white ``margin`` (mm), placed at ``T_base_board`` (OpenCV board frame: origin
+    at the first inner corner, x along the columns, y along the rows, z into the board)."""
+
+    pattern: tuple[int, int] = (9, 6)
+    square: float = 20.0
+    margin: float = 15.0
+    T_base_board: np.ndarray = field(default_factory=lambda: _board_on_table())
+
+    def __post_init__(self) -> None:
+        cols, rows = (count(p, "pattern", 2) for p in self.pattern)
+        object.__setattr__(self, "pattern", (cols, rows))
+        positive(self.square, "square")
+        non_negative(self.margin, "margin", "mm")
+        object.__setattr__(self, "T_base_board", as_transform(self.T_base_board, "T_base_board"))
+
+    @property
+    def extent(self) -> np.ndarray:
+        """The printed area in the board frame, [[xmin, ymin], [xmax, ymax]] mm (squares and border)."""
+        s, m = float(self.square), float(self.margin)
+        return np.array([[-s - m, -s - m], [self.pattern[0] * s + m, self.pattern[1] * s + m]])
+
+    @property
+    def center(self) -> np.ndarray:
+        """The centre of the inner-corner grid in the base frame, mm."""
+        local = np.array([(self.pattern[0] - 1) * self.square / 2, (self.pattern[1] - 1) * self.square / 2, 0, 1])
+        return (self.T_base_board @ local)[:3]
+
+
+@dataclass(frozen=True)
 class Cell:
     """The whole simulated cell: camera, laser, hand-eye ``T_flange_camera``, bin, lighting and noise,
-    and the robot pose ``T_base_flange`` it scans from."""
+    the robot pose ``T_base_flange`` it scans from, and the calibration ``board`` lying in it (None: no board)."""
 
     camera: CameraIntrinsics = field(default_factory=Camera)
     laser: Laser = field(default_factory=Laser)
@@ -180,8 +215,13 @@ class Cell:
     lighting: Lighting = field(default_factory=Lighting)
     noise: SensorNoise = field(default_factory=SensorNoise)
     T_base_flange: np.ndarray = field(default_factory=lambda: _scan_flange())
+    board: Optional[CalibrationBoard] = field(default_factory=CalibrationBoard)
 
     def __post_init__(self) -> None:
+        if self.board is not None and not isinstance(self.board, CalibrationBoard):
+            raise InvalidInputError(
+                f"board: expected a binpick.sim.CalibrationBoard or None, got {type(self.board).__name__}"
+            )
         object.__setattr__(self, "T_flange_camera", as_transform(self.T_flange_camera, "T_flange_camera"))
         object.__setattr__(self, "T_base_flange", as_transform(self.T_base_flange, "T_base_flange"))
 
@@ -211,6 +251,14 @@ class Cell:
 def _flange_camera() -> np.ndarray:
     T = np.eye(4)
     T[2, 3] = 40.0
+    return T
+
+
+def _board_on_table() -> np.ndarray:
+    # Face up on the table top (z = −8) on a 3 mm plate, centred at (400, −250): board x along
+    # base x, board y along base −y, board z (into the board) straight down.
+    T = np.diag([1.0, -1.0, -1.0, 1.0])
+    T[:3, 3] = (400.0 - 80.0, -250.0 + 50.0, -5.0)
     return T
 
 
