@@ -15,11 +15,13 @@ import signal
 import subprocess
 import sys
 import tempfile
+import warnings
 from typing import Optional
 
 import numpy as np
 
 from . import _core
+from ._shapes import edge_use_counts
 from ._validate import unit_scale
 from .errors import InvalidInputError, MeshFileError, MeshFileNotFoundError
 
@@ -68,12 +70,28 @@ def read_step(path: str, unit: str) -> tuple[np.ndarray, np.ndarray]:
     scale = _scale(path, unit, declared_length_unit(data))
     with tempfile.TemporaryDirectory(prefix="binpick-step-") as tmp:
         obj = os.path.join(tmp, "part.obj")
-        _convert(path, obj)
+        complaints = _convert(path, obj)
         vertices, faces = _core.read_mesh(obj, "mm")
     if len(faces) == 0:
         raise MeshFileError(f"{path}: the STEP file has no surface to tessellate (no solid, shell or face)")
     welded, index = np.unique(vertices, axis=0, return_inverse=True)
-    return welded * scale, np.ascontiguousarray(index.reshape(-1)[faces], dtype=np.int64)
+    faces = np.ascontiguousarray(index.reshape(-1)[faces], dtype=np.int64)
+    _check_closed(path, faces, complaints)
+    return welded * scale, faces
+
+
+def _check_closed(path: str, faces: np.ndarray, complaints: str) -> None:
+    """Refuses a damaged file whose solid lost faces (OpenCASCADE skips what it cannot read and
+    says so); warns of an open surface in a file it read without complaint (a surface model)."""
+    open_edges = int(np.count_nonzero(edge_use_counts(faces) != 2))
+    if open_edges and complaints:
+        raise MeshFileError(
+            f"{path}: the STEP file is damaged: OpenCASCADE skipped what it could not read ({complaints}) and "
+            f"the surface left is open ({open_edges} edges); export the part again"
+        )
+    if open_edges or complaints:
+        problem = f"its surface is open ({open_edges} edges bound one triangle only)" if open_edges else complaints
+        warnings.warn(f"binpick: {path}: read, but {problem}", RuntimeWarning, stacklevel=4)
 
 
 def _scale(path: str, unit: str, declared: Optional[tuple[str, Optional[float]]]) -> float:
@@ -90,7 +108,9 @@ def _scale(path: str, unit: str, declared: Optional[tuple[str, Optional[float]]]
     raise InvalidInputError(f"unit: {path} declares its lengths in {name} ({mm:g} mm), not {unit!r}; {fix}")
 
 
-def _convert(path: str, obj: str) -> None:
+def _convert(path: str, obj: str) -> str:
+    """Runs OpenCASCADE on ``path`` into ``obj`` in a child process: its complaints about a file
+    it could read (empty when none), or MeshFileError when it could not, crashed or hung."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
     args = [sys.executable, "-c", _CONVERT, path, obj, repr(CHORD_TOLERANCE), repr(ANGLE_TOLERANCE)]
     try:
@@ -105,9 +125,10 @@ def _convert(path: str, obj: str) -> None:
         raise MeshFileError(
             f"{path}: OpenCASCADE crashed on the STEP file ({_signal_name(-done.returncode)}); is the file damaged?"
         )
+    errors, everything = _said(done.stdout + done.stderr, path)
     if done.returncode != 0 or not os.path.isfile(obj):
-        reason = _reason(done.stdout + done.stderr, path)
-        raise MeshFileError(f"{path}: not a STEP file OpenCASCADE can read ({reason})")
+        raise MeshFileError(f"{path}: not a STEP file OpenCASCADE can read ({errors or everything or 'no message'})")
+    return errors
 
 
 def _signal_name(number: int) -> str:
@@ -117,12 +138,12 @@ def _signal_name(number: int) -> str:
         return f"signal {number}"
 
 
-def _reason(output: bytes, path: str) -> str:
-    """OpenCASCADE's own words for a failure: its error lines, without terminal colours."""
+def _said(output: bytes, path: str) -> tuple[str, str]:
+    """What OpenCASCADE printed, without terminal colours: ``(its error lines, all of it)``."""
     text = re.sub(r"\x1b\[[0-9;]*m", "", output.decode("utf-8", "replace")).replace(f'"{path}"', "the file")
     lines = [line.strip(" *") for line in text.splitlines() if line.strip(" *")]
-    errors = [line for line in lines if "ERR" in line or "rror" in line] or lines or ["no message"]
-    return "; ".join(errors)[:400]
+    errors = [line for line in lines if "ERR" in line or "rror" in line]
+    return "; ".join(errors)[:400], "; ".join(lines)[:400]
 
 
 _SI_PREFIX = {
