@@ -46,7 +46,8 @@ _CONVERT = """
 import sys
 try:
     import cascadio
-except ImportError:
+except ImportError as exc:
+    print(exc, file=sys.stderr)
     sys.exit(3)
 src, out, chord, angle = sys.argv[1], sys.argv[2], float(sys.argv[3]), float(sys.argv[4])
 sys.exit(1 if cascadio.step_to_obj(src, out, tol_linear=chord, tol_angular=angle, use_colors=False) else 0)
@@ -120,7 +121,11 @@ def _convert(path: str, obj: str) -> str:
             f"{path}: OpenCASCADE did not finish tessellating the STEP file in {TIMEOUT_S:g} s and was stopped"
         ) from None
     if done.returncode == 3:
-        raise MeshFileError(f"{path}: reading STEP files needs the optional extra: {_INSTALL} (OpenCASCADE)")
+        why = done.stderr.decode("utf-8", "replace").strip()[-300:]
+        raise MeshFileError(
+            f"{path}: reading STEP files needs the optional extra: {_INSTALL} (OpenCASCADE; "
+            f"the converter could not import it: {why or 'no reason given'})"
+        )
     if done.returncode < 0:
         raise MeshFileError(
             f"{path}: OpenCASCADE crashed on the STEP file ({_signal_name(-done.returncode)}); is the file damaged?"
