@@ -16,6 +16,7 @@ import pytest
 
 import binpick
 from _files import mutate
+from _geometry import extruded_mesh, random_rotation, rendered_view
 from binpick import _step
 from binpick._shapes import edge_use_counts, signed_volume
 from binpick.errors import BinpickError, InvalidInputError, MeshFileError, MeshFileNotFoundError, UnknownUnitError
@@ -382,3 +383,21 @@ def test_mutated_files_load_or_raise_binpick_errors(l_file, tmp_path):
         except BinpickError as exc:
             outcomes.append((type(exc).__name__, True))
     assert all(kind in ("valid", "MeshFileError", "InvalidInputError") and ok for kind, ok in outcomes), outcomes
+
+
+def test_a_step_part_is_found_in_a_scan_of_the_solid(l_model):
+    # The scan renders the prism built independently (tests/_geometry), the pose is estimated
+    # against the model read from STEP: the two frames must be the same for the pose to be.
+    from binpick import sim
+
+    truth = binpick.Model.from_arrays(*extruded_mesh(L_OUTLINE, L_HEIGHT), spacing=1.0)
+    rng = np.random.default_rng(5)
+    viewpoint = sim.Cell().T_base_camera[:3, 3]
+    errors = []
+    for _ in range(3):
+        T = np.eye(4)
+        T[:3, :3] = random_rotation(rng)
+        T[:3, 3] = [rng.uniform(350, 450), rng.uniform(-40, 40), rng.uniform(30, 50)]
+        res = binpick.estimate_pose(rendered_view(truth, T, rng), l_model, method="ppf", viewpoint=viewpoint)
+        errors.append(l_model.pose_error(res.T_scene_model, T))
+    assert all(rot < 5.0 and shift < 3.0 for rot, shift in errors), errors
