@@ -102,7 +102,7 @@ def test_unknown_unit_and_mesh_errors(tmp_path):
     with pytest.raises(errors.MeshFileError, match="truncated"):
         binpick.read_ply(tmp_path / "trunc.ply")
     with pytest.raises(errors.MeshFileError, match="extension"):
-        binpick.Model.from_mesh(tmp_path / "part.step")
+        binpick.Model.from_mesh(tmp_path / "part.iges")
 
 
 arrays = st.one_of(

@@ -47,7 +47,7 @@ pub fn read_mesh(path: &Path) -> Result<TriMesh> {
     if !matches!(ext.as_str(), "stl" | "ply" | "obj") {
         return Err(Error::bad_file(
             shown,
-            format!("unsupported extension {ext:?}; binpick reads .stl, .ply and .obj meshes"),
+            format!("unsupported extension {ext:?}; binpick reads .stl, .ply and .obj meshes (and .step/.stp with the extra: pip install \"binpick[step]\")"),
         ));
     }
     let bytes = read_bytes(path)?;
