@@ -13,7 +13,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ._validate import as_transform, as_vector
+from ._validate import as_transform, as_vector, count, number
 
 __all__ = [
     "inverse",
@@ -120,12 +120,19 @@ def pose_error(
     return min(errors, key=lambda e: e[0] / 5.0 + e[1] / 3.0)
 
 
+#: Most frames one laser sweep takes: a scan is 30–200 frames; beyond this the frames alone
+#: (at 1 MP each) would not fit in memory.
+MAX_SWEEP_FRAMES = 10_000
+
+
 def laser_sweep(
     T_base_laser: np.ndarray, lo: np.ndarray, hi: np.ndarray, frames: int, margin: float = 10.0
 ) -> np.ndarray:
     """``frames`` motor angles (rad), evenly spaced, whose laser sheets sweep the box ``lo``..``hi``
     (floor corners widened by ``margin`` mm along x, and the rim), for the laser at motor angle 0
-    posed at ``T_base_laser`` (inputs already checked)."""
+    posed at ``T_base_laser`` (the others already checked; ``margin`` is checked here)."""
+    margin = number(margin, "margin", -1e6, 1e6, unit="mm")
+    frames = count(frames, "frames", 1, MAX_SWEEP_FRAMES)
     corners = [[x, y, lo[2]] for x in (lo[0] - margin, hi[0] + margin) for y in (lo[1], hi[1])]
     corners += [[x, y, hi[2]] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])]
     T_laser_base = inverse(T_base_laser)
