@@ -78,7 +78,7 @@ def test_layout_arguments_found_by_the_properties(call, name):
         call()
 
 
-@pytest.mark.xfail(strict=False, reason=OTHERS)
+@pytest.mark.xfail(strict=True, reason=OTHERS)
 @PROPERTY
 @given(
     kw=variations(
@@ -101,7 +101,6 @@ def test_property_camera(kw):
         assert finite(cam.K) and finite(cam.dist) and cam.dist.shape == (5,)
 
 
-@pytest.mark.xfail(strict=False, reason=OTHERS)
 @PROPERTY
 @given(
     kw=variations(
@@ -152,7 +151,6 @@ def test_property_sensor_noise(kw):
         assert all(v >= 0 and math.isfinite(v) for v in noise._args())
 
 
-@pytest.mark.xfail(strict=False, reason=OTHERS)
 @PROPERTY
 @given(
     kw=variations(
