@@ -227,3 +227,48 @@ FOUND = [
 def test_calibration_arguments_found_by_the_properties(call, name):
     with pytest.raises(errors.InvalidInputError, match=name):
         call()
+
+
+# --------------------------------------------------------------------------- scan folders
+
+json_values = st.one_of(
+    anything.filter(lambda v: isinstance(v, (type(None), bool, int, float, str, list))),
+    st.sampled_from([[[1, 0, 0, 0]] * 4, {"a": 1}, [[]] * 4, "frames/000.png", "../x.png", "/etc/passwd", 1e308]),
+)
+entries = st.fixed_dictionaries(
+    {},
+    optional={
+        "image": st.one_of(st.sampled_from(["frames/000.png", "frames/001.png"]), json_values),
+        "angle": st.one_of(st.floats(-0.2, 0.2), json_values),
+        "T_base_flange": st.one_of(st.just(np.eye(4).tolist()), json_values),
+    },
+)
+manifests = st.one_of(
+    st.fixed_dictionaries(
+        {"version": st.one_of(st.just(1), json_values), "frames": st.one_of(st.lists(entries, max_size=3), json_values)}
+    ),
+    json_values,
+)
+
+
+@pytest.fixture(scope="module")
+def scan_dir(tmp_path_factory):
+    from _files import small_scan
+
+    return small_scan(tmp_path_factory.mktemp("scan") / "scan")
+
+
+@PROPERTY
+@given(doc=manifests)
+def test_property_load_scan_with_hostile_manifests(scan_dir, doc):
+    import json
+
+    from binpick.scan import load_scan
+
+    (scan_dir / "scan.json").write_text(json.dumps(doc))
+    scan = outcome(lambda: load_scan(scan_dir), "load_scan")
+    if scan is not None:
+        assert len(scan.frames) == len(doc["frames"]) >= 1
+        assert (np.abs(scan.angles) <= math.pi).all()
+        assert all(np.allclose(f.T_base_flange[:3, :3].T @ f.T_base_flange[:3, :3], np.eye(3)) for f in scan.frames)
+        assert all(f.image_path.resolve().is_relative_to(scan_dir.resolve()) for f in scan.frames)

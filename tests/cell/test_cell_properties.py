@@ -182,3 +182,11 @@ FOUND = [
 def test_cell_arguments_found_by_the_properties(call, name):
     with pytest.raises(errors.InvalidInputError, match=name):
         call()
+
+
+@pytest.mark.xfail(strict=True, reason=OTHERS)
+@pytest.mark.parametrize("name, value", [("min_confidence", 10**400)])
+def test_cell_config_numbers_found_by_the_bench(tee, name, value):
+    """benches/hardening.py (class cell): OverflowError from float() of an integer beyond the float range."""
+    with pytest.raises(errors.InvalidInputError, match=name):
+        CellConfig(**_valid_config(tee), **{name: value})

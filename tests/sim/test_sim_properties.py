@@ -26,6 +26,7 @@ from _properties import (
     vectors,
 )
 from binpick import errors, sim
+from binpick import transforms as transforms_
 from binpick.transforms import translation
 
 CUBE_V = np.array([[x, y, z] for x in (0.0, 20.0) for y in (0.0, 20.0) for z in (0.0, 20.0)])
@@ -427,3 +428,56 @@ def test_property_contact_sheet(frames, picks, columns, width):
     sheet = outcome(lambda: sim.contact_sheet(frames, picks=picks, columns=columns, width=width), "contact_sheet")
     if sheet is not None:
         assert sheet.dtype == np.uint8 and sheet.ndim == 3 and sheet.shape[1] <= max(width, columns)
+
+
+# --------------------------------------------------------------------------- transforms
+
+
+@PROPERTY
+@given(T=transforms)
+def test_property_inverse(T):
+    inv = outcome(lambda: transforms_.inverse(T), "inverse")
+    if inv is not None:
+        np.testing.assert_allclose(inv @ np.asarray(T, float), np.eye(4), atol=1e-9)
+
+
+@PROPERTY
+@given(xyz=vectors(3, -1e3, 1e3), axis=vectors(3, -1, 1), angle=reals(-4, 4))
+def test_property_translation_rotation_look_down(xyz, axis, angle):
+    for name, call in (
+        ("translation", lambda: transforms_.translation(*xyz)),
+        ("look_down", lambda: transforms_.look_down(*xyz)),
+        ("rot_y", lambda: transforms_.rot_y(angle)),
+    ):
+        T = outcome(call, name)
+        if T is not None:
+            assert T.shape == (4, 4) and finite(T), name
+            np.testing.assert_allclose(T[:3, :3].T @ T[:3, :3], np.eye(3), atol=1e-12)
+    R = outcome(lambda: transforms_.rotation_about(axis, angle), "rotation_about")
+    if R is not None:
+        assert finite(R) and np.allclose(R.T @ R, np.eye(3), atol=1e-9)
+        if abs(angle) <= math.pi:
+            assert transforms_.rotation_angle_deg(R) == pytest.approx(math.degrees(abs(angle)), abs=1e-6)
+
+
+@PROPERTY
+@given(
+    A=transforms,
+    B=transforms,
+    symmetries=st.one_of(st.just(()), st.lists(transforms, max_size=2), anything),
+    axis=st.one_of(st.none(), vectors(3, -1, 1)),
+)
+def test_property_pose_error(A, B, symmetries, axis):
+    err = outcome(lambda: transforms_.pose_error(A, B, symmetries, continuous_axis=axis), "pose_error")
+    if err is not None:
+        deg, mm = err
+        assert 0 <= deg <= 180 + 1e-9 and mm >= 0 and math.isfinite(mm)
+
+
+@PROPERTY
+@given(frames=ints(-1, 300), margin=reals(-50, 50), T=transforms)
+def test_property_laser_sweep(frames, margin, T):
+    lo, hi = np.array([250.0, -100.0, 0.0]), np.array([550.0, 100.0, 80.0])
+    angles = outcome(lambda: transforms_.laser_sweep(T, lo, hi, frames, margin), "laser_sweep")
+    if angles is not None:
+        assert len(angles) == frames and finite(angles)
