@@ -1,9 +1,11 @@
 """The measurement of issue 16: generated bad inputs and misuse over seven classes (arrays, integer
 and float parameters, units, corrupt meshes, other files, vision inputs, hostile serial devices)
-plus the robot's raw ``command``, each case run in a long-lived worker process under a 4 GiB
-address-space limit and a 5 s wall-clock limit. Counts per class: ok, BinpickError subclasses,
-Python TypeError, InternalError, other exceptions, aborts, hangs, and silent wrong answers where
-an oracle exists. Prints a table per class and the totals; writes results.json to --out.
+plus the robot's raw ``command``, and four over the layers above the core (benches/hardening_layers.py:
+device configs and safety checks, simulator arguments, calibration, the cell), each case run in a
+long-lived worker process under a 4 GiB address-space limit and a 5 s wall-clock limit. Counts per
+class: ok, BinpickError subclasses, Python TypeError, InternalError, other exceptions, aborts, hangs,
+and silent wrong answers where an oracle exists. Prints a table per class and the totals; writes
+results.json to --out.
 
 Run: PYTHONPATH=python python benches/hardening.py [--cases 2000 | --quick] [--seed 16]
      [--workers 1] [--classes arrays,params,...] [--out DIR]"""
@@ -27,29 +29,14 @@ from pathlib import Path
 
 import numpy as np
 
+from hardening_cases import Cases, WrongAnswer, _bad_scalar
+from hardening_layers import LAYERS
+
 ROOT = Path(__file__).resolve().parents[1]
-CLASSES = ("arrays", "params", "units", "meshes", "files", "vision", "devices", "command")
+CLASSES = ("arrays", "params", "units", "meshes", "files", "vision", "devices", "command", *LAYERS)
 CASE_LIMIT_S = 5.0
 ADDRESS_LIMIT = 4 << 30
 EXAMPLES = 5
-
-
-class WrongAnswer(Exception):
-    """A call returned, but its result fails the oracle."""
-
-
-# --------------------------------------------------------------------------- values
-
-
-def _bad_scalar(rng: random.Random):
-    """A value a careless or hostile caller might pass for any integer or float argument."""
-    # fmt: off
-    return rng.choice([
-        -1, 0, 1, 2, 3, 7, 255, 256, 257, 2000, 10**9, 10**12, 2**31, 2**63, 2**64, 2**64 - 1, 2**70, -(2**64),
-        10**400, -0.0, 1e-300, 1e-6, 0.5, 1.5, 1e16, 1e300, math.nan, math.inf, -math.inf, True, False, None,
-        "6", "", "nan", b"1", [1], (1, 2), {}, 1 + 2j, object(), rng.uniform(-100, 100), rng.randint(-50, 500),
-    ])
-    # fmt: on
 
 
 def _cloud(rng: random.Random):
@@ -133,19 +120,6 @@ def _model_ok(m):
 
 
 # --------------------------------------------------------------------------- the classes
-
-
-class Cases:
-    """One class's cases: ``run(i)`` builds case ``i`` from the seed and calls the API under test;
-    it returns normally (ok), raises WrongAnswer, or lets the API's exception out."""
-
-    def __init__(self, seed: int, tmp: Path):
-        import binpick
-
-        self.seed, self.tmp, self.bp = seed, tmp, binpick
-
-    def rng(self, i: int) -> random.Random:
-        return random.Random(f"{self.seed}:{type(self).__name__}:{i}")
 
 
 class Arrays(Cases):
@@ -603,7 +577,7 @@ class Command(Cases):
                 raise WrongAnswer(f"{cmd!r} changed the speed or moved the arm")
 
 
-CLASS_TYPES = dict(zip(CLASSES, (Arrays, Params, Units, Meshes, Files, Vision, Devices, Command)))
+CLASS_TYPES = {**dict(zip(CLASSES, (Arrays, Params, Units, Meshes, Files, Vision, Devices, Command))), **LAYERS}
 
 
 # --------------------------------------------------------------------------- the worker

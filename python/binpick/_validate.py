@@ -221,6 +221,33 @@ def native_config(cls: Any, **options: Any) -> Any:
     raise InvalidInputError(f"{cls.__name__}: cannot take these options: {options!r}")
 
 
+def as_faces(value: Any, name: str, vertex_count: int) -> np.ndarray:
+    """An (F, 3) int64 C-contiguous array of triangle vertex indices, each in [0, ``vertex_count``),
+    or InvalidInputError naming ``name`` (DTypeError for non-integer indices, which would be truncated)."""
+    try:
+        arr = np.asarray(value)
+    except Exception as exc:  # ragged lists and the like
+        raise DTypeError(f"{name}: cannot be read as an integer array ({exc}); pass an (F, 3) integer array") from None
+    if arr.ndim != 2 or arr.shape[1] != 3:
+        raise ShapeError(f"{name}: expected an (F, 3) array of vertex indices, got shape {arr.shape}")
+    if arr.dtype.kind not in "iu":
+        raise DTypeError(f"{name}: dtype {arr.dtype}; vertex indices must be integers")
+    if arr.size and (arr.min() < 0 or arr.max() >= vertex_count):
+        raise InvalidInputError(
+            f"{name}: indices span [{arr.min()}, {arr.max()}] but there are {vertex_count} vertices; "
+            f"each index must be in [0, {vertex_count})"
+        )
+    return np.ascontiguousarray(arr, dtype=np.int64)
+
+
+def instance_of(value: Any, cls: type, name: str, example: str = "") -> Any:
+    """``value`` when it is a ``cls``, else InvalidTypeError naming ``name`` (and how to make one)."""
+    if not isinstance(value, cls):
+        hint = f" (e.g. {example})" if example else ""
+        raise InvalidTypeError(f"{name}: expected a {cls.__module__}.{cls.__name__}{hint}, got {type(value).__name__}")
+    return value
+
+
 # --------------------------------------------------------------------------- devices
 
 
@@ -246,7 +273,7 @@ def check_transform(value: Any, name: str) -> np.ndarray:
     (the drivers' form of :func:`as_transform`: any unreadable value is InvalidInputError)."""
     try:
         arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an int beyond the float range
         raise InvalidInputError(
             f"{name}: cannot be read as a 4×4 numeric array; pass a numpy (4, 4) float array"
         ) from None

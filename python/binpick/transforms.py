@@ -2,7 +2,7 @@
 
 Transforms are 4×4 float arrays named ``T_to_from``; lengths in mm, angles in radians unless a
 name says ``_deg``. This is a leaf module: it imports nothing from binpick but the validation
-vocabulary.
+vocabulary and its errors.
 """
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ._validate import as_transform, as_vector
+from ._validate import as_float_array, as_transform, as_vector, count, number
+from .errors import InvalidInputError, ShapeError
 
 __all__ = [
     "inverse",
@@ -29,6 +30,7 @@ __all__ = [
 
 def inverse(T: np.ndarray) -> np.ndarray:
     """The inverse of the rigid transform ``T`` (transposed rotation, rotated-back translation)."""
+    T = as_transform(T, "T")
     out = np.eye(4)
     out[:3, :3] = T[:3, :3].T
     out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
@@ -38,20 +40,26 @@ def inverse(T: np.ndarray) -> np.ndarray:
 def translation(x: float, y: float, z: float) -> np.ndarray:
     """The pure translation by (x, y, z) mm."""
     T = np.eye(4)
+    x, y, z = _xyz(x, y, z)
     T[:3, 3] = (x, y, z)
     return T
 
 
 def rotation_about(axis: Any, angle: float) -> np.ndarray:
     """The 3×3 rotation by ``angle`` radians about ``axis`` (any non-zero length; Rodrigues)."""
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a)
+    a = as_vector(axis, "axis", 3)
+    norm = float(np.linalg.norm(a))
+    if not norm > 1e-12:
+        raise InvalidInputError(f"axis: {a.tolist()} has no direction; pass a non-zero axis")
+    a = a / norm
+    angle = number(angle, "angle", unit="rad")
     K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
     return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
 
 
 def rot_y(angle: float) -> np.ndarray:
     """4×4 rotation about y by ``angle`` radians (the laser motor's axis)."""
+    angle = number(angle, "angle", unit="rad")
     c, s = np.cos(angle), np.sin(angle)
     return np.array([[c, 0, s, 0], [0, 1, 0, 0], [-s, 0, c, 0], [0, 0, 0, 1.0]])
 
@@ -61,7 +69,9 @@ def rotation_angle_deg(R: np.ndarray) -> Any:
 
     From cos θ = (tr R − 1) / 2 and sin θ = |axial part of R|, with atan2, so that angles near
     0° and 180° keep full precision (arccos alone loses half the digits near 0°)."""
-    R = np.asarray(R, dtype=np.float64)
+    R = as_float_array(R, "R")
+    if R.ndim < 2 or R.shape[-2:] != (3, 3):
+        raise ShapeError(f"R: expected a (3, 3) rotation or a stack (..., 3, 3), got shape {R.shape}")
     cos = (np.trace(R, axis1=-2, axis2=-1) - 1.0) / 2.0
     axial = np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]], axis=-1)
     deg = np.degrees(np.arctan2(np.linalg.norm(axial, axis=-1) / 2.0, cos))
@@ -71,9 +81,14 @@ def rotation_angle_deg(R: np.ndarray) -> Any:
 def look_down(x: float, y: float, z: float) -> np.ndarray:
     """A pose at (x, y, z) whose z axis points straight down (−z of the base) and x axis along base +x."""
     T = np.eye(4)
+    x, y, z = _xyz(x, y, z)
     T[:3, :3] = np.diag([1.0, -1.0, -1.0])
     T[:3, 3] = (x, y, z)
     return T
+
+
+def _xyz(x: Any, y: Any, z: Any) -> tuple[float, float, float]:
+    return number(x, "x", unit="mm"), number(y, "y", unit="mm"), number(z, "z", unit="mm")
 
 
 def _closest_spin(M: np.ndarray, axis: np.ndarray) -> np.ndarray:
@@ -108,8 +123,8 @@ def pose_error(
     axis = None if continuous_axis is None else as_vector(continuous_axis, "continuous_axis", 3)
     c = None if axis is None else as_vector(center, "center", 3)
     errors = []
-    for S in [np.eye(4), *symmetries]:
-        S = np.asarray(S, dtype=np.float64)
+    maps = [as_transform(S, f"symmetries[{i}]") for i, S in enumerate(symmetries)]
+    for S in [np.eye(4), *maps]:
         if axis is not None:
             spin = np.eye(4)
             spin[:3, :3] = _closest_spin(A[:3, :3].T @ B[:3, :3] @ S[:3, :3], axis)
@@ -120,12 +135,20 @@ def pose_error(
     return min(errors, key=lambda e: e[0] / 5.0 + e[1] / 3.0)
 
 
+#: Most frames one laser sweep takes: a scan is 30–200 frames; beyond this the frames alone
+#: (at 1 MP each) would not fit in memory.
+MAX_SWEEP_FRAMES = 10_000
+
+
 def laser_sweep(
     T_base_laser: np.ndarray, lo: np.ndarray, hi: np.ndarray, frames: int, margin: float = 10.0
 ) -> np.ndarray:
     """``frames`` motor angles (rad), evenly spaced, whose laser sheets sweep the box ``lo``..``hi``
     (floor corners widened by ``margin`` mm along x, and the rim), for the laser at motor angle 0
-    posed at ``T_base_laser`` (inputs already checked)."""
+    posed at ``T_base_laser`` (the others already checked; ``margin`` is checked here)."""
+    margin = number(margin, "margin", -1e6, 1e6, unit="mm")
+    T_base_laser = as_transform(T_base_laser, "T_base_laser")
+    frames = count(frames, "frames", 1, MAX_SWEEP_FRAMES)
     corners = [[x, y, lo[2]] for x in (lo[0] - margin, hi[0] + margin) for y in (lo[1], hi[1])]
     corners += [[x, y, hi[2]] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])]
     T_laser_base = inverse(T_base_laser)

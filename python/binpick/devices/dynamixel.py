@@ -32,13 +32,14 @@ from typing import Optional, Union
 
 import serial
 
-from .._validate import check_int
+from .._validate import check_int, check_number
 from ..errors import (
     ChecksumError,
     DeviceError,
     DeviceFault,
     DeviceTimeout,
     InvalidInputError,
+    InvalidTypeError,
     ProtocolError,
     TruncatedReplyError,
     UnknownReplyError,
@@ -149,6 +150,8 @@ def encode_packet(motor_id: int, instruction: int, params: bytes = b"") -> bytes
     """A complete packet: header, ID, length, instruction, stuffed parameters, CRC."""
     check_int(motor_id, "motor_id", 0, 0xFE)
     check_int(instruction, "instruction", 0, 0xFF)
+    if not isinstance(params, (bytes, bytearray)):  # bytes(n) of an int would be n zero bytes
+        raise InvalidTypeError(f"params: expected bytes, got {type(params).__name__}")
     body = stuff(bytes([instruction]) + bytes(params))
     length = len(body) + 2
     if length > 0xFFFF:
@@ -172,6 +175,8 @@ def encode_read(motor_id: int, address: int, length: int) -> bytes:
 def encode_write(motor_id: int, address: int, data: bytes) -> bytes:
     """WRITE packet putting ``data`` at ``address``."""
     check_int(address, "address", 0, 0xFFFF)
+    if not isinstance(data, (bytes, bytearray)):
+        raise InvalidTypeError(f"data: expected bytes, got {type(data).__name__}")
     if not data:
         raise InvalidInputError("data: a WRITE needs at least one byte")
     return encode_packet(motor_id, INST_WRITE, struct.pack("<H", address) + bytes(data))
@@ -399,6 +404,7 @@ class DynamixelConfig:
         check_int(self.motor_id, "DynamixelConfig.motor_id", 0, 252)
         check_int(self.ticks_per_revolution, "DynamixelConfig.ticks_per_revolution", 2, 1 << 24)
         check_int(self.zero_tick, "DynamixelConfig.zero_tick", -(1 << 30), 1 << 30)
+        check_number(self.velocity_unit_rpm, "DynamixelConfig.velocity_unit_rpm", low=1e-6, high=100.0, unit="rpm")
         if not isinstance(self.range, MotorRange) or not isinstance(self.serial, SerialSettings):
             raise InvalidInputError("DynamixelConfig: range must be a MotorRange and serial a SerialSettings")
 

@@ -299,6 +299,8 @@ class GripperConfig:
 
     def __post_init__(self) -> None:
         check_int(self.slave, "GripperConfig.slave", 1, 247)
+        if not isinstance(self.serial, SerialSettings):
+            raise InvalidInputError(f"GripperConfig.serial: expected SerialSettings, got {type(self.serial).__name__}")
         check_number(self.stroke_mm, "GripperConfig.stroke_mm", low=0.1, unit="mm")
         for name in ("speed", "force", "max_speed", "max_force"):
             check_int(getattr(self, name), f"GripperConfig.{name}", 0, 255)

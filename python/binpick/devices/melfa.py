@@ -66,7 +66,7 @@ from ..errors import (
 from ._link import SerialLink, SerialSettings, raise_after_stop, restate, with_retries
 from .robot import Robot
 from .safety import CellLimits, check_linear_speed, check_move, check_override, check_pose, check_sequence
-from .xyzabc import transform_from_xyzabc, xyzabc_from_transform, xyzabc_from_wire, xyzabc_to_wire
+from .xyzabc import _as_xyzabc, transform_from_xyzabc, xyzabc_from_transform, xyzabc_from_wire, xyzabc_to_wire
 
 __all__ = [
     "R3Reply",
@@ -76,6 +76,7 @@ __all__ = [
     "encode_command",
     "parse_reply",
     "format_position",
+    "posture_flags",
     "parse_position",
     "parse_joints",
     "parse_state",
@@ -244,12 +245,16 @@ def parse_state(data: str) -> RobotState:
 def format_position(number: int, xyzabc_deg: Any, flags: tuple[int, int]) -> str:
     """``P<n>=(X,Y,Z,A,B,C)(FL1,FL2)`` with two decimals, the body of an EXECP command."""
     check_int(number, "position number", 1, 999)
-    v = [check_number(x, "xyzabc_deg", low=-99999.0, high=99999.0) for x in np.asarray(xyzabc_deg, dtype=float)]
-    if len(v) != 6:
-        raise InvalidInputError(f"xyzabc_deg: expected six numbers, got {len(v)}")
-    fl1 = check_int(flags[0], "FL1", 0, 7)
-    fl2 = check_int(flags[1], "FL2", -(2**31), 2**31 - 1)
+    v = [check_number(x, "xyzabc_deg", low=-99999.0, high=99999.0) for x in _as_xyzabc(xyzabc_deg, "xyzabc_deg")]
+    fl1, fl2 = posture_flags(flags, "flags")
     return f"P{number}=(" + ",".join(f"{x:.2f}" for x in v) + f")({fl1},{fl2})"
+
+
+def posture_flags(flags: Any, name: str) -> tuple[int, int]:
+    """``(FL1, FL2)`` checked: FL1 0–7, FL2 a 32-bit integer, or InvalidInputError naming ``name``."""
+    if not isinstance(flags, (tuple, list)) or len(flags) != 2:
+        raise InvalidInputError(f"{name}: expected the posture flags (FL1, FL2), got {flags!r:.60}")
+    return check_int(flags[0], f"{name}[0] (FL1)", 0, 7), check_int(flags[1], f"{name}[1] (FL2)", -(2**31), 2**31 - 1)
 
 
 # --------------------------------------------------------------------------- driver
@@ -295,6 +300,7 @@ class MelfaConfig:
         if not re.fullmatch(r"[A-Za-z0-9_]{1,32}", str(self.client_name)):
             raise InvalidInputError(f"MelfaConfig.client_name: {self.client_name!r} must be 1–32 letters/digits")
         check_int(self.position_variable, "MelfaConfig.position_variable", 1, 999)
+        posture_flags(self.default_flags, "MelfaConfig.default_flags")
         check_number(self.initial_override_percent, "MelfaConfig.initial_override_percent", low=1, high=100, unit="%")
         check_number(self.initial_linear_speed_mm_s, "MelfaConfig.initial_linear_speed_mm_s", low=0.001, unit="mm/s")
         for name in ("servo_on_timeout_s", "motion_timeout_s", "poll_interval_s"):

@@ -25,7 +25,7 @@ from typing import Any, Optional
 import numpy as np
 
 from .._validate import check_number, check_transform
-from ..errors import InvalidInputError, SafetyError
+from ..errors import InvalidInputError, InvalidTypeError, SafetyError
 
 __all__ = ["CellLimits", "check_pose", "check_move", "check_sequence", "check_override", "check_linear_speed"]
 
@@ -75,8 +75,15 @@ def _triple(value: Any, which: str) -> Sequence[Any]:
     return list(value)
 
 
+def _cell_limits(limits: Any) -> CellLimits:
+    if not isinstance(limits, CellLimits):
+        raise InvalidTypeError(f"limits: expected binpick.devices.CellLimits, got {type(limits).__name__}")
+    return limits
+
+
 def check_pose(T_base_flange: Any, limits: CellLimits, *, name: str = "target") -> np.ndarray:
     """Rules 1 and 2 for one pose; returns it as a float64 (4, 4) array."""
+    limits = _cell_limits(limits)
     T = check_transform(T_base_flange, name)
     p = T[:3, 3]
     lo, hi = np.asarray(limits.workspace_min_mm), np.asarray(limits.workspace_max_mm)
@@ -145,6 +152,7 @@ def check_sequence(
 
 def check_override(percent: Any, limits: CellLimits) -> float:
     """Rule 4 for a speed override, percent."""
+    limits = _cell_limits(limits)
     v = check_number(percent, "override_percent", low=1.0, high=100.0, unit="%")
     if v > limits.max_override_percent:
         raise SafetyError(
@@ -156,6 +164,7 @@ def check_override(percent: Any, limits: CellLimits) -> float:
 
 def check_linear_speed(speed_mm_s: Any, limits: CellLimits) -> float:
     """Rule 4 for a straight-line speed, mm/s."""
+    limits = _cell_limits(limits)
     v = check_number(speed_mm_s, "speed_mm_s", low=0.001, unit="mm/s")
     if v > limits.max_linear_speed_mm_s:
         raise SafetyError(

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validate import check_transform
+from .._validate import check_number, check_transform
 from ..errors import InvalidInputError, ShapeError
 
 __all__ = [
@@ -35,6 +35,7 @@ _GIMBAL_EPS = 1e-9
 
 def rotation_from_abc(a: float, b: float, c: float) -> np.ndarray:
     """The 3×3 rotation Rz(c)·Ry(b)·Rx(a) for angles in radians."""
+    a, b, c = (check_number(v, name, unit="rad") for v, name in ((a, "a"), (b, "b"), (c, "c")))
     ca, sa = math.cos(a), math.sin(a)
     cb, sb = math.cos(b), math.sin(b)
     cc, sc = math.cos(c), math.sin(c)
@@ -50,7 +51,7 @@ def rotation_from_abc(a: float, b: float, c: float) -> np.ndarray:
 def _as_xyzabc(value: Any, name: str) -> np.ndarray:
     try:
         arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # OverflowError: an int beyond the float range
         raise InvalidInputError(f"{name}: cannot be read as six numbers (X, Y, Z, A, B, C)") from None
     if arr.shape != (6,):
         raise ShapeError(f"{name}: expected six numbers (X, Y, Z, A, B, C), got shape {arr.shape}")

@@ -9,9 +9,10 @@ from typing import Optional
 
 import numpy as np
 
-from .._validate import count, non_negative
+from .._validate import MAX_IMAGE_SIDE, count, instance_of, non_negative, thread_count
 from ..errors import FileWriteError, InvalidInputError
 from ..models import Model
+from ..transforms import MAX_SWEEP_FRAMES
 from .cell import Cell
 from .pile import Pile
 from .render import View, World
@@ -64,26 +65,35 @@ def simulate_scan(
     ``cell.noise.reflections`` bounces off them); None makes them glossy
     (:data:`GLOSSY_PART_SPECULAR`) when the cell's noise has reflections and matte otherwise, so
     that ``binpick simulate --reflections`` shows them."""
-    cell = cell or Cell()
+    cell = Cell() if cell is None else instance_of(cell, Cell, "cell", "binpick.sim.Cell()")
+    thread_count(num_threads)
     if part_specular is None:
         part_specular = GLOSSY_PART_SPECULAR if cell.noise.reflections > 0 else 0.0
     pile = Pile(model, count_, bin=cell.bin, seed=seed)
     world = World.of_pile(pile, part_specular=non_negative(part_specular, "part_specular"))
     view = world.view(cell, num_threads=num_threads)
-    angles = cell.sweep(count(frames, "frames", 1))
+    angles = cell.sweep(count(frames, "frames", 1, MAX_SWEEP_FRAMES))
     imgs = view.frames(angles, seed=seed, num_threads=num_threads)
     return SimulatedScan(
         frames=imgs, angles=angles, T_base_flange=cell.T_base_flange, cell=cell, pile=pile, view=view, world=world
     )
 
 
+#: Most tiles (and columns) of a contact sheet.
+MAX_SHEET_TILES = 1000
+
+
 def contact_sheet(frames: np.ndarray, *, picks: int = 6, columns: int = 3, width: int = 1200) -> np.ndarray:
     """A BGR image tiling ``picks`` evenly chosen RGB frames, each labelled with its index."""
     import cv2
 
-    frames = np.asarray(frames)
+    if not isinstance(frames, np.ndarray) or frames.dtype != np.uint8:
+        raise InvalidInputError("frames: expected a uint8 array of (K, H, W, 3) RGB frames")
     if frames.ndim != 4 or frames.shape[-1] != 3 or len(frames) == 0:
         raise InvalidInputError(f"frames: expected (K, H, W, 3) RGB frames, got shape {frames.shape}")
+    picks = count(picks, "picks", 1, MAX_SHEET_TILES)
+    columns = count(columns, "columns", 1, MAX_SHEET_TILES)
+    width = count(width, "width", columns, MAX_IMAGE_SIDE)
     idx = np.unique(np.linspace(0, len(frames) - 1, min(picks, len(frames))).round().astype(int))
     h, w = frames.shape[1:3]
     tw = max(1, width // columns)

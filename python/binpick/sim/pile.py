@@ -7,9 +7,9 @@ from typing import Any
 import numpy as np
 
 from .. import _core
-from .._validate import count, non_negative, positive
+from .._validate import as_float_array, check_finite, count, instance_of, non_negative, number
 from ..errors import InvalidInputError
-from ..models import Model
+from ..models import MAX_SPACING, MIN_SPACING, Model, _check_spacing
 from .cell import Bin
 
 __all__ = ["Pile", "SettleReport", "max_interpenetration", "convex_decomposition"]
@@ -36,12 +36,37 @@ class SettleReport:
         )
 
 
+#: Most parts one pile drops; beyond it the bin could not hold them and settling would take hours.
+MAX_PARTS = 1000
+
+#: Range of the physics time step, s: finer than a millisecond multiplies the steps (and the
+#: quiet steps a settled pile needs) without changing the pile; coarser than 50 ms the core refuses.
+TIME_STEP_RANGE = (1e-3, 0.05)
+
+#: Longest settling, simulated seconds: a pile at rest takes a few; a pile that never rests
+#: stops here rather than stepping for ever.
+MAX_SETTLE_TIME = 60.0
+
+#: Ranges of the convex decomposition's voxel resolution (the core's) and of its hull count.
+DECOMPOSITION_RESOLUTION_RANGE = (8, 256)
+MAX_CONVEX_HULLS = 256
+
+
 def _model(model: Any) -> Model:
-    if not isinstance(model, Model):
-        raise InvalidInputError(
-            f"model: expected a binpick.Model (e.g. binpick.parts.tee()), got {type(model).__name__}"
-        )
-    return model
+    return instance_of(model, Model, "model", "binpick.parts.tee()")
+
+
+def _sample_spacing(model: Model, spacing: Any) -> float:
+    s = number(spacing, "spacing", MIN_SPACING, MAX_SPACING, unit="mm")
+    _check_spacing(model.vertices, model.faces, s)  # a spacing that would sample too many points
+    return s
+
+
+def _decomposition(resolution: Any, hulls: Any) -> tuple[int, int]:
+    return (
+        count(resolution, "decomposition_resolution", *DECOMPOSITION_RESOLUTION_RANGE),
+        count(hulls, "max_convex_hulls", 1, MAX_CONVEX_HULLS),
+    )
 
 
 class Pile:
@@ -68,10 +93,8 @@ class Pile:
         max_convex_hulls: int = 24,
     ) -> None:
         self.model = _model(model)
-        self.bin = bin if bin is not None else Bin()
-        if not isinstance(self.bin, Bin):
-            raise InvalidInputError(f"bin: expected a binpick.sim.Bin, got {type(self.bin).__name__}")
-        n = count(count_, "count", 1)
+        self.bin = Bin() if bin is None else instance_of(bin, Bin, "bin", "binpick.sim.Bin()")
+        n = count(count_, "count", 1, MAX_PARTS)
         self._raw = _core.SimPile(
             np.ascontiguousarray(self.model.vertices, dtype=np.float64),
             np.ascontiguousarray(self.model.faces, dtype=np.int64),
@@ -82,12 +105,11 @@ class Pile:
             float(self.bin.wall_thickness),
             count(seed, "seed"),
             non_negative(friction, "friction"),
-            non_negative(restitution, "restitution"),
-            positive(time_step, "time_step", "s"),
-            positive(max_settle_time, "max_settle_time", "s"),
-            non_negative(skin, "skin"),
-            count(decomposition_resolution, "decomposition_resolution", 8),
-            count(max_convex_hulls, "max_convex_hulls", 1),
+            number(restitution, "restitution", 0.0, 1.0),
+            number(time_step, "time_step", *TIME_STEP_RANGE, unit="s"),
+            number(max_settle_time, "max_settle_time", 1e-3, MAX_SETTLE_TIME, unit="s"),
+            number(skin, "skin", 0.0, 5.0, unit="mm"),
+            *_decomposition(decomposition_resolution, max_convex_hulls),
         )
 
     @property
@@ -103,7 +125,7 @@ class Pile:
     def pose(self, id: int) -> np.ndarray:
         """``T_base_object`` of part ``id``."""
         ids, poses = self._raw.poses()
-        hit = np.flatnonzero(ids == id)
+        hit = np.flatnonzero(ids == count(id, "id"))
         if len(hit) == 0:
             raise InvalidInputError(f"id: no part {id} in the pile (remaining: {ids.tolist()})")
         return poses[hit[0]]
@@ -140,13 +162,14 @@ def max_interpenetration(model: Model, poses: Any, *, spacing: float = 1.0) -> f
     """How deep (mm) points sampled every ``spacing`` mm on each instance's surface lie inside
     another instance's mesh; 0 when no instance overlaps another."""
     model = _model(model)
-    T = np.ascontiguousarray(poses, dtype=np.float64)
+    T = as_float_array(poses, "poses")
     if T.ndim != 3 or T.shape[1:] != (4, 4):
         raise InvalidInputError(f"poses: expected an (N, 4, 4) array, got shape {T.shape}")
+    check_finite(T, "poses")
     samples = _core.sample_mesh(
         np.ascontiguousarray(model.vertices, dtype=np.float64),
         np.ascontiguousarray(model.faces, dtype=np.int64),
-        positive(spacing, "spacing"),
+        _sample_spacing(model, spacing),
         None,
         1,
     )[0]
@@ -168,6 +191,5 @@ def convex_decomposition(
     return _core.sim_convex_decomposition(
         np.ascontiguousarray(model.vertices, dtype=np.float64),
         np.ascontiguousarray(model.faces, dtype=np.int64),
-        count(decomposition_resolution, "decomposition_resolution", 8),
-        count(max_convex_hulls, "max_convex_hulls", 1),
+        *_decomposition(decomposition_resolution, max_convex_hulls),
     )

@@ -15,13 +15,34 @@ from typing import Any, Optional
 import numpy as np
 
 from .. import _core
-from .._validate import as_points, as_transform, count, positive
+from .._validate import (
+    as_angles,
+    as_faces,
+    as_float_array,
+    as_points,
+    as_transform,
+    as_vector,
+    count,
+    instance_of,
+    non_negative,
+    number,
+    positive,
+    thread_count,
+)
 from ..camera import CameraIntrinsics, camera_args
 from ..errors import InvalidInputError
 from ..models import Model
 from .cell import Bin, Cell, Laser, Lighting, SensorNoise
 
 __all__ = ["World", "View", "render_checkerboard", "BIN_ID", "TABLE_ID", "NO_SURFACE"]
+
+#: Range of instance ids (the core's 32-bit signed ids).
+ID_RANGE = (-(2**31), 2**31 - 1)
+
+#: Most inner corners a rendered checkerboard has along one side, and the largest supersampling
+#: (rays per pixel side): beyond either, one render would run for minutes.
+MAX_BOARD_CORNERS = 200
+MAX_SUPERSAMPLE = 8
 
 BIN_ID = -2
 TABLE_ID = -3
@@ -52,14 +73,18 @@ class World:
     @classmethod
     def of_pile(cls, pile: Any, *, bin: Bin | None = None, table: bool = True, part_specular: float = 0.0) -> World:
         """The bin, a table under it, and every part of ``pile`` (a :class:`binpick.sim.Pile`) at its pose."""
+        from .pile import Pile
+
+        pile = instance_of(pile, Pile, "pile", "binpick.sim.Pile(model)")
         w = cls()
-        b = bin if bin is not None else pile.bin
+        b = pile.bin if bin is None else bin
         w.add_bin(b, table=table)
         w.add_parts(pile.model, pile.ids, pile.poses, specular=part_specular)
         return w
 
     def add_bin(self, bin: Bin, *, table: bool = True) -> None:
         """Adds the bin (id −2) and, if ``table``, a table top under it (id −3)."""
+        bin = instance_of(bin, Bin, "bin", "binpick.sim.Bin()")
         v, f = _core.sim_bin_mesh(tuple(bin.center), tuple(bin.size), float(bin.floor_z), float(bin.wall_thickness))
         m = self._scene.add_mesh(v, f, list(BIN_ALBEDO), 0.0, 10.0)
         self._scene.add_instance(m, np.eye(4), BIN_ID)
@@ -80,36 +105,39 @@ class World:
         shininess: float = 20.0,
     ) -> int:
         """Adds a mesh (mm, its own frame) and returns its index for :meth:`add_instance`."""
-        v = np.ascontiguousarray(vertices, dtype=np.float64)
-        f = np.ascontiguousarray(faces, dtype=np.int64)
-        return int(
-            self._scene.add_mesh(v, f, [float(a) for a in albedo], float(specular), positive(shininess, "shininess"))
-        )
+        v = as_points(vertices, "vertices", min_points=3)
+        f = as_faces(faces, "faces", len(v))
+        rgb = as_vector(albedo, "albedo", 3)
+        if ((rgb < 0) | (rgb > 1)).any():
+            raise InvalidInputError(f"albedo: each of R, G, B must be in [0, 1], got {rgb.tolist()}")
+        spec = non_negative(specular, "specular")
+        return int(self._scene.add_mesh(v, f, rgb.tolist(), spec, positive(shininess, "shininess")))
 
     def add_instance(self, mesh: int, T_base_object: Any, id: int) -> None:
         """Places mesh ``mesh`` at ``T_base_object`` under instance id ``id``."""
-        self._scene.add_instance(int(mesh), as_transform(T_base_object, "T_base_object"), int(id))
+        self._scene.add_instance(
+            count(mesh, "mesh"), as_transform(T_base_object, "T_base_object"), count(id, "id", *ID_RANGE)
+        )
 
     def add_parts(self, model: Model, ids: Sequence[int], poses: Any, *, specular: float = 0.0) -> None:
         """Adds instances of ``model`` (mesh built once) at ``poses`` (N, 4, 4) with ``ids``."""
-        if not isinstance(model, Model):
-            raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}")
+        instance_of(model, Model, "model", "binpick.parts.tee()")
         key = id(model)
         if key not in self._meshes:
             self._meshes[key] = self.add_mesh(model.vertices, model.faces, specular=specular)
-        poses = np.asarray(poses, dtype=np.float64)
+        poses = as_float_array(poses, "poses")
         if len(ids) != len(poses):
             raise InvalidInputError(f"ids/poses: {len(ids)} ids but {len(poses)} poses")
         for i, T in zip(ids, poses):
-            self.add_instance(self._meshes[key], T, int(i))
+            self.add_instance(self._meshes[key], T, i)
 
     def set_pose(self, id: int, T_base_object: Any) -> None:
         """Moves instance ``id``."""
-        self._scene.set_pose(int(id), as_transform(T_base_object, "T_base_object"))
+        self._scene.set_pose(count(id, "id", *ID_RANGE), as_transform(T_base_object, "T_base_object"))
 
     def remove(self, id: int) -> None:
         """Removes instance ``id`` (e.g. after a pick)."""
-        self._scene.remove_instance(int(id))
+        self._scene.remove_instance(count(id, "id", *ID_RANGE))
 
     @property
     def ids(self) -> list[int]:
@@ -129,7 +157,7 @@ class World:
             raise InvalidInputError(f"cell: expected a binpick.sim.Cell, got {type(cell).__name__}")
         T_bf = cell.T_base_flange if T_base_flange is None else as_transform(T_base_flange, "T_base_flange")
         T_bc = T_bf @ cell.T_flange_camera
-        raw = self._scene.view(camera_args(cell.camera), T_bc, cell.lighting._args(), count(num_threads, "num_threads"))
+        raw = self._scene.view(camera_args(cell.camera), T_bc, cell.lighting._args(), thread_count(num_threads))
         return View(raw, cell, T_bf)
 
 
@@ -177,18 +205,16 @@ class View:
         num_threads: int = 0,
     ) -> np.ndarray:
         """(K, H, W, 3) uint8 RGB frames, one per motor angle; frame k's noise is seeded by ``seed + k``."""
-        laser = self.cell.laser if laser is None else laser
-        noise = self.cell.noise if noise is None else noise
-        a = np.asarray(angles, dtype=np.float64).ravel()
-        if not np.isfinite(a).all():
-            raise InvalidInputError("angles: must be finite radians")
+        laser = self.cell.laser if laser is None else instance_of(laser, Laser, "laser", "binpick.sim.Laser()")
+        noise = _noise(self.cell.noise if noise is None else noise)
+        a = as_angles(angles, "angles")
         return self._raw.frames(
-            *laser._args(), a.tolist(), noise._args(), count(seed, "seed"), count(num_threads, "num_threads")
+            *laser._args(), a.tolist(), noise._args(), count(seed, "seed"), thread_count(num_threads)
         )
 
     def ambient_frame(self, *, seed: int = 0, noise: Optional[SensorNoise] = None) -> np.ndarray:
         """The RGB frame without the laser."""
-        noise = self.cell.noise if noise is None else noise
+        noise = _noise(self.cell.noise if noise is None else noise)
         return self._raw.ambient_frame(noise._args(), count(seed, "seed"))
 
 
@@ -209,17 +235,27 @@ def render_checkerboard(
     """An RGB image (H, W, 3) uint8 of a checkerboard with ``pattern`` = (columns, rows) inner
     corners, ``square`` mm, at ``T_camera_board`` (OpenCV board frame: origin at the first inner
     corner, corners at (i·square, j·square, 0)); with the laser line at ``angle`` if ``laser``."""
-    cols, rows = (count(pattern[0], "pattern[0]", 1), count(pattern[1], "pattern[1]", 1))
-    lighting = lighting or Lighting(ambient=150.0, lamp=60.0)
-    noise = noise or SensorNoise()
+    if not isinstance(pattern, (tuple, list)) or len(pattern) != 2:
+        raise InvalidInputError(f"pattern: expected (columns, rows) of inner corners, got {pattern!r:.60}")
+    cols, rows = (count(p, f"pattern[{i}]", 1, MAX_BOARD_CORNERS) for i, p in enumerate(pattern))
+    lighting = (
+        Lighting(ambient=150.0, lamp=60.0)
+        if lighting is None
+        else instance_of(lighting, Lighting, "lighting", "binpick.sim.Lighting()")
+    )
+    noise = SensorNoise() if noise is None else _noise(noise)
     return _core.sim_render_checkerboard(
         camera_args(camera),
-        (cols + 1, rows + 1, positive(square, "square"), float(margin)),
+        (cols + 1, rows + 1, positive(square, "square"), non_negative(margin, "margin", "mm")),
         as_transform(T_camera_board, "T_camera_board"),
         lighting._args(),
-        None if laser is None else laser._args(),
-        float(angle),
+        None if laser is None else instance_of(laser, Laser, "laser", "binpick.sim.Laser()")._args(),
+        number(angle, "angle", -np.pi, np.pi, unit="rad"),
         noise._args(),
-        count(supersample, "supersample", 1),
+        count(supersample, "supersample", 1, MAX_SUPERSAMPLE),
         count(seed, "seed"),
     )
+
+
+def _noise(noise: Any) -> SensorNoise:
+    return instance_of(noise, SensorNoise, "noise", "binpick.sim.SensorNoise()")
