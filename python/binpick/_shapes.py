@@ -17,6 +17,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from ._validate import edge_use_counts
+
 __all__ = [
     "ring_solid",
     "angle_samples",
@@ -114,12 +116,6 @@ def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
     """The signed volume of a closed mesh (positive when its faces are wound outward), mm³."""
     a, b, c = (vertices[faces[:, i]] for i in range(3))
     return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
-
-
-def edge_use_counts(faces: np.ndarray) -> np.ndarray:
-    """How many faces use each undirected edge of the mesh (2 everywhere for a closed manifold)."""
-    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    return np.unique(e, axis=0, return_counts=True)[1]
 
 
 def raycast_down(

@@ -21,8 +21,7 @@ from typing import Optional
 import numpy as np
 
 from . import _core
-from ._shapes import edge_use_counts
-from ._validate import unit_scale
+from ._validate import edge_use_counts, unit_scale
 from .errors import InvalidInputError, MeshFileError, MeshFileNotFoundError
 
 __all__ = ["STEP_SUFFIXES", "read_step", "declared_length_unit"]

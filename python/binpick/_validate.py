@@ -454,3 +454,9 @@ def parse_toml(text: str, source: str, error: type) -> dict:
         ) from None
     except ValueError as exc:  # TOMLDecodeError, and integers longer than Python converts
         raise error(f"{source}: not valid TOML ({str(exc)[:200]}); fix the line it names") from None
+
+
+def edge_use_counts(faces: np.ndarray) -> np.ndarray:
+    """How many faces use each undirected edge of the mesh (2 everywhere for a closed manifold)."""
+    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    return np.unique(e, axis=0, return_counts=True)[1]

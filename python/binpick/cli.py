@@ -26,26 +26,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Optional
 
+from ._cli_parts import _model, _Usage
 from .errors import BinpickError, InvalidInputError
 
 __all__ = ["main"]
-
-PARTS = ("tee", "elbow", "cross")
-
-
-class _Usage(Exception):
-    """A usage error found after parsing (exit code 2)."""
-
-
-def _model(part: str, unit: str = "mm") -> Any:
-    from . import parts
-    from .models import Model
-
-    if part in PARTS:
-        return getattr(parts, part)()
-    if not os.path.exists(part):
-        raise _Usage(f"--part: {part!r} is neither a built-in part ({', '.join(PARTS)}) nor a mesh file")
-    return Model.from_mesh(part, unit=unit)
 
 
 def _print_table(report: Any, out: Any = None) -> None:

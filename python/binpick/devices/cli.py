@@ -106,7 +106,7 @@ def _cell(args: argparse.Namespace) -> int:
     _take_signals()
     stop = threading.Event()
     try:
-        from ..cli import _model, _Usage
+        from .._cli_parts import _model, _Usage
 
         model = _model(args.part, args.unit)
         ref = args.part if args.part in ("tee", "elbow", "cross") else os.path.abspath(args.part)

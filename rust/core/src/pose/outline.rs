@@ -187,8 +187,15 @@ pub(crate) fn outline(judge: &Judge, model: &PoseModel, t_scene_model: &Isometry
                 if fp.occupied(pa, pb) {
                     return false; // the part itself is there (a concave outline)
                 }
-                map.top_at(&probe)
-                    .is_some_and(|(hp, top)| (hp - probe.coords.dot(&up)).abs() < tol && !on_support(&top))
+                // The scan's top in the probe's cell must itself lie off the part's footprint: a
+                // coarse cell at the edge also holds the part's own points.
+                map.top_at(&probe).is_some_and(|(hp, top)| {
+                    let own = fp.occupied(
+                        (top.coords.dot(&e1) / g).floor() as i64,
+                        (top.coords.dot(&e2) / g).floor() as i64,
+                    );
+                    (hp - probe.coords.dot(&up)).abs() < tol && !own && !on_support(&top)
+                })
             });
             out.continued += goes_on as usize;
         }
