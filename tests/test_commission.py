@@ -52,16 +52,14 @@ def _command_shim(folder: Path) -> dict:
 def _step_times(trace: str, end: float) -> list[tuple[str, float]]:
     """(command, seconds) of each traced top-level command, up to the next one (or ``end``)."""
     starts = [(float(t), cmd) for t, cmd in re.findall(r"^\+\++ @(\d+\.\d+) (.*)$", trace, re.M)]
-    steps: list[tuple[str, float]] = []
+    starts.sort()  # the background job's trace may be printed after the next command's
+    steps: dict[str, float] = {}
     for i, (t, cmd) in enumerate(starts):
         seconds = (starts[i + 1][0] if i + 1 < len(starts) else end) - t
-        if cmd.startswith(("'[' ", "sleep ")):  # one turn of the `until` loop
+        if cmd.startswith(("'[' ", "sleep ")):  # the turns of the `until` loop, together
             cmd = "until [ -S twin/camera.sock ] … (the twin starting)"
-        if steps and steps[-1][0] == cmd:
-            steps[-1] = (cmd, steps[-1][1] + seconds)
-        else:
-            steps.append((cmd, seconds))
-    return steps
+        steps[cmd] = steps.get(cmd, 0.0) + seconds
+    return list(steps.items())
 
 
 @pytest.fixture(scope="module")

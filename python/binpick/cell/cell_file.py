@@ -89,6 +89,11 @@ drop_pose = [400.0, -250.0, 350.0, 180.0, 0.0, 0.0]
 frames = 90
 tool = [0.0, 0.0, 150.0, 0.0, 0.0, 0.0]   # the gripper's TCP in the flange frame
 
+[calibration_board]          # the printed checkerboard lying face up, for `binpick calibrate capture`
+pattern = [9, 6]             # inner corners: columns, rows
+square_mm = 20.0
+center_mm = [400.0, -250.0, -5.0]      # the centre of the corner grid in the base frame
+
 [estimate]                   # optional: keyword arguments of binpick.estimate_pose
 # d_star = 12.0
 # min_points = 500
