@@ -337,57 +337,31 @@ def _calibrate(args: argparse.Namespace) -> int:
                 "calibrate solve: give one capture folder, e.g. `binpick calibrate solve DIR --out calibration.toml`"
             )
         return _calibrate_solve(target[1], args)
+    if target[0] == "compare":
+        if len(target) != 3:
+            raise _Usage(
+                "calibrate compare: give the solved and the true calibration, e.g. "
+                "`binpick calibrate compare calibration.toml true_calibration.toml`"
+            )
+        return _calibrate_compare(target[1], target[2])
     if len(target) != 1:
-        raise _Usage("calibrate: give one folder of checkerboard images, or `capture CELL.toml` or `solve DIR`")
+        raise _Usage(
+            "calibrate: give one folder of checkerboard images, or `capture CELL.toml`, `solve DIR` "
+            "or `compare CALIBRATION TRUTH`"
+        )
     if args.out is not None:
         raise _Usage("--out: applies to `calibrate capture` and `calibrate solve`; FOLDER's intrinsics print as JSON")
     return _calibrate_folder(args)
 
 
 def _calibrate_capture(cell_path: str, args: argparse.Namespace) -> int:
-    import numpy as np
-
-    from . import parts
-    from .calibration.capture import calibration_plan, capture
     from .cell import ProgressPrinter, load_cell_file
-    from .cell.cell_file import _camera, _limits, _motor, _robot, config_from_file
-    from .errors import CalibrationError
-    from .sim.cell import CalibrationBoard
+    from .cell.cell_file import capture_calibration
 
     if args.out is None:
         raise _Usage("calibrate capture: --out DIR is required (the folder the frames and manifest go to)")
-    f = load_cell_file(cell_path)
-    board = CalibrationBoard()
-    pattern = f.numbers("calibration_board", "pattern", 2, list(board.pattern))
-    if (pattern != np.round(pattern)).any() or (pattern < 2).any():
-        raise _Usage(f"{cell_path}: [calibration_board] pattern must be [columns, rows] of inner corners, >= 2 each")
-    square = f.number("calibration_board", "square_mm", board.square)
-    centre = f.numbers("calibration_board", "center_mm", 3, board.center.tolist())
-    try:  # the present calibration, if the cell has one, aims the camera; a first calibration aims the flange
-        config = config_from_file(f)
-        nominal, model = config.calibration.T_flange_camera, config.model
-    except CalibrationError:
-        nominal, model = None, parts.tee()
-    plan = calibration_plan(centre, T_flange_camera=nominal, pattern=tuple(int(p) for p in pattern), square=square)
-    limits = _limits(f)
-    progress = ProgressPrinter()
-    robot = _robot(f, limits)()
-    motor = camera = None
-    try:
-        motor = _motor(f)()
-        camera = _camera(f, model, 0)()
-        robot.open_session()
-        motor.enable()
-        manifest = capture(robot, motor, camera, plan, args.out, limits=limits, progress=progress)
-    finally:
-        for close in (robot.close_session, robot.close, *(() if motor is None else (motor.disable, motor.close))):
-            try:
-                close()
-            except (BinpickError, OSError):
-                pass
-        if camera is not None:
-            camera.close()
-    print(f"wrote {manifest} ({len(plan.stations)} stations)", file=sys.stderr)
+    manifest, stations = capture_calibration(load_cell_file(cell_path), args.out, progress=ProgressPrinter())
+    print(f"wrote {manifest} ({stations} stations)", file=sys.stderr)
     return 0
 
 
@@ -400,6 +374,18 @@ def _calibrate_solve(folder: str, args: argparse.Namespace) -> int:
     print(solution.summary())
     print(f"wrote {out} and {out.with_name(out.stem + '_residuals.png')}", file=sys.stderr)
     return 0
+
+
+def _calibrate_compare(solved: str, truth: str) -> int:
+    """``binpick calibrate compare``: the errors against the targets; exit 1 when one is missed."""
+    from .calibration import CellCalibration
+    from .calibration.compare import compare_calibrations
+
+    result = compare_calibrations(CellCalibration.load(solved), CellCalibration.load(truth))
+    print(result.table())
+    for failure in result.failures:
+        print(f"binpick calibrate compare: {failure}", file=sys.stderr)
+    return 1 if result.failures else 0
 
 
 def _calibrate_folder(args: argparse.Namespace) -> int:
@@ -602,9 +588,11 @@ def _add_calibrate(sub: Any) -> None:
         "intrinsics as JSON. binpick calibrate capture CELL.toml --out DIR: drives the cell through the calibration "
         "plan (board views, laser sweeps over the board; the board from the cell file's [calibration_board] table) "
         "and saves frames, poses and angles. binpick calibrate solve DIR --out calibration.toml: solves intrinsics, "
-        "hand-eye (all five OpenCV methods) and the laser sheet, writes the calibration and a PNG of the residuals.",
+        "hand-eye (all five OpenCV methods) and the laser sheet, writes the calibration and a PNG of the residuals. "
+        "binpick calibrate compare CALIBRATION TRUTH: prints a solved calibration's errors against a known one (a "
+        "twin's true_calibration.toml) and the commissioning targets; exit 1 when one is missed.",
     )
-    c.add_argument("target", nargs="+", metavar="FOLDER | capture CELL.toml | solve DIR")
+    c.add_argument("target", nargs="+", metavar="FOLDER | capture CELL.toml | solve DIR | compare CALIBRATION TRUTH")
     c.add_argument("--out", default=None, help="capture: the folder to write; solve: the calibration file")
     c.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS (default 9x6)")
     c.add_argument("--square", type=float, default=20.0, help="square size, mm (default 20)")

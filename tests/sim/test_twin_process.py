@@ -100,6 +100,11 @@ def test_the_twin_writes_a_cell_file_pick_can_load_and_its_true_calibration(twin
     assert world["held"] is None and world["collisions"] == []
     true = binpick.calibration.CellCalibration.load(twin.out / "true_calibration.toml")
     assert true == Layout().calibration()
+    # The board the capture aims at is the twin's own.
+    board, cell_file = Layout().board, load_cell_file(twin.out / "cell.toml")
+    assert cell_file.numbers("calibration_board", "pattern", 2).tolist() == list(board.pattern)
+    assert cell_file.number("calibration_board", "square_mm") == board.square
+    np.testing.assert_allclose(cell_file.numbers("calibration_board", "center_mm", 3), board.center, atol=1e-6)
 
 
 def test_the_ports_reopen_again_and_again_with_the_real_drivers(twin):

@@ -9,6 +9,7 @@ import math
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable, Optional
 
 import numpy as np
@@ -39,7 +40,14 @@ from .config import CellConfig, GripperGeometry, check_static_poses
 from .frames import FolderReplay, FrameSource, OpenCVCamera, TwinCamera
 from .loop import Cell
 
-__all__ = ["CELL_FILE_EXAMPLE", "CellFile", "load_cell_file", "cell_from_file", "config_from_file"]
+__all__ = [
+    "CELL_FILE_EXAMPLE",
+    "CellFile",
+    "load_cell_file",
+    "cell_from_file",
+    "config_from_file",
+    "capture_calibration",
+]
 
 
 CELL_FILE_EXAMPLE = """\
@@ -80,6 +88,11 @@ scan_pose = [400.0, 0.0, 620.0, 180.0, 0.0, 0.0]
 drop_pose = [400.0, -250.0, 350.0, 180.0, 0.0, 0.0]
 frames = 90
 tool = [0.0, 0.0, 150.0, 0.0, 0.0, 0.0]   # the gripper's TCP in the flange frame
+
+[calibration_board]          # the printed checkerboard lying face up, for `binpick calibrate capture`
+pattern = [9, 6]             # inner corners: columns, rows
+square_mm = 20.0
+center_mm = [400.0, -250.0, -5.0]      # the centre of the corner grid in the base frame
 
 [estimate]                   # optional: keyword arguments of binpick.estimate_pose
 # d_star = 12.0
@@ -242,6 +255,53 @@ def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig
         num_threads=num_threads,
         estimate_options=_estimate_options(f),
     )
+
+
+def capture_calibration(
+    cell_file: CellFile, out_dir: Any, *, progress: Optional[Callable[[str, str], None]] = None
+) -> tuple[Path, int]:
+    """Drives the cell a cell file describes through the standard calibration plan
+    (:func:`binpick.calibration.capture.calibration_plan` around the file's
+    ``[calibration_board]``: ``pattern`` (inner corners), ``square_mm``, ``center_mm``; each
+    defaults to the twin's board) and saves the capture into ``out_dir``
+    (:func:`binpick.calibration.capture.capture`). The cell's present calibration, when its file
+    exists, aims the camera at the board; a first calibration aims the flange. Only the robot,
+    the laser motor and the camera are opened. Returns the manifest's path and the number of stations."""
+    from ..calibration.capture import calibration_plan, capture
+    from ..sim.cell import CalibrationBoard  # the defaults: the twin's board
+
+    f = cell_file
+    board = CalibrationBoard()
+    pattern = f.numbers("calibration_board", "pattern", 2, list(board.pattern))
+    if (pattern != np.round(pattern)).any() or (pattern < 2).any():
+        raise f._wrong("calibration_board", "pattern", pattern.tolist(), "[columns, rows] of inner corners, 2 or more")
+    square = f.number("calibration_board", "square_mm", board.square)
+    centre = f.numbers("calibration_board", "center_mm", 3, board.center.tolist())
+    try:
+        config = config_from_file(f)
+        nominal, model = config.calibration.T_flange_camera, config.model
+    except CalibrationError:
+        nominal, model = None, parts.tee()
+    plan = calibration_plan(centre, T_flange_camera=nominal, pattern=tuple(int(p) for p in pattern), square=square)
+    limits = _limits(f)
+    open_robot, open_motor, open_camera = _robot(f, limits), _motor(f), _camera(f, model, 0)
+    robot = open_robot()
+    motor = camera = None
+    try:
+        motor = open_motor()
+        camera = open_camera()
+        robot.open_session()
+        motor.enable()
+        manifest = capture(robot, motor, camera, plan, out_dir, limits=limits, progress=progress)
+    finally:
+        for close in (robot.close_session, robot.close, *(() if motor is None else (motor.disable, motor.close))):
+            try:
+                close()
+            except (BinpickError, OSError):
+                pass
+        if camera is not None:
+            camera.close()
+    return manifest, len(plan.stations)
 
 
 def _estimate_options(f: CellFile) -> dict:

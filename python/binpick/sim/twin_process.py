@@ -7,8 +7,10 @@ angle — on the Unix-domain socket ``DIR/camera.sock`` (protocol:
 :mod:`binpick.cell.camera_socket`). It writes into ``DIR``:
 
 * ``cell.toml`` — the cell file for ``binpick pick``: the ptys, ``[camera] source = "twin"``,
-  the bin, scan and drop poses, the tool, the limits, and ``calibration = "calibration.toml"``:
-  the calibration the integrator solves (``binpick pick`` needs that file);
+  the bin, scan and drop poses, the tool, the limits, the twin's checkerboard
+  (``[calibration_board]``, for ``binpick calibrate capture``) and
+  ``calibration = "calibration.toml"``: the calibration the integrator solves (``binpick pick``
+  needs that file);
 * ``true_calibration.toml`` — the twin's exact calibration, for checking a solved one only;
 * ``world.json`` — kept current (:data:`WORLD_VERSION`): the parts in the bin with their poses,
   ``removed`` (parts taken out), ``held`` (the part in the gripper), ``collisions`` (the robot's
@@ -182,6 +184,9 @@ class CellTwin:
         self.out = Path(out)
         self.out.mkdir(parents=True, exist_ok=True)
         self.part_ref, self.unit, self.progress = part_ref, unit, progress
+        for stale in (self.socket_path, self.cell_file):  # a previous twin's, until this one is up
+            if stale.exists() or stale.is_symlink():
+                stale.unlink()
         self.world = TwinWorld(model, progress=progress, **world_options)
         self.camera: Optional[_CameraServer] = None
         self.collisions: list[dict] = []
@@ -203,12 +208,14 @@ class CellTwin:
         return self.out / "camera.sock"
 
     def start(self) -> CellTwin:
-        """Starts the emulators and the camera, writes the files."""
+        """Starts the emulators, writes the files, and opens the camera socket last: once
+        ``camera.sock`` exists, cell.toml names this twin's ports (a script waits for it with
+        ``until [ -S DIR/camera.sock ]``)."""
         self.world.start()
-        self.camera = _CameraServer(self.world, self.socket_path, self.progress)
         write_atomic(self.out / "true_calibration.toml", self.world.config.calibration.to_toml())
         write_atomic(self.cell_file, self.cell_toml())
         self.tick()
+        self.camera = _CameraServer(self.world, self.socket_path, self.progress)
         return self
 
     def close(self) -> None:
@@ -265,7 +272,7 @@ drop_pose = {_toml_list(_pose_deg(w.drop_pose))}
 frames = {int(w.frames)}
 tool = {_toml_list(_pose_deg(w.gripper_geometry.T_flange_gripper))}
 
-[limits]
+{self._board_table()}[limits]
 workspace_min_mm = {_toml_list(lim.workspace_min_mm)}
 workspace_max_mm = {_toml_list(lim.workspace_max_mm)}
 approach_height_mm = {lim.approach_height_mm:.6f}
@@ -273,6 +280,20 @@ max_tool_tilt_deg = {math.degrees(lim.max_tool_tilt_rad):.6f}
 max_lateral_below_mm = {lim.max_lateral_below_mm:.6f}
 max_override_percent = {lim.max_override_percent:g}
 max_linear_speed_mm_s = {lim.max_linear_speed_mm_s:g}
+"""
+
+    def _board_table(self) -> str:
+        """cell.toml's [calibration_board]: the twin's checkerboard, for `binpick calibrate capture`
+        (nothing when the layout has no board)."""
+        board = self.world.layout.board
+        if board is None:
+            return ""
+        return f"""\
+[calibration_board]   # the checkerboard lying face up in the twin, for `binpick calibrate capture`
+pattern = [{board.pattern[0]}, {board.pattern[1]}]   # inner corners: columns, rows
+square_mm = {float(board.square):.6f}
+center_mm = {_toml_list(board.center)}   # the centre of the corner grid, base frame
+
 """
 
     # -- the world's state
