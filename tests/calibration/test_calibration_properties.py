@@ -55,7 +55,6 @@ images = st.one_of(
 
 @PROPERTY
 @given(pattern=patterns, square=reals(-1, 50))
-@pytest.mark.xfail(strict=True, reason=OTHERS)
 def test_property_board_object_points(pattern, square):
     pts = outcome(lambda: board_object_points(pattern, square), "board_object_points")
     if pts is not None:
@@ -66,7 +65,6 @@ def test_property_board_object_points(pattern, square):
 
 @settings(PROPERTY, max_examples=min(PROPERTY.max_examples, 25))
 @given(image=images, pattern=patterns)
-@pytest.mark.xfail(strict=True, reason=OTHERS)
 def test_property_find_checkerboard(image, pattern):
     corners = outcome(lambda: find_checkerboard(image, pattern), "find_checkerboard")
     if corners is not None:
@@ -221,7 +219,6 @@ FOUND = [
 ]
 
 
-@pytest.mark.xfail(strict=True, reason=OTHERS)
 @pytest.mark.parametrize("call, name", FOUND)
 @pytest.mark.timeout(20)
 def test_calibration_arguments_found_by_the_properties(call, name):
