@@ -84,9 +84,23 @@ def find_checkerboard(image: np.ndarray, pattern: tuple[int, int], *, orient: bo
     if not found:
         return None
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
-    corners = cv2.cornerSubPix(grey, corners, (7, 7), (-1, -1), criteria)
+    corners = cv2.cornerSubPix(grey, corners, _refine_window(corners.reshape(-1, 2), size), (-1, -1), criteria)
     corners = corners.reshape(-1, 2).astype(np.float64)
     return _oriented(grey, corners, size) if orient else corners
+
+
+def _refine_window(corners: np.ndarray, size: tuple[int, int]) -> tuple[int, int]:
+    """cornerSubPix's half window, px: 7 (a 15 px search), narrowed on small squares so that the
+    window stays inside the four squares around its corner — a wider one reaches the next corner
+    and pulls both onto the same point."""
+    cols, rows = size
+    grid = corners.reshape(rows, cols, 2)
+    spacing = min(
+        float(np.linalg.norm(np.diff(grid, axis=1), axis=2).min()),
+        float(np.linalg.norm(np.diff(grid, axis=0), axis=2).min()),
+    )
+    half = int(min(7, max(1, (spacing - 1) // 2)))
+    return half, half
 
 
 def _oriented(grey: np.ndarray, corners: np.ndarray, size: tuple[int, int]) -> np.ndarray:
