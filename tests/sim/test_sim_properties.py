@@ -67,6 +67,8 @@ LAYOUT_FOUND = [
     (lambda: sim.Bin(floor_z=1.2e18), "floor_z"),
     (lambda: sim.Bin(center=(1.2e18, 0.0)), "center"),
     (lambda: sim.Bin(size=(300.0, 200.0, 1e18)), "size"),
+    (lambda: sim.Bin(size=(1.0, 1.0, 2.6e-73), floor_z=1.0), "size"),
+    (lambda: CELL.sweep(2, margin=2301.0), "margin"),
     (lambda: sim.Cell(camera=CAMERA, laser=3), "laser"),
     (lambda: sim.simulated_cell(None, seed="x"), "seed"),
     (lambda: sim.simulated_cell(None, layout=3), "layout"),

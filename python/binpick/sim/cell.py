@@ -19,8 +19,8 @@ from typing import Optional
 
 import numpy as np
 
-from .. import _core
-from .._validate import MAX_COORDINATE, as_transform, as_vector, count, instance_of, non_negative, number, positive
+from .. import _core, _validate
+from .._validate import as_transform, as_vector, count, instance_of, non_negative, number, positive
 from ..camera import CameraIntrinsics
 from ..errors import InvalidInputError
 from ..transforms import laser_sweep, look_down, rot_y
@@ -155,23 +155,24 @@ class Bin:
     wall_thickness: float = 8.0
 
     def __post_init__(self) -> None:
+        # The clouds' coordinate ceiling: beyond it floor_z + height rounds to floor_z.
+        top = _validate.MAX_COORDINATE
         s = as_vector(self.size, "size", 3)
-        if (s <= 0).any() or (s > MAX_COORDINATE).any():
+        if (s <= 0).any() or (s > top).any():
             raise InvalidInputError(
-                f"size: the bin's inner length, width and height must be positive mm up to {MAX_COORDINATE:g}, "
-                f"got {s.tolist()}"
+                f"size: the bin's inner length, width and height must be positive mm up to {top:g}, got {s.tolist()}"
             )
         object.__setattr__(self, "size", tuple(float(v) for v in s))
         c = as_vector(self.center, "center", 2)
-        if (np.abs(c) > MAX_COORDINATE).any():
+        if (np.abs(c) > top).any():
             raise InvalidInputError(
-                f"center: {c.tolist()} mm lies beyond ±{MAX_COORDINATE:g} mm, where the bin's walls would "
+                f"center: {c.tolist()} mm lies beyond ±{top:g} mm, where the bin's walls would "
                 "round into each other; place the bin near the robot base"
             )
         object.__setattr__(self, "center", tuple(float(v) for v in c))
-        # The same ceiling as the clouds' coordinates: beyond it floor_z + height rounds to floor_z.
-        object.__setattr__(self, "floor_z", number(self.floor_z, "floor_z", -MAX_COORDINATE, MAX_COORDINATE, "mm"))
+        object.__setattr__(self, "floor_z", number(self.floor_z, "floor_z", -top, top, "mm"))
         positive(self.wall_thickness, "wall_thickness")
+        _validate.as_box(self.bounds, "size")  # a size too small to tell from the position's rounding leaves no inside
 
     @property
     def bounds(self) -> np.ndarray:
