@@ -51,7 +51,7 @@ def _pattern(pattern) -> tuple[int, int]:
 
 def _flags(flags) -> int:
     """``flags`` as a bitwise OR of :data:`CALIBRATION_FLAGS`, or InvalidInputError naming the others."""
-    v = count(flags, "flags", 0, _FLAG_MASK)
+    v = count(flags, "flags", 0, 2**31 - 1)  # OpenCV takes an int
     if v & ~_FLAG_MASK:
         raise InvalidInputError(
             f"flags: {v:#x} sets bits {v & ~_FLAG_MASK:#x} that calibrate_camera does not take; "
