@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ._validate import calibration_matrix, frozen_copy, image_size
+from ._validate import calibration_matrix, frozen_copy, image_size, number
 from .errors import CalibrationError, InvalidInputError
 
 __all__ = ["CameraIntrinsics", "camera_args", "pinhole_matrix"]
@@ -69,7 +69,11 @@ class CameraIntrinsics:
         dist: Sequence[float] = (0.0, 0.0, 0.0, 0.0, 0.0),
         skew: float = 0.0,
     ) -> CameraIntrinsics:
-        """A camera from its pinhole parameters (pixels) and ``dist = [k1, k2, p1, p2, k3]``."""
+        """A camera from its pinhole parameters (pixels) and ``dist = [k1, k2, p1, p2, k3]``; each
+        parameter a finite number (InvalidInputError naming it otherwise)."""
+        fx, fy, cx, cy, skew = (
+            number(v, name, unit="px") for v, name in ((fx, "fx"), (fy, "fy"), (cx, "cx"), (cy, "cy"), (skew, "skew"))
+        )
         return cls(width=width, height=height, K=pinhole_matrix(fx, fy, cx, cy, skew), dist=dist)
 
     @property

@@ -15,6 +15,7 @@ import numpy as np
 from . import _core, _step
 from ._validate import (
     MAX_UNSIGNED,
+    as_faces,
     as_points,
     as_transform,
     as_vector,
@@ -236,14 +237,8 @@ class Model:
         index array (F, 3). At most :data:`MAX_SAMPLES` samples are drawn: a larger ``count``,
         or a ``spacing`` so fine that it would ask for more, is refused before any allocation."""
         v = as_points(vertices, "vertices", min_points=3)
-        try:
-            f = np.asarray(faces)
-        except (ValueError, TypeError) as e:
-            raise InvalidInputError(f"faces: expected an (F, 3) integer array, got {type(faces).__name__} ({e})") from e
-        if f.ndim != 2 or f.shape[1] != 3 or f.dtype.kind not in "iu":
-            raise InvalidInputError(f"faces: expected an (F, 3) integer array, got shape {f.shape} dtype {f.dtype}")
+        f = as_faces(faces, "faces", len(v))
         v = v * unit_scale(unit)
-        f = np.ascontiguousarray(f, dtype=np.int64)
         if spacing is not None and count is not None:
             raise InvalidInputError("spacing/count: give one of them, not both")
         if spacing is None and count is None:

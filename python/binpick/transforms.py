@@ -153,6 +153,12 @@ def laser_sweep(
     corners += [[x, y, hi[2]] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])]
     T_laser_base = inverse(T_base_laser)
     local = np.asarray(corners) @ T_laser_base[:3, :3].T + T_laser_base[:3, 3]
+    behind = local[:, 2] <= 0
+    if behind.any():
+        raise InvalidInputError(
+            f"margin: the box corner {np.round(corners[int(np.argmax(behind))], 1).tolist()} mm lies behind the laser "
+            "(its light travels along +z_L), where no sheet reaches; use a smaller margin or a scan pose above the box"
+        )
     # At motor angle θ the sheet is x cos θ − z sin θ = 0 in the laser frame: it meets a point at θ = atan2(x, z).
     theta = np.arctan2(local[:, 0], local[:, 2])
     return np.array([float(theta.mean())]) if frames == 1 else np.linspace(theta.min(), theta.max(), frames)

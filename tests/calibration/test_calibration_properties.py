@@ -3,14 +3,14 @@ and poses, checkerboard detection, camera, hand-eye, laser-plane and projector c
 the calibration file's readers each end in a result or a BinpickError (TypeError for a wrong
 Python type), within seconds, and what they return is what they promise.
 
-calibration/* is not this change's to fix: what these tests found there is listed in FOUND
-(strict xfail, so that a fix shows as an XPASS), and the property tests that find it are
-marked xfail until then."""
+What these tests found in calibration/* is pinned in FOUND (each case now refused with an
+InvalidInputError naming the argument)."""
 
 from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -35,7 +35,6 @@ CAMERA = CameraIntrinsics.pinhole(160, 120, 200.0, 200.0, 79.5, 59.5)
 PATTERN = (4, 3)
 T_BOARD = rigid(0.15, (1, 0.5, 0), (-15.0, -10.0, 250.0))
 BOARD = render_checkerboard(CAMERA, T_BOARD, pattern=PATTERN, square=10.0, supersample=1)
-OTHERS = "issue 16: calibration/* lets this through; to be fixed there (see FOUND)"
 
 patterns = st.one_of(st.just(PATTERN), st.tuples(ints(0, 12), ints(0, 12)), anything)
 images = st.one_of(
@@ -55,7 +54,6 @@ images = st.one_of(
 
 @PROPERTY
 @given(pattern=patterns, square=reals(-1, 50))
-@pytest.mark.xfail(strict=True, reason=OTHERS)
 def test_property_board_object_points(pattern, square):
     pts = outcome(lambda: board_object_points(pattern, square), "board_object_points")
     if pts is not None:
@@ -66,7 +64,6 @@ def test_property_board_object_points(pattern, square):
 
 @settings(PROPERTY, max_examples=min(PROPERTY.max_examples, 25))
 @given(image=images, pattern=patterns)
-@pytest.mark.xfail(strict=True, reason=OTHERS)
 def test_property_find_checkerboard(image, pattern):
     corners = outcome(lambda: find_checkerboard(image, pattern), "find_checkerboard")
     if corners is not None:
@@ -205,8 +202,8 @@ def test_property_calibration_load(path):
     outcome(lambda: CellCalibration.load(path), "CellCalibration.load")
 
 
-#: What the properties found in calibration/* (each raises outside BinpickError, or hangs or
-#: allocates without bound).
+#: What the properties found in calibration/* (each raised outside BinpickError, hung, allocated
+#: without bound, or returned a wrong answer), refused now.
 FOUND = [
     (lambda: board_object_points((math.inf, 3), 10.0), "pattern"),
     (lambda: board_object_points((2.7, 3), 10.0), "pattern"),
@@ -217,16 +214,45 @@ FOUND = [
     (lambda: find_checkerboard(BOARD, (10**5, 10**5)), "pattern"),
     (lambda: calibrate_camera([BOARD] * 3, PATTERN, 10.0, flags=-1), "flags"),
     (lambda: calibrate_camera([BOARD] * 3, PATTERN, 10.0, min_views="3"), "min_views"),
+    (lambda: calibrate_camera([BOARD] * 3, PATTERN, 10.0, flags=cv2.CALIB_RATIONAL_MODEL), "flags"),
+    (lambda: calibrate_camera([BOARD] * 3, PATTERN, 10.0, flags=cv2.CALIB_USE_INTRINSIC_GUESS), "flags"),
+    (lambda: calibrate_camera([BOARD] * 3, PATTERN, 10.0, flags=2**40), "flags"),
+    (lambda: calibrate_camera([BOARD] * 3, PATTERN, 10.0, min_views=0), "min_views"),
     (lambda: fit_plane(PLANE, seed=-1), "seed"),
+    (lambda: fit_plane(PLANE, seed=1.5), "seed"),
+    (lambda: fit_plane(PLANE, iterations=10**9), "iterations"),
+    (lambda: board_pose(np.full((12, 2), np.nan), CAMERA, PATTERN, 10.0), "corners"),
+    (lambda: board_pose(np.zeros((12, 2)), CAMERA, PATTERN, 10.0), "corners"),
+    (lambda: board_pose(np.zeros((12, 3)), CAMERA, PATTERN, 10.0), "corners"),
+    (lambda: board_pose(np.full((12, 2), 1e300), CAMERA, PATTERN, 10.0), "corners"),
 ]
 
 
-@pytest.mark.xfail(strict=True, reason=OTHERS)
 @pytest.mark.parametrize("call, name", FOUND)
 @pytest.mark.timeout(20)
 def test_calibration_arguments_found_by_the_properties(call, name):
     with pytest.raises(errors.InvalidInputError, match=name):
         call()
+
+
+def test_board_pose_of_a_small_board_finds_the_rendered_pose(corners):
+    """Squares 8 px wide: the sub-pixel window narrows to stay within one corner's squares (a
+    15 px one pulled neighbouring corners onto each other and put the board 110 mm too far)."""
+    spacing = np.linalg.norm(corners[1] - corners[0])
+    assert 7.0 < spacing < 9.0
+    assert np.linalg.norm(np.diff(corners.reshape(3, 4, 2), axis=1), axis=2).min() > 7.0  # no two corners merged
+    for c in (corners, corners[:, None, :].astype(np.float32)):  # OpenCV's own (N, 1, 2) float32 too
+        T = board_pose(c, CAMERA, PATTERN, 10.0)
+        assert np.linalg.norm(T[:3, 3] - T_BOARD[:3, 3]) < 0.5
+        assert T[:3, 2] @ T_BOARD[:3, 2] > math.cos(0.2)  # the board's normal within 0.2 rad
+
+
+def test_calibrate_camera_with_allowed_flags_keeps_them():
+    """A fixed principal point stays at the image centre the guess starts from."""
+    flags = cv2.CALIB_FIX_PRINCIPAL_POINT | cv2.CALIB_ZERO_TANGENT_DIST
+    cal = calibrate_camera([BOARD] * 3, PATTERN, 10.0, flags=flags)
+    assert cal.camera.dist[2] == 0.0 and cal.camera.dist[3] == 0.0
+    assert abs(cal.camera.cx - 79.5) < 1.0 and abs(cal.camera.cy - 59.5) < 1.0
 
 
 # --------------------------------------------------------------------------- scan folders

@@ -8,21 +8,56 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .._validate import as_image, positive
+from .._validate import as_float_array, as_image, as_points, count, instance_of, positive
 from ..camera import CameraIntrinsics
 from ..errors import CalibrationError, InvalidInputError
 
 __all__ = ["CameraCalibration", "board_object_points", "board_pose", "calibrate_camera", "find_checkerboard"]
 
 
+#: Most inner corners a checkerboard may have along one side: printed boards have tens, and
+#: beyond this a pattern is a mistake that would allocate its corners (a million of them) for nothing.
+MAX_PATTERN_SIDE = 1000
+
+#: The cv2.calibrateCamera flags :func:`calibrate_camera` passes on: those that fix or drop terms
+#: of the five-coefficient model ``[k1, k2, p1, p2, k3]`` binpick keeps, and the solver choice.
+#: The rational, thin-prism and tilted models would return coefficients the camera cannot hold;
+#: the intrinsic and extrinsic guesses need starting values this function does not take.
+CALIBRATION_FLAGS = {
+    "CALIB_FIX_ASPECT_RATIO": cv2.CALIB_FIX_ASPECT_RATIO,
+    "CALIB_FIX_PRINCIPAL_POINT": cv2.CALIB_FIX_PRINCIPAL_POINT,
+    "CALIB_ZERO_TANGENT_DIST": cv2.CALIB_ZERO_TANGENT_DIST,
+    "CALIB_FIX_K1": cv2.CALIB_FIX_K1,
+    "CALIB_FIX_K2": cv2.CALIB_FIX_K2,
+    "CALIB_FIX_K3": cv2.CALIB_FIX_K3,
+    "CALIB_USE_LU": cv2.CALIB_USE_LU,
+    "CALIB_USE_QR": cv2.CALIB_USE_QR,
+}
+_FLAG_MASK = sum(CALIBRATION_FLAGS.values())
+
+
 def _pattern(pattern) -> tuple[int, int]:
+    """(columns, rows) of inner corners, each a whole number in [3, :data:`MAX_PATTERN_SIDE`]
+    (OpenCV finds no board with fewer than three inner corners along a side)."""
     try:
-        cols, rows = (int(p) for p in pattern)
+        cols, rows = pattern
     except (TypeError, ValueError):
-        raise InvalidInputError(f"pattern: expected (columns, rows) of inner corners, got {pattern!r}") from None
-    if cols < 2 or rows < 2:
-        raise InvalidInputError(f"pattern: needs at least 2×2 inner corners, got {pattern!r}")
-    return cols, rows
+        raise InvalidInputError(f"pattern: expected (columns, rows) of inner corners, got {pattern!r:.60}") from None
+    return (
+        count(cols, "pattern columns (inner corners)", 3, MAX_PATTERN_SIDE),
+        count(rows, "pattern rows (inner corners)", 3, MAX_PATTERN_SIDE),
+    )
+
+
+def _flags(flags) -> int:
+    """``flags`` as a bitwise OR of :data:`CALIBRATION_FLAGS`, or InvalidInputError naming the others."""
+    v = count(flags, "flags", 0, 2**31 - 1)  # OpenCV takes an int
+    if v & ~_FLAG_MASK:
+        raise InvalidInputError(
+            f"flags: {v:#x} sets bits {v & ~_FLAG_MASK:#x} that calibrate_camera does not take; "
+            f"combine only {', '.join('cv2.' + n for n in CALIBRATION_FLAGS)}"
+        )
+    return v
 
 
 def board_object_points(pattern: tuple[int, int], square: float) -> np.ndarray:
@@ -49,9 +84,23 @@ def find_checkerboard(image: np.ndarray, pattern: tuple[int, int], *, orient: bo
     if not found:
         return None
     criteria = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_MAX_ITER, 100, 1e-4)
-    corners = cv2.cornerSubPix(grey, corners, (7, 7), (-1, -1), criteria)
+    corners = cv2.cornerSubPix(grey, corners, _refine_window(corners.reshape(-1, 2), size), (-1, -1), criteria)
     corners = corners.reshape(-1, 2).astype(np.float64)
     return _oriented(grey, corners, size) if orient else corners
+
+
+def _refine_window(corners: np.ndarray, size: tuple[int, int]) -> tuple[int, int]:
+    """cornerSubPix's half window, px: 7 (a 15 px search), narrowed on small squares so that the
+    window stays inside the four squares around its corner — a wider one reaches the next corner
+    and pulls both onto the same point."""
+    cols, rows = size
+    grid = corners.reshape(rows, cols, 2)
+    spacing = min(
+        float(np.linalg.norm(np.diff(grid, axis=1), axis=2).min()),
+        float(np.linalg.norm(np.diff(grid, axis=0), axis=2).min()),
+    )
+    half = int(min(7, max(1, (spacing - 1) // 2)))
+    return half, half
 
 
 def _oriented(grey: np.ndarray, corners: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -80,13 +129,27 @@ def _pose(rvec: np.ndarray, tvec: np.ndarray) -> np.ndarray:
 def board_pose(corners: np.ndarray, camera: CameraIntrinsics, pattern: tuple[int, int], square: float) -> np.ndarray:
     """``T_camera_board`` from the board's detected corners (the paper's Eq. 15, by PnP)."""
     obj = board_object_points(pattern, square)
-    corners = np.asarray(corners, dtype=np.float64).reshape(-1, 2)
-    if len(corners) != len(obj):
-        raise InvalidInputError(f"corners: {len(corners)} corners for a {pattern} pattern of {len(obj)}")
-    ok, rvec, tvec = cv2.solvePnP(obj, corners, camera.K, camera.dist, flags=cv2.SOLVEPNP_ITERATIVE)
-    if not ok:
+    instance_of(camera, CameraIntrinsics, "camera", "CameraIntrinsics.pinhole(width, height, fx, fy, cx, cy)")
+    arr = as_float_array(corners, "corners")
+    if arr.ndim == 3 and arr.shape[1] == 1:  # OpenCV's (N, 1, 2)
+        arr = arr[:, 0, :]
+    pts = as_points(arr, "corners", columns=2)
+    if len(pts) != len(obj):
+        raise InvalidInputError(f"corners: {len(pts)} corners for a {pattern} pattern of {len(obj)}; pass every corner")
+    try:
+        ok, rvec, tvec = cv2.solvePnP(obj, pts, camera.K, camera.dist, flags=cv2.SOLVEPNP_ITERATIVE)
+    except cv2.error as exc:
+        raise CalibrationError(
+            f"corners: solvePnP failed ({str(exc).strip()[-120:]}); pass the corners find_checkerboard found"
+        ) from None
+    if not ok or not (np.isfinite(rvec).all() and np.isfinite(tvec).all()):
         raise CalibrationError("corners: solvePnP found no board pose; check the pattern size and the corners")
-    return _pose(rvec, tvec)
+    T = _pose(rvec, tvec)
+    if T[2, 3] <= 0:
+        raise CalibrationError(
+            "corners: the only board pose that fits lies behind the camera; the corners are not a view of this board"
+        )
+    return T
 
 
 @dataclass(frozen=True, eq=False)
@@ -126,6 +189,8 @@ def calibrate_camera(
     The reprojection error is reported overall and per view. ``orient``: see :func:`find_checkerboard`
     (needed when the board poses are used together, as hand-eye does).
     """
+    flags = _flags(flags)
+    min_views = count(min_views, "min_views", 1)
     imgs = list(images)
     if not imgs:
         raise CalibrationError("images: no checkerboard images given")
@@ -145,9 +210,17 @@ def calibrate_camera(
             f"images: the {pattern} checkerboard was found in {len(views)} of {len(imgs)} images, "
             f"at least {min_views} are needed; check the pattern size (inner corners) and the lighting"
         )
-    rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(
-        [obj] * len(views), corners, (width, height), None, None, flags=flags
-    )
+    try:
+        rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(
+            [obj] * len(views), corners, (width, height), None, None, flags=flags
+        )
+    except cv2.error as exc:
+        raise CalibrationError(
+            f"images: OpenCV could not calibrate from these views ({str(exc).strip()[-120:]}); "
+            "use views of the board at several tilts"
+        ) from None
+    if not (np.isfinite(K).all() and np.isfinite(dist).all() and np.isfinite(rms)):
+        raise CalibrationError("images: the calibration diverged; use views of the board at several tilts")
     per_view = []
     for c, r, t in zip(corners, rvecs, tvecs):
         proj, _ = cv2.projectPoints(obj, r, t, K, dist)

@@ -10,7 +10,7 @@ from typing import Optional
 
 import numpy as np
 
-from .._validate import as_angles, as_points, as_transform, positive
+from .._validate import as_angles, as_points, as_transform, count, positive
 from ..camera import CameraIntrinsics
 from ..errors import CalibrationError, SingularGeometryError
 
@@ -33,15 +33,23 @@ def laser_points_on_board(pixels: np.ndarray, camera: CameraIntrinsics, T_camera
     return rays * s[:, None]
 
 
+#: Most RANSAC iterations :func:`fit_plane` runs: each costs a pass over every point, and a few
+#: hundred find a plane holding half the points with near certainty; far more is a mistake
+#: that would run for hours.
+MAX_RANSAC_ITERATIONS = 100_000
+
+
 def fit_plane(
     points: np.ndarray, *, inlier_distance: float = 0.5, iterations: int = 200, seed: int = 0
 ) -> tuple[np.ndarray, float, np.ndarray]:
     """A robust plane through ``points`` (N, 3): RANSAC on triples, then a least-squares refit on
     the inliers (within ``inlier_distance`` mm). Returns (unit normal, offset, inlier mask),
-    the plane being ``normal · x = offset``."""
+    the plane being ``normal · x = offset``. ``iterations``: RANSAC triples drawn, 1 to
+    :data:`MAX_RANSAC_ITERATIONS`; ``seed``: a non-negative integer fixing the draw."""
     pts = as_points(points, "points", min_points=3)
     tol = positive(inlier_distance, "inlier_distance")
-    rng = np.random.default_rng(seed)
+    iterations = count(iterations, "iterations", 1, MAX_RANSAC_ITERATIONS)
+    rng = np.random.default_rng(count(seed, "seed"))
     best = None
     for _ in range(iterations):
         a, b, c = pts[rng.choice(len(pts), 3, replace=False)]

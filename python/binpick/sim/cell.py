@@ -19,8 +19,8 @@ from typing import Optional
 
 import numpy as np
 
-from .. import _core
-from .._validate import as_transform, as_vector, count, non_negative, positive
+from .. import _core, _validate
+from .._validate import as_transform, as_vector, count, instance_of, non_negative, number, positive
 from ..camera import CameraIntrinsics
 from ..errors import InvalidInputError
 from ..transforms import laser_sweep, look_down, rot_y
@@ -72,7 +72,7 @@ class Laser:
         object.__setattr__(self, "T_camera_laser0", as_transform(self.T_camera_laser0, "T_camera_laser0"))
         positive(self.sheet_sigma, "sheet_sigma")
         non_negative(self.power, "power", "DN")
-        if not 0 < float(self.fan_angle) < np.pi:
+        if positive(self.fan_angle, "fan_angle", "rad") >= np.pi:
             raise InvalidInputError(f"fan_angle: must be in (0, π) radians, got {self.fan_angle!r}")
         object.__setattr__(self, "color", tuple(float(c) for c in as_vector(self.color, "color", 3)))
         positive(self.reference_distance, "reference_distance")
@@ -155,15 +155,24 @@ class Bin:
     wall_thickness: float = 8.0
 
     def __post_init__(self) -> None:
+        # The clouds' coordinate ceiling: beyond it floor_z + height rounds to floor_z.
+        top = _validate.MAX_COORDINATE
         s = as_vector(self.size, "size", 3)
-        if (s <= 0).any():
+        if (s <= 0).any() or (s > top).any():
             raise InvalidInputError(
-                f"size: the bin's inner length, width and height must be positive mm, got {s.tolist()}"
+                f"size: the bin's inner length, width and height must be positive mm up to {top:g}, got {s.tolist()}"
             )
         object.__setattr__(self, "size", tuple(float(v) for v in s))
-        object.__setattr__(self, "center", tuple(float(v) for v in as_vector(self.center, "center", 2)))
-        object.__setattr__(self, "floor_z", float(as_vector([self.floor_z], "floor_z", 1)[0]))
+        c = as_vector(self.center, "center", 2)
+        if (np.abs(c) > top).any():
+            raise InvalidInputError(
+                f"center: {c.tolist()} mm lies beyond ±{top:g} mm, where the bin's walls would "
+                "round into each other; place the bin near the robot base"
+            )
+        object.__setattr__(self, "center", tuple(float(v) for v in c))
+        object.__setattr__(self, "floor_z", number(self.floor_z, "floor_z", -top, top, "mm"))
         positive(self.wall_thickness, "wall_thickness")
+        _validate.as_box(self.bounds, "size")  # a size too small to tell from the position's rounding leaves no inside
 
     @property
     def bounds(self) -> np.ndarray:
@@ -218,10 +227,11 @@ class Cell:
     board: Optional[CalibrationBoard] = field(default_factory=CalibrationBoard)
 
     def __post_init__(self) -> None:
-        if self.board is not None and not isinstance(self.board, CalibrationBoard):
-            raise InvalidInputError(
-                f"board: expected a binpick.sim.CalibrationBoard or None, got {type(self.board).__name__}"
-            )
+        instance_of(self.camera, CameraIntrinsics, "camera", "binpick.sim.Camera()")
+        for name, kind in (("laser", Laser), ("bin", Bin), ("lighting", Lighting), ("noise", SensorNoise)):
+            instance_of(getattr(self, name), kind, name, f"binpick.sim.{kind.__name__}()")
+        if self.board is not None:
+            instance_of(self.board, CalibrationBoard, "board", "binpick.sim.CalibrationBoard() or None")
         object.__setattr__(self, "T_flange_camera", as_transform(self.T_flange_camera, "T_flange_camera"))
         object.__setattr__(self, "T_base_flange", as_transform(self.T_base_flange, "T_base_flange"))
 

@@ -21,8 +21,8 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from .. import parts
-from .._validate import positive
+from .. import _validate, parts
+from .._validate import instance_of, positive, thread_count
 from ..cell.config import CellConfig, GripperGeometry
 from ..cell.grasp import GraspMatcher, grip_width, symmetry_maps
 from ..cell.loop import Cell, quiet
@@ -143,11 +143,13 @@ class TwinWorld:
     ) -> None:
         if not isinstance(model, Model):
             raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}")
-        self.layout = layout if layout is not None else Layout()
+        self.layout = instance_of(Layout() if layout is None else layout, Layout, "layout", "binpick.sim.Cell()")
         self.model = model
-        self.seed = int(seed)
-        self.num_threads = int(num_threads)
-        self.gripper_geometry = gripper or GripperGeometry()
+        self.seed = _validate.count(seed, "seed")
+        self.num_threads = thread_count(num_threads)
+        self.gripper_geometry = instance_of(
+            GripperGeometry() if gripper is None else gripper, GripperGeometry, "gripper", "GripperGeometry()"
+        )
         self.grip_tolerance_mm = positive(grip_tolerance_mm, "grip_tolerance_mm")
         self.grip_tolerance_deg = positive(grip_tolerance_deg, "grip_tolerance_deg", "deg")
         self.speed_scale = positive(speed_scale, "speed_scale", "")
