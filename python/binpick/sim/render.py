@@ -72,10 +72,15 @@ class World:
 
     @classmethod
     def of_pile(cls, pile: Any, *, bin: Bin | None = None, table: bool = True, part_specular: float = 0.0) -> World:
-        """The bin, a table under it, and every part of ``pile`` (a :class:`binpick.sim.Pile`) at its pose."""
-        from .pile import Pile
-
-        pile = instance_of(pile, Pile, "pile", "binpick.sim.Pile(model)")
+        """The bin, a table under it, and every part of ``pile`` at its pose: a :class:`binpick.sim.Pile`,
+        or a snapshot of one (anything with its ``bin``, ``model``, ``ids`` and ``poses``, such as the
+        parts a twin's ``world.json`` lists)."""
+        missing = [a for a in ("bin", "model", "ids", "poses") if not hasattr(pile, a)]
+        if missing:
+            raise InvalidInputError(
+                f"pile: a {type(pile).__name__} has no {', '.join(missing)}; pass a binpick.sim.Pile(model) "
+                "or a snapshot with its bin, model, ids and poses"
+            )
         w = cls()
         b = pile.bin if bin is None else bin
         w.add_bin(b, table=table)
