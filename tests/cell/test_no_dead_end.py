@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 import binpick
-from binpick.cell.config import turned_scan_poses
 from binpick.cell.grasp import bin_clash, pick_waypoints, plan_grasp, points_in_gripper, tool_tilt_deg
+from binpick.cell.views import deciding_views, turned_scan_poses
 from binpick.devices import safety
 from binpick.errors import SafetyError
 from binpick.sim import SimulatedCell
-from binpick.transforms import laser_sweep
+from binpick.transforms import laser_sweep, rotation_about
 
 
 @pytest.fixture(scope="module")
@@ -120,3 +120,22 @@ def test_the_planner_agrees_with_checking_every_grasp_one_by_one(tee):
                 plan.grasp,
                 expected,
             )
+
+
+def test_the_deciding_view_faces_the_surface_the_alternative_lacks(tee):
+    # The tee lies with its stem along +y; the alternative the scan could not rule out has the stem
+    # turned up (+z). The stem's end face and side toward +y exist in one pose only, so a camera
+    # on the +y side decides, one on the -y side sees only the upright stem's side.
+    T = np.eye(4)
+    T_alt = np.eye(4)
+    T_alt[:3, :3] = rotation_about(np.array([1.0, 0.0, 0.0]), math.pi / 2)
+    views = []
+    for y in (-300.0, 300.0, 0.0):
+        V = np.eye(4)
+        V[:3, 3] = (0.0, y, 400.0)
+        views.append(V)
+    order = deciding_views(tee, T, [T_alt], views, np.eye(4))
+    assert sorted(order) == [0, 1, 2]
+    assert order.index(1) < order.index(0)
+    # Without a difference between the poses, the views keep their order.
+    assert deciding_views(tee, T, [T], views, np.eye(4)) == [0, 1, 2]

@@ -8,7 +8,6 @@ Lengths in mm, angles in radians; transforms are 4×4 ``T_to_from``.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -21,8 +20,9 @@ from ..calibration import CellCalibration
 from ..devices import safety
 from ..errors import InvalidInputError, SafetyError
 from ..models import Model
-from ..transforms import laser_sweep, rotation_about, translation
+from ..transforms import laser_sweep, translation
 from .grasp import branch_grasps, mesh_grasps
+from .views import turned_scan_poses
 
 __all__ = ["CellConfig", "GripperGeometry", "check_static_poses", "sweep_angles", "turned_scan_poses"]
 
@@ -284,29 +284,6 @@ def sweep_angles(
     lo, hi = as_box(bin_bounds)
     n = count(frames, "frames", 1)
     return laser_sweep(T_bf @ calibration.T_flange_camera @ calibration.T_camera_laser, lo, hi, n, margin)
-
-
-def turned_scan_poses(config: CellConfig, *, tilt_deg: float = 20.0) -> tuple[np.ndarray, ...]:
-    """The first scan pose turned by ``tilt_deg`` about the centre of the bin's floor toward each
-    of the bin's four sides (the camera keeps the bin in view and sees the pile's sides that face
-    that way), keeping those within the cell's limits, above the approach height and, when the
-    config knows the arm's kinematics (``reachable``), reachable."""
-    lo, hi = config.bin_bounds
-    centre = np.array([(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0, lo[2]])
-    T0 = config.scan_poses[0]
-    turned = []
-    for axis in ((0.0, 1.0, 0.0), (0.0, -1.0, 0.0), (1.0, 0.0, 0.0), (-1.0, 0.0, 0.0)):
-        R = rotation_about(np.array(axis), math.radians(positive(tilt_deg, "tilt_deg", "deg")))
-        T = np.eye(4)
-        T[:3, :3] = R @ T0[:3, :3]
-        T[:3, 3] = centre + R @ (T0[:3, 3] - centre)
-        try:
-            safety.check_pose(T, config.limits, name="look-again pose")
-        except SafetyError:
-            continue
-        if T[2, 3] >= config.limits.approach_height_mm and (config.reachable is None or config.reachable(T)):
-            turned.append(T)
-    return tuple(turned)
 
 
 def check_static_poses(config: CellConfig) -> None:

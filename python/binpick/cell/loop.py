@@ -44,6 +44,7 @@ from .config import CellConfig, check_static_poses
 from .frames import FrameSource
 from .grasp import NoGraspError, grasp_filter, plan_bin_clash, plan_grasp
 from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult, Skipped
+from .views import deciding_views
 
 __all__ = ["Cell", "PICK_MOVES", "ProgressPrinter", "quiet"]
 
@@ -115,8 +116,11 @@ class Cell:
     """
 
     EMPTY_GRIP_RADIUS_MM = 15.0
-    """A part located within this distance of where the gripper closed on nothing earlier in the
-    run is passed over: the same (wrong) pose would most likely be found and tried again."""
+    """A part located within this distance …"""
+    EMPTY_GRIP_TURN_DEG = 15.0
+    """… and this angle (modulo the part's symmetries) of a pose at which the gripper closed on
+    nothing earlier in the run is passed over: it is most likely the same wrong pose found again.
+    A pose as near but turned differently is another answer for what lies there and is tried."""
 
     def __init__(
         self,
@@ -290,6 +294,10 @@ class Cell:
         keep = np.arange(len(scan.points)) if exclude is None else np.flatnonzero(~np.asarray(exclude, dtype=bool))
         if len(keep) < 10:
             raise NoObjectFound(f"the scan holds {len(keep)} usable points; is the laser on and the bin in view?")
+        if exclude is not None and len(keep) < len(scan.points):
+            span = float(np.linalg.norm(np.ptp(scan.points[keep], axis=0)))
+            if span < 0.2 * cfg.model.diameter:  # the estimator's own floor for a scene of this part
+                raise NoObjectFound(f"the points left once the parts found are left out span {span:.0f} mm only")
         options = dict(cfg.estimate_options)
         options.setdefault("num_threads", cfg.num_threads)
         # The camera's position at the first pose of the scan orients the scan's normals (PPF).
@@ -384,7 +392,12 @@ class Cell:
                         self._cpu["cpu.plan"] = self._cpu.get("cpu.plan", 0.0) + (time.process_time() - c0) * 1e3
                 except NoGraspError as exc:
                     last = exc
-                    skipped.append(Skipped(located.T_base_object, exc.reason, located.truth, exc.refused))
+                    res = located.result
+                    alternatives = tuple(
+                        np.asarray(a.T_scene_model, dtype=np.float64)
+                        for a in (getattr(res, "alternatives", ()) if getattr(res, "ambiguous", False) else ())
+                    )
+                    skipped.append(Skipped(located.T_base_object, exc.reason, located.truth, exc.refused, alternatives))
                     self.progress(
                         "skip", f"{self.config.model.name} at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm: {exc.reason}"
                     )
@@ -396,7 +409,8 @@ class Cell:
 
     def _refuse_empty_grip_spot(self, located: Located) -> None:
         t = located.T_base_object[:3, 3]
-        if any(np.linalg.norm(t - spot) < self.EMPTY_GRIP_RADIUS_MM for spot in self._empty_grips):
+        errors = (self.config.model.pose_error(located.T_base_object, T) for T in self._empty_grips)
+        if any(mm < self.EMPTY_GRIP_RADIUS_MM and deg < self.EMPTY_GRIP_TURN_DEG for deg, mm in errors):
             raise NoGraspError(
                 f"the gripper closed on nothing at this located {self.config.model.name} "
                 f"({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm in an earlier pick of this run",
@@ -500,7 +514,7 @@ class Cell:
         """The kind of failure of the pick (None when it succeeded, see :attr:`PickRecord.failure`)
         and why; remembers where the gripper closed on nothing."""
         if held is False:
-            self._empty_grips.append(located.T_base_object[:3, 3].copy())
+            self._empty_grips.append(located.T_base_object.copy())
             return "empty grip", "the gripper closed on nothing (no part between the fingers)"
         if self.truth is None:
             return None, None
@@ -600,8 +614,8 @@ class Cell:
 
     def _cycle(self, i: int) -> tuple[PickRecord, Optional[str]]:
         """One pick of :meth:`run`: scan, locate and plan — looking again from each of
-        ``config.look_again_poses`` while nothing is pickable — then pick; the record, and why
-        the run stops (None to go on)."""
+        ``config.look_again_poses`` while nothing is pickable (from one only when neither look
+        finds any part) — then pick; the record, and why the run stops (None to go on)."""
         t0 = time.perf_counter()
         self._cpu = {}
         scan: Optional[ScanResult] = None
@@ -628,8 +642,12 @@ class Cell:
                 try:
                     located, plan = self.locate_and_plan(scan, skipped)
                 except (NoObjectFound, NoGraspError):
-                    if k == len(views) - 1:
+                    # Two looks that found no part at all: the bin is empty, as far as the cell
+                    # can see; parts found but not pickable are worth every view there is.
+                    if k == len(views) - 1 or (k >= 1 and not skipped):
                         raise
+                    if k == 0:
+                        views[1:] = self._deciding_first(views[1:], skipped)
                     continue
                 finally:
                     times["locate+plan"] = times.get("locate+plan", 0.0) + _ms_since(t1)
@@ -656,6 +674,28 @@ class Cell:
             times["total"] = _ms_since(t0)
             record = self._failed(i, scan, located, exc, times, failure=failure)
             return replace(record, skipped=tuple(skipped), looks=looks, scan=scan), why
+
+    def _deciding_first(self, views: list, skipped: list[Skipped]) -> list:
+        """The look-again views, the one that best shows what tells the first ambiguous part
+        passed over from its alternatives first (:func:`binpick.cell.views.deciding_views`)."""
+        ambiguous = next((k for k in skipped if k.alternatives), None)
+        if ambiguous is None or len(views) < 2:
+            return views
+        order = deciding_views(
+            self.config.model,
+            ambiguous.T_base_object,
+            ambiguous.alternatives,
+            [v[0] for v in views],
+            self.config.calibration.T_flange_camera,
+            tolerance_mm=self.config.ambiguity_tolerance_mm,
+        )
+        T = views[order[0]][0]
+        self.progress(
+            "look",
+            f"the ambiguous {self.config.model.name} is best told apart from flange "
+            f"({T[0, 3]:.1f}, {T[1, 3]:.1f}, {T[2, 3]:.1f}) mm: looking from there first",
+        )
+        return [views[i] for i in order]
 
     @staticmethod
     def _failed(

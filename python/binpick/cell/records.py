@@ -68,13 +68,15 @@ class Located:
 
 @dataclass(frozen=True, eq=False)
 class Skipped:
-    """A located part the loop passed over: where, why (a few words) and, for the picture, a few
-    of the refused gripper poses per reason (reason → (K, 4, 4) ``T_base_gripper``)."""
+    """A located part the loop passed over: where, why (a few words), for the picture a few of
+    the refused gripper poses per reason (reason → (K, 4, 4) ``T_base_gripper``), and the
+    alternative poses the scan could not rule out when the pose was ambiguous."""
 
     T_base_object: np.ndarray
     reason: str
     truth: Optional[PoseTruth] = None
     refused: Mapping[str, np.ndarray] = field(default_factory=dict)
+    alternatives: tuple[np.ndarray, ...] = ()
 
     def as_dict(self) -> dict:
         """A JSON-ready summary."""
