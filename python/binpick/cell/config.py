@@ -243,13 +243,17 @@ class CellConfig:
             object.__setattr__(self, "scan_angles", angles)
 
     def _set_grasps(self) -> None:
-        grasps = self.grasps if self.grasps is not None else (self.model.grasps or self._generated_grasps())
-        if not grasps:
-            raise InvalidInputError(
-                f"grasps: the part {self.model.name!r} has no grasps; declare some with model.add_grasp"
-            )
+        given = self.grasps if self.grasps is not None else self.model.grasps
+        if not given:
+            # Generated here, rigid by construction: thousands of them need no check one by one.
+            object.__setattr__(self, "grasps", MappingProxyType(self._generated_grasps()))
+            if not self.grasps:
+                raise InvalidInputError(
+                    f"grasps: the part {self.model.name!r} has no grasps; declare some with model.add_grasp"
+                )
+            return
         object.__setattr__(
-            self, "grasps", MappingProxyType({str(k): as_transform(v, f"grasps[{k!r}]") for k, v in grasps.items()})
+            self, "grasps", MappingProxyType({str(k): as_transform(v, f"grasps[{k!r}]") for k, v in given.items()})
         )
 
     def _generated_grasps(self) -> dict:

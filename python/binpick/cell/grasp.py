@@ -113,6 +113,11 @@ def branch_grasps(
     if not pitches or any(not -90.0 < p < 90.0 for p in pitches):
         raise InvalidInputError(f"pitches_deg: expected one or more angles in (-90, 90) degrees, got {pitches_deg!r}")
     grasps: dict[str, np.ndarray] = {}
+    combos = list(itertools.product(range(n), pitches, (0, 1), raises))
+    a = np.array([2 * math.pi * k / n for k, _, _, _ in combos])
+    p = np.radians([c[1] for c in combos])
+    sign = np.array([-1.0 if c[2] else 1.0 for c in combos])[:, None]
+    raised = np.array([c[3] for c in combos])[:, None]
     for i, b in enumerate(model.branches):
         d = np.asarray(b.direction, dtype=np.float64)
         d = d / np.linalg.norm(d)
@@ -120,21 +125,25 @@ def branch_grasps(
         helper = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
         z0 = np.cross(d, helper)
         z0 /= np.linalg.norm(z0)
-        for k in range(n):
-            z_square = rotation_about(d, 2 * math.pi * k / n) @ z0
-            for pitch, flip, raised in itertools.product(pitches, (0, 1), raises):
-                x = np.cross(d, z_square) * (1 if flip == 0 else -1)
-                z = rotation_about(x, math.radians(pitch)) @ z_square
-                T_object_gripper = np.eye(4)
-                T_object_gripper[:3, :3] = np.column_stack([x, np.cross(z, x), z])
-                T_object_gripper[:3, 3] = s * d - raised * z
-                name = (
-                    f"branch{i}/{round(360 * k / n)}°"
-                    + (f"/pitch{pitch:+g}°" if pitch else "")
-                    + ("/flipped" if flip else "")
-                    + (f"/raised{raised:g}mm" if raised else "")
-                )
-                grasps[name] = inverse(T_object_gripper)
+        # z0 turned about the branch by a (square to it), the closing direction across both, and
+        # the approach pitched about the closing direction by p (z_square is square to x).
+        z_square = np.cos(a)[:, None] * z0 + np.sin(a)[:, None] * np.cross(d, z0)
+        x = sign * np.cross(d, z_square)
+        z = np.cos(p)[:, None] * z_square + np.sin(p)[:, None] * np.cross(x, z_square)
+        R = np.stack([x, np.cross(z, x), z], axis=2)  # columns: the gripper axes in the object frame
+        origin = s * d - raised * z
+        T_go = np.zeros((len(combos), 4, 4))
+        T_go[:, :3, :3] = np.transpose(R, (0, 2, 1))
+        T_go[:, :3, 3] = -np.einsum("nji,nj->ni", R, origin)
+        T_go[:, 3, 3] = 1.0
+        for T, (k, pitch, flip, lift) in zip(T_go, combos):
+            name = (
+                f"branch{i}/{round(360 * k / n)}°"
+                + (f"/pitch{pitch:+g}°" if pitch else "")
+                + ("/flipped" if flip else "")
+                + (f"/raised{lift:g}mm" if lift else "")
+            )
+            grasps[name] = T
     return grasps
 
 
@@ -421,28 +430,40 @@ def _near(points: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
     return points[np.einsum("ij,ij->i", points - centre, points - centre) <= radius * radius]
 
 
+def _hits_many(gripper: GripperGeometry, points: np.ndarray, T_bg: np.ndarray) -> np.ndarray:
+    """:func:`points_in_gripper` for each of the gripper poses ``T_bg`` (K, 4, 4): the distances
+    of every point to each pose's bounding sphere in one matrix product, then the piece-by-piece
+    test on the (point, pose) pairs inside a sphere, all at once."""
+    if len(points) == 0 or len(T_bg) == 0:
+        return np.zeros(len(T_bg), dtype=np.int64)
+    z_mid, radius = _occupied_sphere(gripper)
+    C = T_bg[:, :3, 3] + z_mid * T_bg[:, :3, 2]
+    d2 = np.einsum("ij,ij->i", points, points)[:, None] - 2.0 * points @ C.T + np.einsum("ij,ij->i", C, C)[None]
+    i, k = np.nonzero(d2 <= radius * radius + 1e-6 * (1.0 + np.abs(d2)))
+    local = np.einsum("nj,nji->ni", points[i] - T_bg[k, :3, 3], T_bg[k, :3, :3])  # each pair in its gripper frame
+    return np.bincount(k[gripper.occupied(local)], minlength=len(T_bg))
+
+
 def _refusal(
-    config: CellConfig,
-    waypoints: list[Waypoint],
-    T_bg: np.ndarray,
-    scene: np.ndarray,
-    part: np.ndarray,
-    here: np.ndarray,
-) -> tuple[Optional[str], int]:
-    """Why a grasp that passed the tilt and bin checks cannot be used (None when it can), and the
-    scene points inside the gripper."""
-    hits = points_in_gripper(config.gripper, scene, T_bg)
+    config: CellConfig, waypoints: list[Waypoint], hits: int, self_hits: int, here: np.ndarray
+) -> Optional[str]:
+    """Why a grasp that passed the tilt and bin checks cannot be used (None when it can), given
+    the scene points and the part's own model points inside its gripper."""
     if hits > config.max_collision_points:
-        return "collision", hits
-    if points_in_gripper(config.gripper, part, T_bg) > config.max_collision_points:
-        return "self-collision", hits
+        return "collision"
+    if self_hits > config.max_collision_points:
+        return "self-collision"
     if config.reachable is not None and not all(config.reachable(T) for _, T, _ in waypoints):
-        return "reach", hits
+        return "reach"
     try:
         safety.check_sequence(here, [T for _, T, _ in waypoints], [lin for _, _, lin in waypoints], config.limits)
     except SafetyError:
-        return "safety", hits
-    return None, hits
+        return "safety"
+    return None
+
+
+_BATCH = 32
+"""Grasps whose collisions are counted together (most vertical first; planning stops at the first usable one)."""
 
 
 def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarray], bool]]:
@@ -490,6 +511,26 @@ def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarr
     return lambda T_bg: all(t(T_bg) for t in tests)
 
 
+def _plan(
+    config: CellConfig,
+    name: str,
+    T_bg: np.ndarray,
+    T_bf: np.ndarray,
+    tilt: float,
+    waypoints: list[Waypoint],
+    rejected: dict[str, int],
+) -> PickPlan:
+    return PickPlan(
+        grasp=name,
+        T_base_gripper=T_bg,
+        T_base_flange=T_bf,
+        tilt_deg=tilt,
+        waypoints=tuple(waypoints),
+        considered=len(config.grasps),
+        rejected=MappingProxyType(dict(rejected)),
+    )
+
+
 def plan_grasp(
     config: CellConfig,
     T_base_object: np.ndarray,
@@ -513,24 +554,30 @@ def plan_grasp(
     reach = abs(z_mid) + radius + float(np.linalg.norm(part - centre, axis=1).max())
     scene = _near(np.asarray(scene, dtype=np.float64).reshape(-1, 3), centre, reach)
     samples: dict[str, list] = {}
-    for tilt, name, T_bg, T_bf, waypoints in _candidates(config, T_base_object, rejected, samples):
-        why, hits = ("ambiguous", 0) if accept is not None and not accept(T_bg) else (None, 0)
-        if why is None:
-            why, hits = _refusal(config, waypoints, T_bg, scene, part, here)
-        if why is not None:
-            rejected[why] += 1
-            _keep_some(samples, why, T_bg[None])
+    candidates = list(_candidates(config, T_base_object, rejected, samples))
+    for start in range(0, len(candidates), _BATCH):
+        batch = candidates[start : start + _BATCH]
+        if accept is not None:
+            kept = []
+            for c in batch:
+                if accept(c[2]):
+                    kept.append(c)
+                else:
+                    rejected["ambiguous"] += 1
+                    _keep_some(samples, "ambiguous", c[2][None])
+            batch = kept
+        if not batch:
             continue
-        plan = PickPlan(
-            grasp=name,
-            T_base_gripper=T_bg,
-            T_base_flange=T_bf,
-            tilt_deg=tilt,
-            waypoints=tuple(waypoints),
-            considered=len(config.grasps),
-            rejected=MappingProxyType(dict(rejected)),
-        )
-        return plan, hits
+        poses = np.stack([c[2] for c in batch])
+        scene_hits = _hits_many(config.gripper, scene, poses)
+        self_hits = _hits_many(config.gripper, part, poses)
+        for (tilt, name, T_bg, T_bf, waypoints), hits, own in zip(batch, scene_hits, self_hits):
+            why = _refusal(config, waypoints, int(hits), int(own), here)
+            if why is not None:
+                rejected[why] += 1
+                _keep_some(samples, why, T_bg[None])
+                continue
+            return _plan(config, name, T_bg, T_bf, tilt, waypoints, rejected), int(hits)
     why = ", ".join(f"{v} {k}" for k, v in rejected.items() if v)
     raise NoGraspError(
         f"none of the {len(config.grasps)} grasps of the located {config.model.name} can be used (rejected: "
