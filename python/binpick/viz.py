@@ -231,9 +231,10 @@ def save_failure(
 ) -> Path:
     """Writes the picture of a failed pick: the cloud (N, 3, mm) from above and from the side,
     each part passed over (:class:`binpick.cell.records.Skipped`: the model at its located pose,
-    numbered, with its reason) and the gripper poses refused for it, one colour per reason (a dot
-    at the TCP and a line 30 mm back along the approach); ``located`` (a pose ``T_base_object``)
-    adds the part the failed attempt went for, in black."""
+    numbered, with its reason; once, however many looks passed it over) and the gripper poses
+    refused for it, one colour per reason (a dot at the TCP and a line 30 mm back along the
+    approach); ``located`` (a pose ``T_base_object``) adds the part the failed attempt went for,
+    in black."""
     pts = as_points(points, "points", min_points=1)
     plt = _pyplot()
     fig, (top, side) = plt.subplots(1, 2, figsize=(14, 6), gridspec_kw={"width_ratios": [3, 2]})
@@ -243,7 +244,17 @@ def save_failure(
     model_pts = np.asarray(model.points)
     colors: dict[str, str] = {}
     notes = []
-    parts = [(k + 1, s.T_base_object, s.reason, s.refused) for k, s in enumerate(skipped)]
+    parts: list = []
+    seen: list[int] = []
+    for k in skipped:  # a part passed over in several looks is drawn once, with its count
+        T = as_transform(k.T_base_object, "skipped.T_base_object")
+        same = [i for i, p in enumerate(parts) if np.linalg.norm(p[1][:3, 3] - T[:3, 3]) < 10.0]
+        if same:
+            seen[same[0]] += 1
+        else:
+            parts.append((len(parts) + 1, T, k.reason, k.refused))
+            seen.append(1)
+    parts = [(n, T, reason + (f" (in {c} looks)" if c > 1 else ""), r) for (n, T, reason, r), c in zip(parts, seen)]
     if located is not None:
         parts.append((0, as_transform(located, "located"), "the part this pick went for", {}))
     for number, T, reason, refused in parts:
