@@ -95,12 +95,17 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="one seed, piles of 8, 45 frames: a smoke run")
     ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--parts", default="", help="comma-separated part names to run (default: all)")
+    ap.add_argument("--frames", type=int, default=0, help="laser frames per scan (default: 45 quick, 90 full)")
     ap.add_argument("--out", default="bin_clearing.json")
     args = ap.parse_args()
     seeds = range(1) if args.quick else range(args.seeds)
-    frames = 45 if args.quick else 90
+    frames = args.frames or (45 if args.quick else 90)
+    wanted = {p for p in args.parts.split(",") if p}
     rows = {}
     for name, make in _parts(args.quick):
+        if wanted and name not in wanted:
+            continue
         piles = []
         for s in seeds:
             count = 8 if args.quick else 8 + s % 5

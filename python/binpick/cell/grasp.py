@@ -463,7 +463,8 @@ def _refusal(
 
 
 _BATCH = 32
-"""Grasps whose collisions are counted together (most vertical first; planning stops at the first usable one)."""
+"""At most this many grasps have their collisions counted together (most vertical first, in
+batches of 4, 8, 16, …: planning stops at the first usable one)."""
 
 
 def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarray], bool]]:
@@ -554,9 +555,10 @@ def plan_grasp(
     reach = abs(z_mid) + radius + float(np.linalg.norm(part - centre, axis=1).max())
     scene = _near(np.asarray(scene, dtype=np.float64).reshape(-1, 3), centre, reach)
     samples: dict[str, list] = {}
-    candidates = list(_candidates(config, T_base_object, rejected, samples))
-    for start in range(0, len(candidates), _BATCH):
-        batch = candidates[start : start + _BATCH]
+    candidates = _candidates(config, T_base_object, rejected, samples)
+    size = 4
+    while batch := list(itertools.islice(candidates, size)):
+        size = min(2 * size, _BATCH)  # the first usable grasp is often among the most vertical few
         if accept is not None:
             kept = []
             for c in batch:
@@ -568,11 +570,13 @@ def plan_grasp(
             batch = kept
         if not batch:
             continue
-        poses = np.stack([c[2] for c in batch])
-        scene_hits = _hits_many(config.gripper, scene, poses)
-        self_hits = _hits_many(config.gripper, part, poses)
-        for (tilt, name, T_bg, T_bf, waypoints), hits, own in zip(batch, scene_hits, self_hits):
-            why = _refusal(config, waypoints, int(hits), int(own), here)
+        scene_hits = _hits_many(config.gripper, scene, np.stack([c[2] for c in batch]))
+        clear = [c for c, h in zip(batch, scene_hits) if h <= config.max_collision_points]
+        poses = np.array([c[2] for c in clear]).reshape(-1, 4, 4)
+        own = dict(zip((id(c) for c in clear), _hits_many(config.gripper, part, poses)))
+        for c, hits in zip(batch, scene_hits):
+            tilt, name, T_bg, T_bf, waypoints = c
+            why = _refusal(config, waypoints, int(hits), int(own.get(id(c), 0)), here)
             if why is not None:
                 rejected[why] += 1
                 _keep_some(samples, why, T_bg[None])

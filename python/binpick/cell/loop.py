@@ -294,10 +294,12 @@ class Cell:
         keep = np.arange(len(scan.points)) if exclude is None else np.flatnonzero(~np.asarray(exclude, dtype=bool))
         if len(keep) < 10:
             raise NoObjectFound(f"the scan holds {len(keep)} usable points; is the laser on and the bin in view?")
-        if exclude is not None and len(keep) < len(scan.points):
-            span = float(np.linalg.norm(np.ptp(scan.points[keep], axis=0)))
-            if span < 0.2 * cfg.model.diameter:  # the estimator's own floor for a scene of this part
-                raise NoObjectFound(f"the points left once the parts found are left out span {span:.0f} mm only")
+        span = float(np.linalg.norm(np.ptp(scan.points[keep], axis=0)))
+        if span < 0.2 * cfg.model.diameter:  # the estimator's own floor for a scene of this part
+            raise NoObjectFound(
+                f"the scan's {len(keep)} usable points span {span:.0f} mm, less than a fifth of the "
+                f"{cfg.model.name} ({cfg.model.diameter:.0f} mm): nothing to locate"
+            )
         options = dict(cfg.estimate_options)
         options.setdefault("num_threads", cfg.num_threads)
         # The camera's position at the first pose of the scan orients the scan's normals (PPF).
