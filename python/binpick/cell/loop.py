@@ -6,7 +6,10 @@ poses, gripper geometry, motion limits). One pick is::
 
     cell.scan()    robot to the scan pose (checked by the safety layer), sweep the laser motor,
                    grab a frame per angle, extract the line, triangulate → cloud in the base frame
-    cell.locate()  estimate_pose(cloud, model, bin box) → T_base_object
+    cell.locate_all()  estimate_poses(cloud, model, bin box) → every distinct part found, most
+                   pickable first; :meth:`Cell.locate_and_plan` tries each in turn (and searches
+                   the points left for more), and :meth:`Cell.run` looks again from
+                   ``config.look_again_poses`` when a scan shows nothing pickable
     cell.plan()    every declared grasp: T_base_gripper = T_base_object · T_gripper_object⁻¹ (Eq. 30),
                    T_base_flange = T_base_gripper · T_flange_gripper⁻¹; keep the ones within the
                    tool-tilt limit, reachable, free of the scene, whose whole motion passes the
@@ -116,11 +119,12 @@ class Cell:
     """
 
     EMPTY_GRIP_RADIUS_MM = 15.0
-    """A part located within this distance …"""
+    """A pose located within this distance, and :attr:`EMPTY_GRIP_TURN_DEG`, of one at which the
+    gripper closed on nothing earlier in the run is passed over: it is most likely the same wrong
+    pose found again."""
     EMPTY_GRIP_TURN_DEG = 15.0
-    """… and this angle (modulo the part's symmetries) of a pose at which the gripper closed on
-    nothing earlier in the run is passed over: it is most likely the same wrong pose found again.
-    A pose as near but turned differently is another answer for what lies there and is tried."""
+    """The angle (modulo the part's symmetries) for :attr:`EMPTY_GRIP_RADIUS_MM`: a pose as near
+    but turned differently is another answer for what lies there, and is tried."""
 
     def __init__(
         self,
