@@ -88,10 +88,7 @@ def branch_grasps(
     turned half a turn about the approach axis (the same grip with the wrist the other way round);
     every grasp also comes raised by half of ``tip_depth_mm`` (how far the fingertips reach past
     the TCP) along the approach, the fingertips half as far past the axis — still past the
-    cylinder's widest line, where parallel fingers touch it — for parts lying on the bin floor;
-    and every grasp comes at a second station too, the fingers flush with the end face
-    (``finger_width_mm / 2`` in), which moves the palm 7 mm farther out along the branch (away
-    from a wall the part's centre lies against).
+    cylinder's widest line, where parallel fingers touch it — for parts lying on the bin floor.
 
     The steps are fine (5° by default) because a part in a pile usually has a branch tilted and
     neighbours close by: the approaches within the tool-tilt limit and clear of the neighbours are
@@ -124,7 +121,7 @@ def branch_grasps(
     for i, b in enumerate(model.branches):
         d = np.asarray(b.direction, dtype=np.float64)
         d = d / np.linalg.norm(d)
-        stations = [max(b.length - half - 7.0, 0.0), max(b.length - half, 0.0)]
+        s = max(b.length - half - 7.0, 0.0)
         helper = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
         z0 = np.cross(d, helper)
         z0 /= np.linalg.norm(z0)
@@ -134,21 +131,19 @@ def branch_grasps(
         x = sign * np.cross(d, z_square)
         z = np.cos(p)[:, None] * z_square + np.sin(p)[:, None] * np.cross(x, z_square)
         R = np.stack([x, np.cross(z, x), z], axis=2)  # columns: the gripper axes in the object frame
-        for station, s in enumerate(stations if stations[1] - stations[0] > 1.0 else stations[:1]):
-            origin = s * d - raised * z
-            T_go = np.zeros((len(combos), 4, 4))
-            T_go[:, :3, :3] = np.transpose(R, (0, 2, 1))
-            T_go[:, :3, 3] = -np.einsum("nji,nj->ni", R, origin)
-            T_go[:, 3, 3] = 1.0
-            for T, (k, pitch, flip, lift) in zip(T_go, combos):
-                name = (
-                    f"branch{i}/{round(360 * k / n)}°"
-                    + (f"/pitch{pitch:+g}°" if pitch else "")
-                    + ("/flipped" if flip else "")
-                    + (f"/raised{lift:g}mm" if lift else "")
-                    + ("/end" if station else "")
-                )
-                grasps[name] = T
+        origin = s * d - raised * z
+        T_go = np.zeros((len(combos), 4, 4))
+        T_go[:, :3, :3] = np.transpose(R, (0, 2, 1))
+        T_go[:, :3, 3] = -np.einsum("nji,nj->ni", R, origin)
+        T_go[:, 3, 3] = 1.0
+        for T, (k, pitch, flip, lift) in zip(T_go, combos):
+            name = (
+                f"branch{i}/{round(360 * k / n)}°"
+                + (f"/pitch{pitch:+g}°" if pitch else "")
+                + ("/flipped" if flip else "")
+                + (f"/raised{lift:g}mm" if lift else "")
+            )
+            grasps[name] = T
     return grasps
 
 
