@@ -24,8 +24,9 @@ from binpick.sim import SimulatedCell
 
 PARTS_DIR = Path(__file__).resolve().parents[1] / ".." / "shared" / "data" / "parts"
 CAD = ("IPAGearShaft.stl", "IPARingScrew.stl")
-ESTIMATE = {"d_star": 12.0, "min_points": 500}
+ESTIMATE: dict = {}  # the library's defaults, as `binpick demo` runs
 STAGES = ("scan.move", "scan.sweep", "scan.extract", "locate+plan", "motion", "total")
+CPU = ("scan.cpu.extract", "cpu.pose", "cpu.plan")  # binpick's own compute per cycle (ms)
 
 
 def _parts(quick: bool) -> list:
@@ -81,7 +82,9 @@ def run_pile(make, seed: int, count: int, frames: int) -> dict:
         "empty_grip": sum(r.failure == "empty grip" for r in recs),
         "floor_contacts": sum(g <= 0.0 for g in gaps),
         "cycles": len(recs),
-        "stages_ms": {s: float(np.mean([r.timings.get(s, 0.0) for r in recs])) for s in STAGES},
+        "stages_ms": {s: float(np.mean([r.timings.get(s, 0.0) for r in recs])) for s in STAGES + CPU},
+        "looks": sum(r.looks for r in recs),
+        "skipped": sum(len(r.skipped) for r in recs),
         "cpu_s_per_pick": cpu / max(1, len(recs)),
         "wall_s": wall,
         "stopped": report.stopped,
@@ -92,12 +95,17 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="one seed, piles of 8, 45 frames: a smoke run")
     ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--parts", default="", help="comma-separated part names to run (default: all)")
+    ap.add_argument("--frames", type=int, default=0, help="laser frames per scan (default: 45 quick, 90 full)")
     ap.add_argument("--out", default="bin_clearing.json")
     args = ap.parse_args()
     seeds = range(1) if args.quick else range(args.seeds)
-    frames = 45 if args.quick else 90
+    frames = args.frames or (45 if args.quick else 90)
+    wanted = {p for p in args.parts.split(",") if p}
     rows = {}
     for name, make in _parts(args.quick):
+        if wanted and name not in wanted:
+            continue
         piles = []
         for s in seeds:
             count = 8 if args.quick else 8 + s % 5
@@ -110,6 +118,7 @@ def main() -> None:
     print(
         f"\n{'part':<14}{'removed':>9}{'emptied':>9}{'wrong':>7}{'empty':>7}{'floor':>7}"
         f"{'scan ms':>9}{'loc+plan':>9}{'motion':>8}{'cpu s/pick':>11}"
+        f"{'extract':>9}{'pose':>7}{'plan':>7}  (binpick's own CPU ms per cycle)"
     )
     for name, piles in rows.items():
         n = sum(p["count"] for p in piles)
@@ -122,6 +131,7 @@ def main() -> None:
             f"{np.mean([p['stages_ms']['locate+plan'] for p in piles]):>9.0f}"
             f"{np.mean([p['stages_ms']['motion'] for p in piles]):>8.0f}"
             f"{np.mean([p['cpu_s_per_pick'] for p in piles]):>11.2f}"
+            + "".join(f"{np.mean([p['stages_ms'][s] for p in piles]):>{w}.0f}" for s, w in zip(CPU, (9, 7, 7)))
         )
     Path(args.out).write_text(json.dumps(rows, indent=1))
 

@@ -71,14 +71,38 @@ def _print_table(report: Any, out: Any = None) -> None:
             print(f"pick {r.index}: {r.error}", file=out)
 
 
+def _failure_pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> list[Path]:
+    """A picture per failed pick: its last scan, the parts passed over and why, the part it went for."""
+    from . import viz
+
+    written = []
+    for r in report.records:
+        if r.success or r.scan is None or not len(r.scan.points):
+            continue
+        title = f"pick {r.index}: {r.failure} — {r.error or ''}"
+        written.append(
+            viz.save_failure(
+                out / f"failure_pick{r.index}.png",
+                r.scan.points,
+                model=model,
+                skipped=r.skipped,
+                located=r.T_base_object,
+                bin_bounds=bin_bounds,
+                title=title if len(title) < 140 else title[:137] + "...",
+            )
+        )
+    return written
+
+
 def _pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> list[Path]:
     from . import viz
 
     written: list[Path] = []
     scan = report.last_scan
     if scan is not None and scan.frames:
+        numbers = sorted(scan.frames)
         written.append(
-            viz.save_contact_sheet(out / "scan_contact_sheet.png", [scan.frames[k] for k in sorted(scan.frames)])
+            viz.save_contact_sheet(out / "scan_contact_sheet.png", [scan.frames[k] for k in numbers], numbers=numbers)
         )
     loc = report.last_located
     if loc is not None:
@@ -109,6 +133,7 @@ def _pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> list[Path]
             )
     if report.records:
         written.append(viz.save_pick_summary(out / "summary.png", report.records))
+    written += _failure_pictures(out, report, model, bin_bounds)
     (out / "picks.json").write_text(
         json.dumps({"picks": [r.as_dict() for r in report.records], "stopped": report.stopped}, indent=1)
     )

@@ -5,6 +5,8 @@
 * :func:`save_pick_summary` — per pick: score, pose error against ground truth (when known)
   and where the time went.
 * :func:`save_contact_sheet` — a few frames of a scan side by side.
+* :func:`save_failure` — a failed pick: the cloud, the parts passed over and the gripper poses
+  refused for each, by reason.
 """
 
 from __future__ import annotations
@@ -12,16 +14,18 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional
 
 import numpy as np
 
-from ._validate import as_points, as_transform
+from ._validate import as_points, as_transform, count
 from .errors import FileWriteError, InvalidInputError
 
-__all__ = ["save_cloud", "save_pick_summary", "save_contact_sheet"]
+__all__ = ["save_cloud", "save_pick_summary", "save_contact_sheet", "save_failure"]
 
 _MAX_POINTS = 60_000
+_CLIP = 20.0
+"""Pose-error bars are cut at this height (° or mm) and labelled with their value."""
 
 
 def _pyplot():
@@ -134,8 +138,15 @@ def save_pick_summary(path: str | os.PathLike[str], records: Sequence[Any], *, t
     tra = [r.truth.translation_error_mm if r.truth is not None else np.nan for r in recs]
     if np.isfinite(rot).any():
         w = 0.38
-        axes[1].bar(x - w / 2, np.minimum(rot, 20), w, label="rotation (°)", color="tab:blue")
-        axes[1].bar(x + w / 2, np.minimum(tra, 20), w, label="translation (mm)", color="tab:orange")
+        for offset, vals, label, color in (
+            (-w / 2, rot, "rotation (°)", "tab:blue"),
+            (w / 2, tra, "translation (mm)", "tab:orange"),
+        ):
+            axes[1].bar(x + offset, np.minimum(vals, _CLIP), w, label=label, color=color)
+            for xi, v in zip(x, vals):
+                if np.isfinite(v) and v > _CLIP:  # the bar is cut at the top: say how tall it is
+                    axes[1].text(xi + offset, _CLIP, f"{v:.0f}", ha="center", va="bottom", fontsize=7, rotation=90)
+        axes[1].set_ylim(0, _CLIP * 1.25)
         axes[1].axhline(5.0, color="tab:blue", linestyle="--", linewidth=0.8)
         axes[1].axhline(3.0, color="tab:orange", linestyle="--", linewidth=0.8)
         axes[1].set_title("pose error vs ground truth (dashed: pick-grade limits)")
@@ -163,21 +174,120 @@ def save_pick_summary(path: str | os.PathLike[str], records: Sequence[Any], *, t
 
 
 def save_contact_sheet(
-    path: str | os.PathLike[str], frames_bgr: Sequence[np.ndarray], *, columns: int = 3, width: int = 1200
+    path: str | os.PathLike[str],
+    frames_bgr: Sequence[np.ndarray],
+    *,
+    numbers: Optional[Sequence[int]] = None,
+    columns: int = 3,
+    width: int = 1200,
 ) -> Path:
-    """Writes frames (uint8 BGR, as grabbed, all of one size) tiled ``columns`` wide."""
+    """Writes frames (uint8 BGR, as grabbed, all of one size) tiled ``columns`` wide, each
+    labelled with its frame number in the scan (``numbers``; default 0, 1, …). Each frame goes
+    through a maximum filter twice as wide as the shrink factor before it is shrunk, so that the
+    laser line, a pixel or two wide, keeps its full brightness in the tile (a plain area average
+    would dim it by the shrink factor) and shows about two tile pixels wide."""
     import cv2
-
-    from .sim import contact_sheet
 
     frames = [np.asarray(f) for f in frames_bgr]
     if not frames or any(
         f.ndim != 3 or f.shape[2] != 3 or f.dtype != np.uint8 or f.shape != frames[0].shape for f in frames
     ):
         raise InvalidInputError("frames_bgr: expected one or more uint8 BGR images (H, W, 3) of one size")
-    sheet = contact_sheet(np.stack([f[:, :, ::-1] for f in frames]), picks=len(frames), columns=columns, width=width)
+    labels = list(range(len(frames))) if numbers is None else [int(n) for n in numbers]
+    if len(labels) != len(frames):
+        raise InvalidInputError(f"numbers: expected one frame number per frame ({len(frames)}), got {len(labels)}")
+    cols = int(count(columns, "columns", 1))
+    h, w = frames[0].shape[:2]
+    tw = max(1, int(count(width, "width", 1)) // cols)
+    th = max(1, int(round(h * tw / w)))
+    k = 2 * max(1, int(np.ceil(w / tw))) + 1  # wide enough to cover a whole tile pixel wherever it falls
+    kernel = np.ones((k, k), dtype=np.uint8)
+    rows = int(np.ceil(len(frames) / cols))
+    sheet = np.zeros((rows * th, cols * tw, 3), dtype=np.uint8)
+    for i, (frame, label) in enumerate(zip(frames, labels)):
+        tile = cv2.resize(cv2.dilate(np.ascontiguousarray(frame), kernel), (tw, th), interpolation=cv2.INTER_AREA)
+        cv2.putText(tile, f"frame {label}", (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 2)
+        r, c = divmod(i, cols)
+        sheet[r * th : (r + 1) * th, c * tw : (c + 1) * tw] = tile
     p = Path(path)
     p.parent.mkdir(parents=True, exist_ok=True)
     if not cv2.imwrite(str(p), sheet):
         raise FileWriteError(f"{p}: cannot write the contact sheet")
     return p
+
+
+_REASON_COLORS = ("tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:gray")
+
+
+def save_failure(
+    path: str | os.PathLike[str],
+    points: Any,
+    *,
+    model: Any,
+    skipped: Sequence[Any] = (),
+    located: Any = None,
+    bin_bounds: Any = None,
+    title: str = "",
+) -> Path:
+    """Writes the picture of a failed pick: the cloud (N, 3, mm) from above and from the side,
+    each part passed over (:class:`binpick.cell.records.Skipped`: the model at its located pose,
+    numbered, with its reason; once, however many looks passed it over) and the gripper poses
+    refused for it, one colour per reason (a dot at the TCP and a line 30 mm back along the
+    approach); ``located`` (a pose ``T_base_object``) adds the part the failed attempt went for,
+    in black."""
+    pts = as_points(points, "points", min_points=1)
+    plt = _pyplot()
+    fig, (top, side) = plt.subplots(1, 2, figsize=(14, 6), gridspec_kw={"width_ratios": [3, 2]})
+    shown = _thin(pts, _MAX_POINTS)
+    for ax, (i, j) in ((top, (0, 1)), (side, (0, 2))):
+        ax.scatter(shown[:, i], shown[:, j], c=shown[:, 2], s=0.5, cmap="viridis", linewidths=0, alpha=0.6)
+    model_pts = np.asarray(model.points)
+    colors: dict[str, str] = {}
+    notes = []
+    parts: list = []
+    seen: list[int] = []
+    for k in skipped:  # a part passed over in several looks is drawn once, with its count
+        T = as_transform(k.T_base_object, "skipped.T_base_object")
+        same = [i for i, p in enumerate(parts) if np.linalg.norm(p[1][:3, 3] - T[:3, 3]) < 10.0]
+        if same:
+            seen[same[0]] += 1
+        else:
+            parts.append((len(parts) + 1, T, k.reason, k.refused))
+            seen.append(1)
+    parts = [(n, T, reason + (f" (in {c} looks)" if c > 1 else ""), r) for (n, T, reason, r), c in zip(parts, seen)]
+    if located is not None:
+        parts.append((0, as_transform(located, "located"), "the part this pick went for", {}))
+    for number, T, reason, refused in parts:
+        T = as_transform(T, "T_base_object")
+        body = _thin(model_pts @ T[:3, :3].T + T[:3, 3], 1500)
+        tone = "black" if number == 0 else "tab:orange"
+        for ax, (i, j) in ((top, (0, 1)), (side, (0, 2))):
+            ax.scatter(body[:, i], body[:, j], s=0.7, c=tone, linewidths=0)
+        if number:
+            top.annotate(str(number), T[:2, 3], fontsize=11, weight="bold", color="black", ha="center", va="center")
+            notes.append(f"{number}: {reason}")
+        for why, poses in refused.items():
+            color = colors.setdefault(why, _REASON_COLORS[len(colors) % len(_REASON_COLORS)])
+            poses = np.asarray(poses).reshape(-1, 4, 4)
+            tcp, back = poses[:, :3, 3], poses[:, :3, 3] - 30.0 * poses[:, :3, 2]
+            for ax, (i, j) in ((top, (0, 1)), (side, (0, 2))):
+                ax.plot(np.stack([tcp[:, i], back[:, i]]), np.stack([tcp[:, j], back[:, j]]), color=color, lw=0.8)
+                ax.scatter(tcp[:, i], tcp[:, j], s=6, color=color)
+    for why, color in colors.items():
+        top.plot([], [], color=color, label=f"refused grasps: {why}")
+    if bin_bounds is not None:
+        (x0, y0, z0), (x1, y1, z1) = np.asarray(bin_bounds, dtype=float)
+        top.plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], "k--", linewidth=0.8, label="bin")
+        side.plot([x0, x0, x1, x1], [z1, z0, z0, z1], "k--", linewidth=0.8)
+    for ax, ylabel, name in ((top, "y (mm)", "from above"), (side, "z (mm)", "from the side (−y)")):
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (mm)")
+        ax.set_ylabel(ylabel)
+        ax.set_title(name)
+    if colors or bin_bounds is not None:
+        top.legend(loc="upper right", fontsize=7)
+    if notes:
+        fig.text(0.01, 0.01, "\n".join(notes[:8]), fontsize=8, va="bottom", family="monospace")
+    fig.suptitle(title or "failed pick")
+    fig.tight_layout(rect=(0, 0.04 + 0.022 * min(len(notes), 8), 1, 1))
+    return _save(fig, path)

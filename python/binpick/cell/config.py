@@ -22,8 +22,9 @@ from ..errors import InvalidInputError, SafetyError
 from ..models import Model
 from ..transforms import laser_sweep, translation
 from .grasp import branch_grasps, mesh_grasps
+from .views import turned_scan_poses
 
-__all__ = ["CellConfig", "GripperGeometry", "check_static_poses", "sweep_angles"]
+__all__ = ["CellConfig", "GripperGeometry", "check_static_poses", "sweep_angles", "turned_scan_poses"]
 
 
 @dataclass(frozen=True)
@@ -144,7 +145,12 @@ class CellConfig:
         ambiguity_tolerance_deg: how closely (degrees) a grasp must land the same way on every
             alternative of an ambiguous pose, and align with a free axis …
         ambiguity_tolerance_mm: … and in translation, mm (see :func:`binpick.cell.grasp.grasp_filter`).
-        max_candidates: parts tried per scan when the top part has no usable grasp.
+        max_candidates: located parts tried per scan before the cell looks again (each part found
+            is tried in turn, most pickable first).
+        look_again_poses: flange poses to scan from again, one after the other, when a scan shows
+            nothing pickable (the camera rides on the arm: a view from the side shows what the first
+            one could not); None = :func:`turned_scan_poses` (the first scan pose turned about the
+            bin floor's centre toward each side); () = no second look.
         reachable: optional test ``T_base_flange → bool`` from the arm's kinematics; None = trust
             the controller (it refuses unreachable targets, and the cell then stops).
         symmetries: ``T_object_object`` maps of the part onto itself, for judging pose errors.
@@ -171,7 +177,8 @@ class CellConfig:
     min_confidence: float = 0.3
     ambiguity_tolerance_deg: float = 5.0
     ambiguity_tolerance_mm: float = 3.0
-    max_candidates: int = 5
+    max_candidates: int = 8
+    look_again_poses: Optional[Sequence[Any]] = None
     reachable: Optional[Callable[[np.ndarray], bool]] = None
     symmetries: Sequence[Any] = ()
     min_score: float = 0.0
@@ -202,6 +209,12 @@ class CellConfig:
         count(self.num_threads, "num_threads")
         if self.reachable is not None and not callable(self.reachable):
             raise InvalidInputError("reachable: expected a function T_base_flange -> bool, or None")
+        looks = turned_scan_poses(self) if self.look_again_poses is None else self.look_again_poses
+        if np.asarray(looks, dtype=object).ndim == 2:
+            looks = [looks]
+        object.__setattr__(
+            self, "look_again_poses", tuple(as_transform(T, f"look_again_poses[{i}]") for i, T in enumerate(looks))
+        )
 
     def _check_types(self) -> None:
         for name, kind, what in (
@@ -230,27 +243,37 @@ class CellConfig:
             object.__setattr__(self, "scan_angles", angles)
 
     def _set_grasps(self) -> None:
-        grasps = self.grasps if self.grasps is not None else (self.model.grasps or self._generated_grasps())
-        if not grasps:
-            raise InvalidInputError(
-                f"grasps: the part {self.model.name!r} has no grasps; declare some with model.add_grasp"
-            )
+        given = self.grasps if self.grasps is not None else self.model.grasps
+        if not given:
+            # Generated here, rigid by construction: thousands of them need no check one by one.
+            object.__setattr__(self, "grasps", MappingProxyType(self._generated_grasps()))
+            if not self.grasps:
+                raise InvalidInputError(
+                    f"grasps: the part {self.model.name!r} has no grasps; declare some with model.add_grasp"
+                )
+            return
         object.__setattr__(
-            self, "grasps", MappingProxyType({str(k): as_transform(v, f"grasps[{k!r}]") for k, v in grasps.items()})
+            self, "grasps", MappingProxyType({str(k): as_transform(v, f"grasps[{k!r}]") for k, v in given.items()})
         )
 
     def _generated_grasps(self) -> dict:
         """Branch grasps for a part with cylindrical branches, else grasps sampled from its mesh."""
         if self.model.branches:
-            return branch_grasps(self.model, finger_width_mm=self.gripper.finger_width_mm)
+            return branch_grasps(
+                self.model, finger_width_mm=self.gripper.finger_width_mm, tip_depth_mm=self.gripper.tip_depth_mm
+            )
         return mesh_grasps(self.model, self.gripper)
 
     def angles_for(self, i: int) -> np.ndarray:
         """The motor angles (rad) of scan pose ``i``."""
         if self.scan_angles is not None:
             return self.scan_angles[i]
+        return self.sweep_from(self.scan_poses[i])
+
+    def sweep_from(self, T_base_flange: np.ndarray) -> np.ndarray:
+        """``frames`` motor angles (rad) whose laser sheets sweep the bin seen from ``T_base_flange``."""
         cal = self.calibration
-        T_base_laser = self.scan_poses[i] @ cal.T_flange_camera @ cal.T_camera_laser
+        T_base_laser = T_base_flange @ cal.T_flange_camera @ cal.T_camera_laser
         return laser_sweep(T_base_laser, self.bin_bounds[0], self.bin_bounds[1], self.frames)
 
 
@@ -271,11 +294,13 @@ def check_static_poses(config: CellConfig) -> None:
     """The scan and drop poses and the clearance height against the cell's limits (SafetyError);
     the cell checks them when it is built, before any byte is sent."""
     lim = config.limits
-    for i, T in enumerate(config.scan_poses):
-        safety.check_pose(T, lim, name=f"scan_poses[{i}]")
+    named = [(f"scan_poses[{i}]", T) for i, T in enumerate(config.scan_poses)]
+    named += [(f"look_again_poses[{i}]", T) for i, T in enumerate(config.look_again_poses)]
+    for name, T in named:
+        safety.check_pose(T, lim, name=name)
         if T[2, 3] < lim.approach_height_mm:
             raise SafetyError(
-                f"scan_poses[{i}]: z = {T[2, 3]:.1f} mm is below the approach height {lim.approach_height_mm:g} mm; "
+                f"{name}: z = {T[2, 3]:.1f} mm is below the approach height {lim.approach_height_mm:g} mm; "
                 "nothing was sent — scan from above the approach height"
             )
     safety.check_pose(config.drop_pose, lim, name="drop_pose")

@@ -9,18 +9,18 @@ direction, the origin the TCP between the fingertips. Lengths in mm, transforms 
 
 from __future__ import annotations
 
+import itertools
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Optional
 
 import numpy as np
 
-from .._validate import count, positive
+from .._validate import count, non_negative, positive
 from ..devices import safety
 from ..errors import BinpickError, InvalidInputError, SafetyError
 from ..models import Model
-from ..poses import grasp_pose
 from ..transforms import inverse, rotation_about, rotation_angle_deg
 from .records import PickPlan
 
@@ -52,20 +52,50 @@ class NoGraspError(BinpickError):
     message adds what to do about it.
     """
 
-    def __init__(self, message: str, *, reason: Optional[str] = None) -> None:
+    def __init__(
+        self, message: str, *, reason: Optional[str] = None, refused: Optional[Mapping[str, np.ndarray]] = None
+    ) -> None:
         super().__init__(message)
         self.reason = reason if reason is not None else message
+        #: A few refused gripper poses per reason (reason → (K, 4, 4) ``T_base_gripper``), for pictures.
+        self.refused: Mapping[str, np.ndarray] = MappingProxyType(dict(refused or {}))
 
 
-def branch_grasps(model: Model, *, finger_width_mm: float = 20.0, steps: int = 72) -> dict[str, np.ndarray]:
+_SAMPLES = 8
+"""Refused gripper poses kept per reason for the picture of a skipped part."""
+
+
+def _keep_some(samples: dict[str, list], why: str, T_bg: np.ndarray) -> None:
+    """Adds up to :data:`_SAMPLES` poses of ``T_bg`` ((K, 4, 4), evenly spaced) to ``samples[why]``."""
+    have = samples.setdefault(why, [])
+    room = _SAMPLES - len(have)
+    if room > 0 and len(T_bg):
+        have.extend(T_bg[np.unique(np.linspace(0, len(T_bg) - 1, min(room, len(T_bg))).round().astype(int))])
+
+
+def branch_grasps(
+    model: Model,
+    *,
+    finger_width_mm: float = 20.0,
+    tip_depth_mm: float = 10.0,
+    steps: int = 72,
+    pitches_deg: Sequence[float] = (-30.0, -15.0, 0.0, 15.0, 30.0),
+) -> dict[str, np.ndarray]:
     """Grasps across every cylindrical branch of ``model`` (``model.branches``): the TCP on the
     branch axis, ``finger_width_mm / 2 + 7`` mm in from the end face, the fingers closing across
-    the axis, approached from ``steps`` directions around it (and each turned half a turn about
-    the approach axis, the same grip with the wrist the other way round).
+    the axis, approached from ``steps`` directions around it, each also pitched by
+    ``pitches_deg`` about the closing direction (the approach leaning along the branch), and each
+    turned half a turn about the approach axis (the same grip with the wrist the other way round);
+    every grasp also comes raised by half of ``tip_depth_mm`` (how far the fingertips reach past
+    the TCP) along the approach, the fingertips half as far past the axis — still past the
+    cylinder's widest line, where parallel fingers touch it — for parts lying on the bin floor.
 
     The steps are fine (5° by default) because a part in a pile usually has a branch tilted and
     neighbours close by: the approaches within the tool-tilt limit and clear of the neighbours are
-    often a narrow range about the branch (12 steps of 30° routinely missed all of them).
+    often a narrow range about the branch (12 steps of 30° routinely missed all of them). A pitched
+    grip is as good on a cylinder: the fingers still close square to its axis and touch it along a
+    line across their pads; the pitch lets the palm lean away from a bin wall or a neighbour
+    beside a part lying flat, where turning about the axis would dip the fingertips into the floor.
 
     Returns name → ``T_gripper_object``.
     """
@@ -77,8 +107,17 @@ def branch_grasps(model: Model, *, finger_width_mm: float = 20.0, steps: int = 7
             "with model.add_grasp(name, T_gripper_object)"
         )
     half = positive(finger_width_mm, "finger_width_mm") / 2.0
+    raises = (0.0, non_negative(tip_depth_mm, "tip_depth_mm", "mm") / 2.0)
     n = count(steps, "steps", 1)
+    pitches = [float(p) for p in pitches_deg]
+    if not pitches or any(not -90.0 < p < 90.0 for p in pitches):
+        raise InvalidInputError(f"pitches_deg: expected one or more angles in (-90, 90) degrees, got {pitches_deg!r}")
     grasps: dict[str, np.ndarray] = {}
+    combos = list(itertools.product(range(n), pitches, (0, 1), raises))
+    a = np.array([2 * math.pi * k / n for k, _, _, _ in combos])
+    p = np.radians([c[1] for c in combos])
+    sign = np.array([-1.0 if c[2] else 1.0 for c in combos])[:, None]
+    raised = np.array([c[3] for c in combos])[:, None]
     for i, b in enumerate(model.branches):
         d = np.asarray(b.direction, dtype=np.float64)
         d = d / np.linalg.norm(d)
@@ -86,14 +125,25 @@ def branch_grasps(model: Model, *, finger_width_mm: float = 20.0, steps: int = 7
         helper = np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
         z0 = np.cross(d, helper)
         z0 /= np.linalg.norm(z0)
-        for k in range(n):
-            z = rotation_about(d, 2 * math.pi * k / n) @ z0
-            for flip in (0, 1):
-                x = np.cross(d, z) * (1 if flip == 0 else -1)
-                T_object_gripper = np.eye(4)
-                T_object_gripper[:3, :3] = np.column_stack([x, np.cross(z, x), z])
-                T_object_gripper[:3, 3] = s * d
-                grasps[f"branch{i}/{round(360 * k / n)}°{'/flipped' if flip else ''}"] = inverse(T_object_gripper)
+        # z0 turned about the branch by a (square to it), the closing direction across both, and
+        # the approach pitched about the closing direction by p (z_square is square to x).
+        z_square = np.cos(a)[:, None] * z0 + np.sin(a)[:, None] * np.cross(d, z0)
+        x = sign * np.cross(d, z_square)
+        z = np.cos(p)[:, None] * z_square + np.sin(p)[:, None] * np.cross(x, z_square)
+        R = np.stack([x, np.cross(z, x), z], axis=2)  # columns: the gripper axes in the object frame
+        origin = s * d - raised * z
+        T_go = np.zeros((len(combos), 4, 4))
+        T_go[:, :3, :3] = np.transpose(R, (0, 2, 1))
+        T_go[:, :3, 3] = -np.einsum("nji,nj->ni", R, origin)
+        T_go[:, 3, 3] = 1.0
+        for T, (k, pitch, flip, lift) in zip(T_go, combos):
+            name = (
+                f"branch{i}/{round(360 * k / n)}°"
+                + (f"/pitch{pitch:+g}°" if pitch else "")
+                + ("/flipped" if flip else "")
+                + (f"/raised{lift:g}mm" if lift else "")
+            )
+            grasps[name] = T
     return grasps
 
 
@@ -201,9 +251,25 @@ def pick_waypoints(
 
 
 def points_in_gripper(gripper: GripperGeometry, points_base: np.ndarray, T_base_gripper: np.ndarray) -> int:
-    """How many of the points (N, 3, base frame) lie inside the open gripper at ``T_base_gripper``."""
+    """How many of the points (N, 3, base frame) lie inside the open gripper at ``T_base_gripper``.
+
+    Only the points within the sphere about the fingers and body are tested piece by piece (one
+    distance per point first), so that planning runs thousands of these against a full scan."""
     R, t = T_base_gripper[:3, :3], T_base_gripper[:3, 3]
-    return int(gripper.occupied(points_base @ R - t @ R).sum())
+    z_mid, radius = _occupied_sphere(gripper)
+    d = points_base - (t + z_mid * R[:, 2])
+    near = points_base[np.einsum("ij,ij->i", d, d) <= radius * radius]
+    return int(gripper.occupied(near @ R - t @ R).sum())
+
+
+def _occupied_sphere(gripper: GripperGeometry) -> tuple[float, float]:
+    """(z of the centre on the gripper axis, radius) of a sphere holding the open fingers and the body."""
+    top = gripper.tip_depth_mm - gripper.finger_length_mm
+    z_lo, z_hi = top - gripper.body_length_mm, gripper.tip_depth_mm
+    z_mid = (z_lo + z_hi) / 2.0
+    finger_x = gripper.open_width_mm / 2 + gripper.finger_thickness_mm
+    across = max(gripper.body_radius_mm, math.hypot(finger_x, gripper.finger_width_mm / 2))
+    return z_mid, math.hypot(across, (z_hi - z_lo) / 2.0) + 1e-6
 
 
 def bin_clash(
@@ -216,16 +282,22 @@ def bin_clash(
 
     Each piece of the gripper is convex and the bin's inner volume too, so a straight move whose
     two ends are clear is clear all along: checking a motion's waypoints checks its whole path."""
-    pts = gripper.outline() @ (T_base_flange @ gripper.T_flange_gripper)[:3, :3].T
-    pts += (T_base_flange @ gripper.T_flange_gripper)[:3, 3]
+    T_bg = T_base_flange @ gripper.T_flange_gripper
+    pts = gripper.outline() @ T_bg[:3, :3].T + T_bg[:3, 3]
+    below, wall = _bin_clashes(pts[None], bin_bounds, floor_clearance_mm)
+    if below[0] > 1e-9:
+        return f"floor ({below[0]:.1f} mm below)"
+    return "wall" if wall[0] else None
+
+
+def _bin_clashes(points: np.ndarray, bin_bounds: Any, floor_clearance_mm: float) -> tuple[np.ndarray, np.ndarray]:
+    """For gripper outlines ``points`` (..., M, 3, base frame): how far (mm) each dips below the
+    floor plus the clearance (≤ 0 when it does not), and whether it crosses a wall below the rim."""
     lo, hi = np.asarray(bin_bounds[0], dtype=np.float64), np.asarray(bin_bounds[1], dtype=np.float64)
-    below = lo[2] + floor_clearance_mm - float(pts[:, 2].min())
-    if below > 1e-9:
-        return f"floor ({below:.1f} mm below)"
-    inside = pts[pts[:, 2] < hi[2]]
-    if ((inside[:, :2] < lo[:2] - 1e-9) | (inside[:, :2] > hi[:2] + 1e-9)).any():
-        return "wall"
-    return None
+    below = lo[2] + floor_clearance_mm - points[..., 2].min(axis=-1)
+    xy = points[..., :2]
+    outside = ((xy < lo[:2] - 1e-9) | (xy > hi[:2] + 1e-9)).any(axis=-1) & (points[..., 2] < hi[2])
+    return below, outside.any(axis=-1)
 
 
 def plan_bin_clash(config: CellConfig, waypoints: Sequence[Waypoint]) -> Optional[tuple[str, str]]:
@@ -306,45 +378,93 @@ class GraspMatcher:
         return error[0] <= self.tolerance_deg and error[1] <= self.tolerance_mm
 
 
-def _tilted_candidates(config: CellConfig, T_base_object: np.ndarray, rejected: dict[str, int]) -> list:
-    """(tilt, name, T_base_gripper, T_base_flange) of every grasp within the tool-tilt limit, most vertical first."""
-    T_fg_inv = inverse(config.gripper.T_flange_gripper)
-    candidates = []
-    for name, T_go in config.grasps.items():
-        T_bg = grasp_pose(T_base_object, T_go)
-        T_bf = T_bg @ T_fg_inv
-        tilt = tool_tilt_deg(T_bf)
-        if math.radians(tilt) > config.limits.max_tool_tilt_rad:
-            rejected["tilt"] += 1
-            continue
-        candidates.append((tilt, name, T_bg, T_bf))
-    candidates.sort(key=lambda c: c[0])
-    return candidates
+def _candidates(
+    config: CellConfig, T_base_object: np.ndarray, rejected: dict[str, int], samples: dict[str, list]
+) -> Iterator[tuple]:
+    """(tilt, name, T_base_gripper, T_base_flange, waypoints) of every grasp within the tool-tilt
+    limit whose gripper clears the bin's floor and walls along approach, grasp and lift, most
+    vertical first; the others counted in ``rejected`` (a few kept in ``samples``). All grasps at
+    once (one matrix product per check), so that thousands of grasps are planned in milliseconds."""
+    names = list(config.grasps)
+    T_go = np.stack([config.grasps[n] for n in names])
+    T_og = np.zeros_like(T_go)
+    T_og[:, :3, :3] = np.transpose(T_go[:, :3, :3], (0, 2, 1))
+    T_og[:, :3, 3] = -np.einsum("nji,nj->ni", T_go[:, :3, :3], T_go[:, :3, 3])
+    T_og[:, 3, 3] = 1.0
+    T_bg = np.asarray(T_base_object, dtype=np.float64) @ T_og
+    T_bf = T_bg @ inverse(config.gripper.T_flange_gripper)
+    tilt = np.degrees(np.arccos(np.clip(-T_bf[:, 2, 2], -1.0, 1.0)))
+    ok = np.radians(tilt) <= config.limits.max_tool_tilt_rad
+    rejected["tilt"] += int((~ok).sum())
+    _keep_some(samples, "tilt", T_bg[~ok])
+    # The outline at the grasp, shifted back along the approach and straight up for the lift
+    # (only for the grasps within the tilt limit: most are not).
+    idx = np.flatnonzero(ok)
+    R, t = T_bg[idx, :3, :3], T_bg[idx, :3, 3]
+    at_grasp = config.gripper.outline() @ np.transpose(R, (0, 2, 1)) + t[:, None]
+    back = at_grasp - config.approach_distance_mm * R[:, None, :, 2]
+    up = at_grasp.copy()
+    up[..., 2] += np.maximum(config.clearance_z_mm - T_bf[idx, 2, 3], 0.0)[:, None]
+    free = np.ones(len(idx), dtype=bool)
+    for pts in (back, at_grasp, up):
+        below, wall = _bin_clashes(pts, config.bin_bounds, config.floor_clearance_mm)
+        free &= (below <= 1e-9) & ~wall
+    rejected["bin"] += int((~free).sum())
+    _keep_some(samples, "bin", T_bg[idx[~free]])
+    clear = idx[free]
+    for i in clear[np.argsort(tilt[clear], kind="stable")]:
+        waypoints = pick_waypoints(
+            T_bf[i],
+            T_bg[i],
+            approach_distance_mm=config.approach_distance_mm,
+            clearance_z_mm=config.clearance_z_mm,
+            drop_pose=config.drop_pose,
+        )
+        yield float(tilt[i]), names[i], T_bg[i], T_bf[i], waypoints
+
+
+def _near(points: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
+    """The points within ``radius`` of ``centre``."""
+    if len(points) == 0:
+        return points
+    return points[np.einsum("ij,ij->i", points - centre, points - centre) <= radius * radius]
+
+
+def _hits_many(gripper: GripperGeometry, points: np.ndarray, T_bg: np.ndarray) -> np.ndarray:
+    """:func:`points_in_gripper` for each of the gripper poses ``T_bg`` (K, 4, 4): the distances
+    of every point to each pose's bounding sphere in one matrix product, then the piece-by-piece
+    test on the (point, pose) pairs inside a sphere, all at once."""
+    if len(points) == 0 or len(T_bg) == 0:
+        return np.zeros(len(T_bg), dtype=np.int64)
+    z_mid, radius = _occupied_sphere(gripper)
+    C = T_bg[:, :3, 3] + z_mid * T_bg[:, :3, 2]
+    d2 = np.einsum("ij,ij->i", points, points)[:, None] - 2.0 * points @ C.T + np.einsum("ij,ij->i", C, C)[None]
+    i, k = np.nonzero(d2 <= radius * radius + 1e-6 * (1.0 + np.abs(d2)))
+    local = np.einsum("nj,nji->ni", points[i] - T_bg[k, :3, 3], T_bg[k, :3, :3])  # each pair in its gripper frame
+    return np.bincount(k[gripper.occupied(local)], minlength=len(T_bg))
 
 
 def _refusal(
-    config: CellConfig,
-    waypoints: list[Waypoint],
-    T_bg: np.ndarray,
-    scene: np.ndarray,
-    part: np.ndarray,
-    here: np.ndarray,
-) -> tuple[Optional[str], int]:
-    """Why a grasp cannot be used (None when it can), and the scene points inside the gripper."""
-    if config.reachable is not None and not all(config.reachable(T) for _, T, _ in waypoints):
-        return "reach", 0
-    if plan_bin_clash(config, waypoints) is not None:
-        return "bin", 0
-    hits = points_in_gripper(config.gripper, scene, T_bg)
+    config: CellConfig, waypoints: list[Waypoint], hits: int, self_hits: int, here: np.ndarray
+) -> Optional[str]:
+    """Why a grasp that passed the tilt and bin checks cannot be used (None when it can), given
+    the scene points and the part's own model points inside its gripper."""
     if hits > config.max_collision_points:
-        return "collision", hits
-    if points_in_gripper(config.gripper, part, T_bg) > config.max_collision_points:
-        return "self-collision", hits
+        return "collision"
+    if self_hits > config.max_collision_points:
+        return "self-collision"
+    if config.reachable is not None and not all(config.reachable(T) for _, T, _ in waypoints):
+        return "reach"
     try:
         safety.check_sequence(here, [T for _, T, _ in waypoints], [lin for _, _, lin in waypoints], config.limits)
     except SafetyError:
-        return "safety", hits
-    return None, hits
+        return "safety"
+    return None
+
+
+_BATCH = 32
+"""At most this many grasps have their collisions counted together (most vertical first, in
+batches of 4, 8, 16, …: planning stops at the first usable one)."""
 
 
 def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarray], bool]]:
@@ -392,6 +512,26 @@ def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarr
     return lambda T_bg: all(t(T_bg) for t in tests)
 
 
+def _plan(
+    config: CellConfig,
+    name: str,
+    T_bg: np.ndarray,
+    T_bf: np.ndarray,
+    tilt: float,
+    waypoints: list[Waypoint],
+    rejected: dict[str, int],
+) -> PickPlan:
+    return PickPlan(
+        grasp=name,
+        T_base_gripper=T_bg,
+        T_base_flange=T_bf,
+        tilt_deg=tilt,
+        waypoints=tuple(waypoints),
+        considered=len(config.grasps),
+        rejected=MappingProxyType(dict(rejected)),
+    )
+
+
 def plan_grasp(
     config: CellConfig,
     T_base_object: np.ndarray,
@@ -404,40 +544,49 @@ def plan_grasp(
     the part's own model at that pose, and whose whole motion from the flange pose ``here``
     passes the safety rules, and which ``accept`` (``T_base_gripper → bool``, see
     :func:`grasp_filter`) accepts; with the scene points inside its gripper. NoGraspError when none is."""
-    rejected = {"tilt": 0, "ambiguous": 0, "reach": 0, "bin": 0, "collision": 0, "self-collision": 0, "safety": 0}
+    rejected = {"tilt": 0, "bin": 0, "ambiguous": 0, "collision": 0, "self-collision": 0, "reach": 0, "safety": 0}
     # The part's own points lie between the fingers and are not in the scene, but the gripper must
     # not run into its other branches either: those are checked against the model at the located
-    # pose, which also covers the part's unseen underside.
+    # pose, which also covers the part's unseen underside. Only scene points the fingers and
+    # body can reach from a TCP on the part are kept.
     part = np.asarray(config.model.points) @ T_base_object[:3, :3].T + T_base_object[:3, 3]
-    for tilt, name, T_bg, T_bf in _tilted_candidates(config, T_base_object, rejected):
-        if accept is not None and not accept(T_bg):
-            rejected["ambiguous"] += 1
+    z_mid, radius = _occupied_sphere(config.gripper)
+    centre = part.mean(axis=0)
+    reach = abs(z_mid) + radius + float(np.linalg.norm(part - centre, axis=1).max())
+    scene = _near(np.asarray(scene, dtype=np.float64).reshape(-1, 3), centre, reach)
+    samples: dict[str, list] = {}
+    candidates = _candidates(config, T_base_object, rejected, samples)
+    size = 4
+    while batch := list(itertools.islice(candidates, size)):
+        size = min(2 * size, _BATCH)  # the first usable grasp is often among the most vertical few
+        if accept is not None:
+            kept = []
+            for c in batch:
+                if accept(c[2]):
+                    kept.append(c)
+                else:
+                    rejected["ambiguous"] += 1
+                    _keep_some(samples, "ambiguous", c[2][None])
+            batch = kept
+        if not batch:
             continue
-        waypoints = pick_waypoints(
-            T_bf,
-            T_bg,
-            approach_distance_mm=config.approach_distance_mm,
-            clearance_z_mm=config.clearance_z_mm,
-            drop_pose=config.drop_pose,
-        )
-        why, hits = _refusal(config, waypoints, T_bg, scene, part, here)
-        if why is not None:
-            rejected[why] += 1
-            continue
-        plan = PickPlan(
-            grasp=name,
-            T_base_gripper=T_bg,
-            T_base_flange=T_bf,
-            tilt_deg=tilt,
-            waypoints=tuple(waypoints),
-            considered=len(config.grasps),
-            rejected=MappingProxyType(dict(rejected)),
-        )
-        return plan, hits
+        scene_hits = _hits_many(config.gripper, scene, np.stack([c[2] for c in batch]))
+        clear = [c for c, h in zip(batch, scene_hits) if h <= config.max_collision_points]
+        poses = np.array([c[2] for c in clear]).reshape(-1, 4, 4)
+        own = dict(zip((id(c) for c in clear), _hits_many(config.gripper, part, poses)))
+        for c, hits in zip(batch, scene_hits):
+            tilt, name, T_bg, T_bf, waypoints = c
+            why = _refusal(config, waypoints, int(hits), int(own.get(id(c), 0)), here)
+            if why is not None:
+                rejected[why] += 1
+                _keep_some(samples, why, T_bg[None])
+                continue
+            return _plan(config, name, T_bg, T_bf, tilt, waypoints, rejected), int(hits)
     why = ", ".join(f"{v} {k}" for k, v in rejected.items() if v)
     raise NoGraspError(
         f"none of the {len(config.grasps)} grasps of the located {config.model.name} can be used (rejected: "
         + ", ".join(f"{v} for {k}" for k, v in rejected.items() if v)
         + "); declare more grasps, widen CellLimits.max_tool_tilt_rad, or let the pile be stirred",
         reason=f"none of {len(config.grasps)} grasps usable ({why})",
+        refused={k: np.stack(v) for k, v in samples.items() if v},
     )

@@ -6,7 +6,10 @@ poses, gripper geometry, motion limits). One pick is::
 
     cell.scan()    robot to the scan pose (checked by the safety layer), sweep the laser motor,
                    grab a frame per angle, extract the line, triangulate → cloud in the base frame
-    cell.locate()  estimate_pose(cloud, model, bin box) → T_base_object
+    cell.locate_all()  estimate_poses(cloud, model, bin box) → every distinct part found, most
+                   pickable first; :meth:`Cell.locate_and_plan` tries each in turn (and searches
+                   the points left for more), and :meth:`Cell.run` looks again from
+                   ``config.look_again_poses`` when a scan shows nothing pickable
     cell.plan()    every declared grasp: T_base_gripper = T_base_object · T_gripper_object⁻¹ (Eq. 30),
                    T_base_flange = T_base_gripper · T_flange_gripper⁻¹; keep the ones within the
                    tool-tilt limit, reachable, free of the scene, whose whole motion passes the
@@ -25,24 +28,26 @@ from __future__ import annotations
 import math
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import replace
 from types import MappingProxyType
 from typing import Any, Callable, Optional, TextIO
 
 import numpy as np
 
-from .._validate import count
+from .._validate import as_transform, count
 from ..devices import safety
 from ..devices.gripper import Gripper
 from ..devices.motor import LaserMotor
 from ..devices.robot import Robot
 from ..errors import BinpickError, DeviceError, InvalidInputError, NoObjectFound, SafetyError
-from ..poses import estimate_pose
+from ..poses import estimate_poses
 from ..vision import extract_line, triangulate
 from .config import CellConfig, check_static_poses
 from .frames import FrameSource
 from .grasp import NoGraspError, grasp_filter, plan_bin_clash, plan_grasp
-from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult
+from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult, Skipped
+from .views import deciding_views
 
 __all__ = ["Cell", "PICK_MOVES", "ProgressPrinter", "quiet"]
 
@@ -114,8 +119,12 @@ class Cell:
     """
 
     EMPTY_GRIP_RADIUS_MM = 15.0
-    """A part located within this distance of where the gripper closed on nothing earlier in the
-    run is passed over: the same (wrong) pose would most likely be found and tried again."""
+    """A pose located within this distance, and :attr:`EMPTY_GRIP_TURN_DEG`, of one at which the
+    gripper closed on nothing earlier in the run is passed over: it is most likely the same wrong
+    pose found again."""
+    EMPTY_GRIP_TURN_DEG = 15.0
+    """The angle (modulo the part's symmetries) for :attr:`EMPTY_GRIP_RADIUS_MM`: a pose as near
+    but turned differently is another answer for what lies there, and is tried."""
 
     def __init__(
         self,
@@ -144,6 +153,7 @@ class Cell:
         self.progress = progress or quiet
         self.truth = truth
         self._empty_grips: list[np.ndarray] = []
+        self._cpu: dict[str, float] = {}
         check_static_poses(config)
 
     # -- life cycle
@@ -199,22 +209,27 @@ class Cell:
             self._move(up, linear=True)
 
     # -- scan
-    def scan(self) -> ScanResult:
-        """Scans the bin from every scan pose; returns the cloud in the base frame."""
+    def scan(self, poses: Optional[Sequence[Any]] = None) -> ScanResult:
+        """Scans the bin from every scan pose (or from the flange poses ``poses``, each swept
+        across the bin: a second look); returns the cloud in the base frame."""
         cfg = self.config
-        timings: dict[str, float] = {"move": 0.0, "sweep": 0.0, "extract": 0.0}
+        if poses is None:
+            views = [(T, cfg.angles_for(i)) for i, T in enumerate(cfg.scan_poses)]
+        else:
+            views = [(T, cfg.sweep_from(T)) for T in (as_transform(T, f"poses[{i}]") for i, T in enumerate(poses))]
+        timings: dict[str, float] = {"move": 0.0, "sweep": 0.0, "extract": 0.0, "cpu.extract": 0.0}
         sweep = _Sweep()
-        for i, T_scan in enumerate(cfg.scan_poses):
+        for T_scan, wanted in views:
             t0 = time.perf_counter()
             self._go_above_approach()
             self._move(T_scan, linear=False)
             T_bf = self.robot.read_pose()
             t1 = time.perf_counter()
             timings["move"] += (t1 - t0) * 1e3
-            wanted = cfg.angles_for(i)
-            extract_s = self._sweep_laser(sweep, wanted, T_bf)
+            extract_s, extract_cpu = self._sweep_laser(sweep, wanted, T_bf)
             timings["sweep"] += (time.perf_counter() - t1 - extract_s) * 1e3
             timings["extract"] += extract_s * 1e3
+            timings["cpu.extract"] += extract_cpu * 1e3
             done = sweep.angles[-len(wanted) :]
             self.progress(
                 "scan",
@@ -243,9 +258,9 @@ class Cell:
             timings=MappingProxyType(timings),
         )
 
-    def _sweep_laser(self, sweep: _Sweep, wanted: np.ndarray, T_bf: np.ndarray) -> float:
+    def _sweep_laser(self, sweep: _Sweep, wanted: np.ndarray, T_bf: np.ndarray) -> tuple[float, float]:
         """Turns the laser through ``wanted`` at flange pose ``T_bf``, a frame per angle into
-        ``sweep``; returns the seconds spent extracting lines."""
+        ``sweep``; returns the seconds (wall clock, and this thread's CPU) spent extracting lines."""
         keep_n = self.config.keep_frames
         keep = (
             set(np.unique(np.linspace(0, len(wanted) - 1, min(keep_n, len(wanted))).round().astype(int)).tolist())
@@ -253,42 +268,84 @@ class Cell:
             else set()
         )
         self.camera.begin(T_bf)
-        extract_s = 0.0
+        extract_s = extract_cpu = 0.0
         for k, a in enumerate(wanted):
             reached = float(self.motor.move_to(float(a), wait=True))
             self.camera.laser_at(reached)
             img = self.camera.grab()
-            te = time.perf_counter()
+            te, ce = time.perf_counter(), time.thread_time()
             uv = extract_line(img)
             extract_s += time.perf_counter() - te
+            extract_cpu += time.thread_time() - ce
             sweep.add(uv, reached, T_bf, img if k in keep else None)
-        return extract_s
+        return extract_s, extract_cpu
 
     # -- locate and plan
     def locate(self, scan: Optional[ScanResult] = None, *, exclude: Optional[np.ndarray] = None) -> Located:
         """The top pickable part in ``scan`` (a new scan when None), leaving out the points where
         ``exclude`` (bool, one per point) is true; NoObjectFound when there is none."""
+        return self.locate_all(scan, exclude=exclude, max_instances=1)[0]
+
+    def locate_all(
+        self, scan: Optional[ScanResult] = None, *, exclude: Optional[np.ndarray] = None, max_instances: int = 0
+    ) -> list[Located]:
+        """Every distinct part :func:`binpick.estimate_poses` finds in ``scan`` (a new scan when
+        None), most pickable first, up to ``max_instances`` (0: ``config.max_candidates``), leaving
+        out the points where ``exclude`` is true and poses scoring below ``config.min_score``;
+        NoObjectFound when there is none."""
         scan = self.scan() if scan is None else scan
         cfg = self.config
         keep = np.arange(len(scan.points)) if exclude is None else np.flatnonzero(~np.asarray(exclude, dtype=bool))
         if len(keep) < 10:
             raise NoObjectFound(f"the scan holds {len(keep)} usable points; is the laser on and the bin in view?")
+        span = float(np.linalg.norm(np.ptp(scan.points[keep], axis=0)))
+        if span < 0.2 * cfg.model.diameter:  # the estimator's own floor for a scene of this part
+            raise NoObjectFound(
+                f"the scan's {len(keep)} usable points span {span:.0f} mm, less than a fifth of the "
+                f"{cfg.model.name} ({cfg.model.diameter:.0f} mm): nothing to locate"
+            )
         options = dict(cfg.estimate_options)
         options.setdefault("num_threads", cfg.num_threads)
-        # The camera's position at the first scan pose orients the scan's normals (PPF).
+        # The camera's position at the first pose of the scan orients the scan's normals (PPF).
         options.setdefault("viewpoint", (np.asarray(scan.T_base_flanges[0]) @ cfg.calibration.T_flange_camera)[:3, 3])
-        result = estimate_pose(scan.points[keep], cfg.model, bin=cfg.bin_bounds, **options)
-        if result.score < cfg.min_score:
-            raise NoObjectFound(
-                f"the best pose scores {result.score:.2f}, below the cell's min_score {cfg.min_score:.2f}"
+        wanted = count(max_instances, "max_instances") or cfg.max_candidates
+        c0 = time.process_time()
+        results = estimate_poses(scan.points[keep], cfg.model, bin=cfg.bin_bounds, max_instances=wanted, **options)
+        self._cpu["cpu.pose"] = self._cpu.get("cpu.pose", 0.0) + (time.process_time() - c0) * 1e3
+        found = []
+        for result in results:
+            if result.score < cfg.min_score:
+                continue
+            T = np.asarray(result.T_scene_model, dtype=np.float64)
+            truth = self._judge_located(result, T)
+            self._report_located(result, T, truth)
+            idx = np.asarray(result.indices, dtype=np.int64)
+            found.append(
+                Located(
+                    scan=scan,
+                    result=result,
+                    T_base_object=T,
+                    indices=keep[idx[(idx >= 0) & (idx < len(keep))]],
+                    truth=truth,
+                )
             )
-        T = np.asarray(result.T_scene_model, dtype=np.float64)
-        truth = self.truth.judge(T) if self.truth is not None else None
-        self._report_located(result, T, truth)
-        idx = np.asarray(result.indices, dtype=np.int64)
-        return Located(
-            scan=scan, result=result, T_base_object=T, indices=keep[idx[(idx >= 0) & (idx < len(keep))]], truth=truth
-        )
+        if not found:
+            raise NoObjectFound(
+                f"the best pose scores {max(r.score for r in results):.2f}, below the cell's min_score "
+                f"{cfg.min_score:.2f}"
+            )
+        return found
+
+    def _judge_located(self, result: Any, T: np.ndarray) -> Optional[PoseTruth]:
+        """The truth of a located pose (None without ground truth). For a pose flagged ambiguous
+        the best of it and its alternatives: :meth:`plan` picks such a pose only with a grasp
+        that grips every alternative the same way, so whichever of them is true, the pick is."""
+        if self.truth is None:
+            return None
+        truths = [self.truth.judge(T)]
+        if getattr(result, "ambiguous", False):
+            truths += [self.truth.judge(np.asarray(a.T_scene_model, dtype=np.float64)) for a in result.alternatives]
+        return min(truths, key=lambda t: (not t.pick_grade, t.rotation_error_deg / 5.0 + t.translation_error_mm / 3.0))
 
     def _report_located(self, result: Any, T: np.ndarray, truth: Optional[PoseTruth]) -> None:
         t = T[:3, 3]
@@ -307,37 +364,59 @@ class Cell:
             f"in {sum(result.timings.values()):.0f} ms{judged}",
         )
 
-    def locate_and_plan(self, scan: ScanResult) -> tuple[Located, PickPlan]:
-        """Locates the top part and plans its pick; when no grasp of it can be used (or the gripper
-        already closed on nothing there earlier in the run), leaves its points out and tries the
-        next part, up to ``config.max_candidates`` parts."""
+    def locate_and_plan(self, scan: ScanResult, skipped: Optional[list[Skipped]] = None) -> tuple[Located, PickPlan]:
+        """Locates the parts in ``scan`` and plans the pick of the first one that can be picked:
+        every part :meth:`locate_all` finds, in turn; when none can, their points are left out
+        and the scan is searched again, up to ``config.max_candidates`` parts. The parts passed
+        over go into ``skipped``. NoGraspError (the last part's) when none can be picked,
+        NoObjectFound when no part is found."""
+        skipped = [] if skipped is None else skipped
         excluded = np.zeros(len(scan.points), dtype=bool)
         last: Optional[NoGraspError] = None
-        for _ in range(self.config.max_candidates):
+        tried: list[np.ndarray] = []
+        while len(tried) < self.config.max_candidates:
             try:
-                located = self.locate(scan, exclude=excluded)
+                found = self.locate_all(scan, exclude=excluded, max_instances=self.config.max_candidates - len(tried))
             except NoObjectFound:
                 if last is None:
                     raise
                 break  # the parts found had no usable grasp: that is the reason to report
-            try:
-                self._refuse_empty_grip_spot(located)
-                return located, self.plan(located)
-            except NoGraspError as exc:
-                last = exc
-                t = located.T_base_object[:3, 3]
-                self.progress(
-                    "skip", f"{self.config.model.name} at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm: {exc.reason}"
-                )
-                if len(located.indices) == 0:
-                    break
+            fresh = False
+            for located in found:
+                fresh |= bool(len(located.indices)) and not excluded[located.indices].all()
                 excluded[located.indices] = True
-        assert last is not None
+                t = located.T_base_object[:3, 3]
+                if any(np.linalg.norm(t - u) < self.config.model.diameter / 4 for u in tried):
+                    continue  # the same part again, from what the search left of it
+                tried.append(t)
+                try:
+                    self._refuse_empty_grip_spot(located)
+                    c0 = time.process_time()
+                    try:
+                        return located, self.plan(located)
+                    finally:
+                        self._cpu["cpu.plan"] = self._cpu.get("cpu.plan", 0.0) + (time.process_time() - c0) * 1e3
+                except NoGraspError as exc:
+                    last = exc
+                    res = located.result
+                    alternatives = tuple(
+                        np.asarray(a.T_scene_model, dtype=np.float64)
+                        for a in (getattr(res, "alternatives", ()) if getattr(res, "ambiguous", False) else ())
+                    )
+                    skipped.append(Skipped(located.T_base_object, exc.reason, located.truth, exc.refused, alternatives))
+                    self.progress(
+                        "skip", f"{self.config.model.name} at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm: {exc.reason}"
+                    )
+            if not fresh:
+                break
+        if last is None:
+            raise NoObjectFound("no part was found that had not been tried already")
         raise last
 
     def _refuse_empty_grip_spot(self, located: Located) -> None:
         t = located.T_base_object[:3, 3]
-        if any(np.linalg.norm(t - spot) < self.EMPTY_GRIP_RADIUS_MM for spot in self._empty_grips):
+        errors = (self.config.model.pose_error(located.T_base_object, T) for T in self._empty_grips)
+        if any(mm < self.EMPTY_GRIP_RADIUS_MM and deg < self.EMPTY_GRIP_TURN_DEG for deg, mm in errors):
             raise NoGraspError(
                 f"the gripper closed on nothing at this located {self.config.model.name} "
                 f"({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm in an earlier pick of this run",
@@ -364,7 +443,7 @@ class Cell:
             plan, hits = plan_grasp(self.config, located.T_base_object, pts[others], self.robot.read_pose(), accept)
         except NoGraspError as exc:
             if accept is not None and exc.reason.startswith("none") and "ambiguous" in exc.reason:
-                raise NoGraspError(str(exc), reason=f"ambiguous: {exc.reason}") from None
+                raise NoGraspError(str(exc), reason=f"ambiguous: {exc.reason}", refused=exc.refused) from None
             raise
         rejected = ", ".join(f"{v} {k}" for k, v in plan.rejected.items() if v) or "none rejected"
         self.progress(
@@ -415,6 +494,7 @@ class Cell:
             error=error,
             failure=failure,
             timings=MappingProxyType(times),
+            scan=None if ok else located.scan,
         )
 
     def _located_and_planned(
@@ -440,7 +520,7 @@ class Cell:
         """The kind of failure of the pick (None when it succeeded, see :attr:`PickRecord.failure`)
         and why; remembers where the gripper closed on nothing."""
         if held is False:
-            self._empty_grips.append(located.T_base_object[:3, 3].copy())
+            self._empty_grips.append(located.T_base_object.copy())
             return "empty grip", "the gripper closed on nothing (no part between the fingers)"
         if self.truth is None:
             return None, None
@@ -539,32 +619,99 @@ class Cell:
         return RunReport(records=tuple(records), stopped=stopped, last_scan=last_scan, last_located=last_located)
 
     def _cycle(self, i: int) -> tuple[PickRecord, Optional[str]]:
-        """One pick of :meth:`run`: scan, locate and plan, pick; the record, and why the run stops (None to go on)."""
+        """One pick of :meth:`run`: scan, locate and plan — looking again from each of
+        ``config.look_again_poses`` while nothing is pickable (from one only when neither look
+        finds any part) — then pick; the record, and why the run stops (None to go on)."""
         t0 = time.perf_counter()
+        self._cpu = {}
         scan: Optional[ScanResult] = None
         located: Optional[Located] = None
+        skipped: list[Skipped] = []
+        times: dict[str, float] = {}
+        views: list[Optional[tuple[np.ndarray, ...]]] = [None, *((T,) for T in self.config.look_again_poses)]
+        looks = 0
         try:
-            scan = self.scan()
-            self._last = (scan, self._last[1])
-            t1 = time.perf_counter()
-            located, plan = self.locate_and_plan(scan)
+            for k, view in enumerate(views):
+                if k:
+                    T = view[0]
+                    self.progress(
+                        "look",
+                        f"nothing pickable; looking again from flange ({T[0, 3]:.1f}, {T[1, 3]:.1f}, {T[2, 3]:.1f}) "
+                        f"mm, tool tilted {math.degrees(math.acos(max(-1.0, min(1.0, -T[2, 2])))):.0f}°",
+                    )
+                scan = self.scan(view)
+                looks += 1
+                self._last = (scan, self._last[1])
+                for key, v in scan.timings.items():
+                    times[f"scan.{key}"] = times.get(f"scan.{key}", 0.0) + v
+                t1 = time.perf_counter()
+                try:
+                    located, plan = self.locate_and_plan(scan, skipped)
+                except (NoObjectFound, NoGraspError):
+                    # Two looks that found no part at all: the bin is empty, as far as the cell
+                    # can see; parts found but not pickable are worth every view there is.
+                    if k == len(views) - 1 or (k >= 1 and not skipped):
+                        raise
+                    if k == 0:
+                        views[1:] = self._deciding_first(views[1:], skipped)
+                    continue
+                finally:
+                    times["locate+plan"] = times.get("locate+plan", 0.0) + _ms_since(t1)
+                break
             self._last = (scan, located)
-            times = {f"scan.{k}": v for k, v in scan.timings.items()}
-            times["locate+plan"] = _ms_since(t1)
             record = self.pick(located, plan=plan, index=i)
             times.update(record.timings)
+            times.update(self._cpu)
             times["total"] = _ms_since(t0)
-            return replace(record, timings=MappingProxyType(times)), None
-        except NoObjectFound as exc:
-            return self._failed(i, scan, located, exc, t0, failure="nothing found"), f"pick {i}: {exc}"
-        except NoGraspError as exc:
-            return self._failed(i, scan, located, exc, t0, failure="no grasp"), f"pick {i}: {exc}"
-        except BinpickError as exc:
-            return self._failed(i, scan, located, exc, t0, failure="fault"), f"pick {i}: {type(exc).__name__}: {exc}"
+            return replace(record, timings=MappingProxyType(times), skipped=tuple(skipped), looks=looks), None
+        except (NoObjectFound, NoGraspError, BinpickError) as exc:
+            failure = (
+                "nothing found"
+                if isinstance(exc, NoObjectFound)
+                else "no grasp"
+                if isinstance(exc, NoGraspError)
+                else "fault"
+            )
+            why = f"pick {i}: {exc}" if failure != "fault" else f"pick {i}: {type(exc).__name__}: {exc}"
+            if failure == "no grasp" or (failure == "nothing found" and skipped):
+                failure = "no grasp"
+                why = f"pick {i}: none of the {len(skipped)} parts located in {looks} looks could be picked — {exc}"
+            times.update(self._cpu)
+            times["total"] = _ms_since(t0)
+            record = self._failed(i, scan, located, exc, times, failure=failure)
+            return replace(record, skipped=tuple(skipped), looks=looks, scan=scan), why
+
+    def _deciding_first(self, views: list, skipped: list[Skipped]) -> list:
+        """The look-again views, the one that best shows what tells the first ambiguous part
+        passed over from its alternatives first (:func:`binpick.cell.views.deciding_views`)."""
+        ambiguous = next((k for k in skipped if k.alternatives), None)
+        if ambiguous is None or len(views) < 2:
+            return views
+        order = deciding_views(
+            self.config.model,
+            ambiguous.T_base_object,
+            ambiguous.alternatives,
+            [v[0] for v in views],
+            self.config.calibration.T_flange_camera,
+            tolerance_mm=self.config.ambiguity_tolerance_mm,
+        )
+        T = views[order[0]][0]
+        self.progress(
+            "look",
+            f"the ambiguous {self.config.model.name} is best told apart from flange "
+            f"({T[0, 3]:.1f}, {T[1, 3]:.1f}, {T[2, 3]:.1f}) mm: looking from there first",
+        )
+        return [views[i] for i in order]
 
     @staticmethod
     def _failed(
-        i: int, scan: Optional[ScanResult], loc: Optional[Located], exc: BaseException, t0: float, *, failure: str
+        i: int,
+        scan: Optional[ScanResult],
+        loc: Optional[Located],
+        exc: BaseException,
+        times: dict[str, float],
+        *,
+        failure: str,
     ) -> PickRecord:
         res = None if loc is None else loc.result
         return PickRecord(
@@ -579,5 +726,5 @@ class Cell:
             error=str(exc),
             fault=failure == "fault",
             failure=failure,
-            timings=MappingProxyType({"total": _ms_since(t0)}),
+            timings=MappingProxyType(dict(times)),
         )

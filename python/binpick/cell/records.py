@@ -9,7 +9,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-__all__ = ["ScanResult", "PoseTruth", "Located", "PickPlan", "PickRecord", "RunReport", "FAILURE_KINDS"]
+__all__ = ["ScanResult", "PoseTruth", "Located", "Skipped", "PickPlan", "PickRecord", "RunReport", "FAILURE_KINDS"]
 
 #: What a failed pick attempt can have gone wrong with, in the order a pick meets them.
 FAILURE_KINDS: tuple[str, ...] = (
@@ -67,6 +67,38 @@ class Located:
 
 
 @dataclass(frozen=True, eq=False)
+class Skipped:
+    """A located part the loop passed over: where, why (a few words), for the picture a few of
+    the refused gripper poses per reason (reason → (K, 4, 4) ``T_base_gripper``), and the
+    alternative poses the scan could not rule out when the pose was ambiguous."""
+
+    T_base_object: np.ndarray
+    reason: str
+    truth: Optional[PoseTruth] = None
+    refused: Mapping[str, np.ndarray] = field(default_factory=dict)
+    alternatives: tuple[np.ndarray, ...] = ()
+
+    def as_dict(self) -> dict:
+        """A JSON-ready summary."""
+        return {
+            "T_base_object": np.round(self.T_base_object, 6).tolist(),
+            "reason": self.reason,
+            "truth": _truth_dict(self.truth),
+        }
+
+
+def _truth_dict(truth: Optional[PoseTruth]) -> Optional[dict]:
+    if truth is None:
+        return None
+    return {
+        "instance": truth.instance,
+        "rotation_error_deg": truth.rotation_error_deg,
+        "translation_error_mm": truth.translation_error_mm,
+        "pick_grade": truth.pick_grade,
+    }
+
+
+@dataclass(frozen=True, eq=False)
 class PickPlan:
     """The chosen grasp and the motion: ``waypoints`` are (name, T_base_flange, linear) in order."""
 
@@ -93,7 +125,10 @@ class PickRecord:
     ``success``: the part was lifted out (with ground truth: the removed part is the located one and
     its pose was pick-grade); ``held``: what the gripper reported (None when it cannot tell);
     ``error``: why the attempt failed, None on success; ``failure``: its kind, one of
-    :data:`FAILURE_KINDS` (None on success); ``timings``: stage → ms.
+    :data:`FAILURE_KINDS` (None on success); ``timings``: stage → ms; ``skipped``: the located
+    parts passed over on the way (no usable grasp, low confidence, …); ``looks``: how many scans
+    the attempt took (more than one when the first showed nothing pickable); ``scan``: the last
+    of them (for the picture of a failure).
     """
 
     index: int
@@ -111,6 +146,9 @@ class PickRecord:
     fault: bool = False
     failure: Optional[str] = None
     timings: Mapping[str, float] = field(default_factory=dict)
+    skipped: tuple[Skipped, ...] = ()
+    looks: int = 1
+    scan: Optional[ScanResult] = None
 
     def as_dict(self) -> dict:
         """A JSON-ready summary."""
@@ -124,18 +162,13 @@ class PickRecord:
             "points": self.points,
             "grasp": self.grasp,
             "held": self.held,
-            "truth": None
-            if self.truth is None
-            else {
-                "instance": self.truth.instance,
-                "rotation_error_deg": self.truth.rotation_error_deg,
-                "translation_error_mm": self.truth.translation_error_mm,
-                "pick_grade": self.truth.pick_grade,
-            },
+            "truth": _truth_dict(self.truth),
             "picked_instance": self.picked_instance,
             "error": self.error,
             "failure": self.failure,
             "timings_ms": dict(self.timings),
+            "looks": self.looks,
+            "skipped": [k.as_dict() for k in self.skipped],
         }
 
 

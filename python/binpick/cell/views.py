@@ -1,0 +1,89 @@
+"""Where the camera looks from: the scan poses of a second look, and which of them best shows
+what tells an ambiguous pose from its alternatives. Lengths in mm, transforms 4×4 ``T_to_from``."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .._validate import positive
+from ..devices import safety
+from ..errors import SafetyError
+from ..models import Model
+from ..transforms import rotation_about
+
+if TYPE_CHECKING:  # annotations only: config imports this module
+    from .config import CellConfig
+
+__all__ = ["turned_scan_poses", "deciding_views"]
+
+
+def turned_scan_poses(config: CellConfig, *, tilt_deg: float = 20.0) -> tuple[np.ndarray, ...]:
+    """The first scan pose turned by ``tilt_deg`` about the centre of the bin's floor toward each
+    of the bin's four sides (the camera keeps the bin in view and sees the pile's sides that face
+    that way), keeping those within the cell's limits, above the approach height and, when the
+    config knows the arm's kinematics (``reachable``), reachable."""
+    lo, hi = config.bin_bounds
+    centre = np.array([(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0, lo[2]])
+    T0 = config.scan_poses[0]
+    angle = math.radians(positive(tilt_deg, "tilt_deg", "deg"))
+    turned = []
+    for axis in ((0.0, 1.0, 0.0), (0.0, -1.0, 0.0), (1.0, 0.0, 0.0), (-1.0, 0.0, 0.0)):
+        R = rotation_about(np.array(axis), angle)
+        T = np.eye(4)
+        T[:3, :3] = R @ T0[:3, :3]
+        T[:3, 3] = centre + R @ (T0[:3, 3] - centre)
+        try:
+            safety.check_pose(T, config.limits, name="look-again pose")
+        except SafetyError:
+            continue
+        if T[2, 3] >= config.limits.approach_height_mm and (config.reachable is None or config.reachable(T)):
+            turned.append(T)
+    return tuple(turned)
+
+
+def deciding_views(
+    model: Model,
+    T_base_object: np.ndarray,
+    alternatives: Sequence[np.ndarray],
+    views: Sequence[np.ndarray],
+    T_flange_camera: np.ndarray,
+    *,
+    tolerance_mm: float = 3.0,
+    samples: int = 600,
+) -> list[int]:
+    """The indices of ``views`` (flange poses), best first, for telling the pose
+    ``T_base_object`` from its ``alternatives``: the deciding feature is the part's surface
+    that one pose has and the other lacks (model samples farther than ``tolerance_mm`` from the
+    other pose's surface, both ways round); a view scores by how squarely that surface faces
+    its camera (the sum over those samples of the cosine between the outward normal and the
+    direction to the camera, facing away counted 0)."""
+    step = max(1, len(model.points) // samples)
+    pts = np.asarray(model.points, dtype=np.float64)[::step]
+    nrm = np.asarray(model.normals, dtype=np.float64)[::step]
+
+    def posed(T: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return pts @ T[:3, :3].T + T[:3, 3], nrm @ T[:3, :3].T
+
+    features = []
+    here = posed(np.asarray(T_base_object, dtype=np.float64))
+    for T_alt in alternatives:
+        there = posed(np.asarray(T_alt, dtype=np.float64))
+        for (p, n), (q, _) in ((here, there), (there, here)):
+            d2 = ((p[:, None, :] - q[None, :, :]) ** 2).sum(axis=-1).min(axis=1)
+            far = d2 > tolerance_mm**2
+            features.append((p[far], n[far]))
+    if not features:
+        return list(range(len(views)))
+    p = np.vstack([f[0] for f in features])
+    n = np.vstack([f[1] for f in features])
+    scores = []
+    for T in views:
+        cam = (np.asarray(T, dtype=np.float64) @ T_flange_camera)[:3, 3]
+        to_cam = cam - p
+        to_cam /= np.linalg.norm(to_cam, axis=1, keepdims=True)
+        scores.append(float(np.clip((n * to_cam).sum(axis=1), 0.0, None).sum()))
+    return sorted(range(len(views)), key=lambda i: -scores[i])
