@@ -15,7 +15,7 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from .._validate import as_box, as_transform, count, non_negative, positive
+from .._validate import as_box, as_transform, count, non_negative, number, positive
 from ..calibration import CellCalibration
 from ..devices import safety
 from ..errors import InvalidInputError, SafetyError
@@ -197,8 +197,7 @@ class CellConfig:
         count(self.max_collision_points, "max_collision_points")
         count(self.max_candidates, "max_candidates", 1)
         non_negative(self.floor_clearance_mm, "floor_clearance_mm", "mm")
-        if not 0.0 <= float(self.min_confidence) <= 1.0:
-            raise InvalidInputError(f"min_confidence: expected a number in [0, 1], got {self.min_confidence!r}")
+        number(self.min_confidence, "min_confidence", 0.0, 1.0)
         positive(self.ambiguity_tolerance_deg, "ambiguity_tolerance_deg", "deg")
         positive(self.ambiguity_tolerance_mm, "ambiguity_tolerance_mm")
         object.__setattr__(

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any, Optional
 
 import numpy as np
 
-from .._validate import count, non_negative, positive
+from .._validate import count, instance_of, non_negative, positive
 from ..devices import safety
 from ..errors import BinpickError, InvalidInputError, SafetyError
 from ..models import Model
@@ -326,6 +326,9 @@ def symmetry_maps(symmetries: Any) -> tuple[np.ndarray, ...]:
     """A part's discrete proper symmetries (a :class:`binpick.models.Symmetries`) as 4×4
     ``T_object_object`` maps, the turns about its centre, without the identity (which
     :class:`GraspMatcher` adds). A continuous axis has no finite set of maps and is left out."""
+    from ..models import Symmetries
+
+    symmetries = instance_of(symmetries, Symmetries, "symmetries", "model.symmetries")
     c = np.asarray(symmetries.center, dtype=np.float64)
     maps = np.tile(np.eye(4), (len(symmetries.rotations), 1, 1))
     maps[:, :3, :3] = symmetries.rotations
