@@ -36,12 +36,18 @@ FRAMES = 40
 ROOT = Path(__file__).resolve().parents[2]
 
 
+def _child_env() -> dict:
+    """The environment of a spawned binpick: the package these tests import (an installed wheel
+    or a source tree with its built core), and a plain PATH."""
+    return {"PYTHONPATH": str(Path(binpick.__file__).resolve().parents[1]), "PATH": "/usr/bin:/bin"}
+
+
 class _Twin:
     """The spawned twin: its folder, its process and the lines it printed."""
 
     def __init__(self, out: Path) -> None:
         self.out = out
-        env = {"PYTHONPATH": str(ROOT / "python"), "PATH": "/usr/bin:/bin"}
+        env = _child_env()
         argv = [sys.executable, "-m", "binpick", "emulate", "cell", "--out", str(out)]
         argv += ["--count", str(COUNT), "--frames", str(FRAMES), "--seed", str(SEED), "--speed-scale", "10"]
         self.t0 = time.perf_counter()
@@ -292,7 +298,7 @@ def test_a_silent_twin_times_out_and_an_absent_one_is_named(tmp_path):
 def test_binpick_pick_removes_three_parts_in_three_attempts(twin, tmp_path):
     before = twin.world()
     out = tmp_path / "pick"
-    env = {"PYTHONPATH": str(ROOT / "python"), "PATH": "/usr/bin:/bin"}
+    env = _child_env()
     t0 = time.perf_counter()
     done = subprocess.run(
         [

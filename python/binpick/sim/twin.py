@@ -362,7 +362,10 @@ class SimulatedCell(TwinWorld):
         self.cell: Optional[Cell] = None
 
     def start(self) -> Cell:
-        """Starts the emulators, opens the drivers on their ptys and the cell; returns the cell."""
+        """Starts the emulators, opens the drivers on their ptys and the cell; returns the cell.
+        The cell's configuration is built here, so that ``config_overrides`` changed after
+        construction take effect."""
+        self.config = self._config(self.limits)
         self._start_emulators()
         robot, motor, gripper = self._drivers(self.limits)
         self.cell = Cell(
