@@ -419,6 +419,18 @@ def image_size(width: Any, height: Any, where: str, error: type = CalibrationErr
     return w, h
 
 
+def write_atomic(path: Any, data: bytes | str) -> None:
+    """Writes ``data`` (text as UTF-8) to ``path`` through a temporary file in the same folder and
+    :func:`os.replace`, so that a reader sees the old file or the new one, never a part of it."""
+    import os
+    from pathlib import Path
+
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_bytes(data.encode("utf-8") if isinstance(data, str) else data)
+    os.replace(tmp, path)
+
+
 def read_text_file(path: Any, what: str, error: type, *, max_bytes: int, missing: str = "") -> str:
     """The UTF-8 text of the file ``path``, or ``error`` naming the file: when it cannot be read
     (``missing`` is appended when it does not exist), when it is larger than ``max_bytes`` (a

@@ -24,6 +24,7 @@ from ._validate import (
     positive,
     thread_count,
     unit_scale,
+    write_atomic,
 )
 from .errors import InvalidInputError
 from .transforms import pose_error, rotation_about
@@ -385,9 +386,7 @@ def _write_atomically(path: Path, data: Optional[bytes]) -> None:
         return
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(f".{os.getpid()}.tmp")
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
+        write_atomic(path, data)
     except OSError as exc:
         warnings.warn(
             f"binpick: cannot write the PPF cache {path} ({exc}); set BINPICK_CACHE_DIR to a writable folder",

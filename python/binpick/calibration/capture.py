@@ -21,7 +21,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from .._validate import as_transform, as_vector, check_transform, positive
+from .._validate import as_transform, as_vector, check_transform, instance_of, positive
 from ..devices import safety
 from ..errors import CalibrationError, FileWriteError, InvalidInputError, SafetyError
 from ..transforms import inverse, rotation_about
@@ -213,10 +213,8 @@ def capture(
     returns the manifest's path."""
     from ..cell.frames import FrameSource
 
-    if not isinstance(plan, CalibrationPlan):
-        raise InvalidInputError(f"plan: expected a CalibrationPlan, got {type(plan).__name__}")
-    if not isinstance(camera, FrameSource):
-        raise InvalidInputError(f"camera: expected a binpick.cell.FrameSource, got {type(camera).__name__}")
+    instance_of(plan, CalibrationPlan, "plan", "calibration_plan(...)")
+    instance_of(camera, FrameSource, "camera", "a binpick.cell frame source")
     limits = limits if limits is not None else getattr(robot, "limits", None)
     if not isinstance(limits, safety.CellLimits):
         raise InvalidInputError(

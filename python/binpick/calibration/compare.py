@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .._validate import as_angles
+from .._validate import as_angles, instance_of
 from ..errors import InvalidInputError
 from ..transforms import rotation_angle_deg
 from ._file import CellCalibration
@@ -91,8 +91,7 @@ def compare_calibrations(
 ) -> CalibrationComparison:
     """The errors of ``solved`` against ``truth`` at the motor ``angles`` (rad)."""
     for name, cal in (("solved", solved), ("truth", truth)):
-        if not isinstance(cal, CellCalibration):
-            raise InvalidInputError(f"{name}: expected a CellCalibration, got {type(cal).__name__}")
+        instance_of(cal, CellCalibration, name, "CellCalibration.load(path)")
     a = as_angles(angles, "angles")
     if len(a) == 0:
         raise InvalidInputError("angles: give at least one motor angle (rad)")

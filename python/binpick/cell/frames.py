@@ -15,7 +15,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from .._validate import as_transform, count, positive
+from .._validate import as_transform, count, instance_of, positive
 from ..errors import DeviceError, InvalidInputError, PortClosedError
 from . import camera_socket as wire
 
@@ -212,12 +212,8 @@ class ScanRecorder(FrameSource):
     def __init__(self, source: FrameSource, calibration: Any, folder: Any) -> None:
         from ..calibration import CellCalibration
 
-        if not isinstance(source, FrameSource):
-            raise InvalidInputError(f"source: expected a binpick.cell.FrameSource, got {type(source).__name__}")
-        if not isinstance(calibration, CellCalibration):
-            raise InvalidInputError(f"calibration: expected a CellCalibration, got {type(calibration).__name__}")
-        self.source = source
-        self.calibration = calibration
+        self.source = instance_of(source, FrameSource, "source", "OpenCVCamera(0)")
+        self.calibration = instance_of(calibration, CellCalibration, "calibration", "CellCalibration.load(path)")
         self.folder = Path(folder)
         self.saved: list[Path] = []
         self._pose: Optional[np.ndarray] = None

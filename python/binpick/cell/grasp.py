@@ -99,8 +99,7 @@ def branch_grasps(
 
     Returns name → ``T_gripper_object``.
     """
-    if not isinstance(model, Model):
-        raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}")
+    instance_of(model, Model, "model", "binpick.parts.tee()")
     if not model.branches:
         raise InvalidInputError(
             f"model: {model.name!r} declares no cylindrical branches, so no grasps can be derived; declare grasps "
@@ -169,8 +168,7 @@ def mesh_grasps(
     fingers' depth), both ways round the wrist. Returns name → ``T_gripper_object``; names say
     the pair, the quality and the approach.
     """
-    if not isinstance(model, Model):
-        raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}")
+    instance_of(model, Model, "model", "binpick.parts.tee()")
     pts = np.asarray(model.points, dtype=np.float64)
     nrm = np.asarray(model.normals, dtype=np.float64)
     step = max(1, len(pts) // 600)

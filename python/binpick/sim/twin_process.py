@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import socket
 import threading
 import time
@@ -34,6 +33,7 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
+from .._validate import write_atomic
 from ..cell import camera_socket as wire
 from ..devices.xyzabc import xyzabc_from_transform
 from ..errors import BinpickError
@@ -42,21 +42,13 @@ from ..transforms import inverse
 from .camera import SimCamera
 from .twin import TwinWorld
 
-__all__ = ["CellTwin", "WORLD_VERSION", "write_atomic"]
+__all__ = ["CellTwin", "WORLD_VERSION"]
 
 #: The version of world.json's layout.
 WORLD_VERSION = 1
 
 #: Most model points checked against the gripper per part and tick (evenly thinned).
 _CONTACT_POINTS = 400
-
-
-def write_atomic(path: Path, text: str) -> None:
-    """Writes ``text`` to ``path`` through a temporary file and :func:`os.replace`, so a reader
-    sees the old file or the new one, never a part."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
 
 
 def _toml_list(values: Any) -> str:
