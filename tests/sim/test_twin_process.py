@@ -69,6 +69,16 @@ class _Twin:
     def world(self) -> dict:
         return json.loads((self.out / "world.json").read_text())
 
+    def world_after(self, frames_served: int, timeout_s: float = 5.0) -> dict:
+        """world.json once it shows at least ``frames_served`` frames (the twin rewrites it on
+        its tick, every 0.1 s), so it describes the state the last frame was rendered in."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            world = self.world()
+            if world["frames_served"] >= frames_served or time.monotonic() > deadline:
+                return world
+            time.sleep(0.02)
+
     def stop(self) -> int:
         if self.proc.poll() is None:
             self.proc.send_signal(signal.SIGTERM)
@@ -150,7 +160,8 @@ def test_a_twin_frame_is_the_in_process_render_of_the_actual_pose_and_angle(twin
     frame = cell.camera.last
     np.testing.assert_allclose(frame.T_base_flange, cell.robot.read_pose(), atol=0.05)
     assert abs(frame.angle - cell.motor.present_angle()) < 1e-6
-    world = twin.world()
+    world = twin.world_after(frame.counter + 1)
+    assert world["frames_served"] >= frame.counter + 1, "world.json caught up with the frame within 5 s"
     np.testing.assert_allclose(world["T_base_flange"], frame.T_base_flange, atol=1e-9)
     here = SimCamera(_Snapshot(world, frame), seed=SEED + frame.counter)
     here.begin(frame.T_base_flange)
