@@ -182,6 +182,13 @@ class PoseResult:
         feature_evidence: what the scan says in the near-symmetries' feature regions about the
             pose kept (``fits``, ``misfits``, ``seen_through``, ``tolerance``, ``score``), or None
             for a part without near-symmetries.
+        fit: how well the pose's points lie on the posed model against the scan's own noise
+            (``residual_sigma_mm``: robust σ of the point-to-plane residuals; ``noise_floor_mm``:
+            the sensor's noise where the part lies, read from the scan without the model;
+            ``ratio``; ``factor``: the share of ``confidence`` it keeps — 1 up to 2.5 times the
+            noise, an e-fold fall per further 1), or None where too few points judge it. A
+            pose whose points sit several times the noise off the surface is wrong, or the part
+            differs from its model.
     """
 
     T_scene_model: np.ndarray
@@ -200,6 +207,7 @@ class PoseResult:
     alternatives: tuple = ()
     free_axis: Optional[np.ndarray] = None
     feature_evidence: Optional[dict] = None
+    fit: Optional[dict] = None
 
     @classmethod
     def _from_native(cls, e: _core.PoseEstimate) -> PoseResult:
@@ -219,6 +227,7 @@ class PoseResult:
             alternatives=tuple(Alternative(a["T_scene_model"], a["evidence"]) for a in e.alternatives),
             free_axis=None if e.free_axis is None else np.asarray(e.free_axis, dtype=np.float64),
             feature_evidence=e.feature_evidence,
+            fit=e.fit,
         )
 
     def __repr__(self) -> str:

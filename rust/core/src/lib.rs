@@ -52,7 +52,7 @@ pub use normals::{estimate_normals, Orientation};
 pub use parallel::with_threads;
 pub use pose::{
     estimate_pose, estimate_poses, Alternative, CcpPathParams, CheckIcpParams, CoarseMethod, FeatureEvidence,
-    FineIcpParams, PoseConfig, PoseEstimate, PoseModel, Timings, TrustParams,
+    FineIcpParams, FitQuality, PoseConfig, PoseEstimate, PoseModel, Timings, TrustParams,
 };
 pub use registration::ccp::{ccp, BranchLayout, CcpConfig, CcpResult};
 pub use registration::ppf::{DetectConfig, PpfConfig, PpfModel};

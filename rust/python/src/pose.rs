@@ -5,7 +5,7 @@ use crate::convert::{bin_box, bin_box_to_py, branch_layout, indices_to_py, isome
 use crate::convert::{points, points_to_py, real_number, rotations_to_rows, threads, vector3, vectors, whole_number};
 use crate::errors::{run, to_py};
 use binpick_core::{estimate_poses as core_estimate, isometry_from_matrix, CcpConfig, CoarseMethod, DetectConfig};
-use binpick_core::{FeatureEvidence, PoseModel, PpfConfig, PpfModel};
+use binpick_core::{FeatureEvidence, FitQuality, PoseModel, PpfConfig, PpfModel};
 use nalgebra::{Point3, Vector3};
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
@@ -375,6 +375,15 @@ fn triple(v: &Vector3<f64>) -> (f64, f64, f64) {
     (v.x, v.y, v.z)
 }
 
+fn fit_to_py<'py>(py: Python<'py>, f: &FitQuality) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("residual_sigma_mm", f.residual_sigma)?;
+    d.set_item("noise_floor_mm", f.noise_floor)?;
+    d.set_item("ratio", f.ratio)?;
+    d.set_item("factor", f.factor)?;
+    Ok(d)
+}
+
 fn evidence_to_py<'py>(py: Python<'py>, e: &FeatureEvidence) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     d.set_item("fits", e.fits)?;
@@ -494,6 +503,14 @@ impl PoseEstimate {
             .as_ref()
             .map(|e| evidence_to_py(py, e))
             .transpose()
+    }
+
+    /// How well the pose's points lie on the posed model against the scan's own noise: a dict
+    /// (`residual_sigma_mm`, `noise_floor_mm`, `ratio`, `factor` — the factor in `confidence`),
+    /// or None where too few points judge it.
+    #[getter]
+    fn fit<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        self.inner.fit.as_ref().map(|f| fit_to_py(py, f)).transpose()
     }
 
     fn __repr__(&self) -> String {

@@ -290,6 +290,7 @@ fn fit_region(
         alternatives: Vec::new(),
         free_axis: None,
         feature_evidence: None,
+        fit: None,
     })
 }
 

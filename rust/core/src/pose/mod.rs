@@ -7,6 +7,7 @@
 //! otherwise the pipeline answers `NoObjectFound` rather than a guess.
 
 mod ccp_path;
+mod fit;
 mod judge;
 mod model;
 mod outline;
@@ -20,8 +21,12 @@ mod trust;
 #[cfg(test)]
 mod trust_tests;
 mod types;
+mod unseen_turns;
+#[cfg(test)]
+mod unseen_turns_tests;
 
 pub use ccp_path::{CcpPathParams, CheckIcpParams, FineIcpParams};
+pub use fit::FitQuality;
 pub use model::PoseModel;
 pub use trust::{Alternative, FeatureEvidence, TrustParams};
 pub use types::{CoarseMethod, PoseConfig, PoseEstimate, Timings};
@@ -123,7 +128,8 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
 }
 
 /// Every estimate with its trust (see [`trust`]): a pose the scan shows to be a near-symmetric
-/// alternative of the truth is replaced by the one it supports.
+/// alternative of the truth is replaced by the one it supports; the confidence also carries
+/// the fit of the pose's points against the scan's own noise (see [`fit`]).
 /// `pts` are the points left after bin removal (the comparison runs on them).
 fn trusted(
     found: Vec<PoseEstimate>,
@@ -142,9 +148,21 @@ fn trusted(
                 let idx = scene::scene_indices(scene, model, &e.t_scene_model, judge.tol);
                 e.indices = idx;
             }
-            e.confidence = t.confidence;
+            let claimed: Vec<Point> = e.indices.iter().map(|&i| scene[i]).collect();
+            e.fit = fit::fit_quality(&claimed, model, &e.t_scene_model, judge.tol);
+            e.confidence = t.confidence * e.fit.map_or(1.0, |f| f.factor);
             e.ambiguous = t.ambiguous;
             e.alternatives = t.alternatives;
+            let noise = e.fit.map(|f| f.noise_floor);
+            let unseen =
+                unseen_turns::unseen_turns(&claimed, model, &e.t_scene_model, judge, cfg, noise, &e.alternatives);
+            if !unseen.is_empty() {
+                // As with near-symmetric alternatives: each one the scan cannot rule out is as
+                // likely as the pose.
+                e.confidence /= (1 + unseen.len()) as f64;
+                e.ambiguous = true;
+                e.alternatives.extend(unseen);
+            }
             e.free_axis = t.free_axis;
             e.feature_evidence = t.evidence;
             e

@@ -298,6 +298,7 @@ fn estimates(
                 alternatives: Vec::new(),
                 free_axis: None,
                 feature_evidence: None,
+                fit: None,
             }
         })
         .collect()

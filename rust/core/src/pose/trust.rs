@@ -338,13 +338,13 @@ fn fine_tolerance(
 }
 
 /// Every k-th point of `v`, so that at most about `n` remain.
-fn thin(v: &[Point], n: usize) -> Vec<Point> {
+pub(super) fn thin(v: &[Point], n: usize) -> Vec<Point> {
     v.iter().step_by(v.len().div_ceil(n.max(1)).max(1)).copied().collect()
 }
 
 /// Distance of a model-frame point from the tangent plane of its nearest dense model point,
 /// when that point lies within `reach`.
-fn plane_residual(model: &PoseModel, q: &Point, reach: f64) -> Option<f64> {
+pub(super) fn plane_residual(model: &PoseModel, q: &Point, reach: f64) -> Option<f64> {
     let target = model.fine_target();
     let (j, _) = target.search().nearest_within(&[q.x, q.y, q.z], reach * reach)?;
     let n = target.normals().map(|n| n[j]);

@@ -2,6 +2,7 @@
 //! [`Timings`].
 
 use super::ccp_path::CcpPathParams;
+use super::fit::FitQuality;
 use super::trust::{Alternative, FeatureEvidence, TrustParams};
 use crate::error::{Error, Result};
 use crate::geometry::{BinBox, Point};
@@ -205,6 +206,9 @@ pub struct PoseEstimate {
     pub free_axis: Option<Vector3<f64>>,
     /// The evidence in the feature regions of the pose kept (`None` without near-symmetries).
     pub feature_evidence: Option<FeatureEvidence>,
+    /// How well the pose's points lie on the posed model against the scan's own noise (`None`
+    /// where too few points judge it); its factor is part of `confidence`.
+    pub fit: Option<FitQuality>,
 }
 
 #[cfg(test)]

@@ -1,0 +1,163 @@
+//! Turns the scan cannot see. When the points a pose claims constrain its turn about one axis
+//! far less than about the others — one leg of an elbow seen alone is a cylinder — other turns
+//! about that axis fit them as well, with the rest of the part swung into places the scan does
+//! not show (under its neighbours). No mesh analysis finds these: they come from what the view
+//! happens to show. Each turn is posed about the weak axis, refined on the claimed points and
+//! judged; a turn the judge passes that explains the claimed points as well is an alternative
+//! the scan cannot rule out, and the pose is reported ambiguous rather than confidently wrong.
+
+use super::fit::{eigen_ascending, residual_sigma, FREE_RATIO};
+use super::judge::Judge;
+use super::trust::{plane_residual, thin, Alternative, FeatureEvidence};
+use super::{PoseConfig, PoseModel};
+use crate::geometry::Point;
+use crate::registration::{icp, IcpConfig};
+use nalgebra::{Isometry3, Matrix3, Translation3, Unit, UnitQuaternion, Vector3};
+
+/// The turn about the weakest axis is probed when the claimed points constrain it less than this
+/// share of the next weakest: the seen surface is then nearly a surface of revolution about it.
+const WEAK_SHARE: f64 = 0.3;
+/// The turns probed, degrees (both ways, and the half turn).
+const TURNS_DEG: [f64; 11] = [
+    30.0, 60.0, 90.0, 120.0, 150.0, 180.0, -30.0, -60.0, -90.0, -120.0, -150.0,
+];
+/// Claimed points each turn is refined on, at most.
+const REFINE_POINTS: usize = 600;
+/// ICP iterations of each turn's refinement.
+const ITERATIONS: usize = 12;
+/// A turn explains the claimed points as well when it keeps this share of them within the
+/// judge's tolerance …
+const KEPT_SHARE: f64 = 0.9;
+/// … with residuals at most this many times the pose's own (or [`FREE_RATIO`] noise floors) …
+const SIGMA_SLACK: f64 = 1.5;
+/// … and the scan confirms its surface nearly as well (coverage at most this much lower).
+const COVERAGE_SLACK: f64 = 0.05;
+
+/// The weakest rotation axis of the point-to-plane constraints of `q` (model-frame points with
+/// their model normals) and a point on it, model frame, when it is weak (see [`WEAK_SHARE`]).
+pub(super) fn weak_axis(q: &[(Point, Vector3<f64>)]) -> Option<(Unit<Vector3<f64>>, Point)> {
+    let n = q.len() as f64;
+    let c = q.iter().fold(Vector3::zeros(), |s, (p, _)| s + p.coords) / n;
+    let (mut a, mut b, mut cc) = (Matrix3::zeros(), Matrix3::zeros(), Matrix3::zeros());
+    for (p, nrm) in q {
+        let r = (p.coords - c).cross(nrm);
+        a += r * r.transpose();
+        b += r * nrm.transpose();
+        cc += nrm * nrm.transpose();
+    }
+    // Eliminate the translation (a flat patch leaves some of it free: regularise slightly).
+    let reg = 1e-9 * cc.trace().max(1e-12);
+    let cinv = (cc + Matrix3::identity() * reg).try_inverse()?;
+    let s = a - b * cinv * b.transpose();
+    let (values, vectors) = eigen_ascending(s);
+    let (w0, w1) = (values[0], values[1]);
+    if !(w1 > 0.0) || w0 > WEAK_SHARE * w1 {
+        return None;
+    }
+    let omega = vectors[0];
+    // The translation that best accompanies a turn about an axis through the centroid moves the
+    // axis to where the turn keeps the surface on itself.
+    let dt = -(cinv * b.transpose() * omega);
+    let on_axis = Point::from(c + omega.cross(&dt) / omega.norm_squared());
+    Some((Unit::new_normalize(omega), on_axis))
+}
+
+/// Claimed points within `reach` of the posed model, with its normals, model frame.
+fn on_model(claimed: &[Point], model: &PoseModel, t: &Isometry3<f64>, reach: f64) -> Vec<(Point, Vector3<f64>)> {
+    let target = model.fine_target();
+    let Some(normals) = target.normals() else {
+        return Vec::new();
+    };
+    let inv = t.inverse();
+    claimed
+        .iter()
+        .filter_map(|p| {
+            let q = inv * p;
+            let (j, _) = target.search().nearest_within(&[q.x, q.y, q.z], reach * reach)?;
+            Some((q, normals[j]))
+        })
+        .collect()
+}
+
+fn kept_within(claimed: &[Point], model: &PoseModel, t: &Isometry3<f64>, tol: f64) -> usize {
+    let inv = t.inverse();
+    claimed
+        .iter()
+        .filter(|p| plane_residual(model, &(inv * *p), tol).is_some_and(|r| r.abs() <= tol))
+        .count()
+}
+
+/// The turns of `t_scene_model` about the weak axis of its claimed points that the scan cannot
+/// rule out (empty when no axis is weak), beyond the `known` alternatives. `noise_floor` is the
+/// scan's noise (mm) where known.
+pub(super) fn unseen_turns(
+    claimed: &[Point],
+    model: &PoseModel,
+    t_scene_model: &Isometry3<f64>,
+    judge: &Judge,
+    cfg: &PoseConfig,
+    noise_floor: Option<f64>,
+    known: &[Alternative],
+) -> Vec<Alternative> {
+    let tol = judge.tol;
+    let sample = thin(claimed, REFINE_POINTS);
+    let q = on_model(&sample, model, t_scene_model, tol);
+    if q.len() < 30 {
+        return Vec::new();
+    }
+    let Some((axis, x)) = weak_axis(&q) else {
+        return Vec::new();
+    };
+    let Some(sigma0) = residual_sigma(claimed, model, t_scene_model, tol) else {
+        return Vec::new();
+    };
+    let sigma_ok = (SIGMA_SLACK * sigma0).max(FREE_RATIO * noise_floor.unwrap_or(0.0));
+    let kept0 = kept_within(claimed, model, t_scene_model, tol);
+    let e0 = judge.evidence(model, t_scene_model);
+    let refine = IcpConfig::robust_plane(3.0 * tol, ITERATIONS, 1e-5, 1e-3);
+    let trust = &cfg.trust;
+    let same = |a: &Isometry3<f64>, b: &Isometry3<f64>| {
+        let (r, d) = model.symmetries.pose_error(a, b);
+        r < trust.pick_rotation && d < trust.pick_translation
+    };
+    let mut found: Vec<Alternative> = Vec::new();
+    for deg in TURNS_DEG {
+        if crate::cancel::requested() {
+            break;
+        }
+        let turn: Isometry3<f64> = Translation3::from(x.coords)
+            * UnitQuaternion::from_axis_angle(&axis, deg.to_radians())
+            * Translation3::from(-x.coords);
+        let start = t_scene_model * turn.inverse();
+        let Ok(r) = icp(&sample, model.fine_target(), &start.inverse(), &refine) else {
+            continue;
+        };
+        let t = r.t_target_source.inverse();
+        if same(&t, t_scene_model) || found.iter().chain(known).any(|a| same(&a.t_scene_model, &t)) {
+            continue;
+        }
+        let e = judge.evidence(model, &t);
+        if e.coverage() < e0.coverage() - COVERAGE_SLACK || judge.check(&e, model, &t, cfg).is_err() {
+            continue;
+        }
+        let kept = kept_within(claimed, model, &t, tol);
+        if (kept as f64) < KEPT_SHARE * kept0 as f64 {
+            continue;
+        }
+        match residual_sigma(claimed, model, &t, tol) {
+            Some(s) if s <= sigma_ok => {}
+            _ => continue,
+        }
+        found.push(Alternative {
+            t_scene_model: model.symmetries.canonical(&t),
+            evidence: FeatureEvidence {
+                fits: kept,
+                misfits: claimed.len().saturating_sub(kept),
+                seen_through: e.violated,
+                tolerance: tol,
+                score: kept as f64 - (claimed.len().saturating_sub(kept)) as f64 - e.violated as f64,
+            },
+        });
+    }
+    found
+}

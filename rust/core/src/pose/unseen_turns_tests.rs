@@ -1,0 +1,148 @@
+//! Turns the scan cannot see: an elbow whose one leg lies under a slab can be turned about the
+//! other (seen) leg's axis without the scan telling; with both legs in view, it cannot.
+
+use super::tests::{config, top_view};
+use super::unseen_turns::{unseen_turns, weak_axis};
+use super::*;
+use crate::mesh::parts::{elbow, FittingParams};
+use crate::mesh::{sample_surface, test_box, Density, TriMesh};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use std::sync::OnceLock;
+
+fn elbow_model() -> &'static (PoseModel, TriMesh) {
+    static MODEL: OnceLock<(PoseModel, TriMesh)> = OnceLock::new();
+    MODEL.get_or_init(|| {
+        let mesh = elbow(&FittingParams::default()).unwrap().mesh;
+        let s = sample_surface(&mesh, Density::Spacing(1.0), 0).unwrap();
+        let mut model = PoseModel::new(s.points, s.normals, mesh.diameter(), mesh.area(), None).unwrap();
+        model.build_ppf(crate::registration::ppf::PpfConfig::default()).unwrap();
+        (model, mesh)
+    })
+}
+
+/// The elbow lying flat (legs along the scene's x and y), and what a sensor above sees of it
+/// with 0.1 mm of noise along the view — with a slab 10 mm above it over its joint and y leg
+/// when `covered`, so that only the straight end of the x leg shows.
+fn scene(covered: bool) -> (Isometry3<f64>, Vec<Point>) {
+    let (_, mesh) = elbow_model();
+    let truth = Isometry3::from_parts(Translation3::new(400.0, 10.0, 80.0), UnitQuaternion::identity());
+    let mut v: Vec<Point> = mesh.vertices.iter().map(|p| truth * p).collect();
+    let mut f = mesh.faces.clone();
+    if covered {
+        let slab = test_box(Point::new(370.0, -20.0, 103.0), Point::new(416.0, 70.0, 106.0));
+        let base = v.len() as u32;
+        v.extend(slab.vertices);
+        f.extend(slab.faces.iter().map(|t| [t[0] + base, t[1] + base, t[2] + base]));
+    }
+    let world = TriMesh::new(v, f).unwrap();
+    let mut rng = crate::rng::Rng::new(5);
+    let mut pts = top_view(&world, &Isometry3::identity(), 3);
+    for p in &mut pts {
+        p.z += 0.1 * rng.normal();
+    }
+    (truth, pts)
+}
+
+/// The truth and the unseen turns of `pose` (default: the truth).
+fn turns_of(covered: bool, pose: Option<Isometry3<f64>>) -> (Isometry3<f64>, Vec<trust::Alternative>) {
+    let (model, _) = elbow_model();
+    let cfg = config(CoarseMethod::Ppf);
+    let (truth, scene_pts) = scene(covered);
+    let (kept, planes) = scene::remove_bin(&scene_pts, model, &cfg, true).unwrap();
+    let pts: Vec<Point> = kept.iter().map(|&i| scene_pts[i]).collect();
+    let judge = judge::Judge::new(&scene_pts, &pts, planes, model, &cfg);
+    let pose = pose.unwrap_or(truth);
+    assert!(judge.verdict(model, &pose, &cfg).is_ok(), "the pose passes the judge");
+    let claimed: Vec<Point> = scene::scene_indices(&scene_pts, model, &pose, judge.tol)
+        .into_iter()
+        .map(|i| scene_pts[i])
+        .collect();
+    (truth, unseen_turns(&claimed, model, &pose, &judge, &cfg, None, &[]))
+}
+
+#[test]
+fn a_leg_seen_alone_leaves_its_turn_open() {
+    let (model, _) = elbow_model();
+    let (truth, alternatives) = turns_of(true, None);
+    assert!(
+        !alternatives.is_empty(),
+        "turns about the seen leg fit the scan as well"
+    );
+    let seen = truth.rotation * Vector3::x();
+    for a in &alternatives {
+        let (r, _) = model.symmetries.pose_error(&a.t_scene_model, &truth);
+        assert!(r > 5f64.to_radians(), "distinct from the pose");
+        // Each keeps the seen leg where it is (as its x leg, or as its y leg by the elbow's
+        // own half turn): a turn about the seen leg's axis.
+        let keeps = [Vector3::x(), Vector3::y()]
+            .iter()
+            .any(|v| (a.t_scene_model.rotation * v).dot(&seen).abs() > 0.99);
+        assert!(keeps, "{:?}", a.t_scene_model.rotation);
+    }
+    // Started from a wrong turn, the truth is among the alternatives.
+    let turn = UnitQuaternion::from_scaled_axis(Vector3::x() * (-60f64).to_radians());
+    let wrong = truth * Isometry3::from_parts(Translation3::identity(), turn);
+    let (_, from_wrong) = turns_of(true, Some(wrong));
+    assert!(
+        from_wrong.iter().any(|a| {
+            let (r, d) = model.symmetries.pose_error(&a.t_scene_model, &truth);
+            r < 5f64.to_radians() && d < 3.0
+        }),
+        "the truth is among {} alternatives",
+        from_wrong.len()
+    );
+}
+
+#[test]
+fn both_legs_in_view_decide_the_turn() {
+    let (_, alternatives) = turns_of(false, None);
+    assert!(alternatives.is_empty(), "{} alternatives", alternatives.len());
+}
+
+#[test]
+fn the_weak_axis_of_a_cylinder_patch_is_its_axis_through_its_axis() {
+    // The top half of a cylinder of radius 10 along y, axis through (5, 0, -3).
+    let mut q = Vec::new();
+    for i in 0..40 {
+        for j in 0..=20 {
+            let a = std::f64::consts::PI * j as f64 / 20.0;
+            let n = Vector3::new(a.cos(), 0.0, a.sin());
+            q.push((Point::new(5.0, i as f64, -3.0) + 10.0 * n, n));
+        }
+    }
+    let (axis, x) = weak_axis(&q).expect("a cylinder leaves its turn free");
+    assert!(axis.y.abs() > 0.999, "{axis:?}");
+    assert!((x.x - 5.0).abs() < 0.05 && (x.z + 3.0).abs() < 0.05, "{x:?}");
+    // A box corner (three faces) constrains every turn.
+    let mut corner = Vec::new();
+    for i in 0..20 {
+        for j in 0..20 {
+            let (a, b) = (i as f64, j as f64);
+            corner.push((Point::new(a, b, 0.0), Vector3::z()));
+            corner.push((Point::new(a, 0.0, b), -Vector3::y()));
+            corner.push((Point::new(0.0, a, b), -Vector3::x()));
+        }
+    }
+    assert!(weak_axis(&corner).is_none());
+}
+
+#[test]
+fn a_pose_off_the_surface_by_more_than_the_noise_loses_confidence() {
+    let (model, _) = elbow_model();
+    let (truth, scene_pts) = scene(false);
+    let tol = judge::tolerance(judge::judge_step(model));
+    let claimed = |t: &Isometry3<f64>| -> Vec<Point> {
+        scene::scene_indices(&scene_pts, model, t, tol)
+            .into_iter()
+            .map(|i| scene_pts[i])
+            .collect()
+    };
+    let right = fit::fit_quality(&claimed(&truth), model, &truth, tol).unwrap();
+    assert!(right.factor == 1.0 && right.ratio < 1.5, "{right:?}");
+    assert!(right.residual_sigma < 0.13 && right.noise_floor < 0.15, "{right:?}");
+    // Turned 8° about the vertical: the legs still lie within the tolerance of most points.
+    let yaw = UnitQuaternion::from_scaled_axis(Vector3::z() * 8f64.to_radians());
+    let wrong = Isometry3::from_parts(truth.translation, yaw * truth.rotation);
+    let off = fit::fit_quality(&claimed(&wrong), model, &wrong, tol).unwrap();
+    assert!(off.ratio > 3.0 && off.factor < 0.75, "{off:?}");
+}
