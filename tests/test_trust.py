@@ -96,6 +96,22 @@ def test_confidence_is_calibrated_on_a_seeded_set(plain_tee):
             assert good[sel].mean() >= c, f"confidence >= {c}: {good[sel].mean():.2f} pick-grade"
 
 
+def test_a_right_pose_fits_at_the_scans_noise(tee):
+    """PoseResult.fit: the residuals of a right pose are at the noise the scan itself shows (read
+    without the model), so the fit costs it no confidence. (A pose off the surface by more than
+    the noise, and the turns a scan cannot see, are tested in the core's pose tests.)"""
+    rng = np.random.default_rng(41)
+    for noise in (0.1, 0.25):
+        truth = lying(0.7, boss_up=True)
+        res = binpick.estimate_pose(rendered_view(tee, truth, rng, noise=noise), tee, num_threads=1)
+        assert pick_grade(tee, res.T_scene_model, truth)
+        fit = res.fit
+        assert fit is not None and fit["factor"] == 1.0 and fit["ratio"] < 2.0, fit
+        # The floor is the scan's noise along the view (or the judge's finest, 0.1 mm).
+        assert max(0.1, 0.6 * noise) < fit["noise_floor_mm"] < 1.6 * noise + 0.05, fit
+        assert fit["residual_sigma_mm"] < 2.0 * noise + 0.05, fit
+
+
 def uniform_noise(seed: int) -> np.ndarray:
     lo, hi = np.array([260.0, -90.0, 0.0]), np.array([540.0, 90.0, 80.0])
     return np.random.default_rng(seed).uniform(lo, hi, (20000, 3))

@@ -174,7 +174,9 @@ class PoseResult:
             confidence ≥ c, at least a fraction c were pick-grade on the project's test sets
             (``benches/near_symmetric.py`` prints the reliability table).
         ambiguous: True when the scan cannot rule out a distinct alternative: a near-symmetric
-            flip whose deciding feature is out of sight, or a turn about a free axis.
+            flip whose deciding feature is out of sight, a turn about a free axis, or a turn or
+            slide that what the view shows leaves open (one leg of an elbow seen alone, a shaft
+            whose ends are hidden).
         alternatives: those alternatives, each an :class:`Alternative` (pose and evidence).
         free_axis: (3,) unit axis, scene frame, through the part's symmetry centre, of a continuous
             near-symmetry the scan cannot fix (a shaft whose keyway is out of sight): the turn

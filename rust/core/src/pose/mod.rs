@@ -129,7 +129,8 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
 
 /// Every estimate with its trust (see [`trust`]): a pose the scan shows to be a near-symmetric
 /// alternative of the truth is replaced by the one it supports; the confidence also carries
-/// the fit of the pose's points against the scan's own noise (see [`fit`]).
+/// the fit of the pose's points against the scan's own noise (see [`fit`]), and the turns and
+/// slides the view leaves open are alternatives too (see [`unseen_turns`]).
 /// `pts` are the points left after bin removal (the comparison runs on them).
 fn trusted(
     found: Vec<PoseEstimate>,
@@ -156,7 +157,7 @@ fn trusted(
             let noise = e.fit.map(|f| f.noise_floor);
             let unseen =
                 unseen_turns::unseen_turns(&claimed, model, &e.t_scene_model, judge, cfg, noise, &e.alternatives);
-            if !unseen.is_empty() {
+            if !unseen.is_empty() && e.free_axis.is_none() {
                 // As with near-symmetric alternatives: each one the scan cannot rule out is as
                 // likely as the pose.
                 e.confidence /= (1 + unseen.len()) as f64;

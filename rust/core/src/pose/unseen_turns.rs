@@ -1,9 +1,10 @@
-//! Turns the scan cannot see. When the points a pose claims constrain its turn about one axis
-//! far less than about the others — one leg of an elbow seen alone is a cylinder — other turns
-//! about that axis fit them as well, with the rest of the part swung into places the scan does
-//! not show (under its neighbours). No mesh analysis finds these: they come from what the view
-//! happens to show. Each turn is posed about the weak axis, refined on the claimed points and
-//! judged; a turn the judge passes that explains the claimed points as well is an alternative
+//! Turns and slides the scan cannot see. When the points a pose claims constrain its turn about
+//! one axis far less than about the others — one leg of an elbow seen alone is a cylinder — other
+//! turns about that axis fit them as well, with the rest of the part swung into places the scan
+//! does not show (under its neighbours); a shaft whose ends are hidden slides along its axis the
+//! same way. No mesh analysis finds these: they come from what the view
+//! happens to show. Each turn is posed about the weak axis (each slide along the weak direction),
+//! refined on the claimed points and judged; a move the judge passes that explains the claimed points as well is an alternative
 //! the scan cannot rule out, and the pose is reported ambiguous rather than confidently wrong.
 
 use super::fit::{eigen_ascending, residual_sigma, FREE_RATIO};
@@ -17,21 +18,38 @@ use nalgebra::{Isometry3, Matrix3, Translation3, Unit, UnitQuaternion, Vector3};
 /// The turn about the weakest axis is probed when the claimed points constrain it less than this
 /// share of the next weakest: the seen surface is then nearly a surface of revolution about it.
 const WEAK_SHARE: f64 = 0.3;
+/// A weak axis within about 10° of the axis of a near-symmetry of the part, or of its continuous
+/// symmetry, is that axis.
+const AXIS_COS: f64 = 0.985;
 /// The turns probed, degrees (both ways, and the half turn).
 const TURNS_DEG: [f64; 11] = [
     30.0, 60.0, 90.0, 120.0, 150.0, 180.0, -30.0, -60.0, -90.0, -120.0, -150.0,
 ];
+/// The slides probed along a weak slide, as shares of the part's diameter (both ways).
+const SLIDES: [f64; 3] = [0.05, 0.1, 0.2];
 /// Claimed points each turn is refined on, at most.
 const REFINE_POINTS: usize = 600;
 /// ICP iterations of each turn's refinement.
 const ITERATIONS: usize = 12;
-/// A turn explains the claimed points as well when it keeps this share of them within the
-/// judge's tolerance …
-const KEPT_SHARE: f64 = 0.9;
+/// A turn explains the claimed points as well when it loses at most this many of them from the
+/// judge's tolerance — twice the 15 points at which a feature counts as in view, as the trust
+/// stage's margin — …
+const MIN_MARGIN: f64 = 30.0;
+/// … or this share of them, when more …
+const MARGIN_SHARE: f64 = 0.02;
 /// … with residuals at most this many times the pose's own (or [`FREE_RATIO`] noise floors) …
 const SIGMA_SLACK: f64 = 1.5;
 /// … and the scan confirms its surface nearly as well (coverage at most this much lower).
 const COVERAGE_SLACK: f64 = 0.05;
+
+/// The weakest slide of the point-to-plane constraints of `q` (model-frame points with their
+/// model normals), model frame, when it is weak (see [`WEAK_SHARE`]): along a cylinder seen
+/// without its ends, say.
+pub(super) fn weak_slide(q: &[(Point, Vector3<f64>)]) -> Option<Unit<Vector3<f64>>> {
+    let cc = q.iter().fold(Matrix3::zeros(), |s, (_, n)| s + n * n.transpose());
+    let (values, vectors) = eigen_ascending(cc);
+    (values[1] > 0.0 && values[0] <= WEAK_SHARE * values[1]).then(|| Unit::new_normalize(vectors[0]))
+}
 
 /// The weakest rotation axis of the point-to-plane constraints of `q` (model-frame points with
 /// their model normals) and a point on it, model frame, when it is weak (see [`WEAK_SHARE`]).
@@ -105,9 +123,34 @@ pub(super) fn unseen_turns(
     if q.len() < 30 {
         return Vec::new();
     }
-    let Some((axis, x)) = weak_axis(&q) else {
+    // Turns about the axis of one of the part's near-symmetries are the trust stage's to weigh,
+    // on the feature that breaks it; about a continuous symmetry's, they change nothing.
+    let turn_axis = weak_axis(&q).filter(|(axis, _)| {
+        let along = |a: &Vector3<f64>| a.norm() > 0.0 && a.normalize().dot(axis).abs() > AXIS_COS;
+        let continuous = model.symmetries.continuous_axis.iter();
+        let near = model.near_symmetries.iter().map(|n| &n.axis);
+        !continuous.chain(near).any(along)
+    });
+    let mut moves: Vec<Isometry3<f64>> = Vec::new();
+    if let Some((axis, x)) = turn_axis {
+        moves.extend(TURNS_DEG.iter().map(|deg| {
+            Translation3::from(x.coords)
+                * UnitQuaternion::from_axis_angle(&axis, deg.to_radians())
+                * Translation3::from(-x.coords)
+        }));
+    }
+    if let Some(u) = weak_slide(&q) {
+        let slides = SLIDES.iter().flat_map(|s| [*s, -*s]);
+        moves.extend(slides.map(|s| {
+            Isometry3::from_parts(
+                Translation3::from(u.into_inner() * s * model.diameter),
+                UnitQuaternion::identity(),
+            )
+        }));
+    }
+    if moves.is_empty() {
         return Vec::new();
-    };
+    }
     let Some(sigma0) = residual_sigma(claimed, model, t_scene_model, tol) else {
         return Vec::new();
     };
@@ -121,14 +164,11 @@ pub(super) fn unseen_turns(
         r < trust.pick_rotation && d < trust.pick_translation
     };
     let mut found: Vec<Alternative> = Vec::new();
-    for deg in TURNS_DEG {
+    for motion in moves {
         if crate::cancel::requested() {
             break;
         }
-        let turn: Isometry3<f64> = Translation3::from(x.coords)
-            * UnitQuaternion::from_axis_angle(&axis, deg.to_radians())
-            * Translation3::from(-x.coords);
-        let start = t_scene_model * turn.inverse();
+        let start = t_scene_model * motion.inverse();
         let Ok(r) = icp(&sample, model.fine_target(), &start.inverse(), &refine) else {
             continue;
         };
@@ -141,7 +181,7 @@ pub(super) fn unseen_turns(
             continue;
         }
         let kept = kept_within(claimed, model, &t, tol);
-        if (kept as f64) < KEPT_SHARE * kept0 as f64 {
+        if (kept as f64) < kept0 as f64 - MIN_MARGIN.max(MARGIN_SHARE * kept0 as f64) {
             continue;
         }
         match residual_sigma(claimed, model, &t, tol) {
