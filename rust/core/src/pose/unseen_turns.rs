@@ -39,8 +39,11 @@ const MIN_MARGIN: f64 = 30.0;
 const MARGIN_SHARE: f64 = 0.02;
 /// … with residuals at most this many times the pose's own (or [`FREE_RATIO`] noise floors) …
 const SIGMA_SLACK: f64 = 1.5;
-/// … and the scan confirms its surface nearly as well (coverage at most this much lower).
-const COVERAGE_SLACK: f64 = 0.05;
+/// … and it puts hardly more surface where the sensor saw free space: at most this share of
+/// the pose's judged probes more …
+const SEEN_THROUGH_SHARE: f64 = 0.01;
+/// … or this many, when more.
+const SEEN_THROUGH_MARGIN: usize = 3;
 
 /// The weakest slide of the point-to-plane constraints of `q` (model-frame points with their
 /// model normals), model frame, when it is weak (see [`WEAK_SHARE`]): along a cylinder seen
@@ -125,12 +128,13 @@ pub(super) fn unseen_turns(
     }
     // Turns about the axis of one of the part's near-symmetries are the trust stage's to weigh,
     // on the feature that breaks it; about a continuous symmetry's, they change nothing.
-    let turn_axis = weak_axis(&q).filter(|(axis, _)| {
+    let trusts_axis = |axis: &Vector3<f64>| {
         let along = |a: &Vector3<f64>| a.norm() > 0.0 && a.normalize().dot(axis).abs() > AXIS_COS;
         let continuous = model.symmetries.continuous_axis.iter();
         let near = model.near_symmetries.iter().map(|n| &n.axis);
-        !continuous.chain(near).any(along)
-    });
+        continuous.chain(near).any(along)
+    };
+    let turn_axis = weak_axis(&q).filter(|(axis, _)| !trusts_axis(axis));
     let mut moves: Vec<Isometry3<f64>> = Vec::new();
     if let Some((axis, x)) = turn_axis {
         moves.extend(TURNS_DEG.iter().map(|deg| {
@@ -157,6 +161,8 @@ pub(super) fn unseen_turns(
     let sigma_ok = (SIGMA_SLACK * sigma0).max(FREE_RATIO * noise_floor.unwrap_or(0.0));
     let kept0 = kept_within(claimed, model, t_scene_model, tol);
     let e0 = judge.evidence(model, t_scene_model);
+    let seen_through_ok =
+        e0.violated + SEEN_THROUGH_MARGIN.max((SEEN_THROUGH_SHARE * (e0.seen + e0.violated) as f64).round() as usize);
     let refine = IcpConfig::robust_plane(3.0 * tol, ITERATIONS, 1e-5, 1e-3);
     let trust = &cfg.trust;
     let same = |a: &Isometry3<f64>, b: &Isometry3<f64>| {
@@ -176,8 +182,13 @@ pub(super) fn unseen_turns(
         if same(&t, t_scene_model) || found.iter().chain(known).any(|a| same(&a.t_scene_model, &t)) {
             continue;
         }
+        // A slide refined into a turn about a near-symmetry's axis is the trust stage's too.
+        let turned = (t_scene_model.inverse() * t).rotation;
+        if turned.angle() >= trust.pick_rotation && turned.axis().is_some_and(|a| trusts_axis(&a)) {
+            continue;
+        }
         let e = judge.evidence(model, &t);
-        if e.coverage() < e0.coverage() - COVERAGE_SLACK || judge.check(&e, model, &t, cfg).is_err() {
+        if e.violated > seen_through_ok || judge.check(&e, model, &t, cfg).is_err() {
             continue;
         }
         let kept = kept_within(claimed, model, &t, tol);
