@@ -187,8 +187,8 @@ class PoseResult:
         fit: how well the pose's points lie on the posed model against the scan's own noise
             (``residual_sigma_mm``: robust σ of the point-to-plane residuals; ``noise_floor_mm``:
             the sensor's noise where the part lies, read from the scan without the model;
-            ``ratio``; ``factor``: the share of ``confidence`` it keeps — 1 up to 2.5 times the
-            noise, an e-fold fall per further 1), or None where too few points judge it. A
+            ``ratio``; ``factor``: the share of ``confidence`` it keeps — 1 up to 2 times the
+            noise, an e-fold fall per further 0.5), or None where too few points judge it. A
             pose whose points sit several times the noise off the surface is wrong, or the part
             differs from its model.
     """

@@ -32,11 +32,12 @@ const LINEAR_SHARE: f64 = 0.2;
 /// The noise floor is at least this share of the judge's tolerance: the finest noise that
 /// tolerance is built for (a scanner that smooths its depth hides its noise from the chords).
 const FLOOR_SHARE_OF_TOLERANCE: f64 = 0.1;
-/// Residuals up to this many times the noise floor cost no confidence: real parts differ from
-/// their CAD models by a few tenths of a millimetre, and the floor is an estimate.
-pub(super) const FREE_RATIO: f64 = 2.5;
+/// Residuals up to this many times the noise floor cost no confidence: the floor is an estimate,
+/// and real parts differ a little from their CAD models (right poses read 0.5–1.4 on the
+/// project's simulator and on the reference sample, wrong ones that pass the judge 3–8).
+pub(super) const FREE_RATIO: f64 = 2.0;
 /// Beyond it, each further this-many noise floors shrinks the confidence e-fold.
-const DECAY_RATIO: f64 = 1.0;
+const DECAY_RATIO: f64 = 0.5;
 
 /// How well a pose's points lie on the posed model, against the scan's own noise.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -208,9 +209,9 @@ mod tests {
             );
         }
         // Noise as large as the spacing tilts the chords and reads low, but a right pose's
-        // residuals (σ) stay well inside the ratio that costs no confidence.
+        // residuals (σ) stay inside the ratio that costs no confidence.
         let floor = noise_floor(&scanned_cylinder(12.0, 2.0, 0.4, 0.4, 7)).unwrap();
-        assert!(0.4 / floor < 0.6 * FREE_RATIO, "σ 0.4: floor {floor:.3}");
+        assert!(0.4 / floor < 0.8 * FREE_RATIO, "σ 0.4: floor {floor:.3}");
     }
 
     #[test]
@@ -237,8 +238,8 @@ mod tests {
     fn the_factor_spares_residuals_near_the_noise_and_falls_beyond() {
         assert_eq!(confidence_factor(1.0), 1.0);
         assert_eq!(confidence_factor(FREE_RATIO), 1.0);
-        assert!(confidence_factor(4.0) < 0.3 && confidence_factor(4.0) > 0.15);
-        assert!(confidence_factor(8.0) < 0.03);
+        assert!(confidence_factor(2.5) < 0.4 && confidence_factor(2.5) > 0.3);
+        assert!(confidence_factor(3.0) < 0.15);
     }
 
     #[test]
