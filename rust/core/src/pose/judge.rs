@@ -85,6 +85,15 @@ impl Judge {
         }
     }
 
+    /// Whether `p` lies clear of every support (more than twice the tolerance on its free
+    /// side): points on the floor or a wall lie in the plane of the faces that rest on it and
+    /// would confirm material wherever a pose puts it.
+    pub fn off_supports(&self, p: &Point) -> bool {
+        self.supports
+            .iter()
+            .all(|s| s.normal.dot(&p.coords) - s.offset > 2.0 * self.tol)
+    }
+
     /// Probe stride over the model's dense points for about `n` probes.
     pub(super) fn probe_step(model: &PoseModel, n: usize) -> usize {
         (model.target().points().len() / n.max(1)).max(1)

@@ -149,7 +149,14 @@ fn trusted(
                 let idx = scene::scene_indices(scene, model, &e.t_scene_model, judge.tol);
                 e.indices = idx;
             }
-            let claimed: Vec<Point> = e.indices.iter().map(|&i| scene[i]).collect();
+            // The part's own points: those on the floor or a wall fit a face resting on it
+            // whatever the pose (and a wall is not where the part's noise is read).
+            let claimed: Vec<Point> = e
+                .indices
+                .iter()
+                .map(|&i| scene[i])
+                .filter(|p| judge.off_supports(p))
+                .collect();
             e.fit = fit::fit_quality(&claimed, model, &e.t_scene_model, judge.tol);
             e.confidence = t.confidence * e.fit.map_or(1.0, |f| f.factor);
             e.ambiguous = t.ambiguous;

@@ -145,12 +145,7 @@ pub(super) fn assess(
             .filter(|p| (*p - center).norm_squared() <= reach * reach)
             // Points on the floor or a wall lie in the plane of the part's faces that rest on
             // it and would confirm material wherever a pose puts it: only the part's own count.
-            .filter(|p| {
-                judge
-                    .supports
-                    .iter()
-                    .all(|s| s.normal.dot(&p.coords) - s.offset > 2.0 * judge.tol)
-            })
+            .filter(|p| judge.off_supports(p))
             .copied()
             .collect()
     };
