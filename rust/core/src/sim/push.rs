@@ -181,7 +181,6 @@ impl Pile {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh::TriMesh;
     use crate::sim::pile::tests::{assert_inside_bin, small_tee};
     use crate::sim::{BinSpec, PileParams};
     use nalgebra::{Translation3, UnitQuaternion};
