@@ -20,7 +20,7 @@ from ..calibration import CellCalibration
 from ..devices import safety
 from ..errors import InvalidInputError, SafetyError
 from ..models import Model
-from ..transforms import laser_sweep, translation
+from ..transforms import laser_sweep, rotation_about, translation
 from .grasp import branch_grasps, mesh_grasps
 from .views import turned_scan_poses
 
@@ -104,6 +104,25 @@ class GripperGeometry:
         T_gf = np.linalg.inv(self.T_flange_gripper)
         flange = ring @ T_gf[:3, :3].T + T_gf[:3, 3]
         return np.vstack([np.array(corners), *palm, flange])
+
+    def boxes(self, opening_mm: float) -> list[tuple[tuple[float, float, float], np.ndarray]]:
+        """The gripper as boxes ``(half_extents, T_gripper_box)`` (gripper frame, mm) for a physics
+        tool: the two fingers ``opening_mm`` apart and the body (palm) as two squares inscribed in
+        its circle, one turned 45° (an eight-pointed star that stays inside the cylinder)."""
+        gap = max(0.0, float(opening_mm))
+        top = self.tip_depth_mm - self.finger_length_mm
+        t = self.finger_thickness_mm
+        finger = (t / 2, self.finger_width_mm / 2, self.finger_length_mm / 2)
+        out = []
+        for sign in (-1.0, 1.0):
+            out.append((finger, translation(sign * (gap / 2 + t / 2), 0.0, (top + self.tip_depth_mm) / 2)))
+        a = self.body_radius_mm / np.sqrt(2.0)
+        body = (a, a, self.body_length_mm / 2)
+        for turn in (0.0, np.pi / 4):
+            T = translation(0.0, 0.0, top - self.body_length_mm / 2)
+            T[:3, :3] = rotation_about((0.0, 0.0, 1.0), turn)
+            out.append((body, T))
+        return out
 
     def between_fingers(self, points_gripper: np.ndarray) -> np.ndarray:
         """Which points (N, 3, in the gripper frame) lie in the slab the closing fingers sweep."""

@@ -45,7 +45,13 @@ from ..models import Model
 from ..transforms import inverse, look_down
 from .camera import SimCamera
 from .cell import Cell as Layout
-from .pile import Pile
+from .pile import Pile, PushReport
+
+#: The gripper counts as closed (a pushing tool) when its fingers are at most this far apart, mm.
+CLOSED_OPENING_MM = 10.0
+
+#: Fastest sweep the physics is asked to run, mm/s: faster motions are pushed at this speed.
+MAX_SWEEP_SPEED = 1000.0
 
 __all__ = ["TwinWorld", "SimulatedCell", "simulated_cell", "sim_limits", "SIM_ARM"]
 
@@ -172,6 +178,9 @@ class TwinWorld:
         self._held: Optional[int] = None
         self._release_pending: Optional[int] = None
         self._picked: Optional[int] = None
+        self._pushes: list[tuple[np.ndarray, float, float]] = []
+        #: Every sweep of the closed, empty gripper through the bin the physics ran, in order.
+        self.pushes: list[PushReport] = []
         self.config = self._config(self.limits)
         self._matcher: Optional[GraspMatcher] = None
         self._gripper_config = GripperConfig(serial=SerialSettings(baudrate=115200, timeout_s=0.3), speed=255)
@@ -198,6 +207,7 @@ class TwinWorld:
         self.robot_emulator = RobotEmulator(
             config=RobotEmulatorConfig(arm=SIM_ARM, speed_scale=self.speed_scale)
         ).start()
+        self.robot_emulator.on_motion = self._on_motion
         self.motor_emulator = DynamixelEmulator().start()
         self.gripper_emulator = _SimGripperEmulator(self).start()
         self.progress(
@@ -306,10 +316,41 @@ class TwinWorld:
                     self._release_pending = self._held
                     self._held = None
 
+    def _on_motion(self, T_base_flange: np.ndarray, speed: float) -> None:
+        """The robot emulator's motion hook (its serving thread, its lock held: nothing here may
+        call back into it): a motion of the closed, empty gripper that sweeps any of its points
+        through the bin's inner volume is queued to push the pile (run by :meth:`settle_pending`)."""
+        if self._held is not None or self.gripper_emulator is None or speed <= 0:
+            return
+        stroke = self._gripper_config.stroke_mm
+        opening = stroke * (1.0 - self.gripper_emulator.axis.position() / 255.0)
+        if opening > CLOSED_OPENING_MM:
+            return
+        path = T_base_flange @ self.gripper_geometry.T_flange_gripper
+        outline = self.gripper_geometry.outline(max(opening, 1.0))
+        pts = np.einsum("kij,mj->kmi", path[:, :3, :3], outline) + path[:, None, :3, 3]
+        lo, hi = self.layout.bin.bounds
+        if ((pts >= lo) & (pts <= hi)).all(axis=2).any():
+            self._pushes.append((path, opening, min(max(speed, 1.0), MAX_SWEEP_SPEED)))
+
+    def _run_pushes(self) -> None:
+        while self._pushes:
+            path, opening, speed = self._pushes.pop(0)
+            t0 = time.perf_counter()
+            report = self.pile.push(self.gripper_geometry.boxes(opening), path, speed)
+            self.pushes.append(report)
+            self.progress(
+                "physics",
+                f"the closed gripper swept the bin at {speed:.0f} mm/s: parts {report.moved or 'none'} moved "
+                f"({report.push_steps} steps, settled in {time.perf_counter() - t0:.1f} s)",
+            )
+
     def settle_pending(self) -> None:
-        """Takes a released part out of the pile and lets the rest settle (done lazily: by the
-        camera before it renders, the judge, or the twin process's world ticks)."""
+        """Runs the gripper's queued sweeps through the pile, takes a released part out of the
+        pile and lets the rest settle (done lazily: by the camera before it renders, the judge, or
+        the twin process's world ticks)."""
         with self.lock:
+            self._run_pushes()
             pid = self._release_pending
             if pid is not None:
                 self._release_pending = None
