@@ -172,6 +172,9 @@ class CellConfig:
             bin floor's centre toward each side); () = no second look.
         reachable: optional test ``T_base_flange → bool`` from the arm's kinematics; None = trust
             the controller (it refuses unreachable targets, and the cell then stops).
+        max_nudges: at a dead end (every view tried, the parts located but none pickable), how
+            many times per pick the closed gripper may push a blocked part over before the cell
+            looks again (:mod:`binpick.cell.nudge`); 0 = never.
         symmetries: ``T_object_object`` maps of the part onto itself, for judging pose errors.
         min_score: a located pose scoring lower counts as not found.
         estimate_options: extra keyword arguments for :func:`binpick.estimate_pose`.
@@ -199,6 +202,7 @@ class CellConfig:
     max_candidates: int = 8
     look_again_poses: Optional[Sequence[Any]] = None
     reachable: Optional[Callable[[np.ndarray], bool]] = None
+    max_nudges: int = 2
     symmetries: Sequence[Any] = ()
     min_score: float = 0.0
     estimate_options: Mapping[str, Any] = field(default_factory=dict)
@@ -215,6 +219,7 @@ class CellConfig:
             object.__setattr__(self, "clearance_z_mm", float(self.limits.approach_height_mm) + 20.0)
         count(self.max_collision_points, "max_collision_points")
         count(self.max_candidates, "max_candidates", 1)
+        count(self.max_nudges, "max_nudges", 0, 20)
         non_negative(self.floor_clearance_mm, "floor_clearance_mm", "mm")
         number(self.min_confidence, "min_confidence", 0.0, 1.0)
         positive(self.ambiguity_tolerance_deg, "ambiguity_tolerance_deg", "deg")
