@@ -3,7 +3,8 @@ laser motor and gripper emulators serving their real protocols on ptys, the real
 on those ptys, and a camera that renders the pile from the pose the robot emulator reports with
 the laser at the angle the motor emulator reports — driven by the same pick loop
 (:class:`binpick.cell.Cell`) as the real cell. The simulated gripper closes on a part only when
-the part really lies between its fingers; the part leaves the pile when the gripper lets go.
+the part really lies between its fingers; the part leaves the pile when the gripper lets go;
+a motion of the closed, empty gripper through the bin pushes the pile (:meth:`binpick.sim.Pile.push`).
 
 :class:`TwinWorld` is the twin's physical side (pile, emulators, ground truth) that both the
 in-process :class:`SimulatedCell` and the twin process (``binpick emulate cell``,
