@@ -4,7 +4,8 @@ the tool-tilt limit), the closed gripper pushes one of them over and the cell lo
 A nudge of a located part (``T_base_object``) is planned with the tool pointing straight down:
 above a start point ``NUDGE_START_MM`` outside the part's footprint, straight down until the
 fingertips are at two thirds of the part's height above the floor (its top minus a third of its
-height), straight across through the part to ``NUDGE_PAST_MM`` beyond its centre (in steps no
+height), straight across through the part to ``NUDGE_PAST_MM`` beyond its centre (to the centre when
+that would bring the gripper against a wall; in steps no
 longer than the cell's ``max_lateral_below_mm``, each a move the safety rules allow), and
 straight up again. Directions are tried in turn — towards the bin's centre first, then away from
 the nearest wall, then the others — and the first plan that passes every check is run:
@@ -183,11 +184,11 @@ def plan_nudge(config: CellConfig, T_base_object: Any, scene: Any, T_now: Any) -
     for d in nudge_directions(config, centre):
         s = (verts[:, :2] - centre) @ d
         start = centre + (float(s.min()) - NUDGE_START_MM - reach) * d
-        end = centre + NUDGE_PAST_MM * d
-        moves = _waypoints(config, start, end, tip_z)
-        problem = check_nudge(config, moves, T_now, others)
-        if problem is None:
-            return NudgePlan(T_base_object=T, direction=d, tip_z_mm=tip_z, waypoints=tuple(moves))
+        for past in (NUDGE_PAST_MM, 0.0):  # a push that would reach a wall may still reach the centre
+            moves = _waypoints(config, start, centre + past * d, tip_z)
+            problem = check_nudge(config, moves, T_now, others)
+            if problem is None:
+                return NudgePlan(T_base_object=T, direction=d, tip_z_mm=tip_z, waypoints=tuple(moves))
         why.append(f"{math.degrees(math.atan2(d[1], d[0])):.0f}°: {problem}")
     raise NudgeRefused(
         f"no nudge of the {model.name} at ({T[0, 3]:.1f}, {T[1, 3]:.1f}, {T[2, 3]:.1f}) mm passes the checks "
@@ -208,18 +209,19 @@ def _near(points: np.ndarray, model_points: np.ndarray, radius: float) -> np.nda
 
 
 def nudge_blocked(cell: Any, skipped: list, scan: Any) -> Optional[NudgePlan]:
-    """Plans a nudge of the first part in ``skipped`` (the located parts the loop passed over)
-    that has one, and runs it on ``cell`` (closes the gripper, the moves, gripper left closed);
+    """Plans a nudge of the first pose in ``skipped`` (the located parts the loop passed over,
+    every look's estimate) that has one, and runs it on ``cell`` (closes the gripper, the moves, gripper left closed);
     the plan run, or None when no part has one (nothing was sent). Faults stop the arm and are raised."""
     cfg = cell.config
     T_now = cell.robot.read_pose()
     tried: list[np.ndarray] = []
     refusals = []
     for k in skipped:
+        # Each look's estimate of a part is tried: a plan refused for one may pass for another.
         t = k.T_base_object[:3, 3]
-        if any(np.linalg.norm(t - u) < cfg.model.diameter / 4 for u in tried):
+        if any(np.abs(k.T_base_object - u).max() < 1e-3 for u in tried):
             continue
-        tried.append(t)
+        tried.append(k.T_base_object)
         try:
             plan = plan_nudge(cfg, k.T_base_object, scan.points, T_now)
         except NudgeRefused as exc:
