@@ -5,12 +5,14 @@ nothing sent."""
 from __future__ import annotations
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 import binpick
 from binpick.cell import nudge
+from binpick.cell.records import Skipped
 from binpick.errors import SafetyError
 from binpick.sim import SimulatedCell
 
@@ -60,41 +62,42 @@ def test_a_dead_end_is_nudged_and_the_bin_emptied(tee):
     assert _lowest_tip_above_floor(sim.cell.config, record.nudges) > 0.0
 
 
-def _config_and_part(tee):
+def test_a_nudge_through_the_floor_into_a_wall_or_out_of_reach_is_refused_with_nothing_sent(tee):
     sim = _dead_end(tee)
-    sim.start()
-    return sim, sim.cell.config, sim.pile.poses[0]
-
-
-def test_a_nudge_through_the_floor_or_out_of_reach_is_refused_with_nothing_sent(tee):
-    sim, cfg, T = _config_and_part(tee)
-    try:
+    with sim:
+        cell, cfg, T = sim.cell, sim.cell.config, sim.pile.poses[0]
         sent = []
-        robot = sim.cell.robot
-        move = robot.move_to
-        robot.move_to = lambda *a, **k: sent.append(a) or move(*a, **k)
-        T_now = robot.read_pose()
-        plan = nudge.plan_nudge(cfg, T, np.zeros((0, 3)), T_now)
-        moves = [list(w) for w in plan.waypoints]
-        assert nudge.check_nudge(cfg, [tuple(w) for w in moves], T_now, np.zeros((0, 3))) is None
-        low = [tuple(w) for w in moves]
-        for k, (name, W, lin) in enumerate(low):
-            if name != "above":
-                W = W.copy()
-                W[2, 3] -= 60.0  # fingertips 10 mm under the floor
-                low[k] = (name, W, lin)
-        assert "floor" in nudge.check_nudge(cfg, low, T_now, np.zeros((0, 3)))
-        far = [(n, W.copy(), lin) for n, W, lin in plan.waypoints]
-        for _, W, _ in far:
-            W[0, 3] += 2000.0
-        assert nudge.check_nudge(cfg, far, T_now, np.zeros((0, 3))) is not None
-        blind = replace(cfg, reachable=lambda T: False)
-        with pytest.raises(SafetyError, match="reach"):
-            nudge.plan_nudge(blind, T, np.zeros((0, 3)), T_now)
-        # A wall of scanned points where the fingers go down: refused.
-        start = plan.waypoints[1][1] @ cfg.gripper.T_flange_gripper
-        column = start[:3, 3] + np.array([[0.0, 0.0, -z] for z in np.linspace(-40, 0, 50)])
+        move, close = cell.robot.move_to, cell.gripper.close
+        cell.robot.move_to = lambda *a, **k: sent.append(("move", a)) or move(*a, **k)
+        cell.gripper.close = lambda *a, **k: sent.append(("close", a)) or close(*a, **k)
+        T_now, nothing = cell.robot.read_pose(), np.zeros((0, 3))
+        plan = nudge.plan_nudge(cfg, T, nothing, T_now)
+        assert nudge.check_nudge(cfg, list(plan.waypoints), T_now, nothing) is None
+        # Fingertips 10 mm under the floor, the whole path 2 m away, the arm unable to reach.
+        low = [(n, W if n == "above" else _lowered(W, 60.0), lin) for n, W, lin in plan.waypoints]
+        assert "floor" in nudge.check_nudge(cfg, low, T_now, nothing)
+        far = [(n, _shifted(W, 2000.0), lin) for n, W, lin in plan.waypoints]
+        assert nudge.check_nudge(cfg, far, T_now, nothing) is not None
+        # Scanned points of another part in the fingers' way down: refused.
+        tips = (plan.waypoints[1][1] @ cfg.gripper.T_flange_gripper)[:3, 3]
+        column = tips + np.array([[0.0, 0.0, z] for z in np.linspace(0.0, 40.0, 50)])
         assert "scanned points" in nudge.check_nudge(cfg, list(plan.waypoints), T_now, column)
+        # The loop's entry point with every plan refused: None, and nothing sent.
+        cell.config = replace(cfg, reachable=lambda T: False)
+        skipped = [Skipped(T, "none of the grasps usable")]
+        assert nudge.nudge_blocked(cell, skipped, SimpleNamespace(points=nothing)) is None
+        with pytest.raises(SafetyError, match="reach"):
+            nudge.plan_nudge(cell.config, T, nothing, T_now)
         assert sent == []
-    finally:
-        sim.close()
+
+
+def _lowered(T, dz):
+    T = T.copy()
+    T[2, 3] -= dz
+    return T
+
+
+def _shifted(T, dx):
+    T = T.copy()
+    T[0, 3] += dx
+    return T
