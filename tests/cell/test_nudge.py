@@ -43,7 +43,7 @@ def _lowest_tip_above_floor(cfg, plans) -> float:
     return lowest - floor
 
 
-def test_a_dead_end_is_nudged_and_the_bin_emptied(tee):
+def test_a_dead_end_is_nudged_and_the_blocked_part_picked(tee):
     lines = []
     sim = _dead_end(tee, progress=lambda stage, msg: lines.append((stage, msg)), look_again_poses=())
     with sim:
@@ -58,6 +58,8 @@ def test_a_dead_end_is_nudged_and_the_bin_emptied(tee):
     # The push moved the blocked part in the physics, and the cell then took it out.
     assert any(blocked in p.moved for p in sim.pushes), sim.pushes
     assert record.picked_instance == blocked and len(sim.pile) == 0, (record.failure, record.error)
+    assert record.success and record.truth.pick_grade, record.error
+    assert len(sim.pushes) == 1, "the nudge's moves push as one continuous sweep"
     assert np.linalg.norm(record.T_base_object[:3, 3] - before[:3, 3]) > 10.0
     assert _lowest_tip_above_floor(sim.cell.config, record.nudges) > 0.0
 

@@ -335,8 +335,17 @@ class TwinWorld:
             self._pushes.append((path, opening, min(max(speed, 1.0), MAX_SWEEP_SPEED)))
 
     def _run_pushes(self) -> None:
+        """Runs the queued sweeps; sweeps that follow on from each other (one ends where the next
+        starts, same opening and speed) run as one push, as the arm makes them without a pause
+        long enough for the pile to settle."""
         while self._pushes:
             path, opening, speed = self._pushes.pop(0)
+            while self._pushes:
+                nxt, o2, v2 = self._pushes[0]
+                if abs(o2 - opening) > 0.5 or abs(v2 - speed) > 0.05 * speed or np.abs(nxt[0] - path[-1]).max() > 1e-3:
+                    break
+                self._pushes.pop(0)
+                path = np.concatenate([path, nxt[1:]])
             t0 = time.perf_counter()
             report = self.pile.push(self.gripper_geometry.boxes(opening), path, speed)
             self.pushes.append(report)
