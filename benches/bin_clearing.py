@@ -40,6 +40,22 @@ def _parts(quick: bool) -> list:
     return parts
 
 
+def _lowest_above_floor(gripper, floor: float, poses) -> float:
+    """The lowest point of the gripper's outline over the flange poses ``poses``, above the floor (mm)."""
+    return (
+        min(
+            float(
+                (
+                    (gripper.outline() @ (T @ gripper.T_flange_gripper)[:3, :3].T)
+                    + (T @ gripper.T_flange_gripper)[:3, 3]
+                )[:, 2].min()
+            )
+            for T in poses
+        )
+        - floor
+    )
+
+
 def _floor_gap(sim) -> list:
     """Wraps the cell's plan check to record, per executed plan, the lowest gripper point above the floor (mm)."""
     cell, gaps = sim.cell, []
@@ -48,17 +64,11 @@ def _floor_gap(sim) -> list:
 
     def recording(plan):
         moves = check(plan)
-        lowest = min(
-            float(
-                (
-                    (gripper.outline() @ (T @ gripper.T_flange_gripper)[:3, :3].T)
-                    + (T @ gripper.T_flange_gripper)[:3, 3]
-                )[:, 2].min()
+        gaps.append(
+            _lowest_above_floor(
+                gripper, floor, [T for name, (T, _) in moves.items() if name in ("approach", "grasp", "lift")]
             )
-            for name, (T, _) in moves.items()
-            if name in ("approach", "grasp", "lift")
         )
-        gaps.append(lowest - floor)
         return moves
 
     cell.check_plan = recording
@@ -73,6 +83,12 @@ def run_pile(make, seed: int, count: int, frames: int) -> dict:
         cpu, wall = time.process_time() - cpu0, time.perf_counter() - wall0
         left = len(sim.pile.ids)
     recs = report.records
+    cfg = sim.cell.config
+    nudge_gaps = [
+        _lowest_above_floor(cfg.gripper, float(cfg.bin_bounds[0][2]), [T for _, T, _ in n.waypoints[1:]])
+        for r in recs
+        for n in r.nudges
+    ]
     return {
         "seed": seed,
         "count": count,
@@ -80,7 +96,8 @@ def run_pile(make, seed: int, count: int, frames: int) -> dict:
         "emptied": left == 0,
         "wrong_pose": sum(r.failure == "wrong pose" for r in recs),
         "empty_grip": sum(r.failure == "empty grip" for r in recs),
-        "floor_contacts": sum(g <= 0.0 for g in gaps),
+        "floor_contacts": sum(g <= 0.0 for g in gaps + nudge_gaps),
+        "nudges": len(nudge_gaps),
         "cycles": len(recs),
         "stages_ms": {s: float(np.mean([r.timings.get(s, 0.0) for r in recs])) for s in STAGES + CPU},
         "looks": sum(r.looks for r in recs),
@@ -117,7 +134,7 @@ def main() -> None:
         rows[name] = piles
     print(
         f"\n{'part':<14}{'removed':>9}{'emptied':>9}{'wrong':>7}{'empty':>7}{'floor':>7}"
-        f"{'scan ms':>9}{'loc+plan':>9}{'motion':>8}{'cpu s/pick':>11}"
+        f"{'nudges':>8}{'scan ms':>9}{'loc+plan':>9}{'motion':>8}{'cpu s/pick':>11}"
         f"{'extract':>9}{'pose':>7}{'plan':>7}  (binpick's own CPU ms per cycle)"
     )
     for name, piles in rows.items():
@@ -126,7 +143,7 @@ def main() -> None:
             f"{name:<14}{sum(p['removed'] for p in piles) / n:>8.0%} "
             f"{sum(p['emptied'] for p in piles):>4}/{len(piles):<3}"
             f"{sum(p['wrong_pose'] for p in piles):>7}{sum(p['empty_grip'] for p in piles):>7}"
-            f"{sum(p['floor_contacts'] for p in piles):>7}"
+            f"{sum(p['floor_contacts'] for p in piles):>7}{sum(p.get('nudges', 0) for p in piles):>8}"
             f"{np.mean([sum(p['stages_ms'][s] for s in STAGES[:3]) for p in piles]):>9.0f}"
             f"{np.mean([p['stages_ms']['locate+plan'] for p in piles]):>9.0f}"
             f"{np.mean([p['stages_ms']['motion'] for p in piles]):>8.0f}"

@@ -333,6 +333,11 @@ class SimPile:
         """Takes part ``id`` out and settles the rest."""
     def settle(self) -> _SettleReport:
         """Steps until every part is at rest."""
+    def push(
+        self, half_extents: _F64, box_poses: _F64, path: _F64, speed: float
+    ) -> tuple[int, _SettleReport, list[int]]:
+        """Moves a kinematic tool of boxes along ``path`` (T_base_tool) at ``speed`` mm/s, then settles:
+        (push_steps, settle report, ids of the parts that moved)."""
     def last_settle(self) -> _SettleReport:
         """The report of the last settling."""
     def remaining(self) -> int:

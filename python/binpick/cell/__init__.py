@@ -5,6 +5,7 @@
 * :mod:`~binpick.cell.frames` — :class:`FrameSource`, :class:`OpenCVCamera`, :class:`TwinCamera`,
   :class:`FolderReplay`, :class:`ScanRecorder`
 * :mod:`~binpick.cell.grasp` — grasp generation and checks as pure functions
+* :mod:`~binpick.cell.nudge` — at a dead end, the closed gripper pushes a blocked part over (plans checked whole)
 * :mod:`~binpick.cell.loop` — :class:`Cell`, the pick loop (the same for the simulated and the real cell)
 * :mod:`~binpick.cell.cell_file` — the real cell's TOML file
 
@@ -18,6 +19,7 @@ from .config import CellConfig, GripperGeometry, check_static_poses, sweep_angle
 from .frames import FolderReplay, FrameSource, OpenCVCamera, ReplayMismatchError, ScanRecorder, TwinCamera
 from .grasp import GraspMatcher, NoGraspError, branch_grasps, plan_grasp, symmetry_maps
 from .loop import Cell, ProgressPrinter
+from .nudge import NudgePlan, NudgeRefused, plan_nudge
 from .records import FAILURE_KINDS, Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult
 
 __all__ = [
@@ -31,6 +33,8 @@ __all__ = [
     "GripperGeometry",
     "Located",
     "NoGraspError",
+    "NudgePlan",
+    "NudgeRefused",
     "OpenCVCamera",
     "FolderReplay",
     "ReplayMismatchError",
@@ -48,6 +52,7 @@ __all__ = [
     "config_from_file",
     "load_cell_file",
     "plan_grasp",
+    "plan_nudge",
     "sweep_angles",
     "symmetry_maps",
 ]

@@ -20,7 +20,7 @@ from ..calibration import CellCalibration
 from ..devices import safety
 from ..errors import InvalidInputError, SafetyError
 from ..models import Model
-from ..transforms import laser_sweep, translation
+from ..transforms import laser_sweep, rotation_about, translation
 from .grasp import branch_grasps, mesh_grasps
 from .views import turned_scan_poses
 
@@ -105,6 +105,25 @@ class GripperGeometry:
         flange = ring @ T_gf[:3, :3].T + T_gf[:3, 3]
         return np.vstack([np.array(corners), *palm, flange])
 
+    def boxes(self, opening_mm: float) -> list[tuple[tuple[float, float, float], np.ndarray]]:
+        """The gripper as boxes ``(half_extents, T_gripper_box)`` (gripper frame, mm) for a physics
+        tool: the two fingers ``opening_mm`` apart and the body (palm) as two squares inscribed in
+        its circle, one turned 45° (an eight-pointed star that stays inside the cylinder)."""
+        gap = max(0.0, float(opening_mm))
+        top = self.tip_depth_mm - self.finger_length_mm
+        t = self.finger_thickness_mm
+        finger = (t / 2, self.finger_width_mm / 2, self.finger_length_mm / 2)
+        out = []
+        for sign in (-1.0, 1.0):
+            out.append((finger, translation(sign * (gap / 2 + t / 2), 0.0, (top + self.tip_depth_mm) / 2)))
+        a = self.body_radius_mm / np.sqrt(2.0)
+        body = (a, a, self.body_length_mm / 2)
+        for turn in (0.0, np.pi / 4):
+            T = translation(0.0, 0.0, top - self.body_length_mm / 2)
+            T[:3, :3] = rotation_about((0.0, 0.0, 1.0), turn)
+            out.append((body, T))
+        return out
+
     def between_fingers(self, points_gripper: np.ndarray) -> np.ndarray:
         """Which points (N, 3, in the gripper frame) lie in the slab the closing fingers sweep."""
         _, y, z = points_gripper.T
@@ -153,6 +172,9 @@ class CellConfig:
             bin floor's centre toward each side); () = no second look.
         reachable: optional test ``T_base_flange → bool`` from the arm's kinematics; None = trust
             the controller (it refuses unreachable targets, and the cell then stops).
+        max_nudges: at a dead end (every view tried, the parts located but none pickable), how
+            many times per pick the closed gripper may push a blocked part over before the cell
+            looks again (:mod:`binpick.cell.nudge`); 0 = never.
         symmetries: ``T_object_object`` maps of the part onto itself, for judging pose errors.
         min_score: a located pose scoring lower counts as not found.
         estimate_options: extra keyword arguments for :func:`binpick.estimate_pose`.
@@ -180,6 +202,7 @@ class CellConfig:
     max_candidates: int = 8
     look_again_poses: Optional[Sequence[Any]] = None
     reachable: Optional[Callable[[np.ndarray], bool]] = None
+    max_nudges: int = 2
     symmetries: Sequence[Any] = ()
     min_score: float = 0.0
     estimate_options: Mapping[str, Any] = field(default_factory=dict)
@@ -196,6 +219,7 @@ class CellConfig:
             object.__setattr__(self, "clearance_z_mm", float(self.limits.approach_height_mm) + 20.0)
         count(self.max_collision_points, "max_collision_points")
         count(self.max_candidates, "max_candidates", 1)
+        count(self.max_nudges, "max_nudges", 0, 20)
         non_negative(self.floor_clearance_mm, "floor_clearance_mm", "mm")
         number(self.min_confidence, "min_confidence", 0.0, 1.0)
         positive(self.ambiguity_tolerance_deg, "ambiguity_tolerance_deg", "deg")

@@ -46,6 +46,7 @@ from ..vision import extract_line, triangulate
 from .config import CellConfig, check_static_poses
 from .frames import FrameSource
 from .grasp import NoGraspError, grasp_filter, plan_bin_clash, plan_grasp
+from .nudge import nudge_blocked
 from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult, Skipped
 from .views import deciding_views
 
@@ -619,7 +620,27 @@ class Cell:
         return RunReport(records=tuple(records), stopped=stopped, last_scan=last_scan, last_located=last_located)
 
     def _cycle(self, i: int) -> tuple[PickRecord, Optional[str]]:
-        """One pick of :meth:`run`: scan, locate and plan — looking again from each of
+        """One pick of :meth:`run` (:meth:`_look_and_pick`); at a dead end (parts located, none
+        pickable from any view) a blocked part is nudged (:mod:`binpick.cell.nudge`) and the cell
+        looks again, up to ``config.max_nudges`` times."""
+        nudges: list = []
+        while True:
+            record, why = self._look_and_pick(i)
+            dead_end = why is not None and record.failure == "no grasp" and bool(record.skipped)
+            if not dead_end or len(nudges) >= self.config.max_nudges or record.scan is None:
+                return replace(record, nudges=tuple(nudges)), why
+            try:
+                plan = nudge_blocked(self, list(record.skipped), record.scan)
+            except BinpickError as exc:
+                error = f"nudge: {type(exc).__name__}: {exc}"
+                record = replace(record, nudges=tuple(nudges), failure="fault", fault=True, error=error)
+                return record, f"pick {i}: {error}"
+            if plan is None:
+                return replace(record, nudges=tuple(nudges)), why
+            nudges.append(plan)
+
+    def _look_and_pick(self, i: int) -> tuple[PickRecord, Optional[str]]:
+        """Scan, locate and plan — looking again from each of
         ``config.look_again_poses`` while nothing is pickable (from one only when neither look
         finds any part) — then pick; the record, and why the run stops (None to go on)."""
         t0 = time.perf_counter()

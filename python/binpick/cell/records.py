@@ -128,7 +128,8 @@ class PickRecord:
     :data:`FAILURE_KINDS` (None on success); ``timings``: stage → ms; ``skipped``: the located
     parts passed over on the way (no usable grasp, low confidence, …); ``looks``: how many scans
     the attempt took (more than one when the first showed nothing pickable); ``scan``: the last
-    of them (for the picture of a failure).
+    of them (for the picture of a failure); ``nudges``: the :class:`~binpick.cell.nudge.NudgePlan`
+    s run before it, when every part located was blocked.
     """
 
     index: int
@@ -149,6 +150,7 @@ class PickRecord:
     skipped: tuple[Skipped, ...] = ()
     looks: int = 1
     scan: Optional[ScanResult] = None
+    nudges: tuple[Any, ...] = ()
 
     def as_dict(self) -> dict:
         """A JSON-ready summary."""
@@ -169,6 +171,7 @@ class PickRecord:
             "timings_ms": dict(self.timings),
             "looks": self.looks,
             "skipped": [k.as_dict() for k in self.skipped],
+            "nudges": [n.as_dict() for n in self.nudges],
         }
 
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 from .camera import RenderedCamera, SimCamera
 from .cell import Bin, Camera, Cell, Laser, Lighting, SensorNoise, look_down, rot_y
 from .dataset import GLOSSY_PART_SPECULAR, SimulatedScan, contact_sheet, simulate_scan, write_scan
-from .pile import Pile, SettleReport, convex_decomposition, max_interpenetration
+from .pile import Pile, PushReport, SettleReport, convex_decomposition, max_interpenetration
 from .render import BIN_ID, NO_SURFACE, TABLE_ID, View, World, render_checkerboard
 from .twin import SIM_ARM, SimulatedCell, TwinWorld, sim_limits, simulated_cell
 
@@ -40,6 +40,7 @@ __all__ = [
     "SimulatedCell",
     "Pile",
     "SensorNoise",
+    "PushReport",
     "SettleReport",
     "SimulatedScan",
     "TABLE_ID",

@@ -7,12 +7,12 @@ from typing import Any
 import numpy as np
 
 from .. import _core
-from .._validate import as_float_array, check_finite, count, instance_of, non_negative, number
+from .._validate import as_float_array, as_points, as_transform, check_finite, count, instance_of, non_negative, number
 from ..errors import InvalidInputError
 from ..models import MAX_SPACING, MIN_SPACING, Model, _check_spacing
 from .cell import Bin
 
-__all__ = ["Pile", "SettleReport", "max_interpenetration", "convex_decomposition"]
+__all__ = ["Pile", "SettleReport", "PushReport", "max_interpenetration", "convex_decomposition"]
 
 
 class SettleReport:
@@ -34,6 +34,35 @@ class SettleReport:
             f"SettleReport(settled={self.settled}, steps={self.steps}, "
             f"simulated_time={self.simulated_time:.3f} s, max_speed={self.max_speed:.3g} mm/s)"
         )
+
+
+class PushReport:
+    """What one push did: ``push_steps`` (physics steps the tool moved for), ``settle`` (the
+    :class:`SettleReport` after the tool was taken away) and ``moved`` (ids of the parts that
+    moved more than 1 mm or turned more than 2°)."""
+
+    __slots__ = ("push_steps", "settle", "moved")
+
+    def __init__(self, raw: tuple) -> None:
+        self.push_steps = int(raw[0])
+        self.settle = SettleReport(raw[1])
+        self.moved = [int(i) for i in raw[2]]
+
+    def __repr__(self) -> str:
+        return f"PushReport(moved={self.moved}, push_steps={self.push_steps}, {self.settle!r})"
+
+
+#: Fastest tool speed of :meth:`Pile.push`, mm/s (the core's bound; its slowest is 0.1 mm/s).
+MAX_PUSH_SPEED = 5000.0
+
+
+def _transforms(value: Any, name: str) -> np.ndarray:
+    T = as_float_array(value, name)
+    if T.ndim != 3 or T.shape[1:] != (4, 4):
+        raise InvalidInputError(f"{name}: expected an (N, 4, 4) array, got shape {T.shape}")
+    for i, t in enumerate(T):
+        as_transform(t, f"{name}[{i}]")
+    return T
 
 
 #: Most parts one pile drops; beyond it the bin could not hold them and settling would take hours.
@@ -140,6 +169,24 @@ class Pile:
     def settle(self) -> SettleReport:
         """Steps the simulation until every part is at rest."""
         return SettleReport(self._raw.settle())
+
+    def push(self, boxes: Any, path: Any, speed: float = 50.0) -> PushReport:
+        """Pushes the pile with a kinematic tool and lets it settle.
+
+        ``boxes``: the tool's shape, a sequence of ``(half_extents (3,), T_tool_box (4, 4))``, mm.
+        ``path``: ``T_base_tool`` poses (P ≥ 2, 4, 4) the tool moves through, straight (and
+        slerped) between them, at ``speed`` mm/s for its fastest point. Parts it touches are
+        shoved by the physics; the tool is then removed and the pile settles."""
+        items = list(boxes) if isinstance(boxes, (list, tuple)) else None
+        if not items or any(not isinstance(b, (list, tuple)) or len(b) != 2 for b in items):
+            raise InvalidInputError(
+                "boxes: pass a non-empty list of (half_extents, T_tool_box) pairs, e.g. [((10, 10, 20), np.eye(4))]"
+            )
+        halves = as_points([h for h, _ in items], "boxes half_extents")
+        poses = _transforms([t for _, t in items], "boxes T_tool_box")
+        T = _transforms(path, "path")
+        v = number(speed, "speed", 0.1, MAX_PUSH_SPEED, unit="mm/s")
+        return PushReport(self._raw.push(halves, poses, T, v))
 
     @property
     def last_settle(self) -> SettleReport:

@@ -3,7 +3,8 @@ laser motor and gripper emulators serving their real protocols on ptys, the real
 on those ptys, and a camera that renders the pile from the pose the robot emulator reports with
 the laser at the angle the motor emulator reports — driven by the same pick loop
 (:class:`binpick.cell.Cell`) as the real cell. The simulated gripper closes on a part only when
-the part really lies between its fingers; the part leaves the pile when the gripper lets go.
+the part really lies between its fingers; the part leaves the pile when the gripper lets go;
+a motion of the closed, empty gripper through the bin pushes the pile (:meth:`binpick.sim.Pile.push`).
 
 :class:`TwinWorld` is the twin's physical side (pile, emulators, ground truth) that both the
 in-process :class:`SimulatedCell` and the twin process (``binpick emulate cell``,
@@ -45,7 +46,13 @@ from ..models import Model
 from ..transforms import inverse, look_down
 from .camera import SimCamera
 from .cell import Cell as Layout
-from .pile import Pile
+from .pile import Pile, PushReport
+
+#: The gripper counts as closed (a pushing tool) when its fingers are at most this far apart, mm.
+CLOSED_OPENING_MM = 10.0
+
+#: Fastest sweep the physics is asked to run, mm/s: faster motions are pushed at this speed.
+MAX_SWEEP_SPEED = 1000.0
 
 __all__ = ["TwinWorld", "SimulatedCell", "simulated_cell", "sim_limits", "SIM_ARM"]
 
@@ -172,6 +179,9 @@ class TwinWorld:
         self._held: Optional[int] = None
         self._release_pending: Optional[int] = None
         self._picked: Optional[int] = None
+        self._pushes: list[tuple[np.ndarray, float, float]] = []
+        #: Every sweep of the closed, empty gripper through the bin the physics ran, in order.
+        self.pushes: list[PushReport] = []
         self.config = self._config(self.limits)
         self._matcher: Optional[GraspMatcher] = None
         self._gripper_config = GripperConfig(serial=SerialSettings(baudrate=115200, timeout_s=0.3), speed=255)
@@ -198,6 +208,7 @@ class TwinWorld:
         self.robot_emulator = RobotEmulator(
             config=RobotEmulatorConfig(arm=SIM_ARM, speed_scale=self.speed_scale)
         ).start()
+        self.robot_emulator.on_motion = self._on_motion
         self.motor_emulator = DynamixelEmulator().start()
         self.gripper_emulator = _SimGripperEmulator(self).start()
         self.progress(
@@ -306,10 +317,50 @@ class TwinWorld:
                     self._release_pending = self._held
                     self._held = None
 
+    def _on_motion(self, T_base_flange: np.ndarray, speed: float) -> None:
+        """The robot emulator's motion hook (its serving thread, its lock held: nothing here may
+        call back into it): a motion of the closed, empty gripper that sweeps any of its points
+        through the bin's inner volume is queued to push the pile (run by :meth:`settle_pending`)."""
+        if self._held is not None or self.gripper_emulator is None or speed <= 0:
+            return
+        stroke = self._gripper_config.stroke_mm
+        opening = stroke * (1.0 - self.gripper_emulator.axis.position() / 255.0)
+        if opening > CLOSED_OPENING_MM:
+            return
+        path = T_base_flange @ self.gripper_geometry.T_flange_gripper
+        outline = self.gripper_geometry.outline(max(opening, 1.0))
+        pts = np.einsum("kij,mj->kmi", path[:, :3, :3], outline) + path[:, None, :3, 3]
+        lo, hi = self.layout.bin.bounds
+        if ((pts >= lo) & (pts <= hi)).all(axis=2).any():
+            self._pushes.append((path, opening, min(max(speed, 1.0), MAX_SWEEP_SPEED)))
+
+    def _run_pushes(self) -> None:
+        """Runs the queued sweeps; sweeps that follow on from each other (one ends where the next
+        starts, same opening and speed) run as one push, as the arm makes them without a pause
+        long enough for the pile to settle."""
+        while self._pushes:
+            path, opening, speed = self._pushes.pop(0)
+            while self._pushes:
+                nxt, o2, v2 = self._pushes[0]
+                if abs(o2 - opening) > 0.5 or abs(v2 - speed) > 0.05 * speed or np.abs(nxt[0] - path[-1]).max() > 1e-3:
+                    break
+                self._pushes.pop(0)
+                path = np.concatenate([path, nxt[1:]])
+            t0 = time.perf_counter()
+            report = self.pile.push(self.gripper_geometry.boxes(opening), path, speed)
+            self.pushes.append(report)
+            self.progress(
+                "physics",
+                f"the closed gripper swept the bin at {speed:.0f} mm/s: parts {report.moved or 'none'} moved "
+                f"({report.push_steps} steps, settled in {time.perf_counter() - t0:.1f} s)",
+            )
+
     def settle_pending(self) -> None:
-        """Takes a released part out of the pile and lets the rest settle (done lazily: by the
-        camera before it renders, the judge, or the twin process's world ticks)."""
+        """Runs the gripper's queued sweeps through the pile, takes a released part out of the
+        pile and lets the rest settle (done lazily: by the camera before it renders, the judge, or
+        the twin process's world ticks)."""
         with self.lock:
+            self._run_pushes()
             pid = self._release_pending
             if pid is not None:
                 self._release_pending = None

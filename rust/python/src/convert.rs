@@ -205,6 +205,20 @@ pub fn isometry(arr: &PyReadonlyArray2<'_, f64>, arg: &str) -> PyResult<Isometry
     binpick_core::isometry_from_matrix(arg, &matrix4(arr, arg)?).map_err(crate::errors::to_py)
 }
 
+/// An (N, 4, 4) float64 array as rigid transforms, each checked as [`isometry`] checks one.
+pub fn isometries(arr: &numpy::PyReadonlyArray3<'_, f64>, arg: &str) -> PyResult<Vec<Isometry3<f64>>> {
+    let a = arr.as_array();
+    if a.shape()[1..] != [4, 4] {
+        return Err(invalid(arg, &format!("must have shape (N, 4, 4), got {:?}", a.shape())));
+    }
+    a.outer_iter()
+        .map(|m| {
+            let m = Matrix4::from_fn(|r, c| m[[r, c]]);
+            binpick_core::isometry_from_matrix(arg, &m).map_err(crate::errors::to_py)
+        })
+        .collect()
+}
+
 /// Largest `num_threads` accepted: above the machine's cores a request is clamped to them, above
 /// this it is refused as a mistake (it would start that many OS threads).
 pub const MAX_THREADS: usize = 256;

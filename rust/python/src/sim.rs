@@ -4,7 +4,7 @@
 
 use crate::convert::{camera, isometry, points, CameraArgs};
 use crate::errors::{invalid, run_borrowed};
-use binpick_core::sim::{convex_decomposition, max_interpenetration, BinSpec, Pile, PileParams, SettleReport};
+use binpick_core::sim::{convex_decomposition, max_interpenetration, BinSpec, Pile, PileParams, SettleReport, ToolBox};
 use binpick_core::sim::{render_checkerboard, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View};
 use binpick_core::{Error, Point};
 use nalgebra::{Isometry3, Matrix4, Vector3};
@@ -32,6 +32,9 @@ fn poses_out<'py>(py: Python<'py>, poses: &[Isometry3<f64>]) -> Bound<'py, PyArr
     }
     PyArray3::from_owned_array(py, a)
 }
+
+/// (push_steps, settle report, ids of the parts that moved).
+type PushOut = (usize, (usize, f64, bool, f64), Vec<usize>);
 
 fn report(r: SettleReport) -> (usize, f64, bool, f64) {
     (r.steps, r.simulated_time, r.settled, r.max_speed)
@@ -110,6 +113,43 @@ impl PySimPile {
     fn settle(&mut self, py: Python<'_>) -> PyResult<(usize, f64, bool, f64)> {
         let pile = &mut self.inner;
         Ok(report(run_borrowed(py, move || Ok::<_, Error>(pile.settle()))?))
+    }
+
+    /// Moves a kinematic tool of boxes (half extents (B, 3), T_tool_box (B, 4, 4)) along
+    /// `path` (T_base_tool (P, 4, 4)) at `speed` mm/s, removes it and settles:
+    /// (push_steps, settle report, ids of the parts that moved).
+    fn push(
+        &mut self,
+        py: Python<'_>,
+        half_extents: PyReadonlyArray2<'_, f64>,
+        box_poses: PyReadonlyArray3<'_, f64>,
+        path: PyReadonlyArray3<'_, f64>,
+        speed: f64,
+    ) -> PyResult<PushOut> {
+        let halves = crate::convert::vectors(&half_extents, "half_extents")?;
+        let poses = crate::convert::isometries(&box_poses, "box_poses")?;
+        if halves.len() != poses.len() {
+            return Err(invalid(
+                "box_poses",
+                &format!(
+                    "{} poses for {} boxes; pass one pose per box",
+                    poses.len(),
+                    halves.len()
+                ),
+            ));
+        }
+        let boxes: Vec<ToolBox> = halves
+            .into_iter()
+            .zip(poses)
+            .map(|(half_extents, pose_in_tool)| ToolBox {
+                pose_in_tool,
+                half_extents,
+            })
+            .collect();
+        let path = crate::convert::isometries(&path, "path")?;
+        let pile = &mut self.inner;
+        let r = run_borrowed(py, move || pile.push(&boxes, &path, speed))?;
+        Ok((r.push_steps, report(r.settle), r.moved))
     }
 
     /// The last settling's (steps, simulated_time, settled, max_speed).

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from typing import Any, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -277,6 +277,12 @@ class RobotEmulator(PtyEmulator):
         self._positions: dict[int, tuple[np.ndarray, int, int]] = {}
         self._pending_alarm: Optional[tuple[float, int]] = None
         self.hands: dict[int, bool] = {}
+        #: Called as ``on_motion(T_base_flange path (K, 4, 4), speed mm/s)`` when a motion starts
+        #: (the flange poses it passes through, ending where an injected alarm stops it; the speed
+        #: at 100 % speed scale); a simulated world uses it to sweep the tool through its parts.
+        #: It runs on the serving thread under the emulator's lock: it must not call back into
+        #: the emulator. Its exceptions are recorded in :attr:`failures`.
+        self.on_motion: Optional[Callable[[np.ndarray, float], None]] = None
 
     # -- state for tests
     def joints(self) -> np.ndarray:
@@ -355,6 +361,20 @@ class RobotEmulator(PtyEmulator):
             motion.alarm_at, motion.alarm_code = self._pending_alarm
             self._pending_alarm = None
         return motion
+
+    def _report_motion(self, m: _Motion) -> None:
+        if self.on_motion is None:
+            return
+        end = 1.0 if m.alarm_at is None else m.alarm_at
+        samples = max(2 * len(m.path), 30)
+        poses = np.array([self.config.arm.forward(m.joints(s)) for s in np.linspace(0.0, end, samples)])
+        length = float(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1).sum())
+        real_duration = end * m.duration * self.config.speed_scale
+        speed = length / real_duration if real_duration > 0 else 0.0
+        try:
+            self.on_motion(poses, speed)
+        except Exception as exc:  # keep serving; the failure shows in failures
+            self.failures.append(f"on_motion: {type(exc).__name__}: {exc}")
 
     # -- protocol
     def _take_requests(self, buf: bytearray) -> list[str]:
@@ -460,6 +480,7 @@ class RobotEmulator(PtyEmulator):
             T[:3, :3] = rotation_from_abc(*np.radians(xyzabc[3:]))
             T[:3, 3] = xyzabc[:3]
             self._motion = self._plan(T, fl1, linear=m.group(1) == "MVS")
+            self._report_motion(self._motion)
             return ""
         raise _Refused(ERR_SYNTAX if cmd.startswith("EXEC") else ERR_UNKNOWN)
 

@@ -1,4 +1,4 @@
-//! The simulated cell: physics piles of parts in a bin (`pile`, rapier3d) and an eye-in-hand
+//! The simulated cell: physics piles of parts in a bin (`pile`, rapier3d), pushed by a kinematic tool (`push`), and an eye-in-hand
 //! camera with a swept laser line projector, rendered by ray casting (`render`, parry3d).
 //!
 //! Default cell layout (base frame, +z up, mm): the bin's inner floor at z = 0, centred at
@@ -7,7 +7,11 @@
 
 mod convert;
 mod pile;
+mod push;
 mod render;
 
 pub use pile::{convex_decomposition, max_interpenetration, BinSpec, Hull, Pile, PileParams, SettleReport};
+pub use push::{
+    PushReport, ToolBox, MAX_PATH_POSES, MAX_PUSH_TIME, MAX_TOOL_BOXES, MOVED_ANGLE, MOVED_DISTANCE, SPEED_RANGE,
+};
 pub use render::{render_checkerboard, Checkerboard, Laser, Lighting, Material, Scene, SensorNoise, View};

@@ -423,9 +423,9 @@ fn decomposition_shape(mesh: &TriMesh, params: &PileParams) -> Result<SharedShap
 /// A settled pile of parts in a bin, simulated by rapier. Instance ids are 0..count in drop order
 /// and stay valid after other parts are removed.
 pub struct Pile {
-    world: PhysicsWorld,
-    bodies: Vec<Option<RigidBodyHandle>>,
-    params: PileParams,
+    pub(super) world: PhysicsWorld,
+    pub(super) bodies: Vec<Option<RigidBodyHandle>>,
+    pub(super) params: PileParams,
     bin: BinSpec,
     hull_shape: SharedShape,
     last: SettleReport,
@@ -719,11 +719,11 @@ pub fn max_interpenetration(mesh: &TriMesh, poses: &[Isometry3<f64>], samples: &
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
     use crate::mesh::parts::{tee, TeeParams};
 
-    fn small_tee() -> TriMesh {
+    pub(in crate::sim) fn small_tee() -> TriMesh {
         tee(&TeeParams {
             resolution: 2.0,
             ..Default::default()
@@ -769,13 +769,18 @@ mod tests {
         let b = Pile::drop(&m, 4, &bin, &params).unwrap();
         assert_eq!(a.poses(), b.poses());
         assert!(a.last_settle().settled, "{:?}", a.last_settle());
-        let (lo, hi) = bin.inner_bounds();
-        for (_, t) in a.poses() {
-            for v in m.vertices.iter().step_by(7) {
+        assert_inside_bin(&a, &m, 0.5);
+    }
+
+    /// Every part's mesh vertices (every 5th) lie inside the bin's inner volume, within `tol` mm.
+    pub(in crate::sim) fn assert_inside_bin(pile: &Pile, mesh: &TriMesh, tol: f64) {
+        let (lo, hi) = pile.bin().inner_bounds();
+        for (id, t) in pile.poses() {
+            for v in mesh.vertices.iter().step_by(5) {
                 let p = t * v;
                 assert!(
-                    p.x > lo.x - 0.5 && p.x < hi.x + 0.5 && p.y > lo.y - 0.5 && p.y < hi.y + 0.5 && p.z > lo.z - 0.5,
-                    "{p}"
+                    p.x > lo.x - tol && p.x < hi.x + tol && p.y > lo.y - tol && p.y < hi.y + tol && p.z > lo.z - tol,
+                    "part {id} pokes out of the bin at {p}"
                 );
             }
         }

@@ -1,0 +1,256 @@
+"""The nudge: when every located part is blocked (standing, leaning on a wall, no grasp within
+the tool-tilt limit), the closed gripper pushes one of them over and the cell looks again.
+
+A nudge of a located part (``T_base_object``) is planned with the tool pointing straight down:
+above a start point ``NUDGE_START_MM`` outside the part's footprint, straight down until the
+fingertips are at two thirds of the part's height above the floor (its top minus a third of its
+height), straight across through the part to ``NUDGE_PAST_MM`` beyond its centre (to the centre when
+that would bring the gripper against a wall; in steps no
+longer than the cell's ``max_lateral_below_mm``, each a move the safety rules allow), and
+straight up again. Directions are tried in turn — towards the bin's centre first, then away from
+the nearest wall, then the others — and the first plan that passes every check is run:
+
+- every pose within the workspace and the tool-attitude limit, the whole sequence from the arm's
+  pose now within the approach rules (:mod:`binpick.devices.safety`);
+- every pose reachable with the arm's kinematics (``config.reachable``);
+- the whole gripper (fingers open as the check assumes, palm, flange) clear of the bin's floor and
+  walls at every waypoint (:func:`~binpick.cell.grasp.bin_clash`; convex pieces in a convex bin,
+  so the straight moves between them are clear too);
+- the straight descent lands on no scanned point but the part's own (the closed fingers' and the
+  palm's columns, down to where they stop).
+
+Nothing moves before the plan is checked whole; a refused plan raises :class:`NudgeRefused`
+(a :class:`~binpick.errors.SafetyError`). Lengths in mm, angles in radians.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Optional
+
+import numpy as np
+
+from ..devices import safety
+from ..errors import BinpickError, SafetyError
+from ..transforms import inverse, look_down
+from .config import CellConfig
+from .grasp import bin_clash
+
+__all__ = ["NudgePlan", "NudgeRefused", "plan_nudge", "check_nudge", "nudge_directions"]
+
+#: How far outside the part's footprint the fingers go down, mm.
+NUDGE_START_MM = 30.0
+#: How far past the part's centre the push goes, mm.
+NUDGE_PAST_MM = 20.0
+#: Directions tried per part (towards the bin centre, away from the nearest wall, then others).
+NUDGE_DIRECTIONS = 8
+#: Scanned points within this distance of the located part's model belong to the part, mm.
+OWN_POINT_MM = 4.0
+#: The fingertips stay at least this far above the floor (beyond ``floor_clearance_mm``), mm.
+TIP_FLOOR_MARGIN_MM = 5.0
+
+
+class NudgeRefused(SafetyError):
+    """No nudge plan for this part passed the checks; nothing was sent."""
+
+
+@dataclass(frozen=True, eq=False)
+class NudgePlan:
+    """A checked nudge: the part pushed (``T_base_object``), the push direction (unit, base xy),
+    the fingertips' height (mm), and the moves as (name, T_base_flange, linear)."""
+
+    T_base_object: np.ndarray
+    direction: np.ndarray
+    tip_z_mm: float
+    waypoints: tuple[tuple[str, np.ndarray, bool], ...]
+
+    @property
+    def heading_deg(self) -> float:
+        """The push direction as an angle from base +x, degrees."""
+        return math.degrees(math.atan2(float(self.direction[1]), float(self.direction[0])))
+
+    def as_dict(self) -> dict:
+        """A JSON-ready summary."""
+        return {
+            "T_base_object": np.round(self.T_base_object, 6).tolist(),
+            "heading_deg": round(self.heading_deg, 1),
+            "tip_z_mm": round(self.tip_z_mm, 1),
+        }
+
+
+def nudge_directions(config: CellConfig, centre_xy: np.ndarray) -> list[np.ndarray]:
+    """Unit push directions for a part at ``centre_xy``: towards the bin's centre, away from the
+    nearest wall, then the rest of :data:`NUDGE_DIRECTIONS` evenly spaced ones, nearest first."""
+    lo, hi = (np.asarray(b, dtype=float) for b in config.bin_bounds)
+    to_centre = (lo[:2] + hi[:2]) / 2 - centre_xy
+    gaps = [centre_xy[0] - lo[0], hi[0] - centre_xy[0], centre_xy[1] - lo[1], hi[1] - centre_xy[1]]
+    away = [np.array(v, dtype=float) for v in ((1, 0), (-1, 0), (0, 1), (0, -1))][int(np.argmin(gaps))]
+    first = to_centre / np.linalg.norm(to_centre) if np.linalg.norm(to_centre) > 1.0 else away
+    angle0 = math.atan2(first[1], first[0])
+    ring = [angle0 + 2 * math.pi * k / NUDGE_DIRECTIONS for k in range(1, NUDGE_DIRECTIONS)]
+    ring.sort(key=lambda a: abs(math.remainder(a - angle0, 2 * math.pi)))
+    out = [first, away] + [np.array([math.cos(a), math.sin(a)]) for a in ring]
+    unique: list[np.ndarray] = []
+    for d in out:
+        if all(float(d @ u) < math.cos(math.radians(10.0)) for u in unique):
+            unique.append(d)
+    return unique
+
+
+def _tool_down(config: CellConfig, x: float, y: float, tip_z: float) -> np.ndarray:
+    """The flange pose with the tool straight down and the fingertips at (x, y, tip_z)."""
+    T = look_down(x, y, 0.0)
+    g = config.gripper
+    tip = (T @ g.T_flange_gripper @ np.array([0.0, 0.0, g.tip_depth_mm, 1.0]))[:3]
+    T[:3, 3] += np.array([x, y, tip_z]) - tip
+    return T
+
+
+def _waypoints(
+    config: CellConfig, start: np.ndarray, end: np.ndarray, tip_z: float
+) -> list[tuple[str, np.ndarray, bool]]:
+    lim = config.limits
+    above = _tool_down(config, *start, tip_z)
+    above[2, 3] = config.clearance_z_mm
+    down = _tool_down(config, *start, tip_z)
+    span = float(np.linalg.norm(end - start))
+    steps = max(1, math.ceil(span / (0.95 * lim.max_lateral_below_mm)))
+    moves = [("above", above, False), ("descend", down, True)]
+    for k in range(1, steps + 1):
+        moves.append((f"push {k}", _tool_down(config, *(start + (end - start) * k / steps), tip_z), True))
+    up = moves[-1][1].copy()
+    up[2, 3] = config.clearance_z_mm
+    moves.append(("retreat", up, True))
+    return moves
+
+
+def _descent_hits(config: CellConfig, T_down: np.ndarray, points: np.ndarray) -> int:
+    """How many ``points`` (base frame) the closed gripper meets on its straight way down to
+    ``T_down``: points in the column of a finger or of the palm, above where that piece stops."""
+    T_gb = inverse(T_down @ config.gripper.T_flange_gripper)
+    local = points @ T_gb[:3, :3].T + T_gb[:3, 3]
+    hits = np.zeros(len(points), dtype=bool)
+    for half, T_gbox in config.gripper.boxes(0.0):
+        T_boxg = inverse(T_gbox)
+        p = local @ T_boxg[:3, :3].T + T_boxg[:3, 3]
+        # The gripper's z points down: a point above the box's bottom face lies in its path.
+        hits |= (np.abs(p[:, 0]) <= half[0]) & (np.abs(p[:, 1]) <= half[1]) & (p[:, 2] <= half[2])
+    return int(hits.sum())
+
+
+def check_nudge(config: CellConfig, waypoints: list, T_now: np.ndarray, scene: np.ndarray) -> Optional[str]:
+    """Why the nudge ``waypoints`` (from the arm's pose ``T_now``) may not run, or None: the
+    safety rules for the whole sequence, reach, the gripper against the bin, the descent against
+    the scanned points ``scene`` (the part's own left out)."""
+    names = [n for n, _, _ in waypoints]
+    poses = [T for _, T, _ in waypoints]
+    try:
+        checked = [safety.check_pose(T, config.limits, name=n) for n, T in zip(names, poses)]
+        safety.check_sequence(T_now, checked, [lin for _, _, lin in waypoints], config.limits, names=names)
+    except SafetyError as exc:
+        return f"safety: {exc}"
+    if config.reachable is not None:
+        for n, T in zip(names, poses):
+            if not config.reachable(T):
+                return f"{n}: out of the arm's reach"
+    for n, T in zip(names[1:], poses[1:]):
+        why = bin_clash(config.gripper, T, config.bin_bounds, floor_clearance_mm=config.floor_clearance_mm)
+        if why is not None:
+            return f"{n}: the gripper would hit the bin's {why}"
+    hits = _descent_hits(config, poses[1], scene)
+    if hits > config.max_collision_points:
+        return f"descend: the gripper would land on {hits} scanned points of other parts"
+    return None
+
+
+def plan_nudge(config: CellConfig, T_base_object: Any, scene: Any, T_now: Any) -> NudgePlan:
+    """The first nudge of the located part ``T_base_object`` that passes :func:`check_nudge`,
+    over :func:`nudge_directions`; NudgeRefused (nothing sent) when none does. ``scene``: the
+    scan's points (base frame); ``T_now``: the arm's flange pose now."""
+    T = np.asarray(T_base_object, dtype=np.float64)
+    pts = np.asarray(scene, dtype=np.float64)
+    model = config.model
+    verts = np.asarray(model.vertices) @ T[:3, :3].T + T[:3, 3]
+    floor = float(config.bin_bounds[0][2])
+    top = float(verts[:, 2].max())
+    tip_z = max(top - (top - floor) / 3.0, floor + config.floor_clearance_mm + TIP_FLOOR_MARGIN_MM)
+    centre = (verts[:, :2].min(axis=0) + verts[:, :2].max(axis=0)) / 2
+    own = _near(pts, np.asarray(model.points) @ T[:3, :3].T + T[:3, 3], OWN_POINT_MM)
+    others = pts[~own]
+    g = config.gripper
+    reach = math.hypot(g.finger_thickness_mm, g.finger_width_mm / 2)
+    why: list[str] = []
+    for d in nudge_directions(config, centre):
+        s = (verts[:, :2] - centre) @ d
+        start = centre + (float(s.min()) - NUDGE_START_MM - reach) * d
+        for past in (NUDGE_PAST_MM, 0.0):  # a push that would reach a wall may still reach the centre
+            moves = _waypoints(config, start, centre + past * d, tip_z)
+            problem = check_nudge(config, moves, T_now, others)
+            if problem is None:
+                return NudgePlan(T_base_object=T, direction=d, tip_z_mm=tip_z, waypoints=tuple(moves))
+        why.append(f"{math.degrees(math.atan2(d[1], d[0])):.0f}°: {problem}")
+    raise NudgeRefused(
+        f"no nudge of the {model.name} at ({T[0, 3]:.1f}, {T[1, 3]:.1f}, {T[2, 3]:.1f}) mm passes the checks "
+        f"({'; '.join(why)}); nothing was sent"
+    )
+
+
+def _near(points: np.ndarray, model_points: np.ndarray, radius: float) -> np.ndarray:
+    """Which ``points`` lie within ``radius`` of a model point (only those in the model's box are measured)."""
+    lo, hi = model_points.min(axis=0) - radius, model_points.max(axis=0) + radius
+    out = np.zeros(len(points), dtype=bool)
+    cand = np.flatnonzero(((points >= lo) & (points <= hi)).all(axis=1))
+    for chunk in np.array_split(cand, max(1, len(cand) // 512)):
+        if len(chunk):
+            d2 = ((points[chunk, None, :] - model_points[None, :, :]) ** 2).sum(axis=2)
+            out[chunk] = d2.min(axis=1) <= radius * radius
+    return out
+
+
+def nudge_blocked(cell: Any, skipped: list, scan: Any) -> Optional[NudgePlan]:
+    """Plans a nudge of the first pose in ``skipped`` (the located parts the loop passed over,
+    every look's estimate) that has one, and runs it on ``cell`` (closes the gripper, the moves, gripper left closed);
+    the plan run, or None when no part has one (nothing was sent). Faults stop the arm and are raised."""
+    cfg = cell.config
+    T_now = cell.robot.read_pose()
+    tried: list[np.ndarray] = []
+    refusals = []
+    for k in skipped:
+        # Each look's estimate of a part is tried: a plan refused for one may pass for another.
+        t = k.T_base_object[:3, 3]
+        if any(np.abs(k.T_base_object - u).max() < 1e-3 for u in tried):
+            continue
+        tried.append(k.T_base_object)
+        try:
+            plan = plan_nudge(cfg, k.T_base_object, scan.points, T_now)
+        except NudgeRefused as exc:
+            refusals.append(str(exc))
+            continue
+        cell.progress(
+            "nudge",
+            f"pushing the {cfg.model.name} at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm towards "
+            f"{plan.heading_deg:.0f}° with the closed gripper, fingertips {plan.tip_z_mm:.0f} mm up",
+        )
+        if not _execute(cell, plan):
+            cell.progress("nudge", "the gripper closed on something before the push; nothing was pushed")
+            return None
+        return plan
+    cell.progress("nudge", f"no part can be nudged: {refusals[0] if refusals else 'no part located'}")
+    return None
+
+
+def _execute(cell: Any, plan: NudgePlan) -> bool:
+    """Closes the gripper and makes the moves; False (and the gripper opened again, the arm not
+    moved) when the fingers closed on something."""
+    try:
+        if cell.gripper.close() is True:
+            cell.gripper.open()
+            return False
+        for _, T, linear in plan.waypoints:
+            cell.robot.move_to(T, linear=linear)
+        return True
+    except BinpickError as exc:
+        note = cell._halt()
+        cell.progress("FAULT", f"{exc} — {note}")
+        raise

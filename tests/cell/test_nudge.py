@@ -1,0 +1,105 @@
+"""The nudge: at a dead end the closed gripper pushes a blocked part over, the physics moves it,
+and the cell picks it; a nudge through the floor, into a wall or out of reach is refused with
+nothing sent."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import binpick
+from binpick.cell import nudge
+from binpick.cell.records import Skipped
+from binpick.errors import SafetyError
+from binpick.sim import SimulatedCell
+
+#: Tee pile seed 1 of 9 parts (benches/bin_clearing.py): taken out in this order, the last part
+#: left stands against the +y wall, where no grasp within the 45° tool-tilt limit can take it.
+DEAD_END_SEED, DEAD_END_COUNT, DEAD_END_REMOVED = 1, 9, (8, 7, 2, 0, 5, 3, 4, 6)
+
+
+@pytest.fixture(scope="module")
+def tee():
+    return binpick.parts.tee()
+
+
+def _dead_end(tee, **kwargs):
+    sim = SimulatedCell(tee, count=DEAD_END_COUNT, seed=DEAD_END_SEED, frames=90, **kwargs)
+    for pid in DEAD_END_REMOVED:
+        sim.pile.remove(pid)
+    return sim
+
+
+def _lowest_tip_above_floor(cfg, plans) -> float:
+    g, floor = cfg.gripper, float(cfg.bin_bounds[0][2])
+    lowest = np.inf
+    for plan in plans:
+        for _, T, _ in plan.waypoints:
+            T_bg = T @ g.T_flange_gripper
+            lowest = min(lowest, float((g.outline() @ T_bg[:3, :3].T + T_bg[:3, 3])[:, 2].min()))
+    return lowest - floor
+
+
+def test_a_dead_end_is_nudged_and_the_blocked_part_picked(tee):
+    lines = []
+    sim = _dead_end(tee, progress=lambda stage, msg: lines.append((stage, msg)), look_again_poses=())
+    with sim:
+        (blocked,) = sim.pile.ids.tolist()
+        before = sim.pile.pose(blocked).copy()
+        report = sim.cell.run(2)
+        assert sim.emulator_failures == []
+    record = report.records[0]
+    assert len(record.nudges) >= 1, [m for s, m in lines if s in ("nudge", "skip")]
+    assert sum(s == "nudge" for s, _ in lines) == len(record.nudges)
+    assert record.as_dict()["nudges"][0]["heading_deg"] == pytest.approx(record.nudges[0].heading_deg, abs=0.1)
+    # The push moved the blocked part in the physics, and the cell then took it out.
+    assert any(blocked in p.moved for p in sim.pushes), sim.pushes
+    assert record.picked_instance == blocked and len(sim.pile) == 0, (record.failure, record.error)
+    assert record.success and record.truth.pick_grade, record.error
+    assert len(sim.pushes) == 1, "the nudge's moves push as one continuous sweep"
+    assert np.linalg.norm(record.T_base_object[:3, 3] - before[:3, 3]) > 10.0
+    assert _lowest_tip_above_floor(sim.cell.config, record.nudges) > 0.0
+
+
+def test_a_nudge_through_the_floor_into_a_wall_or_out_of_reach_is_refused_with_nothing_sent(tee):
+    sim = _dead_end(tee)
+    with sim:
+        cell, cfg, T = sim.cell, sim.cell.config, sim.pile.poses[0]
+        sent = []
+        move, close = cell.robot.move_to, cell.gripper.close
+        cell.robot.move_to = lambda *a, **k: sent.append(("move", a)) or move(*a, **k)
+        cell.gripper.close = lambda *a, **k: sent.append(("close", a)) or close(*a, **k)
+        T_now, nothing = cell.robot.read_pose(), np.zeros((0, 3))
+        plan = nudge.plan_nudge(cfg, T, nothing, T_now)
+        assert nudge.check_nudge(cfg, list(plan.waypoints), T_now, nothing) is None
+        # Fingertips 10 mm under the floor, the whole path 2 m away, the arm unable to reach.
+        low = [(n, W if n == "above" else _lowered(W, 60.0), lin) for n, W, lin in plan.waypoints]
+        assert "floor" in nudge.check_nudge(cfg, low, T_now, nothing)
+        far = [(n, _shifted(W, 2000.0), lin) for n, W, lin in plan.waypoints]
+        assert nudge.check_nudge(cfg, far, T_now, nothing) is not None
+        # Scanned points of another part in the fingers' way down: refused.
+        tips = (plan.waypoints[1][1] @ cfg.gripper.T_flange_gripper)[:3, 3]
+        column = tips + np.array([[0.0, 0.0, z] for z in np.linspace(0.0, 40.0, 50)])
+        assert "scanned points" in nudge.check_nudge(cfg, list(plan.waypoints), T_now, column)
+        # The loop's entry point with every plan refused: None, and nothing sent.
+        cell.config = replace(cfg, reachable=lambda T: False)
+        skipped = [Skipped(T, "none of the grasps usable")]
+        assert nudge.nudge_blocked(cell, skipped, SimpleNamespace(points=nothing)) is None
+        with pytest.raises(SafetyError, match="reach"):
+            nudge.plan_nudge(cell.config, T, nothing, T_now)
+        assert sent == []
+
+
+def _lowered(T, dz):
+    T = T.copy()
+    T[2, 3] -= dz
+    return T
+
+
+def _shifted(T, dx):
+    T = T.copy()
+    T[0, 3] += dx
+    return T
