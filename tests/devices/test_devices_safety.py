@@ -1,4 +1,4 @@
-"""The cell's rules: workspace box, tool attitude, approach below the safety plane, speed."""
+"""The cell's rules: workspace box, tool attitude, approach below the safety plane, speed, push."""
 
 import math
 
@@ -62,6 +62,23 @@ def test_sequence_is_checked_step_by_step():
         check_sequence(start, [down(300, 0, 150), down(300, 0, 300), down(300, 0, 150)], [True, True, False], LIMITS)
     with pytest.raises(InvalidInputError):
         check_sequence(start, [down(300, 0, 150)], [True, False], LIMITS)
+
+
+def test_a_push_is_a_chain_of_allowed_steps_within_its_total_sideways_travel():
+    above, down_at = down(300, 0, 300), down(300, 0, 100)
+    steps = [down(300, 25 * k, 100) for k in range(1, 5)]  # 100 mm across in 25 mm steps
+    path = [above, down_at, *steps, down(300, 100, 300)]
+    linear = [False, True, True, True, True, True, True]
+    check_sequence(down(300, 0, 350), path, linear, LIMITS, push=True)  # within the default 120 mm
+    with pytest.raises(SafetyError, match="travel 100.0 mm sideways .* more than the 80 mm a push may"):
+        check_sequence(down(300, 0, 350), path, linear, CellLimits(max_push_mm=80.0), push=True)
+    # Not a push: the same chain is checked step by step only (rule 3).
+    check_sequence(down(300, 0, 350), path, linear, CellLimits(max_push_mm=0.0))
+    with pytest.raises(SafetyError, match="more than the 0 mm"):
+        check_sequence(down(300, 0, 350), path, linear, CellLimits(max_push_mm=0.0), push=True)
+    # Each step is still rule 3's: one 50 mm step is refused whatever the push allows.
+    with pytest.raises(SafetyError, match="sideways, more than 30 mm"):
+        check_sequence(down(300, 0, 350), [above, down_at, down(300, 50, 100)], [False, True, True], LIMITS, push=True)
 
 
 def test_speed_limits():

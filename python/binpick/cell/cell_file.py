@@ -326,6 +326,7 @@ def _limits(f: CellFile) -> safety.CellLimits:
         max_lateral_below_mm=f.number("limits", "max_lateral_below_mm", d.max_lateral_below_mm),
         max_override_percent=f.number("limits", "max_override_percent", d.max_override_percent),
         max_linear_speed_mm_s=f.number("limits", "max_linear_speed_mm_s", d.max_linear_speed_mm_s),
+        max_push_mm=f.number("limits", "max_push_mm", d.max_push_mm),
     )
 
 

@@ -6,12 +6,13 @@ above a start point ``NUDGE_START_MM`` outside the part's footprint, straight do
 fingertips are at two thirds of the part's height above the floor (its top minus a third of its
 height), straight across through the part to ``NUDGE_PAST_MM`` beyond its centre (to the centre when
 that would bring the gripper against a wall; in steps no
-longer than the cell's ``max_lateral_below_mm``, each a move the safety rules allow), and
+longer than the cell's ``max_lateral_below_mm``, the whole push within ``max_push_mm``: the
+safety module's rule 5), and
 straight up again. Directions are tried in turn — towards the bin's centre first, then away from
 the nearest wall, then the others — and the first plan that passes every check is run:
 
 - every pose within the workspace and the tool-attitude limit, the whole sequence from the arm's
-  pose now within the approach rules (:mod:`binpick.devices.safety`);
+  pose now within the approach and push rules (:mod:`binpick.devices.safety`, rules 3 and 5);
 - every pose reachable with the arm's kinematics (``config.reachable``);
 - the whole gripper (fingers open as the check assumes, palm, flange) clear of the bin's floor and
   walls at every waypoint (:func:`~binpick.cell.grasp.bin_clash`; convex pieces in a convex bin,
@@ -147,7 +148,8 @@ def check_nudge(config: CellConfig, waypoints: list, T_now: np.ndarray, scene: n
     poses = [T for _, T, _ in waypoints]
     try:
         checked = [safety.check_pose(T, config.limits, name=n) for n, T in zip(names, poses)]
-        safety.check_sequence(T_now, checked, [lin for _, _, lin in waypoints], config.limits, names=names)
+        linear = [lin for _, _, lin in waypoints]
+        safety.check_sequence(T_now, checked, linear, config.limits, names=names, push=True)
     except SafetyError as exc:
         return f"safety: {exc}"
     if config.reachable is not None:

@@ -13,6 +13,10 @@ what to change. The rules, all in the robot's base frame on the flange pose ``T_
    sideways: it goes into and out of the bin vertically.
 4. **Speed** — the speed override never exceeds ``max_override_percent`` and the straight-line
    speed never exceeds ``max_linear_speed_mm_s``.
+5. **Push** — a deliberate push of the closed gripper through the pile (the cell's nudge,
+   :func:`check_sequence` with ``push=True``) is the one sequence that goes sideways below the approach height: a chain
+   of straight moves, each within rule 3's ``max_lateral_below_mm``, whose sideways travel below
+   the approach height totals at most ``max_push_mm`` (0 forbids pushes).
 """
 
 from __future__ import annotations
@@ -27,7 +31,14 @@ import numpy as np
 from .._validate import check_number, check_transform
 from ..errors import InvalidInputError, InvalidTypeError, SafetyError
 
-__all__ = ["CellLimits", "check_pose", "check_move", "check_sequence", "check_override", "check_linear_speed"]
+__all__ = [
+    "CellLimits",
+    "check_pose",
+    "check_move",
+    "check_sequence",
+    "check_override",
+    "check_linear_speed",
+]
 
 Vec3 = tuple[float, float, float]
 
@@ -45,6 +56,8 @@ class CellLimits:
             ``approach_height_mm``, mm.
         max_override_percent: largest speed override sent to the controller, percent (1–100).
         max_linear_speed_mm_s: largest straight-line speed sent to the controller, mm/s.
+        max_push_mm: largest total sideways travel below ``approach_height_mm`` of a push (rule 5),
+            mm; 0 forbids pushes.
     """
 
     workspace_min_mm: Vec3 = (100.0, -300.0, 0.0)
@@ -54,6 +67,7 @@ class CellLimits:
     max_lateral_below_mm: float = 30.0
     max_override_percent: float = 50.0
     max_linear_speed_mm_s: float = 250.0
+    max_push_mm: float = 120.0
 
     def __post_init__(self) -> None:
         lo = [check_number(v, "CellLimits.workspace_min_mm", unit="mm") for v in _triple(self.workspace_min_mm, "min")]
@@ -67,6 +81,7 @@ class CellLimits:
         check_number(self.max_lateral_below_mm, "CellLimits.max_lateral_below_mm", low=0.0, unit="mm")
         check_number(self.max_override_percent, "CellLimits.max_override_percent", low=1.0, high=100.0, unit="%")
         check_number(self.max_linear_speed_mm_s, "CellLimits.max_linear_speed_mm_s", low=0.001, unit="mm/s")
+        check_number(self.max_push_mm, "CellLimits.max_push_mm", low=0.0, unit="mm")
 
 
 def _triple(value: Any, which: str) -> Sequence[Any]:
@@ -134,9 +149,12 @@ def check_sequence(
     limits: CellLimits,
     *,
     names: Optional[Sequence[str]] = None,
+    push: bool = False,
 ) -> list:
     """:func:`check_move` for each step of a sequence, each step starting where the previous one
-    ends; ``names`` name the steps in errors (``targets[i]`` by default)."""
+    ends; ``names`` name the steps in errors (``targets[i]`` by default). With ``push``, the
+    sequence is a push (rule 5): its sideways travel below the approach height totals at most
+    ``max_push_mm``."""
     if len(targets) != len(linear):
         raise InvalidInputError(f"linear: has {len(linear)} entries for {len(targets)} targets; give one per target")
     labels = [f"targets[{i}]" for i in range(len(targets))] if names is None else list(names)
@@ -144,9 +162,19 @@ def check_sequence(
         raise InvalidInputError(f"names: has {len(labels)} entries for {len(targets)} targets; give one per target")
     checked = []
     previous = T_start
+    travel = 0.0
     for T, lin, label in zip(targets, linear, labels):
+        start = previous
         previous = check_move(previous, T, linear=bool(lin), limits=limits, name=label)
         checked.append(previous)
+        if min(float(start[2, 3]), float(previous[2, 3])) < limits.approach_height_mm:
+            travel += float(np.hypot(*(previous[:2, 3] - start[:2, 3])))
+    if push and travel > limits.max_push_mm:
+        raise SafetyError(
+            f"push: the gripper would travel {travel:.1f} mm sideways below the approach height "
+            f"{limits.approach_height_mm:g} mm, more than the {limits.max_push_mm:g} mm a push may; nothing was "
+            "sent — push a shorter way or raise CellLimits.max_push_mm"
+        )
     return checked
 
 

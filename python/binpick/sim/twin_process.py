@@ -272,6 +272,7 @@ max_tool_tilt_deg = {math.degrees(lim.max_tool_tilt_rad):.6f}
 max_lateral_below_mm = {lim.max_lateral_below_mm:.6f}
 max_override_percent = {lim.max_override_percent:g}
 max_linear_speed_mm_s = {lim.max_linear_speed_mm_s:g}
+max_push_mm = {lim.max_push_mm:g}   # sideways travel of a nudge below the approach height
 """
 
     def _board_table(self) -> str:
