@@ -587,7 +587,7 @@ def plan_grasp(
     raise NoGraspError(
         f"none of the {len(config.grasps)} grasps of the located {config.model.name} can be used (rejected: "
         + ", ".join(f"{v} for {k}" for k, v in rejected.items() if v)
-        + "); declare more grasps, widen CellLimits.max_tool_tilt_rad, or let the pile be stirred",
+        + "); declare more grasps, widen CellLimits.max_tool_tilt_rad, or allow nudges (CellConfig.max_nudges)",
         reason=f"none of {len(config.grasps)} grasps usable ({why})",
         refused={k: np.stack(v) for k, v in samples.items() if v},
     )

@@ -627,8 +627,11 @@ class Cell:
         while True:
             record, why = self._look_and_pick(i)
             dead_end = why is not None and record.failure == "no grasp" and bool(record.skipped)
-            if not dead_end or len(nudges) >= self.config.max_nudges or record.scan is None:
+            if not dead_end or record.scan is None:
                 return replace(record, nudges=tuple(nudges)), why
+            if len(nudges) >= self.config.max_nudges:
+                after = f" (after {len(nudges)} nudges)" if nudges else ""
+                return replace(record, nudges=tuple(nudges)), f"{why}{after}"
             try:
                 plan = nudge_blocked(self, list(record.skipped), record.scan)
             except BinpickError as exc:
@@ -636,7 +639,7 @@ class Cell:
                 record = replace(record, nudges=tuple(nudges), failure="fault", fault=True, error=error)
                 return record, f"pick {i}: {error}"
             if plan is None:
-                return replace(record, nudges=tuple(nudges)), why
+                return replace(record, nudges=tuple(nudges)), f"{why} (no nudge passes the checks)"
             nudges.append(plan)
 
     def _look_and_pick(self, i: int) -> tuple[PickRecord, Optional[str]]:
