@@ -161,10 +161,15 @@ fn trusted(
             e.confidence = t.confidence * e.fit.map_or(1.0, |f| f.factor);
             e.ambiguous = t.ambiguous;
             e.alternatives = t.alternatives;
+            // A free axis already says the turn is unknown.
             let noise = e.fit.map(|f| f.noise_floor);
-            let unseen =
-                unseen_turns::unseen_turns(&claimed, model, &e.t_scene_model, judge, cfg, noise, &e.alternatives);
-            if !unseen.is_empty() && e.free_axis.is_none() {
+            let unseen = match t.free_axis {
+                None => {
+                    unseen_turns::unseen_turns(&claimed, model, &e.t_scene_model, judge, cfg, noise, &e.alternatives)
+                }
+                Some(_) => Vec::new(),
+            };
+            if !unseen.is_empty() {
                 // As with near-symmetric alternatives: each one the scan cannot rule out is as
                 // likely as the pose.
                 e.confidence /= (1 + unseen.len()) as f64;
