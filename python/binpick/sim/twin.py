@@ -267,6 +267,10 @@ class TwinWorld:
         """Where the gripper's TCP really is."""
         return self.robot_emulator.pose() @ self.gripper_geometry.T_flange_gripper
 
+    def finger_opening_mm(self) -> float:
+        """How far apart the gripper emulator's fingers are now, mm."""
+        return self._gripper_config.stroke_mm * (1.0 - self.gripper_emulator.axis.position() / 255.0)
+
     @property
     def grasp_matcher(self) -> GraspMatcher:
         """The declared grasps of the running cell, matched with the grip tolerances."""
@@ -323,8 +327,7 @@ class TwinWorld:
         through the bin's inner volume is queued to push the pile (run by :meth:`settle_pending`)."""
         if self._held is not None or self.gripper_emulator is None or speed <= 0:
             return
-        stroke = self._gripper_config.stroke_mm
-        opening = stroke * (1.0 - self.gripper_emulator.axis.position() / 255.0)
+        opening = self.finger_opening_mm()
         if opening > CLOSED_OPENING_MM:
             return
         path = T_base_flange @ self.gripper_geometry.T_flange_gripper

@@ -331,8 +331,7 @@ center_mm = {_toml_list(board.center)}   # the centre of the corner grid, base f
         if alarm:
             now[f"robot alarm {alarm}"] = 0
         T_bg = w.T_base_tcp()
-        stroke = w._gripper_config.stroke_mm
-        opening = stroke * (1.0 - w.gripper_emulator.axis.position() / 255.0)
+        opening = w.finger_opening_mm()
         g = w.gripper_geometry
         outline = g.outline(max(opening, 1.0)) @ T_bg[:3, :3].T + T_bg[:3, 3]
         lo, hi = w.layout.bin.bounds

@@ -88,29 +88,55 @@ pub(super) fn eigen_ascending(m: Matrix3<f64>) -> ([f64; 3], [Vector3<f64>; 3]) 
     )
 }
 
-fn median(mut v: Vec<f64>) -> Option<f64> {
-    if v.len() < MIN_SAMPLES {
+fn median(mut v: Vec<f64>, fewest: usize) -> Option<f64> {
+    if v.is_empty() || v.len() < fewest {
         return None;
     }
     let mid = v.len() / 2;
     Some(*v.select_nth_unstable_by(mid, f64::total_cmp).1)
 }
 
-/// 1.4826 × the median absolute point-to-plane residual (a robust σ) of `points` within `tol`
-/// of the posed model.
+/// 1.4826 × the median of the absolute `residuals` (a robust σ), when there are at least `fewest`.
+pub(super) fn robust_sigma(residuals: impl Iterator<Item = f64>, fewest: usize) -> Option<f64> {
+    median(residuals.map(f64::abs).collect(), fewest).map(|m| 1.4826 * m)
+}
+
+/// The point-to-plane residual of each of `points` about the posed model (`None` where no
+/// dense model point lies within `reach`).
+pub(super) fn plane_residuals(
+    points: &[Point],
+    model: &PoseModel,
+    t_scene_model: &Isometry3<f64>,
+    reach: f64,
+) -> Vec<Option<f64>> {
+    let inv = t_scene_model.inverse();
+    points
+        .iter()
+        .map(|p| plane_residual(model, &(inv * p), reach))
+        .collect()
+}
+
+/// The robust σ of the residuals of `points` within `tol` of the posed model, on at most
+/// [`RESIDUAL_POINTS`] of them.
 pub(super) fn residual_sigma(
     points: &[Point],
     model: &PoseModel,
     t_scene_model: &Isometry3<f64>,
     tol: f64,
 ) -> Option<f64> {
-    let inv = t_scene_model.inverse();
-    let res: Vec<f64> = thin(points, RESIDUAL_POINTS)
-        .iter()
-        .filter_map(|p| plane_residual(model, &(inv * p), tol))
-        .map(f64::abs)
-        .collect();
-    median(res).map(|m| 1.4826 * m)
+    thinned_sigma(&plane_residuals(
+        &thin(points, RESIDUAL_POINTS),
+        model,
+        t_scene_model,
+        tol,
+    ))
+}
+
+/// [`residual_sigma`] from the residuals of all the points (as [`plane_residuals`] gives them),
+/// thinned as it thins the points.
+pub(super) fn thinned_sigma(residuals: &[Option<f64>]) -> Option<f64> {
+    let stride = residuals.len().div_ceil(RESIDUAL_POINTS).max(1);
+    robust_sigma(residuals.iter().step_by(stride).flatten().copied(), MIN_SAMPLES)
 }
 
 /// The sensor's noise among `points` (mm), from no model. Each sampled point is compared with
@@ -171,7 +197,7 @@ pub(super) fn noise_floor(points: &[Point]) -> Option<f64> {
             sigmas.push(d / (0.6745 * (1.0 + 1.0 / k).sqrt()));
         }
     }
-    median(sigmas)
+    median(sigmas, MIN_SAMPLES)
 }
 
 #[cfg(test)]

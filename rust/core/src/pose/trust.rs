@@ -10,6 +10,7 @@
 //! the feature, a hole or a cut corner — leaves points beyond the scan's noise; the judge's depth
 //! test adds the surface a pose predicts where the sensor saw free space.
 
+use super::fit::{plane_residuals, robust_sigma};
 use super::judge::Judge;
 use super::{PoseConfig, PoseEstimate, PoseModel};
 use crate::geometry::Point;
@@ -318,18 +319,11 @@ fn fine_tolerance(
     tol: f64,
     p: &TrustParams,
 ) -> f64 {
-    let inv = t_scene_model.inverse();
-    let mut res: Vec<f64> = local
-        .iter()
-        .filter_map(|l| plane_residual(model, &(inv * l), tol))
-        .map(f64::abs)
-        .collect();
-    if res.len() < 12 {
-        return tol;
+    let res = plane_residuals(local, model, t_scene_model, tol);
+    match robust_sigma(res.into_iter().flatten(), 12) {
+        Some(sigma) => (p.noise_sigmas * sigma).clamp(p.min_fine_tolerance.min(tol), tol),
+        None => tol,
     }
-    let mid = res.len() / 2;
-    let median = *res.select_nth_unstable_by(mid, f64::total_cmp).1;
-    (p.noise_sigmas * 1.4826 * median).clamp(p.min_fine_tolerance.min(tol), tol)
 }
 
 /// Every k-th point of `v`, so that at most about `n` remain.

@@ -7,9 +7,9 @@
 //! refined on the claimed points and judged; a move the judge passes that explains the claimed points as well is an alternative
 //! the scan cannot rule out, and the pose is reported ambiguous rather than confidently wrong.
 
-use super::fit::{eigen_ascending, residual_sigma, FREE_RATIO};
+use super::fit::{eigen_ascending, plane_residuals, thinned_sigma, FREE_RATIO};
 use super::judge::Judge;
-use super::trust::{plane_residual, thin, Alternative, FeatureEvidence};
+use super::trust::{thin, Alternative, FeatureEvidence};
 use super::{PoseConfig, PoseModel};
 use crate::geometry::Point;
 use crate::registration::{icp, IcpConfig};
@@ -100,12 +100,12 @@ fn on_model(claimed: &[Point], model: &PoseModel, t: &Isometry3<f64>, reach: f64
         .collect()
 }
 
-fn kept_within(claimed: &[Point], model: &PoseModel, t: &Isometry3<f64>, tol: f64) -> usize {
-    let inv = t.inverse();
-    claimed
-        .iter()
-        .filter(|p| plane_residual(model, &(inv * *p), tol).is_some_and(|r| r.abs() <= tol))
-        .count()
+/// In one pass over the claimed points: how many lie within `tol` of the posed model, and the
+/// robust σ of their residuals (that of [`super::fit::residual_sigma`]).
+fn kept_and_sigma(claimed: &[Point], model: &PoseModel, t: &Isometry3<f64>, tol: f64) -> (usize, Option<f64>) {
+    let res = plane_residuals(claimed, model, t, tol);
+    let kept = res.iter().flatten().filter(|r| r.abs() <= tol).count();
+    (kept, thinned_sigma(&res))
 }
 
 /// The turns of `t_scene_model` about the weak axis of its claimed points that the scan cannot
@@ -155,11 +155,10 @@ pub(super) fn unseen_turns(
     if moves.is_empty() {
         return Vec::new();
     }
-    let Some(sigma0) = residual_sigma(claimed, model, t_scene_model, tol) else {
+    let (kept0, Some(sigma0)) = kept_and_sigma(claimed, model, t_scene_model, tol) else {
         return Vec::new();
     };
     let sigma_ok = (SIGMA_SLACK * sigma0).max(FREE_RATIO * noise_floor.unwrap_or(0.0));
-    let kept0 = kept_within(claimed, model, t_scene_model, tol);
     let e0 = judge.evidence(model, t_scene_model);
     let seen_through_ok =
         e0.violated + SEEN_THROUGH_MARGIN.max((SEEN_THROUGH_SHARE * (e0.seen + e0.violated) as f64).round() as usize);
@@ -191,13 +190,12 @@ pub(super) fn unseen_turns(
         if e.violated > seen_through_ok || judge.check(&e, model, &t, cfg).is_err() {
             continue;
         }
-        let kept = kept_within(claimed, model, &t, tol);
+        let (kept, sigma) = kept_and_sigma(claimed, model, &t, tol);
         if (kept as f64) < kept0 as f64 - MIN_MARGIN.max(MARGIN_SHARE * kept0 as f64) {
             continue;
         }
-        match residual_sigma(claimed, model, &t, tol) {
-            Some(s) if s <= sigma_ok => {}
-            _ => continue,
+        if !sigma.is_some_and(|s| s <= sigma_ok) {
+            continue;
         }
         found.push(Alternative {
             t_scene_model: model.symmetries.canonical(&t),
