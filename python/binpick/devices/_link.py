@@ -20,8 +20,10 @@ try:
     import termios
 
     _PORT_ERRORS: tuple = (serial.SerialException, OSError, termios.error)
+    _SETTINGS_REFUSED: tuple = (termios.error,)
 except ImportError:  # pragma: no cover - not POSIX
     _PORT_ERRORS = (serial.SerialException, OSError)
+    _SETTINGS_REFUSED = ()
 
 from .._validate import check_int, check_number
 from ..errors import (
@@ -40,6 +42,9 @@ T = TypeVar("T")
 E = TypeVar("E", bound=BaseException)
 
 _SLICE_S = 0.01  # the port's read timeout: reads return at least this often to check their deadline
+#: Opens of a port whose line settings are refused, and the pause between them (see SerialLink._open).
+_OPEN_ATTEMPTS = 5
+_OPEN_RETRY_S = 0.02
 
 _PARITIES = {
     "N": serial.PARITY_NONE,
@@ -115,21 +120,40 @@ class SerialLink:
         if not isinstance(port, str) or not port:
             raise InvalidInputError(f"{device}: port must be a device path such as '/dev/ttyUSB0', got {port!r}")
         self.port_name = port
-        try:
-            self._ser = serial.Serial(
-                port,
-                baudrate=settings.baudrate,
-                bytesize=settings.bytesize,
-                parity=_PARITIES[settings.parity],
-                stopbits=settings.stopbits,
-                timeout=_SLICE_S,
-                write_timeout=settings.write_timeout_s,
-            )
-        except (serial.SerialException, OSError, ValueError) as exc:
-            raise PortClosedError(
-                f"{device}: cannot open serial port {port!r} ({exc}); check that the device is plugged in, "
-                "the path is right and you may read and write it"
-            ) from None
+        self._ser = self._open(port, settings, device)
+
+    @staticmethod
+    def _open(port: str, settings: SerialSettings, device: str) -> serial.Serial:
+        """Opens ``port`` with ``settings``. A port whose line settings are refused is tried again
+        for a short while: a pty emulator resets its stored speed a few milliseconds after each
+        open (see ``devices.emulators._pty``), and a driver that reopens within them is refused
+        once; a real port that refuses them still fails, after :data:`_OPEN_ATTEMPTS` tries."""
+        for attempt in range(_OPEN_ATTEMPTS):
+            try:
+                return serial.Serial(
+                    port,
+                    baudrate=settings.baudrate,
+                    bytesize=settings.bytesize,
+                    parity=_PARITIES[settings.parity],
+                    stopbits=settings.stopbits,
+                    timeout=_SLICE_S,
+                    write_timeout=settings.write_timeout_s,
+                )
+            except _SETTINGS_REFUSED as exc:
+                if attempt + 1 < _OPEN_ATTEMPTS:
+                    time.sleep(_OPEN_RETRY_S)
+                    continue
+                raise PortClosedError(
+                    f"{device}: serial port {port!r} refuses the line settings {settings.baudrate} baud "
+                    f"{settings.bytesize}{settings.parity}{settings.stopbits:g} ({exc}); check the port "
+                    "supports them (SerialSettings)"
+                ) from None
+            except (serial.SerialException, OSError, ValueError) as exc:
+                raise PortClosedError(
+                    f"{device}: cannot open serial port {port!r} ({exc}); check that the device is plugged in, "
+                    "the path is right and you may read and write it"
+                ) from None
+        raise AssertionError("unreachable: the last attempt returns or raises")
 
     # -- housekeeping
     @property
