@@ -18,11 +18,14 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ._validate import edge_use_counts
+from .errors import InvalidInputError
 
 __all__ = [
     "ring_solid",
     "angle_samples",
     "stations",
+    "check_grid",
+    "MAX_GRID_VERTICES",
     "axial_solid",
     "polygon_radius",
     "signed_volume",
@@ -36,6 +39,21 @@ __all__ = [
 
 #: Half-width (rad or mm) of the pair of samples that writes a step of a radius function.
 STEP = 1e-3
+
+#: Most vertices a part's mesh grid may have (rings × vertices per ring): the default parts have
+#: under 50 000; four million (about 300 MB of vertices and faces) is checked before the grid is
+#: built, so that sizes far beyond a real part cannot take the machine's memory.
+MAX_GRID_VERTICES = 4_000_000
+
+
+def check_grid(rings: int, per_ring: int, what: str) -> None:
+    """InvalidInputError naming ``what`` (the part and its size arguments) when a grid of
+    ``rings`` × ``per_ring`` vertices is over :data:`MAX_GRID_VERTICES`."""
+    if rings * per_ring > MAX_GRID_VERTICES:
+        raise InvalidInputError(
+            f"{what}: these sizes need a mesh grid of {rings} × {per_ring} = {rings * per_ring} vertices, over the "
+            f"ceiling of {MAX_GRID_VERTICES}; pass the part's real sizes in mm"
+        )
 
 
 def ring_solid(rings: np.ndarray, first_pole: Sequence[float], last_pole: Sequence[float]) -> tuple:
@@ -83,10 +101,13 @@ def axial_solid(
     s: np.ndarray,
     phi: np.ndarray,
     cap_rings: int = 6,
+    what: str = "sizes",
 ) -> tuple:
     """The solid about the z axis from z = s[0] to s[-1] whose surface at height s and angle φ
     lies at ``radius(s, φ)`` (broadcasting arrays) from the axis, closed by flat end caps (each
-    star-shaped from the axis: ``cap_rings`` scaled copies of its rim)."""
+    star-shaped from the axis: ``cap_rings`` scaled copies of its rim). The grid's size is
+    checked first (:func:`check_grid`, naming ``what``)."""
+    check_grid(len(s) + 2 * (cap_rings - 1), len(phi), what)
     S, P = np.meshgrid(s, phi, indexing="ij")
     r = radius(S, P)
     side = np.stack([r * np.cos(P), r * np.sin(P), S], axis=-1)

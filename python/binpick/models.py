@@ -26,7 +26,7 @@ from ._validate import (
     unit_scale,
     write_atomic,
 )
-from .errors import InvalidInputError
+from .errors import InvalidInputError, InvalidTypeError
 from .transforms import pose_error, rotation_about
 
 __all__ = [
@@ -239,6 +239,7 @@ class Model:
         or a ``spacing`` so fine that it would ask for more, is refused before any allocation."""
         v = as_points(vertices, "vertices", min_points=3)
         f = as_faces(faces, "faces", len(v))
+        branches, special_direction = _branches(branches), _special(special_direction)
         v = v * unit_scale(unit)
         if spacing is not None and count is not None:
             raise InvalidInputError("spacing/count: give one of them, not both")
@@ -270,8 +271,9 @@ class Model:
         the origin to the open end with its length and outer radius (mm); optionally the
         direction of one feature that breaks the branches' symmetry (the tee's boss).
         """
-        self.branches = tuple(branches)
-        self.special_direction = None if special_direction is None else tuple(float(v) for v in special_direction)
+        rows, special = _branches(branches), _special(special_direction)  # checked before the model changes
+        self.branches = rows
+        self.special_direction = special
         self._prepared = None
 
     def prepared(self, ppf: Optional[PpfParams] = None):
@@ -378,6 +380,41 @@ class Model:
             f"Model(name={self.name!r}, vertices={len(self.vertices)}, faces={len(self.faces)}, "
             f"points={len(self.points)}, diameter={self.diameter:.2f} mm, branches={len(self.branches)})"
         )
+
+
+def _branches(branches: Any) -> tuple[Branch, ...]:
+    """``branches`` as a tuple of :class:`Branch` with float fields: each a Branch whose direction is
+    three finite numbers and whose length and radius are positive finite mm, or InvalidInputError
+    (InvalidTypeError for a wrong type) naming ``branches[i]``. Their geometry (distinct axes
+    meeting at the origin) is checked when the model is prepared."""
+    if isinstance(branches, (str, bytes, Branch)) or not hasattr(branches, "__iter__"):
+        raise InvalidTypeError(
+            f"branches: expected a sequence of binpick.Branch, got {type(branches).__name__} {branches!r:.40}"
+        )
+    rows = []
+    for i, b in enumerate(branches):
+        if not isinstance(b, Branch):
+            raise InvalidTypeError(
+                f"branches[{i}]: expected a binpick.Branch(direction=(x, y, z), length=mm, radius=mm), "
+                f"got {type(b).__name__} {b!r:.40}"
+            )
+        direction = as_vector(b.direction, f"branches[{i}].direction")
+        rows.append(
+            Branch(
+                direction=(float(direction[0]), float(direction[1]), float(direction[2])),
+                length=positive(b.length, f"branches[{i}].length"),
+                radius=positive(b.radius, f"branches[{i}].radius"),
+            )
+        )
+    return tuple(rows)
+
+
+def _special(direction: Any) -> Optional[tuple[float, float, float]]:
+    """None, or ``direction`` as three finite floats (InvalidInputError naming ``special_direction``)."""
+    if direction is None:
+        return None
+    d = as_vector(direction, "special_direction")
+    return (float(d[0]), float(d[1]), float(d[2]))
 
 
 def _write_atomically(path: Path, data: Optional[bytes]) -> None:

@@ -30,8 +30,8 @@ from typing import Optional
 import numpy as np
 
 from . import _core, _shapes
-from ._validate import positive
-from .errors import InvalidInputError
+from ._validate import count, non_negative, positive
+from .errors import InvalidInputError, InvalidTypeError
 from .models import Branch, Model
 
 __all__ = [
@@ -45,7 +45,46 @@ __all__ = [
     "bossed_rod",
     "base_shape",
     "NEAR_SYMMETRIC",
+    "MAX_PART_SIZE_MM",
+    "MAX_BOLT_HOLES",
 ]
+
+#: Largest length argument of a near-symmetric part, mm (the defaults are 35–150 mm). Their mesh
+#: grids are 0.25–5 mm, so a size is refused above this before any array is built; the grid as a
+#: whole is checked too (:data:`binpick._shapes.MAX_GRID_VERTICES`).
+MAX_PART_SIZE_MM = 500.0
+
+#: Most bolt holes a :func:`flange` may have.
+MAX_BOLT_HOLES = 64
+
+
+def _size(value, name: str) -> float:
+    """A positive finite length in mm of at most :data:`MAX_PART_SIZE_MM`, or InvalidInputError naming ``name``."""
+    v = positive(value, name)
+    if v > MAX_PART_SIZE_MM:
+        raise InvalidInputError(
+            f"{name}: {v:g} mm is over the ceiling of {MAX_PART_SIZE_MM:g} mm for a built-in part; pass its size in mm"
+        )
+    return v
+
+
+def _flag(value, name: str = "feature") -> bool:
+    """``value`` when it is a bool, else InvalidTypeError naming ``name`` (a string such as "no" is not False)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise InvalidTypeError(f"{name}: must be True or False, got {type(value).__name__} {value!r:.40}")
+    return bool(value)
+
+
+def _boss(semi_axes, height) -> tuple[tuple[float, float], float]:
+    """The tee's boss: two positive finite semi-axes (mm) and a finite height ≥ 0 (0 for none)."""
+    if isinstance(semi_axes, (str, bytes)) or not hasattr(semi_axes, "__len__"):
+        raise InvalidTypeError(
+            f"boss_semi_axes: expected two numbers (mm along x and y), got {type(semi_axes).__name__} {semi_axes!r:.40}"
+        )
+    if len(semi_axes) != 2:
+        raise InvalidInputError(f"boss_semi_axes: expected two numbers (mm along x and y), got {len(semi_axes)}")
+    axes = (positive(semi_axes[0], "boss_semi_axes[0]"), positive(semi_axes[1], "boss_semi_axes[1]"))
+    return axes, non_negative(height, "boss_height", "mm")
 
 
 def _model(raw, name: str, spacing: Optional[float], count: Optional[int], seed: int, special=None) -> Model:
@@ -81,15 +120,16 @@ def tee(
     (0 for none). ``resolution`` is the meshing grid; the model is sampled at ``spacing`` mm
     (1 mm by default) or with ``count`` points.
     """
+    semi_axes, height = _boss(boss_semi_axes, boss_height)
     raw = _core.part_tee(
         positive(outer_diameter, "outer_diameter"),
         positive(run_length, "run_length"),
         positive(branch_length, "branch_length"),
-        (float(boss_semi_axes[0]), float(boss_semi_axes[1])),
-        float(boss_height),
+        semi_axes,
+        height,
         positive(resolution, "resolution"),
     )
-    return _model(raw, "tee", spacing, count, seed, special=(0.0, 0.0, 1.0) if boss_height > 0 else None)
+    return _model(raw, "tee", spacing, count, seed, special=(0.0, 0.0, 1.0) if height > 0 else None)
 
 
 def elbow(
@@ -159,10 +199,10 @@ def keyed_shaft(
     ``diameter/2 − keyway_depth`` from the axis), ``keyway_width`` wide, ``keyway_length`` long,
     centred on the length. Without the keyway it is continuously symmetric about z; the keyway
     alone fixes the turn about the axis. Sampled every ``spacing`` mm (1 mm by default)."""
-    R = positive(diameter, "diameter") / 2
-    L = positive(length, "length")
-    d = positive(keyway_depth, "keyway_depth") if feature else 0.0
-    w, lk = positive(keyway_width, "keyway_width"), positive(keyway_length, "keyway_length")
+    R = _size(diameter, "diameter") / 2
+    L = _size(length, "length")
+    d = _size(keyway_depth, "keyway_depth") if _flag(feature) else 0.0
+    w, lk = _size(keyway_width, "keyway_width"), _size(keyway_length, "keyway_length")
     if d >= R or lk >= L or w >= 2 * (R - d):
         raise InvalidInputError("keyway_depth/keyway_width/keyway_length: the keyway must fit inside the shaft")
     wall = float(np.arctan(w / (2 * (R - d)))) if d > 0 else 0.0
@@ -175,7 +215,8 @@ def keyed_shaft(
         slot = _slot_radius(R - d, w, p)
         return np.where(np.abs(z) < lk / 2, np.minimum(slot, R), R)
 
-    return _near_model(_shapes.axial_solid(radius, s, phi), "keyed_shaft", spacing, seed)
+    mesh = _shapes.axial_solid(radius, s, phi, what="keyed_shaft: diameter/length")
+    return _near_model(mesh, "keyed_shaft", spacing, seed)
 
 
 def cut_plate(
@@ -191,16 +232,18 @@ def cut_plate(
     (+x, +y) corner cut at 45°, ``cut`` mm along each edge: the cut reaches ``cut / √2`` mm deep
     (3.0 mm by default) into the corner. Without the cut: the square plate's 8 symmetries; with
     it only the flip about the diagonal through the cut corner is left."""
-    h = positive(side, "side") / 2
-    t = positive(thickness, "thickness")
-    c = positive(cut, "cut") if feature else 0.0
+    h = _size(side, "side") / 2
+    t = _size(thickness, "thickness")
+    c = _size(cut, "cut") if _flag(feature) else 0.0
     if c >= h:
         raise InvalidInputError(f"cut: {c:g} mm must be less than half the side ({h:g} mm)")
     corners = [(-h, -h), (h, -h), (h, h - c), (h - c, h), (-h, h)] if c > 0 else [(-h, -h), (h, -h), (h, h), (-h, h)]
     poly = np.array(corners)
     phi = _shapes.angle_samples(1.0, h, breaks=np.arctan2(poly[:, 1], poly[:, 0]))
     s = _shapes.stations(t, 2.0) - t / 2
-    mesh = _shapes.axial_solid(lambda z, p: _shapes.polygon_radius(poly, p) + 0 * z, s, phi, cap_rings=12)
+    mesh = _shapes.axial_solid(
+        lambda z, p: _shapes.polygon_radius(poly, p) + 0 * z, s, phi, cap_rings=12, what="cut_plate: side/thickness"
+    )
     return _near_model(mesh, "cut_plate", spacing, seed)
 
 
@@ -218,10 +261,10 @@ def notched_hex(
     flat-bottomed notch ``notch_depth`` deep and ``notch_width`` wide along the whole +y flat.
     Without the notch: the hex prism's 12 symmetries (near 60° turns); with it only the flip
     about y is left."""
-    a = positive(across_flats, "across_flats") / 2
-    L = positive(length, "length")
-    d = positive(notch_depth, "notch_depth") if feature else 0.0
-    w = positive(notch_width, "notch_width")
+    a = _size(across_flats, "across_flats") / 2
+    L = _size(length, "length")
+    d = _size(notch_depth, "notch_depth") if _flag(feature) else 0.0
+    w = _size(notch_width, "notch_width")
     if d >= a or w >= a:
         raise InvalidInputError("notch_depth/notch_width: the notch must fit on one flat")
     hexagon = np.array(
@@ -241,7 +284,8 @@ def notched_hex(
             r = np.minimum(r, _slot_radius(a - d, w, p - np.pi / 2))
         return r + 0 * z
 
-    return _near_model(_shapes.axial_solid(radius, s, phi), "notched_hex", spacing, seed)
+    mesh = _shapes.axial_solid(radius, s, phi, what="notched_hex: across_flats/length")
+    return _near_model(mesh, "notched_hex", spacing, seed)
 
 
 def bossed_rod(
@@ -258,10 +302,10 @@ def bossed_rod(
     ``boss_diameter`` on +z at mid-length whose top stands ``boss_height`` mm proud of the run.
     Without the boss it is continuously symmetric about x (and flips end for end); with it only
     the half turn about z is left: the boss alone tells up from down."""
-    R = positive(diameter, "diameter") / 2
-    L = positive(length, "length")
-    rb = positive(boss_diameter, "boss_diameter") / 2
-    hb = positive(boss_height, "boss_height") if feature else 0.0
+    R = _size(diameter, "diameter") / 2
+    L = _size(length, "length")
+    rb = _size(boss_diameter, "boss_diameter") / 2
+    hb = _size(boss_height, "boss_height") if _flag(feature) else 0.0
     if rb >= R or rb >= L / 2:
         raise InvalidInputError("boss_diameter: the boss must be narrower than the run")
     walls = [float(np.arcsin(rb / R)), -float(np.arcsin(rb / R))] if hb > 0 else []
@@ -281,7 +325,7 @@ def bossed_rod(
         boss = np.where((np.abs(x) < rb) & (np.cos(p) > 0), np.minimum(top, wall), 0.0)
         return np.maximum(R, np.where(np.isfinite(boss), boss, R))
 
-    v, f = _shapes.axial_solid(radius, s, phi)
+    v, f = _shapes.axial_solid(radius, s, phi, what="bossed_rod: diameter/length/boss_height")
     v = np.c_[v[:, 2], -v[:, 1], v[:, 0]]  # build axis z -> x, the boss's +x -> +z (a proper rotation)
     return _near_model((v, f), "bossed_rod", spacing, seed)
 
@@ -307,17 +351,17 @@ def flange(
     ``hole_depth`` deep from each face (the solid keeps the topology of a sphere; from above a
     pocket reads like a hole). Without the notch: the 12 symmetries of the hole pattern; with
     it only the flip about x is left."""
-    R = positive(diameter, "diameter") / 2
-    T = positive(thickness, "thickness")
-    n = int(bolt_holes)
+    R = _size(diameter, "diameter") / 2
+    T = _size(thickness, "thickness")
+    n = count(bolt_holes, "bolt_holes", 1, MAX_BOLT_HOLES)
     rh, rc = (
-        positive(bolt_hole_diameter, "bolt_hole_diameter") / 2,
-        positive(bolt_circle_diameter, "bolt_circle_diameter") / 2,
+        _size(bolt_hole_diameter, "bolt_hole_diameter") / 2,
+        _size(bolt_circle_diameter, "bolt_circle_diameter") / 2,
     )
-    hd = positive(hole_depth, "hole_depth")
-    d = positive(notch_depth, "notch_depth") if feature else 0.0
-    w = positive(notch_width, "notch_width")
-    if n < 1 or rc + rh >= R - d - 1.0 or rc - rh <= 1.0 or 2 * hd >= T:
+    hd = _size(hole_depth, "hole_depth")
+    d = _size(notch_depth, "notch_depth") if _flag(feature) else 0.0
+    w = _size(notch_width, "notch_width")
+    if rc + rh >= R - d - 1.0 or rc - rh <= 1.0 or 2 * hd >= T:
         raise InvalidInputError("bolt_holes/bolt_circle_diameter/hole_depth: the holes must lie inside the flange")
     wall = float(np.arctan(w / (2 * (R - d)))) if d > 0 else 0.0
     phi = _shapes.angle_samples(0.3, rc + rh, steps=[wall, -wall] if d > 0 else [])
@@ -325,6 +369,7 @@ def flange(
     band = (rc - rh - 0.5, rc + rh + 0.5)
     fine = np.arange(band[0], band[1], 0.25)
     rho = np.unique(np.r_[np.linspace(0, R, int(np.ceil(R / 2.0)) + 1)[1:], fine]) / R  # as a share of the rim
+    _shapes.check_grid(2 * len(rho) + 2, len(phi), "flange: diameter/bolt_hole_diameter/bolt_circle_diameter")
     centres = [(rc * np.cos(np.pi * (2 * k + 1) / n), rc * np.sin(np.pi * (2 * k + 1) / n)) for k in range(n)]
 
     def face(share, z_face, inward):

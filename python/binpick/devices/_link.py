@@ -81,9 +81,10 @@ class SerialSettings:
     def __post_init__(self) -> None:
         check_int(self.baudrate, "SerialSettings.baudrate", 50, 20_000_000)
         check_int(self.bytesize, "SerialSettings.bytesize", 5, 8)
-        if self.parity not in _PARITIES:
+        if not isinstance(self.parity, str) or self.parity not in _PARITIES:
             raise InvalidInputError(f"SerialSettings.parity: {self.parity!r} is not one of {sorted(_PARITIES)}")
-        if self.stopbits not in (1, 1.5, 2):
+        stopbits = self.stopbits
+        if isinstance(stopbits, bool) or not isinstance(stopbits, (int, float)) or stopbits not in (1, 1.5, 2):
             raise InvalidInputError(f"SerialSettings.stopbits: {self.stopbits!r} must be 1, 1.5 or 2")
         check_number(self.timeout_s, "SerialSettings.timeout_s", low=0.001, high=3600, unit="s")
         check_number(self.write_timeout_s, "SerialSettings.write_timeout_s", low=0.001, high=3600, unit="s")
