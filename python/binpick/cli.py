@@ -404,9 +404,10 @@ def _calibrate_solve(folder: str, args: argparse.Namespace) -> int:
 def _calibrate_compare(solved: str, truth: str) -> int:
     """``binpick calibrate compare``: the errors against the targets; exit 1 when one is missed."""
     from .calibration import CellCalibration
-    from .calibration.compare import compare_calibrations
+    from .calibration.compare import captured_angles, compare_calibrations
 
-    result = compare_calibrations(CellCalibration.load(solved), CellCalibration.load(truth))
+    captured = captured_angles(solved)
+    result = compare_calibrations(CellCalibration.load(solved), CellCalibration.load(truth), captured=captured)
     print(result.table())
     for failure in result.failures:
         print(f"binpick calibrate compare: {failure}", file=sys.stderr)
