@@ -619,7 +619,13 @@ class Cell:
             if stopped is not None:
                 break
         last_scan, last_located = self._last
-        return RunReport(records=tuple(records), stopped=stopped, last_scan=last_scan, last_located=last_located)
+        return RunReport(
+            records=tuple(records),
+            stopped=stopped,
+            last_scan=last_scan,
+            last_located=last_located,
+            ground_truth=self.truth is not None,
+        )
 
     def _cycle(self, i: int) -> tuple[PickRecord, Optional[str]]:
         """One pick of :meth:`run` (:meth:`_look_and_pick`); at a dead end (parts located, none
