@@ -37,7 +37,7 @@ from ..errors import BinpickError, CalibrationError, InvalidInputError, MeshFile
 from ..models import Model
 from ..poses import estimate_pose
 from .config import CellConfig, GripperGeometry, check_static_poses
-from .frames import FolderReplay, FrameSource, OpenCVCamera, TwinCamera
+from .frames import FolderReplay, FrameSource, OpenCVCamera, TwinCamera, is_device_path
 from .loop import Cell
 
 __all__ = [
@@ -370,9 +370,14 @@ def _gripper(f: CellFile) -> Callable[[MelfaRobot], Gripper]:
 
 def _camera(f: CellFile, model: Model, num_threads: int) -> Callable[[], FrameSource]:
     source = f.text("camera", "source", "opencv")
+    here = os.path.dirname(os.path.abspath(f.path))
     if source == "opencv":
+        # A path is relative to this file, like the twin's socket and a replay's folder; a device
+        # index and a stream URL are what they say.
         device = f.get("camera", "device", 0)
         index_or_path = f.text("camera", "device") if isinstance(device, str) else f.integer("camera", "device", 0)
+        if is_device_path(index_or_path):
+            index_or_path = os.path.join(here, index_or_path)
         return lambda: OpenCVCamera(index_or_path)
     if source == "simulated":
         count, seed = f.integer("camera", "count", 8), f.integer("camera", "seed", 0)
@@ -383,7 +388,6 @@ def _camera(f: CellFile, model: Model, num_threads: int) -> Callable[[], FrameSo
             return RenderedCamera(model, count=count, seed=seed, num_threads=num_threads)
 
         return rendered
-    here = os.path.dirname(os.path.abspath(f.path))
     if source == "twin":
         path = os.path.join(here, f.text("camera", "socket", "camera.sock"))
         timeout = f.number("camera", "timeout_s", 60.0)
