@@ -19,8 +19,8 @@ import pytest
 
 import binpick
 from binpick.calibration import CellCalibration
-from binpick.calibration.compare import compare_calibrations
-from binpick.transforms import rotation_about, rotation_angle_deg
+from binpick.calibration.compare import captured_angles, compare_calibrations
+from binpick.transforms import rot_y, rotation_about, rotation_angle_deg
 
 README = Path(__file__).resolve().parents[1] / "README.md"
 MARKER = "<!-- commission-commands -->"
@@ -119,8 +119,10 @@ def test_calibration_meets_the_targets_against_the_truth(commissioned):
     for angles in (swept, np.radians(np.arange(-25.0, 25.5, 0.5))):
         result = compare_calibrations(solved, truth, angles)
         assert max(result.laser_deg) < 0.1 and result.failures == []
-    print("\n" + compare_calibrations(solved, truth).table())
+    print("\n" + compare_calibrations(solved, truth, captured=captured_angles(twin / "calibration.toml")).table())
     assert "MISSED" not in out and out.count(" ok\n") >= 5  # `binpick calibrate compare` agreed
+    per_angle = re.findall(r"^laser sheet at captured motor angle [+-]\d+\.\d°\s+0\.\d{4}°\s+0\.1°\s+ok$", out, re.M)
+    assert len(per_angle) == len(captured_angles(twin / "calibration.toml")) >= 3
 
 
 def test_three_parts_removed_in_three_attempts(commissioned):
@@ -166,4 +168,41 @@ def test_compare_reports_a_calibration_off_target(tmp_path, capsys):
     printed = capsys.readouterr()
     assert printed.out.count("MISSED") == 2 and "hand-eye rotation is 0.2000° off" in printed.err
     assert main(["calibrate", "compare", str(tmp_path / "truth.toml"), str(tmp_path / "truth.toml")]) == 0
+    assert "(no captured motor angles: " in capsys.readouterr().out
     assert main(["calibrate", "compare", str(tmp_path / "truth.toml")]) == 2
+
+
+def test_compare_prints_the_laser_sheet_error_at_each_captured_motor_angle(tmp_path, capsys):
+    from dataclasses import replace
+
+    from binpick.cli import main
+    from binpick.sim import Cell
+
+    # The laser sheet solved 0.05° turned about the camera's x axis: the error varies with the
+    # motor angle. The solved file records the angles it was captured at, as `calibrate solve`
+    # writes them ([residuals.laser] angles_rad).
+    truth = Cell().calibration()
+    turned = truth.T_camera_laser.copy()
+    turned[:3, :3] = rotation_about([1.0, 0.0, 0.0], math.radians(0.05)) @ turned[:3, :3]
+    solved = replace(truth, T_camera_laser=turned)
+    captured = np.radians([-16.0, -12.0, -8.0, -4.0, 0.0, 4.0, 8.0, 12.0, 16.0])
+    expected = compare_calibrations(solved, truth, captured=captured)
+    assert len(set(np.round(expected.captured_deg, 6))) > 1 and max(expected.captured_deg) < 0.1
+    table = "\n[residuals.laser]\nangles_rad = [" + ", ".join(repr(float(a)) for a in captured) + "]\n"
+    (tmp_path / "solved.toml").write_text(solved.to_toml() + table)
+    truth.save(tmp_path / "truth.toml")
+    assert main(["calibrate", "compare", str(tmp_path / "solved.toml"), str(tmp_path / "truth.toml")]) == 0
+    out = capsys.readouterr().out
+    rows = re.findall(r"^laser sheet at captured motor angle ([+-]\d+\.\d)°\s+(\d\.\d{4})°\s+0\.1°\s+ok$", out, re.M)
+    assert [float(a) for a, _ in rows] == [-16.0, -12.0, -8.0, -4.0, 0.0, 4.0, 8.0, 12.0, 16.0], out
+    assert [float(e) for _, e in rows] == pytest.approx(expected.captured_deg, abs=6e-5)
+    # The motor's zero 0.2° off (the sheet turned about the motor axis): every captured angle
+    # misses by 0.2°, each line says so, and the command exits 1.
+    off_zero = truth.T_camera_laser @ rot_y(math.radians(0.2))
+    (tmp_path / "solved.toml").write_text(replace(truth, T_camera_laser=off_zero).to_toml() + table)
+    assert main(["calibrate", "compare", str(tmp_path / "solved.toml"), str(tmp_path / "truth.toml")]) == 1
+    printed = capsys.readouterr()
+    missed = re.findall(r"^laser sheet at captured motor angle .*MISSED$", printed.out, re.M)
+    assert len(missed) == len(captured), printed.out
+    assert all(line.split()[-3] == "0.2000°" for line in missed)
+    assert "the laser sheet is 0.2000° off" in printed.err

@@ -32,6 +32,34 @@ from .errors import BinpickError, InvalidInputError
 __all__ = ["main"]
 
 
+def _plural(n: int, word: str) -> str:
+    return f"{n} {word}{'s' if n != 1 else ''}"
+
+
+def _removed_text(report: Any) -> str:
+    """What left the bin: the parts removed with ground truth; without it (real drivers) the
+    count is not known, and the picks whose gripper reported holding a part (and those it could
+    not tell) are named instead."""
+    removed = report.removed
+    if removed is not None:
+        return f"removed {_plural(len(removed), 'part')}" + (f" ({', '.join(map(str, removed))})" if removed else "")
+    lifted = report.lifted
+    text = "removed: not known (no ground truth); lifted a part: " + _plural(len(lifted), "pick")
+    text += f" ({', '.join(map(str, lifted))})" if lifted else ""
+    unsure = [r.index for r in report.records if r.success and r.held is None]
+    if unsure:
+        text += f", the gripper could not tell: {_plural(len(unsure), 'pick')} ({', '.join(map(str, unsure))})"
+    return text
+
+
+def _removed_cell(report: Any, r: Any) -> str:
+    """A pick's "removed" column: the part (ground truth), "?" where something may have left the
+    bin but nothing tells which part, "-" where nothing did."""
+    if r.picked_instance is not None:
+        return f"part {r.picked_instance}"
+    return "?" if not report.ground_truth and r.success else "-"
+
+
 def _print_table(report: Any, out: Any = None) -> None:
     """The picks as a table (one row each: result, part removed, kind of failure, pose quality),
     a line of totals (parts removed, failures by kind) and one line per failed pick."""
@@ -42,7 +70,7 @@ def _print_table(report: Any, out: Any = None) -> None:
             (
                 str(r.index),
                 "picked" if r.success else "failed",
-                "-" if r.picked_instance is None else f"part {r.picked_instance}",
+                _removed_cell(report, r),
                 r.failure or "-",
                 "-" if r.score is None else f"{r.score:.2f}",
                 "-" if r.rmse is None else f"{r.rmse:.2f}",
@@ -57,11 +85,9 @@ def _print_table(report: Any, out: Any = None) -> None:
         print("  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip(), file=out)
         if k == 0:
             print("  ".join("-" * w for w in widths), file=out)
-    removed = report.removed
     failures = report.failures_by_kind()
     print(
-        f"removed {len(removed)} part{'s' if len(removed) != 1 else ''}"
-        + (f" ({', '.join(map(str, removed))})" if removed else "")
+        _removed_text(report)
         + "; failures: "
         + (", ".join(f"{n} {kind}" for kind, n in failures.items()) if failures else "none"),
         file=out,
@@ -132,10 +158,19 @@ def _pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> list[Path]
                 )
             )
     if report.records:
-        written.append(viz.save_pick_summary(out / "summary.png", report.records))
+        title = f"{report.successes} of {_plural(len(report.records), 'pick')} succeeded; {_removed_text(report)}"
+        written.append(viz.save_pick_summary(out / "summary.png", report.records, title=title))
     written += _failure_pictures(out, report, model, bin_bounds)
     (out / "picks.json").write_text(
-        json.dumps({"picks": [r.as_dict() for r in report.records], "stopped": report.stopped}, indent=1)
+        json.dumps(
+            {
+                "picks": [r.as_dict() for r in report.records],
+                "stopped": report.stopped,
+                "removed": None if report.removed is None else list(report.removed),
+                "lifted": list(report.lifted),
+            },
+            indent=1,
+        )
     )
     written.append(out / "picks.json")
     return written
@@ -404,9 +439,10 @@ def _calibrate_solve(folder: str, args: argparse.Namespace) -> int:
 def _calibrate_compare(solved: str, truth: str) -> int:
     """``binpick calibrate compare``: the errors against the targets; exit 1 when one is missed."""
     from .calibration import CellCalibration
-    from .calibration.compare import compare_calibrations
+    from .calibration.compare import captured_angles, compare_calibrations
 
-    result = compare_calibrations(CellCalibration.load(solved), CellCalibration.load(truth))
+    captured = captured_angles(solved)
+    result = compare_calibrations(CellCalibration.load(solved), CellCalibration.load(truth), captured=captured)
     print(result.table())
     for failure in result.failures:
         print(f"binpick calibrate compare: {failure}", file=sys.stderr)

@@ -167,7 +167,8 @@ def save_pick_summary(path: str | os.PathLike[str], records: Sequence[Any], *, t
     axes[2].set_xlabel("pick")
     axes[2].set_ylabel("seconds")
     axes[2].set_title("time per stage")
-    axes[2].legend(fontsize=7)
+    if bottom.any():
+        axes[2].legend(fontsize=7)
     fig.suptitle(title or f"{sum(r.success for r in recs)} of {len(recs)} picks succeeded")
     fig.tight_layout()
     return _save(fig, path)

@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from _cell_helpers import emulated_cell_file, emulators
 
 from binpick.cli import main
 
 ESTIMATE_FLAGS = ["--d-star", "12", "--min-points", "500"]
+ESTIMATE_TABLE = "[estimate]\nd_star = 12.0\nmin_points = 500"
 
 
 def test_demo_picks_one_part_and_writes_the_pictures(tmp_path, capsys):
@@ -50,50 +52,9 @@ def test_pick_example_prints_a_cell_file(capsys):
 
 
 def test_pick_dry_run_against_emulators(tmp_path, capsys):
-    from binpick.devices.emulators import DynamixelEmulator, GripperEmulator, RobotEmulator, RobotEmulatorConfig
-    from binpick.sim import SIM_ARM, sim_limits
-    from binpick.sim import Cell as Layout
-
-    layout = Layout()
-    layout.calibration().save(tmp_path / "calibration.toml")
-    limits = sim_limits(layout)
-    lo, hi = layout.bin.bounds
-    with (
-        RobotEmulator(config=RobotEmulatorConfig(arm=SIM_ARM, speed_scale=20.0)) as robot,
-        DynamixelEmulator() as motor,
-        GripperEmulator() as gripper,
-    ):
-        cfg = tmp_path / "cell.toml"
-        cfg.write_text(f"""
-[robot]
-port = "{robot.slave_path}"
-override_percent = 50
-linear_speed_mm_s = 250
-[motor]
-port = "{motor.slave_path}"
-[gripper]
-port = "{gripper.slave_path}"
-[camera]
-source = "simulated"
-count = 4
-seed = 1
-[part]
-model = "tee"
-[cell]
-calibration = "calibration.toml"
-bin_min_mm = {lo.tolist()}
-bin_max_mm = {hi.tolist()}
-scan_pose = [400.0, 0.0, 620.0, 180.0, 0.0, 0.0]
-drop_pose = [400.0, -250.0, 350.0, 180.0, 0.0, 0.0]
-frames = 60
-[estimate]
-d_star = 12.0
-min_points = 500
-[limits]
-workspace_min_mm = {list(limits.workspace_min_mm)}
-workspace_max_mm = {list(limits.workspace_max_mm)}
-approach_height_mm = {limits.approach_height_mm}
-""")
+    with emulators() as (robot, motor, gripper):
+        camera = 'source = "simulated"\ncount = 4\nseed = 1'
+        cfg = emulated_cell_file(tmp_path, robot, motor, gripper, camera=camera, tail=ESTIMATE_TABLE)
         code = main(["pick", str(cfg), "--dry-run", "--out", str(tmp_path / "out")])
         captured = capsys.readouterr()
         assert code == 0, captured.err

@@ -1,13 +1,15 @@
 """What ``binpick demo`` prints about its picks: one line per skipped part, a picks table with
-the part removed and the kind of failure per pick, and a line of totals."""
+the part removed and the kind of failure per pick, and a line of totals; and what ``binpick
+pick`` prints on real drivers, where nothing tells which part left the bin."""
 
 from __future__ import annotations
 
 import json
 import re
 
+import binpick
 from binpick.cell import PickRecord, PoseTruth, RunReport
-from binpick.cli import _print_table, main
+from binpick.cli import _pictures, _print_table, main
 
 
 def test_totals_line_counts_removed_parts_and_failures_by_kind(capsys):
@@ -18,7 +20,7 @@ def test_totals_line_counts_removed_parts_and_failures_by_kind(capsys):
         PickRecord(index=3, success=False, picked_instance=5, error="part 5 left the bin", failure="wrong pose"),
         PickRecord(index=4, success=False, error="none of the grasps can be used", failure="no grasp"),
     )
-    report = RunReport(records=records, stopped="pick 4: none of the grasps can be used")
+    report = RunReport(records=records, stopped="pick 4: none of the grasps can be used", ground_truth=True)
     assert report.removed == (3, 5)
     assert report.failures_by_kind() == {"no grasp": 1, "empty grip": 1, "wrong pose": 1}
     _print_table(report)
@@ -33,6 +35,38 @@ def test_totals_line_counts_removed_parts_and_failures_by_kind(capsys):
         "pick 3: part 5 left the bin",
         "pick 4: none of the grasps can be used",
     ]
+
+
+def test_without_ground_truth_the_removed_count_is_not_known_and_the_lifts_are_named(tmp_path, capsys):
+    # Real drivers: three picks the gripper reported holding, one it closed on nothing, one
+    # whose gripper cannot tell (the robot's hand outputs). No record knows which part left.
+    records = (
+        PickRecord(index=1, success=True, held=True, grasp="b0"),
+        PickRecord(index=2, success=False, held=False, error="the gripper closed on nothing", failure="empty grip"),
+        PickRecord(index=3, success=True, held=True, grasp="b1"),
+        PickRecord(index=4, success=True, held=True, grasp="b2"),
+        PickRecord(index=5, success=True, held=None, grasp="b0"),
+    )
+    report = RunReport(records=records, stopped=None)
+    assert report.removed is None and report.lifted == (1, 3, 4)
+    _print_table(report)
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split()[:3] for line in lines[2:7]] == [
+        ["1", "picked", "?"],
+        ["2", "failed", "-"],
+        ["3", "picked", "?"],
+        ["4", "picked", "?"],
+        ["5", "picked", "?"],
+    ]
+    assert lines[7] == (
+        "removed: not known (no ground truth); lifted a part: 3 picks (1, 3, 4), "
+        "the gripper could not tell: 1 pick (5); failures: 1 empty grip"
+    )
+    assert not any(line.startswith("removed 0") for line in lines)
+    _pictures(tmp_path, report, binpick.parts.tee(), None)
+    saved = json.loads((tmp_path / "picks.json").read_text())
+    assert saved["removed"] is None and saved["lifted"] == [1, 3, 4]
+    assert (tmp_path / "summary.png").read_bytes()[:4] == b"\x89PNG"
 
 
 def test_demo_prints_one_line_per_skipped_part(tmp_path, capsys):

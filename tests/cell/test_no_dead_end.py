@@ -98,7 +98,8 @@ def test_the_planner_agrees_with_checking_every_grasp_one_by_one(tee):
                 )
                 if any(bin_clash(cfg.gripper, W, cfg.bin_bounds) for n, W, _ in wps if n != "above" and n != "drop"):
                     continue
-                if points_in_gripper(cfg.gripper, scene, T_bg) > cfg.max_collision_points:
+                hits = points_in_gripper(cfg.gripper, scene, T_bg)
+                if hits > cfg.max_collision_points:
                     continue
                 if points_in_gripper(cfg.gripper, part, T_bg) > cfg.max_collision_points:
                     continue
@@ -108,18 +109,43 @@ def test_the_planner_agrees_with_checking_every_grasp_one_by_one(tee):
                     safety.check_sequence(here, [W for _, W, _ in wps], [lin for _, _, lin in wps], cfg.limits)
                 except SafetyError:
                     continue
+                # Fewest scene points inside the gripper first, then the most vertical.
                 tilt = tool_tilt_deg(T_bf)
-                if expected is None or tilt < expected[0] - 1e-9:
-                    expected = (tilt, name)
+                if expected is None or (hits, tilt) < (expected[0], expected[1] - 1e-9):
+                    expected = (hits, tilt, name)
             try:
-                plan, _ = plan_grasp(cfg, T, scene, here)
+                plan, hits = plan_grasp(cfg, T, scene, here)
             except binpick.cell.NoGraspError:
                 assert expected is None, f"part {k}: the planner found nothing, one by one found {expected}"
                 continue
-            assert expected is not None and plan.tilt_deg == pytest.approx(expected[0], abs=1e-6), (
-                plan.grasp,
-                expected,
-            )
+            assert expected is not None and hits == expected[0], (plan.grasp, hits, expected)
+            assert plan.tilt_deg == pytest.approx(expected[1], abs=1e-6), (plan.grasp, expected)
+
+
+def test_a_grasp_clear_of_the_scene_comes_before_a_more_vertical_one_with_points_inside(tee):
+    with SimulatedCell(tee, count=1, seed=0, frames=4) as sim:
+        cfg = sim.cell.config
+        here = sim.robot_emulator.pose()
+        T = sim.pile.poses[0]
+        vertical, hits = plan_grasp(cfg, T, np.zeros((0, 3)), here)
+        assert hits == 0
+        # A few stray points in that grasp's gripper body (fewer than the cell tolerates), far
+        # from the part: the planner takes a grasp that touches nothing, if a little more tilted.
+        top = cfg.gripper.tip_depth_mm - cfg.gripper.finger_length_mm
+        stray_g = np.array([[0.0, 0.0, top - 40.0], [30.0, 0.0, top - 30.0], [-30.0, 10.0, top - 50.0]])
+        assert cfg.gripper.occupied(stray_g).all() and len(stray_g) <= cfg.max_collision_points
+        stray = stray_g @ vertical.T_base_gripper[:3, :3].T + vertical.T_base_gripper[:3, 3]
+        assert points_in_gripper(cfg.gripper, stray, vertical.T_base_gripper) == 3
+        clean, hits = plan_grasp(cfg, T, stray, here)
+        assert hits == 0 and points_in_gripper(cfg.gripper, stray, clean.T_base_gripper) == 0
+        assert clean.grasp != vertical.grasp and clean.tilt_deg >= vertical.tilt_deg - 1e-9
+        # Where nothing cleaner can be used, the grasp with the points inside still is.
+        only = plan_grasp(cfg, T, stray, here, lambda T_bg: np.allclose(T_bg, vertical.T_base_gripper))
+        assert only[0].grasp == vertical.grasp and only[1] == 3
+        # And past the cell's tolerance, it is refused.
+        crowd = np.repeat(stray, cfg.max_collision_points // 3 + 1, axis=0)
+        with pytest.raises(binpick.cell.NoGraspError, match="collision"):
+            plan_grasp(cfg, T, crowd, here, lambda T_bg: np.allclose(T_bg, vertical.T_base_gripper))
 
 
 def test_the_deciding_view_faces_the_surface_the_alternative_lacks(tee):

@@ -1,13 +1,16 @@
 """`binpick emulate cell` as its own process, against the real drivers and `binpick pick`: ports
 reopened, the camera over its socket equal to the in-process renderer, a replayed scan equal to
-the live one, three picks removing three parts according to world.json, a clean SIGTERM.
+the live one, three picks removing three parts according to world.json, the example cell file
+(`binpick pick --example`) picking the last with only its ports and camera edited, a clean SIGTERM.
 
 One twin serves the whole module (spawned once, always stopped in teardown); the tests run in
 file order because the last ones change the twin (picks, then SIGTERM)."""
 
 from __future__ import annotations
 
+import difflib
 import json
+import re
 import shutil
 import signal
 import socket
@@ -53,6 +56,7 @@ class _Twin:
         self.t0 = time.perf_counter()
         self.proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
         self.lines: list[str] = []
+        self.picked = 0  # parts the tests picked out of the twin's bin so far
         self.ready = threading.Event()
         threading.Thread(target=self._drain, daemon=True).start()
         if not self.ready.wait(60.0):
@@ -343,12 +347,65 @@ def test_binpick_pick_removes_three_parts_in_three_attempts(twin, tmp_path):
     assert [p.name for p in sweeps] == ["sweep_000", "sweep_001", "sweep_002"]
     assert all(len(load_scan(p)) == FRAMES for p in sweeps)
     assert [c for c in after["collisions"] if c["with"] == "bin" or c["with"].startswith("robot")] == []
+    twin.picked += 3
     print(f"twin start-up {twin.startup_s:.1f} s, binpick pick --picks 3 {pick_s:.1f} s")
+
+
+def _table_lines(text: str, table: str) -> list[str]:
+    """The lines of ``[table]`` in a cell file: its header to the line before the next table."""
+    lines = text.splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith(f"[{table}]"))
+    end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("[")), len(lines))
+    while not lines[end - 1].strip():
+        end -= 1
+    return lines[start:end]
+
+
+def test_the_printed_example_picks_from_the_twin_with_only_its_ports_and_camera_edited(twin, tmp_path):
+    env = _child_env()
+    printed = subprocess.run(
+        [sys.executable, "-m", "binpick", "pick", "--example"], capture_output=True, text=True, env=env, timeout=60
+    )
+    assert printed.returncode == 0, printed.stderr
+    example, twin_file = printed.stdout, load_cell_file(twin.out / "cell.toml")
+    # What an integrator edits: the three ports, and the [camera] table replaced by the twin's.
+    lines = example.splitlines()
+    for table in ("robot", "motor", "gripper"):
+        head = lines.index(f"[{table}]")
+        at = next(i for i in range(head, len(lines)) if lines[i].startswith("port = "))
+        lines[at] = re.sub(r'"[^"]*"', json.dumps(twin_file.text(table, "port")), lines[at], count=1)
+    mine = _table_lines("\n".join(lines), "camera")
+    at = lines.index(mine[0])
+    lines[at : at + len(mine)] = _table_lines((twin.out / "cell.toml").read_text(), "camera")
+    edited = "\n".join(lines) + "\n"
+    changed = [d for d in difflib.ndiff(example.splitlines(), lines) if d[:1] in "+-"]
+    assert all(re.match(r"[+-] (port = |\[camera\]|source = |socket = |device = |\s+#)", d) for d in changed), changed
+    path = twin.out / "example.toml"  # beside the twin's calibration.toml, which the example names
+    path.write_text(edited)
+    before = twin.world()
+    out = tmp_path / "pick"
+    done = subprocess.run(
+        [sys.executable, "-m", "binpick", "pick", str(path), "--picks", "1", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    picks = json.loads((out / "picks.json").read_text())
+    assert [p["success"] for p in picks["picks"]] == [True] and picks["lifted"] == [1]
+    assert "removed: not known (no ground truth); lifted a part: 1 pick (1); failures: none" in done.stdout
+    time.sleep(0.5)  # the twin's world tick
+    after = twin.world()
+    removed = set(after["removed"]) - set(before["removed"])
+    assert len(removed) == 1 and removed <= {p["id"] for p in before["in_bin"]}, (before, after)
+    assert after["held"] is None
+    twin.picked += 1
 
 
 def test_sigterm_ends_the_twin_cleanly_with_its_files_in_place(twin):
     assert twin.stop() == 0
     names = {p.name for p in twin.out.iterdir()}
     assert {"cell.toml", "true_calibration.toml", "world.json"} <= names and "camera.sock" not in names
-    assert len(twin.world()["removed"]) == 3
+    assert len(twin.world()["removed"]) == twin.picked > 0
     assert any(" stopped " in line for line in twin.lines)

@@ -37,7 +37,7 @@ from ..errors import BinpickError, CalibrationError, InvalidInputError, MeshFile
 from ..models import Model
 from ..poses import estimate_pose
 from .config import CellConfig, GripperGeometry, check_static_poses
-from .frames import FolderReplay, FrameSource, OpenCVCamera, TwinCamera
+from .frames import FolderReplay, FrameSource, OpenCVCamera, TwinCamera, is_device_path
 from .loop import Cell
 
 __all__ = [
@@ -53,28 +53,34 @@ __all__ = [
 CELL_FILE_EXAMPLE = """\
 # binpick cell file: the real cell's ports, calibration, part and poses.
 # Lengths in mm; poses as [X, Y, Z, A, B, C] with A, B, C in degrees (MELFA: R = Rz(C)·Ry(B)·Rx(A)).
+#
+# Edit the lines marked EDIT for your cell: the three ports and the [camera] table. Everything else
+# is the layout of the digital twin (`binpick emulate cell --out DIR`): this file, with the ports and
+# the [camera] table of DIR/cell.toml, picks from the twin as written. Then measure your own cell and
+# change the bin, the poses, the tool, the calibration board and the limits to match it.
 
 [robot]
-port = "/dev/ttyUSB0"        # MELFA controller, R3 protocol
+port = "/dev/ttyUSB0"        # EDIT: the MELFA controller's port, R3 protocol
 baudrate = 9600
-override_percent = 10
+override_percent = 10        # slow for a first run; at most [limits] max_override_percent
 linear_speed_mm_s = 50
 
 [motor]
-port = "/dev/ttyUSB1"        # laser motor
+port = "/dev/ttyUSB1"        # EDIT: the laser motor's port
 protocol = "dynamixel"       # or "aimotor"
 id = 1
 baudrate = 57600
 
 [gripper]
-kind = "modbus"              # or "hand": the robot's hand outputs (HNDON/HNDOFF)
-port = "/dev/ttyUSB2"
+kind = "modbus"              # or "hand": the robot's hand outputs (HNDON/HNDOFF), no port
+port = "/dev/ttyUSB2"        # EDIT: the gripper's port
 slave = 9
 baudrate = 115200
 
-[camera]
+[camera]                     # EDIT: the whole table
 source = "opencv"            # or "twin": the camera of `binpick emulate cell` (socket = "DIR/camera.sock"),
-device = 0                   # "replay": a recorded scan folder (folder = "scan"), "simulated": a rendered pile
+device = 0                   # "replay": a recorded scan folder (folder = "scan"), "simulated": a rendered pile;
+                             # device: an index, a video device or file path (relative to this file), a URL
 
 [part]
 model = "tee"                # built-in tee, elbow, cross, or a mesh file (STL, PLY, OBJ)
@@ -103,6 +109,10 @@ workspace_min_mm = [100.0, -350.0, 60.0]
 workspace_max_mm = [650.0, 350.0, 700.0]
 approach_height_mm = 270.0
 max_tool_tilt_deg = 45.0
+max_lateral_below_mm = 40.0
+max_override_percent = 50
+max_linear_speed_mm_s = 250
+max_push_mm = 120            # sideways travel of a nudge below the approach height
 """
 
 
@@ -370,9 +380,14 @@ def _gripper(f: CellFile) -> Callable[[MelfaRobot], Gripper]:
 
 def _camera(f: CellFile, model: Model, num_threads: int) -> Callable[[], FrameSource]:
     source = f.text("camera", "source", "opencv")
+    here = os.path.dirname(os.path.abspath(f.path))
     if source == "opencv":
+        # A path is relative to this file, like the twin's socket and a replay's folder; a device
+        # index and a stream URL are what they say.
         device = f.get("camera", "device", 0)
         index_or_path = f.text("camera", "device") if isinstance(device, str) else f.integer("camera", "device", 0)
+        if is_device_path(index_or_path):
+            index_or_path = os.path.join(here, index_or_path)
         return lambda: OpenCVCamera(index_or_path)
     if source == "simulated":
         count, seed = f.integer("camera", "count", 8), f.integer("camera", "seed", 0)
@@ -383,7 +398,6 @@ def _camera(f: CellFile, model: Model, num_threads: int) -> Callable[[], FrameSo
             return RenderedCamera(model, count=count, seed=seed, num_threads=num_threads)
 
         return rendered
-    here = os.path.dirname(os.path.abspath(f.path))
     if source == "twin":
         path = os.path.join(here, f.text("camera", "socket", "camera.sock"))
         timeout = f.number("camera", "timeout_s", 60.0)

@@ -41,6 +41,13 @@ class FrameSource(abc.ABC):
         """Releases the camera."""
 
 
+def is_device_path(device: Any) -> bool:
+    """Whether ``cv2.VideoCapture`` takes ``device`` as a filesystem path (a video device, a
+    video file, an image sequence): a string that is neither a URL (``scheme://…``) nor a
+    GStreamer pipeline (``… ! …``). A device index is not a path."""
+    return isinstance(device, str) and "://" not in device and "!" not in device
+
+
 class OpenCVCamera(FrameSource):
     """A camera opened with ``cv2.VideoCapture`` (a device index, a device path or a stream URL).
 
@@ -59,6 +66,11 @@ class OpenCVCamera(FrameSource):
 
         self.device = device
         self.flush = count(flush, "flush")
+        if is_device_path(device) and not os.path.exists(device):
+            raise DeviceError(
+                f"camera: {device!r} does not exist; give a device index (0), the path of a video device or "
+                "file, or a stream URL (rtsp://…)"
+            )
         self._cap = cv2.VideoCapture(device)
         if not self._cap.isOpened():
             raise DeviceError(

@@ -1,6 +1,7 @@
 """Grasps as pure functions: the grasps of a part's cylindrical branches, the checks a grasp
 must pass (tool tilt, reach, collision with the scene and with the part itself, the safety
-rules for its whole motion), the choice of the most vertical usable one, and the matching of a
+rules for its whole motion), the choice of the usable one touching the fewest scene points, most
+vertical among equals, and the matching of a
 part's pose in the gripper against the declared grasps (the simulated gripper's test of a grip).
 
 The gripper frame: z is the approach direction (into the part), x the fingers' closing
@@ -465,7 +466,7 @@ def _refusal(
 
 _BATCH = 32
 """At most this many grasps have their collisions counted together (most vertical first, in
-batches of 4, 8, 16, …: planning stops at the first usable one)."""
+batches of 4, 8, 16, …: planning stops at the first usable one clear of the scene)."""
 
 
 def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarray], bool]]:
@@ -533,6 +534,31 @@ def _plan(
     )
 
 
+def _first_usable(
+    config: CellConfig,
+    batch: list[tuple[tuple, int]],
+    part: np.ndarray,
+    here: np.ndarray,
+    rejected: dict[str, int],
+    samples: dict[str, list],
+) -> Optional[tuple[PickPlan, int]]:
+    """The first of ``batch`` (candidates of :func:`_candidates`, each with the scene points
+    inside its gripper) that :func:`_refusal` lets through, as (plan, points); the ones before it
+    counted in ``rejected`` (a few kept in ``samples``). None when none is usable."""
+    clear = [c for c, h in batch if h <= config.max_collision_points]
+    poses = np.array([c[2] for c in clear]).reshape(-1, 4, 4)
+    own = dict(zip((id(c) for c in clear), _hits_many(config.gripper, part, poses)))
+    for c, hits in batch:
+        tilt, name, T_bg, T_bf, waypoints = c
+        why = _refusal(config, waypoints, hits, int(own.get(id(c), 0)), here)
+        if why is not None:
+            rejected[why] += 1
+            _keep_some(samples, why, T_bg[None])
+            continue
+        return _plan(config, name, T_bg, T_bf, tilt, waypoints, rejected), hits
+    return None
+
+
 def plan_grasp(
     config: CellConfig,
     T_base_object: np.ndarray,
@@ -540,11 +566,13 @@ def plan_grasp(
     here: np.ndarray,
     accept: Optional[Callable[[np.ndarray], bool]] = None,
 ) -> tuple[PickPlan, int]:
-    """The most vertical declared grasp of the part at ``T_base_object`` that is within the tilt
-    limit, reachable, clear of the ``scene`` points (base frame, the part's own left out) and of
-    the part's own model at that pose, and whose whole motion from the flange pose ``here``
-    passes the safety rules, and which ``accept`` (``T_base_gripper → bool``, see
-    :func:`grasp_filter`) accepts; with the scene points inside its gripper. NoGraspError when none is."""
+    """The declared grasp of the part at ``T_base_object`` that is within the tilt limit,
+    reachable, clear of the ``scene`` points (base frame, the part's own left out) and of the
+    part's own model at that pose (up to ``config.max_collision_points`` inside the gripper),
+    whose whole motion from the flange pose ``here`` passes the safety rules, and which ``accept``
+    (``T_base_gripper → bool``, see :func:`grasp_filter`) accepts — of those, the one with the
+    fewest scene points inside its gripper, the most vertical among equals; with that number of
+    points. NoGraspError when none is."""
     rejected = {"tilt": 0, "bin": 0, "ambiguous": 0, "collision": 0, "self-collision": 0, "reach": 0, "safety": 0}
     # The part's own points lie between the fingers and are not in the scene, but the gripper must
     # not run into its other branches either: those are checked against the model at the located
@@ -557,6 +585,10 @@ def plan_grasp(
     scene = _near(np.asarray(scene, dtype=np.float64).reshape(-1, 3), centre, reach)
     samples: dict[str, list] = {}
     candidates = _candidates(config, T_base_object, rejected, samples)
+    # The grasps with scene points inside the gripper (up to max_collision_points: stray points,
+    # a neighbour's edge) are tried only after every clean one: most vertical first among the
+    # clean, then fewest points first (most vertical among equals).
+    touching: list[tuple[int, int, tuple]] = []
     size = 4
     while batch := list(itertools.islice(candidates, size)):
         size = min(2 * size, _BATCH)  # the first usable grasp is often among the most vertical few
@@ -572,17 +604,20 @@ def plan_grasp(
         if not batch:
             continue
         scene_hits = _hits_many(config.gripper, scene, np.stack([c[2] for c in batch]))
-        clear = [c for c, h in zip(batch, scene_hits) if h <= config.max_collision_points]
-        poses = np.array([c[2] for c in clear]).reshape(-1, 4, 4)
-        own = dict(zip((id(c) for c in clear), _hits_many(config.gripper, part, poses)))
-        for c, hits in zip(batch, scene_hits):
-            tilt, name, T_bg, T_bf, waypoints = c
-            why = _refusal(config, waypoints, int(hits), int(own.get(id(c), 0)), here)
-            if why is not None:
-                rejected[why] += 1
-                _keep_some(samples, why, T_bg[None])
-                continue
-            return _plan(config, name, T_bg, T_bf, tilt, waypoints, rejected), int(hits)
+        now = []
+        for c, h in zip(batch, scene_hits.tolist()):
+            if 0 < h <= config.max_collision_points:
+                touching.append((h, len(touching), c))
+            else:
+                now.append((c, h))
+        found = _first_usable(config, now, part, here, rejected, samples)
+        if found is not None:
+            return found
+    touching.sort(key=lambda t: t[:2])
+    for k in range(0, len(touching), _BATCH):
+        found = _first_usable(config, [(c, h) for h, _, c in touching[k : k + _BATCH]], part, here, rejected, samples)
+        if found is not None:
+            return found
     why = ", ".join(f"{v} {k}" for k, v in rejected.items() if v)
     raise NoGraspError(
         f"none of the {len(config.grasps)} grasps of the located {config.model.name} can be used (rejected: "

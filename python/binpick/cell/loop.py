@@ -13,7 +13,8 @@ poses, gripper geometry, motion limits). One pick is::
     cell.plan()    every declared grasp: T_base_gripper = T_base_object · T_gripper_object⁻¹ (Eq. 30),
                    T_base_flange = T_base_gripper · T_flange_gripper⁻¹; keep the ones within the
                    tool-tilt limit, reachable, free of the scene, whose whole motion passes the
-                   safety rules; take the most vertical (:func:`binpick.cell.grasp.plan_grasp`)
+                   safety rules; take the one touching the fewest scene points, the most
+                   vertical among equals (:func:`binpick.cell.grasp.plan_grasp`)
     cell.pick()    open, above → approach → grasp (straight along the gripper axis), close, lift
                    straight up, drop pose, open; on any fault the arm is stopped and the fault raised
 
@@ -425,9 +426,10 @@ class Cell:
             )
 
     def plan(self, located: Located) -> PickPlan:
-        """The most vertical declared grasp that is within the tilt limit, reachable, clear of the
-        scene and of the located part's own other branches, and whose whole motion passes the safety
-        rules; NoGraspError when none is."""
+        """The declared grasp that is within the tilt limit, reachable, clear of the scene and of
+        the located part's own other branches, and whose whole motion passes the safety rules —
+        the one with the fewest scene points inside the gripper, the most vertical among equals
+        (:func:`binpick.cell.grasp.plan_grasp`); NoGraspError when none is."""
         pts = np.asarray(located.scan.points)
         others = np.ones(len(pts), dtype=bool)
         others[located.indices] = False
@@ -617,7 +619,13 @@ class Cell:
             if stopped is not None:
                 break
         last_scan, last_located = self._last
-        return RunReport(records=tuple(records), stopped=stopped, last_scan=last_scan, last_located=last_located)
+        return RunReport(
+            records=tuple(records),
+            stopped=stopped,
+            last_scan=last_scan,
+            last_located=last_located,
+            ground_truth=self.truth is not None,
+        )
 
     def _cycle(self, i: int) -> tuple[PickRecord, Optional[str]]:
         """One pick of :meth:`run` (:meth:`_look_and_pick`); at a dead end (parts located, none

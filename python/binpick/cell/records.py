@@ -177,13 +177,15 @@ class PickRecord:
 
 @dataclass(frozen=True, eq=False)
 class RunReport:
-    """The picks of :meth:`Cell.run`, why it stopped (None when every pick was tried), and the
-    last scan and location."""
+    """The picks of :meth:`Cell.run`, why it stopped (None when every pick was tried), the last
+    scan and location, and whether the cell knew which part left the bin (``ground_truth``: the
+    simulator does; real drivers, the twin's among them, do not)."""
 
     records: tuple[PickRecord, ...]
     stopped: Optional[str]
     last_scan: Optional[ScanResult] = None
     last_located: Optional[Located] = None
+    ground_truth: bool = False
 
     @property
     def successes(self) -> int:
@@ -191,9 +193,17 @@ class RunReport:
         return sum(r.success for r in self.records)
 
     @property
-    def removed(self) -> tuple[int, ...]:
-        """The parts that left the bin, in order (with ground truth; a wrong-pose lift counts too)."""
+    def removed(self) -> Optional[tuple[int, ...]]:
+        """The parts that left the bin, in order (a wrong-pose lift counts too); None without
+        ground truth, where nothing tells which part left (see :attr:`lifted`)."""
+        if not self.ground_truth:
+            return None
         return tuple(r.picked_instance for r in self.records if r.picked_instance is not None)
+
+    @property
+    def lifted(self) -> tuple[int, ...]:
+        """The picks (their indices) whose gripper reported holding a part as it lifted."""
+        return tuple(r.index for r in self.records if r.held is True)
 
     def failures_by_kind(self) -> dict[str, int]:
         """Failed attempts per kind of :data:`FAILURE_KINDS` (the kinds that occurred, in that order)."""
