@@ -4,11 +4,12 @@
 //! planes.
 
 use super::outline::outline;
+use super::trust::near_turns;
 use super::{PoseConfig, PoseModel};
 use crate::error::{Error, Result};
 use crate::geometry::{BinBox, Plane, Point};
 use crate::registration::ppf::PpfConfig;
-use crate::registration::verify::{depth_evidence, Evidence, HeightMap};
+use crate::registration::verify::{depth_evidence, depth_evidence_with, Evidence, HeightMap};
 use nalgebra::{Isometry3, Vector3};
 
 /// Of the surface nothing else covers, the least share the scan must confirm: a pose that hangs
@@ -27,6 +28,14 @@ const MAX_CONTINUED: f64 = 0.4;
 const MIN_OUTLINE: usize = 4;
 /// Probe points of the judge over the model's dense surface.
 const JUDGE_PROBES: usize = 2000;
+/// Seen-through probes with at least this many seen-through neighbours within two probe
+/// spacings lie inside a patch of them (on an even sampling a disc of that radius holds about
+/// twelve probes; a strip along a silhouette, where cells straddle the edge, about four).
+const PATCH_NEIGHBOURS: usize = 6;
+/// The most probes inside seen-through patches a pose may have: a patch of the surface where
+/// the sensor saw free space — a branch standing where the scan looks past it — is material
+/// that is not there, whatever else the pose explains.
+const MAX_PATCH_PROBES: usize = 8;
 
 /// The scene as the judge sees it.
 pub(crate) struct Judge {
@@ -111,6 +120,32 @@ impl Judge {
         )
     }
 
+    /// Seen-through probes of the posed model that lie inside a patch of them (see
+    /// [`PATCH_NEIGHBOURS`]), counted only when there are enough to make one.
+    fn seen_through_patch(&self, model: &PoseModel, t_scene_model: &Isometry3<f64>, violated: usize) -> usize {
+        if violated <= MAX_PATCH_PROBES {
+            return 0;
+        }
+        let step = Self::probe_step(model, JUDGE_PROBES);
+        let mut probes = Vec::with_capacity(violated);
+        depth_evidence_with(
+            model.target(),
+            &self.heights,
+            t_scene_model,
+            step,
+            self.tol,
+            false,
+            |q| probes.push(q),
+        );
+        // Two probe spacings: the probes share the part's area evenly.
+        let probes_total = model.target().points().len().div_ceil(step).max(1);
+        let r = 2.0 * (model.area / probes_total as f64).sqrt();
+        probes
+            .iter()
+            .filter(|p| probes.iter().filter(|q| (*q - *p).norm_squared() <= r * r).count() > PATCH_NEIGHBOURS)
+            .count()
+    }
+
     /// Fraction of the posed part's surface more than twice the tolerance beyond a support.
     fn through_supports(&self, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> f64 {
         if self.supports.is_empty() {
@@ -131,12 +166,15 @@ impl Judge {
         inside as f64 / pts.len().div_ceil(step) as f64
     }
 
-    /// The verdict on a pose: its evidence when it passes [`Judge::check`], otherwise
-    /// `NoObjectFound` saying which test failed.
-    pub fn verdict(&self, model: &PoseModel, t_scene_model: &Isometry3<f64>, cfg: &PoseConfig) -> Result<Evidence> {
-        let e = self.evidence(model, t_scene_model);
-        self.check(&e, model, t_scene_model, cfg)?;
-        Ok(e)
+    /// The verdict on a pose: the pose [`Judge::accept`] keeps (it or a near-symmetric turn of
+    /// it) and its evidence, otherwise `NoObjectFound` saying which test failed.
+    pub fn verdict(
+        &self,
+        model: &PoseModel,
+        t_scene_model: &Isometry3<f64>,
+        cfg: &PoseConfig,
+    ) -> Result<(Isometry3<f64>, Evidence)> {
+        self.accept(self.evidence(model, t_scene_model), model, t_scene_model, cfg)
     }
 
     /// Whether a pose with depth evidence `e` is an instance: the scan confirms it wherever it
@@ -186,7 +224,49 @@ impl Judge {
                 100.0 * MAX_CONTINUED
             ));
         }
+        self.check_patch(e, model, t_scene_model)
+    }
+
+    /// The last test of [`Judge::check`]: no patch of the predicted surface where the sensor saw
+    /// free space.
+    fn check_patch(&self, e: &Evidence, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> Result<()> {
+        let patch = self.seen_through_patch(model, t_scene_model, e.violated);
+        if patch > MAX_PATCH_PROBES {
+            return Err(Error::NoObjectFound {
+                reason: format!(
+                    "the sensor saw through a patch of the surface the best pose predicts ({patch} probes inside it, at most {MAX_PATCH_PROBES}): material the pose puts where there is none"
+                ),
+            });
+        }
         Ok(())
+    }
+
+    /// [`Judge::check`] of a pose with evidence `e`, and when only its last test fails (a patch of
+    /// the predicted surface seen through), of its near-symmetric turns: a hypothesis that puts
+    /// the part's feature where the scan shows free space (the boss of a block whose boss faces
+    /// the floor, on top) is the right pose turned, which the trust stage then weighs. Returns
+    /// the pose that passes, with its evidence.
+    pub fn accept(
+        &self,
+        e: Evidence,
+        model: &PoseModel,
+        t_scene_model: &Isometry3<f64>,
+        cfg: &PoseConfig,
+    ) -> Result<(Isometry3<f64>, Evidence)> {
+        let Err(refused) = self.check(&e, model, t_scene_model, cfg) else {
+            return Ok((*t_scene_model, e));
+        };
+        if self.check_patch(&e, model, t_scene_model).is_ok() {
+            return Err(refused); // an earlier test failed: a turn of the feature does not mend it
+        }
+        near_turns(model, &cfg.trust)
+            .into_iter()
+            .map(|(turn, _)| t_scene_model * turn)
+            .find_map(|t| {
+                let e = self.evidence(model, &t);
+                self.check(&e, model, &t, cfg).is_ok().then_some((t, e))
+            })
+            .ok_or(refused)
     }
 }
 

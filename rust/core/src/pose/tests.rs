@@ -301,3 +301,44 @@ fn the_judge_refuses_a_pose_through_the_floor_and_accepts_the_truth() {
         other => panic!("a pose half through the floor passed: {other:?}"),
     }
 }
+
+/// A tee whose side branch the scan shows 14 mm shorter than the model's (the floor seen where
+/// the rest would be): the pose explains most of the scan, but the sensor saw through a whole
+/// patch of the surface it predicts, and the judge refuses it; the full scan is accepted.
+#[test]
+fn the_judge_refuses_a_pose_whose_surface_the_sensor_saw_through_in_a_patch() {
+    let (model, mesh) = tee_model();
+    let mut rng = Rng::new(8);
+    let truth = random_pose(&mut rng);
+    let full = top_view(mesh, &truth, 8);
+    let t_model_scene = truth.inverse();
+    let cut = TeeParams::default().branch_length - 14.0;
+    let mut scene: Vec<Point> = full.iter().filter(|p| (t_model_scene * *p).y < cut).copied().collect();
+    let floor_z = transform_points(&truth, &mesh.vertices)
+        .iter()
+        .map(|p| p.z)
+        .fold(f64::INFINITY, f64::min)
+        - 1.0;
+    let c = truth * model.symmetries.center;
+    for i in -60..60 {
+        for j in -60..60 {
+            scene.push(Point::new(c.x + 2.0 * i as f64, c.y + 2.0 * j as f64, floor_z));
+        }
+    }
+    let cfg = config(CoarseMethod::Ppf);
+    let judge_of = |scene: &[Point]| {
+        let (kept, removed) = remove_bin(scene, model, &cfg, true).unwrap();
+        let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
+        super::judge::Judge::new(scene, &pts, removed, model, &cfg)
+    };
+    let judge = judge_of(&scene);
+    let e = judge.evidence(model, &truth);
+    assert!(e.coverage() >= cfg.min_coverage, "the rest of the tests pass: {e:?}");
+    match judge.verdict(model, &truth, &cfg) {
+        Err(Error::NoObjectFound { reason }) => assert!(reason.contains("saw through a patch"), "{reason}"),
+        other => panic!("a branch standing where the scan shows the floor passed: {other:?}"),
+    }
+    let mut whole = full.clone();
+    whole.extend(scene.iter().filter(|p| p.z == floor_z));
+    assert!(judge_of(&whole).verdict(model, &truth, &cfg).is_ok());
+}

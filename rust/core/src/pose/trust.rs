@@ -15,6 +15,7 @@ use super::judge::Judge;
 use super::{PoseConfig, PoseEstimate, PoseModel};
 use crate::geometry::Point;
 use crate::registration::{icp, IcpConfig};
+use crate::symmetry::NearSymmetry;
 use nalgebra::{Isometry3, Vector3};
 use std::collections::HashSet;
 use std::f64::consts::TAU;
@@ -293,13 +294,7 @@ fn turns_and_region(model: &PoseModel, p: &TrustParams) -> (Vec<(Isometry3<f64>,
     let mut turns = Vec::new();
     let mut region = Vec::new();
     for n in &model.near_symmetries {
-        let own: Vec<(Isometry3<f64>, bool)> = match n.angle {
-            Some(_) => vec![(n.transform(0.0), false)],
-            None => {
-                let k = p.continuous_turns.max(2);
-                (1..k).map(|i| (n.transform(TAU * i as f64 / k as f64), true)).collect()
-            }
-        };
+        let own = turns_of(n, p);
         region.extend(n.feature.iter().copied());
         for (t, _) in &own {
             region.extend(n.feature.iter().map(|q| t * q));
@@ -308,6 +303,23 @@ fn turns_and_region(model: &PoseModel, p: &TrustParams) -> (Vec<(Isometry3<f64>,
         turns.extend(own);
     }
     (turns, region)
+}
+
+/// The turns (model frame; `true` for a continuous axis's) of one near-symmetry: its half turn,
+/// or [`TrustParams::continuous_turns`] even turns about a continuous axis.
+fn turns_of(n: &NearSymmetry, p: &TrustParams) -> Vec<(Isometry3<f64>, bool)> {
+    match n.angle {
+        Some(_) => vec![(n.transform(0.0), false)],
+        None => {
+            let k = p.continuous_turns.max(2);
+            (1..k).map(|i| (n.transform(TAU * i as f64 / k as f64), true)).collect()
+        }
+    }
+}
+
+/// The turns of every near-symmetry of `model` (see [`turns_of`]).
+pub(super) fn near_turns(model: &PoseModel, p: &TrustParams) -> Vec<(Isometry3<f64>, bool)> {
+    model.near_symmetries.iter().flat_map(|n| turns_of(n, p)).collect()
 }
 
 /// The fine tolerance: `noise_sigmas` robust standard deviations of the point-to-plane residuals

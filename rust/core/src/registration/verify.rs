@@ -213,6 +213,20 @@ pub fn depth_evidence(
     tol: f64,
     check_occluders: bool,
 ) -> Evidence {
+    depth_evidence_with(target, heights, t_scene_model, step, tol, check_occluders, |_| {})
+}
+
+/// [`depth_evidence`], calling `on_violated` with each probe (scene frame) where the sensor saw
+/// through the predicted surface.
+pub fn depth_evidence_with(
+    target: &IcpTarget,
+    heights: &HeightMap,
+    t_scene_model: &Isometry3<f64>,
+    step: usize,
+    tol: f64,
+    check_occluders: bool,
+    mut on_violated: impl FnMut(Point),
+) -> Evidence {
     let up_model = t_scene_model.rotation.inverse() * heights.up;
     let normals = target.normals().unwrap_or(&[]);
     let t_model_scene = t_scene_model.inverse();
@@ -235,7 +249,10 @@ pub fn depth_evidence(
             None if c >= 0.7 => e.missing += 1,
             None => {}
             Some((top, _)) if (top - h).abs() <= slack => e.seen += 1,
-            Some((top, _)) if top < h - slack => e.violated += 1,
+            Some((top, _)) if top < h - slack => {
+                e.violated += 1;
+                on_violated(q);
+            }
             Some((_, at)) => {
                 let m = t_model_scene * at;
                 let own = check_occluders
