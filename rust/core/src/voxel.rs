@@ -4,7 +4,10 @@
 use crate::error::{Error, Result};
 use crate::geometry::Point;
 use nalgebra::Vector3;
+use std::collections::hash_map::RandomState;
 use std::collections::HashMap;
+use std::hash::{BuildHasher, BuildHasherDefault, Hasher};
+use std::sync::OnceLock;
 
 /// The largest voxel index (per axis, either sign) a grid here uses: 2^52, so that the index is
 /// exact in an f64 and its neighbours never overflow an i64.
@@ -49,7 +52,7 @@ pub fn voxel_downsample(points: &[Point], normals: Option<&[Vector3<f64>]>, voxe
         }
     }
     let inv = 1.0 / voxel_size;
-    let mut slot_of: HashMap<[i64; 3], usize> = HashMap::with_capacity(points.len() / 4 + 1);
+    let mut slot_of: CellMap<usize> = CellMap::with_capacity_and_hasher(points.len() / 4 + 1, Default::default());
     let mut sums: Vec<(Vector3<f64>, Vector3<f64>, usize)> = Vec::new();
     let mut first_index = Vec::new();
     for (i, p) in points.iter().enumerate() {
@@ -98,12 +101,56 @@ pub fn voxel_downsample(points: &[Point], normals: Option<&[Vector3<f64>]>, voxe
     })
 }
 
+/// A hash map keyed by grid cells. A multiply-and-rotate mix replaces the default hash, which
+/// costs several times more per lookup on the grids' hot paths (27 lookups per candidate of an
+/// even sampling); it starts from a per-process random seed, so that a file cannot be made of
+/// points whose cells all collide.
+pub(crate) type CellMap<V> = HashMap<[i64; 3], V, BuildHasherDefault<CellHasher>>;
+
+/// The hasher of [`CellMap`]: each written word is mixed in by a multiply and a rotate.
+#[derive(Clone, Copy)]
+pub(crate) struct CellHasher(u64);
+
+impl Default for CellHasher {
+    #[inline]
+    fn default() -> Self {
+        static SEED: OnceLock<u64> = OnceLock::new();
+        CellHasher(*SEED.get_or_init(|| RandomState::new().build_hasher().finish() | 1))
+    }
+}
+
+impl Hasher for CellHasher {
+    #[inline]
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(word));
+        }
+    }
+
+    #[inline]
+    fn write_u64(&mut self, word: u64) {
+        self.0 = (self.0.rotate_left(5) ^ word).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+
+    #[inline]
+    fn write_i64(&mut self, word: i64) {
+        self.write_u64(word as u64);
+    }
+
+    #[inline]
+    fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
 /// Points kept at least `radius` apart: each candidate is accepted unless an accepted point lies
 /// closer, looked up on a hash grid of `radius` cells.
 pub struct DiskGrid {
     inv: f64,
     r2: f64,
-    cells: HashMap<[i64; 3], Vec<u32>>,
+    cells: CellMap<Vec<u32>>,
     points: Vec<Point>,
 }
 
@@ -113,7 +160,7 @@ impl DiskGrid {
         DiskGrid {
             inv: 1.0 / radius,
             r2: radius * radius,
-            cells: HashMap::new(),
+            cells: CellMap::default(),
             points: Vec::new(),
         }
     }

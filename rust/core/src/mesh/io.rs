@@ -17,18 +17,45 @@ fn cancelled_at(i: usize) -> bool {
     i.is_multiple_of(1 << 16) && crate::cancel::requested()
 }
 
+/// The largest mesh or cloud file read, bytes (4 GiB): far beyond any part's CAD model, and a
+/// bound on what a file that is not one (a device, a pipe) can make the reader allocate.
+const MAX_FILE_BYTES: u64 = 1 << 32;
+
 fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    use std::io::Read;
     let shown = path.display().to_string();
-    if path.is_dir() {
-        return Err(Error::FileNotFound {
-            path: shown,
-            reason: "it is a directory".into(),
-        });
-    }
-    let bytes = std::fs::read(path).map_err(|e| Error::FileNotFound {
+    let not_found = |reason: String| Error::FileNotFound {
         path: shown.clone(),
-        reason: e.to_string(),
-    })?;
+        reason,
+    };
+    let meta = std::fs::metadata(path).map_err(|e| not_found(e.to_string()))?;
+    if meta.is_dir() {
+        return Err(not_found("it is a directory".into()));
+    }
+    if !meta.is_file() {
+        return Err(Error::bad_file(
+            shown,
+            "it is not a regular file (a device, a pipe or a socket); save the mesh or cloud to a file and read that",
+        ));
+    }
+    if meta.len() > MAX_FILE_BYTES {
+        return Err(Error::bad_file(
+            shown,
+            format!("{} bytes is over the ceiling of {MAX_FILE_BYTES} bytes", meta.len()),
+        ));
+    }
+    let file = std::fs::File::open(path).map_err(|e| not_found(e.to_string()))?;
+    // Read no more than the ceiling even if the file grows while it is read.
+    let mut bytes = Vec::with_capacity(meta.len() as usize);
+    file.take(MAX_FILE_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(|e| not_found(e.to_string()))?;
+    if bytes.len() as u64 > MAX_FILE_BYTES {
+        return Err(Error::bad_file(
+            shown,
+            format!("it grew over the ceiling of {MAX_FILE_BYTES} bytes while it was read"),
+        ));
+    }
     if bytes.is_empty() {
         return Err(Error::bad_file(shown, "the file is empty"));
     }

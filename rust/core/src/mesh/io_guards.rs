@@ -180,3 +180,21 @@ fn byte_mutation_fuzz_of_the_mesh_readers_never_panics() {
         assert_eq!(ok + err, 400);
     }
 }
+
+/// A device is not a mesh file: reading `/dev/zero` would never end (or end with the memory).
+#[cfg(unix)]
+#[test]
+fn a_device_is_refused_before_anything_is_read() {
+    let dir = std::env::temp_dir().join(format!("binpick-dev-zero-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let link = dir.join("zero.ply");
+    let _ = std::fs::remove_file(&link);
+    std::os::unix::fs::symlink("/dev/zero", &link).unwrap();
+    for r in [read_ply(&link).map(|_| ()), read_mesh(&link).map(|_| ())] {
+        match r {
+            Err(Error::BadFile { problem, .. }) => assert!(problem.contains("not a regular file"), "{problem}"),
+            other => panic!("/dev/zero was read as a file: {other:?}"),
+        }
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
+}
