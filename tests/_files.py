@@ -122,3 +122,66 @@ def fuzz(path: Path, original: bytes, load: Callable[[], Any], seed: int, cases:
         took = time.monotonic() - t
         assert took < SLOWEST_CASE_S, f"case {case} took {took:.1f} s: {data[:200]!r}"
     return outcomes, other
+
+
+def mesh_and_scene_readers(root: Path) -> list[tuple[str, Path, Callable[[], Any]]]:
+    """``(name, file, load)`` for every mesh format :meth:`binpick.Model.from_mesh` reads (the box
+    of :func:`_geometry.box_mesh`), PLY clouds by :func:`binpick.read_ply` and XYZ and NPY scenes
+    by :func:`binpick.clouds.read_scene`, each written under ``root``; ``load`` reads the file
+    and fails (AssertionError) on a result that breaks its promise: non-finite points or normals."""
+    import binpick
+    from _geometry import MESH_WRITERS, box_mesh
+    from binpick.clouds import read_scene, write_scene
+
+    root.mkdir(parents=True, exist_ok=True)
+    v, f = box_mesh()
+    cloud = np.random.default_rng(5).normal(size=(30, 3)) * 20.0
+    out = []
+    for name, write in MESH_WRITERS.items():
+        write(root / name, v, f)
+        out.append(
+            (f"mesh {name}", root / name, lambda p=root / name: _finite(binpick.Model.from_mesh(p, count=50).points))
+        )
+    for name, ascii_ in (("cloud_ascii.ply", True), ("cloud_binary.ply", False)):
+        binpick.write_ply(root / name, cloud, cloud / np.linalg.norm(cloud, axis=1)[:, None], ascii=ascii_)
+        out.append(
+            (
+                f"read_ply {name}",
+                root / name,
+                lambda p=root / name: [_finite(a) for a in binpick.read_ply(p) if a is not None],
+            )
+        )
+    for ext in (".xyz", ".npy"):
+        path = write_scene(root / f"scene{ext}", cloud)
+        out.append((f"read_scene {ext}", path, lambda p=path: _finite(read_scene(p).points)))
+    return out
+
+
+def _finite(arr: np.ndarray) -> np.ndarray:
+    assert arr.ndim == 2 and arr.shape[1] == 3 and np.isfinite(arr).all(), "a reader returned non-finite points"
+    return arr
+
+
+#: A tetrahedron: its prepared model is the cheapest to build (about 50 ms), for the cache fuzz.
+_TETRA_V = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0], [0, 0, 10]], dtype=float)
+_TETRA_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+
+
+def ppf_cache_reader(root: Path) -> tuple[Path, Callable[[], Any]]:
+    """The PPF cache file of a small model, written under ``root`` (the caller sets
+    ``BINPICK_CACHE_DIR`` to it), and ``load``: prepares the model afresh from whatever the file
+    holds. It fails (AssertionError) when the table it ends with differs from the one built from
+    the model: a damaged cache must be rebuilt, never loaded."""
+    import binpick
+
+    model = binpick.Model.from_arrays(_TETRA_V, _TETRA_F, count=40)
+    table = model.prepared().ppf_bytes()
+    (path,) = (root / "ppf").glob("*.bin")
+
+    def load() -> Any:
+        model._prepared = None
+        native = model.prepared()
+        assert native.ppf_bytes() == table, "a damaged PPF cache was loaded instead of rebuilt"
+        return native
+
+    return path, load

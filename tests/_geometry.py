@@ -80,6 +80,16 @@ def write_ply_mesh(path: Path, v: np.ndarray, f: np.ndarray, binary: bool) -> No
                 fh.write(f"3 {tri[0]} {tri[1]} {tri[2]}\n".encode())
 
 
+#: A writer of every mesh format binpick reads, by a file name of that format: ``write(path, v, f)``.
+MESH_WRITERS = {
+    "binary.stl": write_stl_binary,
+    "ascii.stl": write_stl_ascii,
+    "part.obj": write_obj,
+    "binary.ply": lambda path, v, f: write_ply_mesh(path, v, f, True),
+    "ascii.ply": lambda path, v, f: write_ply_mesh(path, v, f, False),
+}
+
+
 def random_rigid(rng: np.random.Generator, max_angle: float, max_shift: float) -> np.ndarray:
     """A random 4×4 rigid transform: rotation up to ``max_angle`` rad, shift up to ``max_shift`` mm."""
     axis = rng.normal(size=3)

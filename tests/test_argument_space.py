@@ -16,10 +16,11 @@ import time
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import binpick
+from _properties import PROPERTY, anything, finite, ints, mostly, outcome, reals, rigid
 from binpick import _core, errors
 from binpick.camera import CameraIntrinsics
 
@@ -217,35 +218,13 @@ def test_ctrl_c_stops_a_long_native_call_and_its_work():
 
 # --------------------------------------------------------------------------- property tests
 
-ALLOWED = (errors.BinpickError, TypeError)
-FORBIDDEN = (errors.InternalError, OverflowError, MemoryError)
-
-anything = st.one_of(
-    st.none(),
-    st.booleans(),
-    st.integers(min_value=-(2**70), max_value=2**70),
-    st.floats(allow_nan=True, allow_infinity=True),
-    st.text(max_size=4),
-    st.lists(st.integers(0, 5), max_size=3),
-)
-small_int = st.one_of(st.integers(-3, 40), anything)
-real = st.one_of(st.floats(-10, 100), anything)
-cloud = st.one_of(
-    st.just(CLOUD),
-    st.integers(0, 30).map(lambda n: RNG.normal(size=(n, 3))),
+small_int = ints(-3, 40)
+real = reals(-10, 100)
+cloud = mostly(
+    st.one_of(st.just(CLOUD), st.integers(0, 30).map(lambda n: RNG.normal(size=(n, 3)))),
     st.sampled_from([CLOUD[:, :2], CLOUD.astype(np.float32), CLOUD.astype(np.int32), np.full((20, 3), np.nan)]),
     anything,
 )
-PROPERTY = settings(max_examples=40, deadline=None, suppress_health_check=list(HealthCheck))
-
-
-def outcome(call):
-    try:
-        call()
-    except FORBIDDEN as exc:
-        raise AssertionError(f"{type(exc).__name__}: {exc}") from exc
-    except ALLOWED:
-        pass
 
 
 @PROPERTY
@@ -300,20 +279,36 @@ def test_property_ppf_params(sr, ab, rb):
     outcome(lambda: binpick.PpfParams(sampling_ratio=sr, angle_bins=ab, rotation_bins=rb))
 
 
-@settings(max_examples=15, deadline=None, suppress_health_check=list(HealthCheck))
+def _view(model, T):
+    """The upper half of ``model``'s surface samples posed at ``T``: what a sensor above sees."""
+    pts = model.points @ T[:3, :3].T + T[:3, 3]
+    return pts[pts[:, 2] > np.median(pts[:, 2])]
+
+
+@settings(PROPERTY, max_examples=15)
 @given(
+    scene=mostly(st.floats(-math.pi, math.pi).map(lambda a: rigid(a, offset=(10.0, 20.0, 300.0))), st.just(CLOUD)),
     inst=small_int,
     threads=small_int,
     hyp=st.one_of(st.none(), small_int),
-    fit=real,
-    method=st.sampled_from(["auto", "ppf", "centroid", "ccp", "?"]),
+    fit=reals(0.0, 1.0),
+    method=mostly(st.sampled_from(["auto", "ppf", "centroid"]), st.sampled_from(["ccp", "?"]), anything),
 )
-def test_property_estimate_poses(model, inst, threads, hyp, fit, method):
-    outcome(
-        lambda: binpick.estimate_poses(
-            CLOUD, model, max_instances=inst, num_threads=threads, max_hypotheses=hyp, min_fitness=fit, method=method
-        )
-    )
+def test_property_estimate_poses_and_estimate_pose(model, scene, inst, threads, hyp, fit, method):
+    """estimate_pose is estimate_poses(...)[0] for the same options, over the same argument space."""
+    pts = _view(model, scene) if isinstance(scene, np.ndarray) and scene.shape == (4, 4) else scene
+    options = dict(num_threads=threads, max_hypotheses=hyp, min_fitness=fit, method=method)
+    poses = outcome(lambda: binpick.estimate_poses(pts, model, max_instances=inst, **options), "estimate_poses")
+    pose = outcome(lambda: binpick.estimate_pose(pts, model, **options), "estimate_pose")
+    for result in [r for r in (pose, *(poses or ())) if r is not None]:
+        T = result.T_scene_model
+        assert T.shape == (4, 4) and finite(T) and np.allclose(T[:3, :3].T @ T[:3, :3], np.eye(3), atol=1e-9)
+        assert 0.0 <= result.score <= 1.0 and 0.0 <= result.confidence <= 1.0 and len(result.indices) > 0
+    if poses is not None and pose is not None:
+        np.testing.assert_allclose(pose.T_scene_model, poses[0].T_scene_model, atol=1e-9)
+        assert pose.method == poses[0].method and pose.score == poses[0].score
+    elif poses is not None:  # what estimate_poses found, estimate_pose finds: only max_instances may differ
+        pytest.fail(f"estimate_poses found {len(poses)} but estimate_pose failed with the same options")
 
 
 @PROPERTY

@@ -13,10 +13,12 @@ import binpick
     [
         b"{'descr': '<f8', 'fortran_order': False, 'shape': (4k[0, 3), }",  # an unclosed bracket
         b"{'descr': '<f8', 'fortran_order': (False, 'shape': (40, 3), }",  # an unclosed parenthesis
+        b"{'descr': '<f8', 'fortran_order': False, 'shape': (-40, 3), }",  # mmap's OverflowError (file_fuzz.py)
     ],
 )
 def test_an_npy_scene_with_a_broken_header_is_a_mesh_file_error(tmp_path, header):
-    """numpy tokenizes the header and raises tokenize.TokenError or SyntaxError, neither a ValueError."""
+    """numpy tokenizes the header and raises tokenize.TokenError or SyntaxError, neither a ValueError;
+    a negative shape passes numpy's header checks and mmap raises OverflowError."""
     path = tmp_path / "scene.npy"
     good = tmp_path / "good.npy"
     np.save(good, np.zeros((40, 3)))

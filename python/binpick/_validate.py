@@ -240,6 +240,37 @@ def as_faces(value: Any, name: str, vertex_count: int) -> np.ndarray:
     return np.ascontiguousarray(arr, dtype=np.int64)
 
 
+def choice(value: Any, name: str, allowed: tuple[str, ...]) -> str:
+    """``value`` when it is one of the strings ``allowed``, else InvalidInputError naming ``name``
+    and listing them (an array or any unhashable value is refused, not compared)."""
+    if not isinstance(value, str) or value not in allowed:
+        raise InvalidInputError(f"{name}: {value!r:.40} is not one of {', '.join(repr(a) for a in allowed)}")
+    return value
+
+
+def flag(value: Any, name: str) -> bool:
+    """``value`` as a bool; anything but True or False (a string, an array, a number) is
+    InvalidTypeError naming ``name``, rather than taken for its truth."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise InvalidTypeError(f"{name}: must be True or False, got {type(value).__name__} {value!r:.40}")
+    return bool(value)
+
+
+def as_indices(value: Any, name: str) -> np.ndarray:
+    """A 1-D int64 array of indices, or DTypeError (ShapeError) naming ``name``; their range is the caller's."""
+    try:
+        arr = np.asarray(value)
+    except Exception as exc:  # ragged lists and the like
+        raise DTypeError(f"{name}: cannot be read as an index array ({exc}); pass a 1-D integer array") from None
+    if arr.dtype.kind not in "iu" and not (arr.size == 0 and arr.dtype.kind == "f"):
+        raise DTypeError(f"{name}: dtype {arr.dtype}; indices must be integers")
+    if arr.ndim != 1:
+        raise ShapeError(f"{name}: expected a 1-D array of indices, got shape {arr.shape}")
+    if arr.dtype == np.uint64 and arr.size and arr.max() > np.iinfo(np.int64).max:
+        raise InvalidInputError(f"{name}: index {arr.max()} is beyond any array")
+    return arr.astype(np.int64)
+
+
 def instance_of(value: Any, cls: type, name: str, example: str = "") -> Any:
     """``value`` when it is a ``cls``, else InvalidTypeError naming ``name`` (and how to make one)."""
     if not isinstance(value, cls):
@@ -395,6 +426,9 @@ def as_box(value: Any, name: str = "bin") -> tuple[np.ndarray, np.ndarray]:
 #: Largest image width or height a calibration or scan file may declare, pixels.
 MAX_IMAGE_SIDE = 65_536
 
+#: Most frames (and columns) of a contact sheet.
+MAX_SHEET_TILES = 1000
+
 #: Largest image a calibration or scan file may declare, pixels (width × height): 2**28 px,
 #: 768 MiB for one 8-bit BGR frame; beyond it one frame would not fit in a machine's memory.
 MAX_IMAGE_PIXELS = 2**28
@@ -417,6 +451,17 @@ def image_size(width: Any, height: Any, where: str, error: type = CalibrationErr
             f"(one BGR frame would take {3 * w * h / 2**30:.1f} GiB); write the camera's real image size"
         )
     return w, h
+
+
+def as_path(value: Any, name: str = "path") -> Any:
+    """``value`` (a str or os.PathLike) as a :class:`pathlib.Path`, or InvalidInputError naming
+    ``name`` when it holds a NUL byte (which no file name can); a non-path is Python's TypeError."""
+    from pathlib import Path
+
+    path = Path(value)
+    if "\x00" in str(path):
+        raise InvalidInputError(f"{name}: {str(path)!r:.80} holds a NUL byte; no file name can")
+    return path
 
 
 def write_atomic(path: Any, data: bytes | str) -> None:

@@ -21,7 +21,11 @@ __all__ = ["CameraIntrinsics", "camera_args", "pinhole_matrix"]
 
 
 def pinhole_matrix(fx: float, fy: float, cx: float, cy: float, skew: float = 0.0) -> np.ndarray:
-    """The 3×3 intrinsic matrix ``[[fx, skew, cx], [0, fy, cy], [0, 0, 1]]`` (pixels)."""
+    """The 3×3 intrinsic matrix ``[[fx, skew, cx], [0, fy, cy], [0, 0, 1]]`` (pixels); each
+    parameter a finite number (InvalidInputError naming it otherwise)."""
+    fx, fy, cx, cy, skew = (
+        number(v, name, unit="px") for v, name in ((fx, "fx"), (fy, "fy"), (cx, "cx"), (cy, "cy"), (skew, "skew"))
+    )
     return np.array([[fx, skew, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
 
 
@@ -70,10 +74,7 @@ class CameraIntrinsics:
         skew: float = 0.0,
     ) -> CameraIntrinsics:
         """A camera from its pinhole parameters (pixels) and ``dist = [k1, k2, p1, p2, k3]``; each
-        parameter a finite number (InvalidInputError naming it otherwise)."""
-        fx, fy, cx, cy, skew = (
-            number(v, name, unit="px") for v, name in ((fx, "fx"), (fy, "fy"), (cx, "cx"), (cy, "cy"), (skew, "skew"))
-        )
+        parameter a finite number (InvalidInputError naming it otherwise; :func:`pinhole_matrix` checks them)."""
         return cls(width=width, height=height, K=pinhole_matrix(fx, fy, cx, cy, skew), dist=dist)
 
     @property

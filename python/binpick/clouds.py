@@ -37,8 +37,15 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ._validate import as_float_array, as_points, unit_scale
-from .errors import FileWriteError, InvalidInputError, MeshFileError, MeshFileNotFoundError, UnknownUnitError
+from ._validate import MAX_UNSIGNED, as_float_array, as_points, choice, count, unit_scale
+from .errors import (
+    FileWriteError,
+    InvalidInputError,
+    InvalidTypeError,
+    MeshFileError,
+    MeshFileNotFoundError,
+    UnknownUnitError,
+)
 
 __all__ = ["SceneCloud", "SCENE_FORMATS", "read_scene", "write_scene", "write_pcd", "lzf_decompress"]
 
@@ -147,8 +154,7 @@ def write_pcd(path: str | os.PathLike[str], points: Any, *, encoding: str = "bin
     """Writes (N, 3) points in mm as a PCD v0.7 file PCL reads (fields x y z, float32, unorganized),
     DATA ``binary`` or ``ascii``, with a ``# unit: mm`` comment. Returns the path."""
     pts = as_points(points, "points", min_points=0).astype(np.float32)
-    if encoding not in ("binary", "ascii"):
-        raise InvalidInputError(f"encoding: {encoding!r:.40} is not a PCD encoding binpick writes; use binary or ascii")
+    encoding = choice(encoding, "encoding", ("binary", "ascii"))
     n = len(pts)
     header = (
         "# .PCD v0.7 - Point Cloud Data file format\n# unit: mm\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\n"
@@ -247,7 +253,8 @@ def _read_npy(path: str) -> tuple[np.ndarray, Optional[str]]:
     try:
         # Memory-mapped: numpy checks the header's shape against the file's size before any copy.
         arr = np.load(path, mmap_mode="r", allow_pickle=False)
-    except (OSError, ValueError, EOFError, SyntaxError, tokenize.TokenError) as exc:  # numpy parses the header
+    # numpy parses the header (SyntaxError, TokenError), and mmap refuses a negative shape (OverflowError).
+    except (OSError, ValueError, OverflowError, EOFError, SyntaxError, tokenize.TokenError) as exc:
         raise MeshFileError(
             f"{path}: cannot be read as a NumPy .npy array ({str(exc)[:200]}); save it with np.save"
         ) from None
@@ -505,8 +512,13 @@ def lzf_decompress(data: bytes, size: int, *, source: str = "data") -> bytes:
       in the output (the copy may overlap what it writes).
 
     A token that runs past the input, a reference before the output's start and an output that
-    is not ``size`` bytes long raise MeshFileError naming ``source``.
+    is not ``size`` bytes long raise MeshFileError naming ``source``; ``data`` that is not bytes
+    or a ``size`` that is not a whole number ≥ 0 raise InvalidInputError naming it.
     """
+    if not isinstance(data, (bytes, bytearray, memoryview)):
+        raise InvalidTypeError(f"data: expected bytes, got {type(data).__name__}")
+    data = bytes(data)
+    size = count(size, "size", 0, MAX_UNSIGNED)
     out = bytearray()
     n, i = len(data), 0
     while i < n:

@@ -294,12 +294,7 @@ class Model:
             special = None if self.special_direction is None else np.asarray(self.special_direction, dtype=np.float64)
             key = (float(params.sampling_ratio), int(params.angle_bins), int(params.rotation_bins))
             path = self._cache_path(key)
-            cached = None
-            if path is not None and path.is_file():
-                try:
-                    cached = path.read_bytes()
-                except OSError:
-                    cached = None
+            cached = None if path is None else _read_cache(path)
             native = _core.PreparedModel(
                 self.points,
                 self.normals,
@@ -312,7 +307,7 @@ class Model:
                 (self.vertices, self.faces),
             )
             if path is not None and not native.ppf_from_cache():
-                _write_atomically(path, native.ppf_bytes())
+                _write_cache(path, native.ppf_bytes())
             self._prepared = (params, native)
         return self._prepared[1]
 
@@ -417,13 +412,32 @@ def _special(direction: Any) -> Optional[tuple[float, float, float]]:
     return (float(d[0]), float(d[1]), float(d[2]))
 
 
-def _write_atomically(path: Path, data: Optional[bytes]) -> None:
-    """Writes a cache file through a temporary name; a cache that cannot be written is skipped."""
+#: Bytes of the digest that closes a cache file: the SHA-256 of the table's bytes before it.
+_DIGEST = 32
+
+
+def _read_cache(path: Path) -> Optional[bytes]:
+    """The table's bytes in the cache file ``path``, or None when there is none, it cannot be
+    read or its digest does not match: a damaged file (a flipped byte in a point the core's
+    structural checks cannot see) is rebuilt, never loaded."""
+    try:
+        data = path.read_bytes() if path.is_file() else b""
+    except OSError:
+        return None
+    table, digest = data[:-_DIGEST], data[-_DIGEST:]
+    if len(data) <= _DIGEST or hashlib.sha256(table).digest() != digest:
+        return None
+    return table
+
+
+def _write_cache(path: Path, data: Optional[bytes]) -> None:
+    """Writes a cache file (the table, then its digest) through a temporary name; a cache that
+    cannot be written is skipped."""
     if data is None:
         return
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        write_atomic(path, data)
+        write_atomic(path, data + hashlib.sha256(data).digest())
     except OSError as exc:
         warnings.warn(
             f"binpick: cannot write the PPF cache {path} ({exc}); set BINPICK_CACHE_DIR to a writable folder",

@@ -22,9 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from ._validate import MAX_IMAGE_PIXELS, as_angles, as_image, as_transform, image_size, read_text_file
+from ._validate import MAX_IMAGE_PIXELS, as_angles, as_image, as_path, as_transform, image_size, read_text_file
 from .calibration import CellCalibration
-from .errors import FileWriteError, InvalidInputError, MeshFileNotFoundError, ScanFormatError
+from .errors import FileWriteError, InvalidInputError, InvalidTypeError, MeshFileNotFoundError, ScanFormatError
 
 __all__ = ["SCAN_VERSION", "Scan", "ScanFrame", "load_scan", "save_scan"]
 
@@ -181,8 +181,9 @@ def save_scan(
         raise InvalidInputError(f"T_base_flanges: expected {n} poses (one per frame), got {len(poses)}")
     poses = [as_transform(p, f"T_base_flanges[{i}]") for i, p in enumerate(poses)]
     images = [as_image(img, f"frames_images[{i}]", shape=calibration.camera.shape) for i, img in enumerate(images)]
+    truth = None if ground_truth is None else _truth_json(ground_truth)
 
-    root = Path(directory)
+    root = as_path(directory, "directory")
     digits = max(3, len(str(n - 1)))
     try:
         (root / "frames").mkdir(parents=True, exist_ok=True)
@@ -195,11 +196,22 @@ def save_scan(
         doc = {"version": SCAN_VERSION, "units": "mm, rad", "frames": entries}
         (root / "scan.json").write_text(json.dumps(doc, indent=1), encoding="utf-8")
         calibration.save(root / "calibration.toml")
-        if ground_truth is not None:
-            (root / "ground_truth.json").write_text(json.dumps(ground_truth), encoding="utf-8")
+        if truth is not None:
+            (root / "ground_truth.json").write_text(truth, encoding="utf-8")
     except OSError as exc:
         raise FileWriteError(f"{root}: cannot write the scan ({exc})") from None
     return root
+
+
+def _truth_json(ground_truth: Any) -> str:
+    """``ground_truth`` as JSON text, checked before anything of the scan is written: a dict of
+    JSON values (InvalidInputError naming ``ground_truth`` otherwise)."""
+    if not isinstance(ground_truth, dict):
+        raise InvalidTypeError(f"ground_truth: expected a dict, got {type(ground_truth).__name__}")
+    try:
+        return json.dumps(ground_truth)
+    except (TypeError, ValueError, RecursionError) as exc:  # a value JSON has no form for, a cycle
+        raise InvalidInputError(f"ground_truth: cannot be written as JSON ({str(exc)[:120]})") from None
 
 
 def _read_json(path: Path, what: str, missing: str = "") -> Any:

@@ -18,8 +18,21 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ._validate import as_points, as_transform, count
+from ._validate import (
+    MAX_IMAGE_PIXELS,
+    MAX_IMAGE_SIDE,
+    MAX_SHEET_TILES,
+    as_box,
+    as_image,
+    as_indices,
+    as_path,
+    as_points,
+    as_transform,
+    count,
+    instance_of,
+)
 from .errors import FileWriteError, InvalidInputError
+from .models import Model
 
 __all__ = ["save_cloud", "save_pick_summary", "save_contact_sheet", "save_failure"]
 
@@ -37,13 +50,32 @@ def _pyplot():
     return plt
 
 
+def _picture_path(path: str | os.PathLike[str], writable: Any) -> Path:
+    """``path`` as a Path (:func:`as_path`), or InvalidInputError naming it when it ends in an
+    extension ``writable`` (``Path → bool``) refuses."""
+    p = as_path(path)
+    if not writable(p):
+        raise InvalidInputError(
+            f"path: {p} ends in {p.suffix!r:.20}, not a picture format binpick writes; end it in .png"
+        )
+    return p
+
+
+def _matplotlib_writes(p: Path) -> bool:
+    """Whether matplotlib writes ``p`` by itself (no extension: PNG; .pgf needs LaTeX)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    suffix = p.suffix[1:].lower()
+    return not suffix or (suffix != "pgf" and suffix in FigureCanvasAgg.get_supported_filetypes())
+
+
 def _save(fig: Any, path: str | os.PathLike[str]) -> Path:
-    p = Path(path)
     try:
+        p = _picture_path(path, _matplotlib_writes)
         p.parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(p, dpi=110)
     except OSError as exc:
-        raise FileWriteError(f"{p}: cannot write the picture ({exc})") from None
+        raise FileWriteError(f"{path}: cannot write the picture ({exc})") from None
     finally:
         _pyplot().close(fig)
     return p
@@ -53,6 +85,12 @@ def _thin(points: np.ndarray, limit: int, seed: int = 0) -> np.ndarray:
     if len(points) <= limit:
         return points
     return points[np.random.default_rng(seed).choice(len(points), limit, replace=False)]
+
+
+def _scene(points: Any, bin_bounds: Any, title: Any) -> tuple[np.ndarray, Optional[tuple[np.ndarray, np.ndarray]]]:
+    """A picture's cloud (N ≥ 1, 3) and bin box (None when not given), the title checked to be text."""
+    instance_of(title, str, "title")
+    return as_points(points, "points", min_points=1), None if bin_bounds is None else as_box(bin_bounds, "bin_bounds")
 
 
 def save_cloud(
@@ -71,34 +109,35 @@ def save_cloud(
     that pose are drawn in red over the cloud; ``highlight`` (indices into ``points``) marks the
     points the estimate used; ``bin_bounds`` outlines the bin. Returns the path.
     """
-    pts = as_points(points, "points", min_points=1)
+    pts, box = _scene(points, bin_bounds, title)
     overlay = None
     if model is not None:
+        instance_of(model, Model, "model", "binpick.parts.tee()")
         if T_base_object is None:
             raise InvalidInputError("T_base_object: give the pose at which to draw the model")
         T = as_transform(T_base_object, "T_base_object")
         overlay = _thin(np.asarray(model.points) @ T[:3, :3].T + T[:3, 3], 4000)
+    idx = None if highlight is None else as_indices(highlight, "highlight")
     plt = _pyplot()
     fig = plt.figure(figsize=(13, 5.6))
     shown = _thin(pts, _MAX_POINTS)
     top = fig.add_subplot(1, 2, 1)
     sc = top.scatter(shown[:, 0], shown[:, 1], c=shown[:, 2], s=0.6, cmap="viridis", linewidths=0)
-    if highlight is not None:
-        idx = np.asarray(highlight, dtype=np.int64)
+    if idx is not None:
         idx = idx[(idx >= 0) & (idx < len(pts))]
         h = _thin(pts[idx], 8000)
         top.scatter(h[:, 0], h[:, 1], s=0.8, c="orange", linewidths=0, label="points used")
     if overlay is not None:
         top.scatter(overlay[:, 0], overlay[:, 1], s=0.8, c="red", linewidths=0, label="estimated part")
-    if bin_bounds is not None:
-        (x0, y0, _), (x1, y1, _) = np.asarray(bin_bounds, dtype=float)
+    if box is not None:
+        (x0, y0, _), (x1, y1, _) = box
         top.plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], "k--", linewidth=0.8, label="bin")
     top.set_aspect("equal")
     top.set_xlabel("x (mm)")
     top.set_ylabel("y (mm)")
     top.set_title("from above, coloured by height")
     fig.colorbar(sc, ax=top, label="z (mm)", shrink=0.8)
-    if overlay is not None or highlight is not None or bin_bounds is not None:
+    if overlay is not None or idx is not None or box is not None:
         top.legend(loc="upper right", markerscale=8, fontsize=8)
     ax = fig.add_subplot(1, 2, 2, projection="3d")
     s3 = _thin(pts, 25_000)
@@ -120,9 +159,14 @@ def save_cloud(
 def save_pick_summary(path: str | os.PathLike[str], records: Sequence[Any], *, title: str = "") -> Path:
     """Writes a per-pick summary of :class:`binpick.cell.PickRecord` s: score, pose error against
     ground truth where known (with the pick-grade limits 5° and 3 mm), and the time per stage."""
+    from .cell.records import PickRecord
+
     recs = list(records)
     if not recs:
         raise InvalidInputError("records: no picks to summarise")
+    for i, r in enumerate(recs):
+        instance_of(r, PickRecord, f"records[{i}]", "the records of Cell.run's report")
+    instance_of(title, str, "title")
     plt = _pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.4))
     x = np.arange(1, len(recs) + 1)
@@ -189,30 +233,37 @@ def save_contact_sheet(
     would dim it by the shrink factor) and shows about two tile pixels wide."""
     import cv2
 
-    frames = [np.asarray(f) for f in frames_bgr]
-    if not frames or any(
-        f.ndim != 3 or f.shape[2] != 3 or f.dtype != np.uint8 or f.shape != frames[0].shape for f in frames
-    ):
+    frames = [as_image(f, f"frames_bgr[{i}]", color=True) for i, f in enumerate(frames_bgr)]
+    if not frames or any(f.shape != frames[0].shape for f in frames):
         raise InvalidInputError("frames_bgr: expected one or more uint8 BGR images (H, W, 3) of one size")
-    labels = list(range(len(frames))) if numbers is None else [int(n) for n in numbers]
+    labels = list(range(len(frames))) if numbers is None else [count(n, f"numbers[{i}]") for i, n in enumerate(numbers)]
     if len(labels) != len(frames):
         raise InvalidInputError(f"numbers: expected one frame number per frame ({len(frames)}), got {len(labels)}")
-    cols = int(count(columns, "columns", 1))
+    cols = count(columns, "columns", 1, MAX_SHEET_TILES)
     h, w = frames[0].shape[:2]
-    tw = max(1, int(count(width, "width", 1)) // cols)
+    tw = max(1, count(width, "width", cols, MAX_IMAGE_SIDE) // cols)
     th = max(1, int(round(h * tw / w)))
     k = 2 * max(1, int(np.ceil(w / tw))) + 1  # wide enough to cover a whole tile pixel wherever it falls
     kernel = np.ones((k, k), dtype=np.uint8)
     rows = int(np.ceil(len(frames) / cols))
+    if rows * th * cols * tw > MAX_IMAGE_PIXELS:
+        raise InvalidInputError(
+            f"width: {len(frames)} frames of {w}×{h} tiled {cols} wide at {width} px make a sheet of "
+            f"{cols * tw}×{rows * th} pixels, more than {MAX_IMAGE_PIXELS}; pass a smaller width or fewer frames"
+        )
     sheet = np.zeros((rows * th, cols * tw, 3), dtype=np.uint8)
     for i, (frame, label) in enumerate(zip(frames, labels)):
         tile = cv2.resize(cv2.dilate(np.ascontiguousarray(frame), kernel), (tw, th), interpolation=cv2.INTER_AREA)
         cv2.putText(tile, f"frame {label}", (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.7, (255, 255, 255), 2)
         r, c = divmod(i, cols)
         sheet[r * th : (r + 1) * th, c * tw : (c + 1) * tw] = tile
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    if not cv2.imwrite(str(p), sheet):
+    p = _picture_path(path, lambda p: cv2.haveImageWriter(str(p)))
+    try:
+        p.parent.mkdir(parents=True, exist_ok=True)
+        written = cv2.imwrite(str(p), sheet)
+    except OSError as exc:
+        raise FileWriteError(f"{p}: cannot write the contact sheet ({exc})") from None
+    if not written:
         raise FileWriteError(f"{p}: cannot write the contact sheet")
     return p
 
@@ -236,13 +287,16 @@ def save_failure(
     refused for it, one colour per reason (a dot at the TCP and a line 30 mm back along the
     approach); ``located`` (a pose ``T_base_object``) adds the part the failed attempt went for,
     in black."""
-    pts = as_points(points, "points", min_points=1)
+    from .cell.records import Skipped
+
+    pts, box = _scene(points, bin_bounds, title)
+    model_pts = np.asarray(instance_of(model, Model, "model", "binpick.parts.tee()").points)
+    skipped = [instance_of(k, Skipped, f"skipped[{i}]", "a PickRecord's skipped") for i, k in enumerate(skipped)]
     plt = _pyplot()
     fig, (top, side) = plt.subplots(1, 2, figsize=(14, 6), gridspec_kw={"width_ratios": [3, 2]})
     shown = _thin(pts, _MAX_POINTS)
     for ax, (i, j) in ((top, (0, 1)), (side, (0, 2))):
         ax.scatter(shown[:, i], shown[:, j], c=shown[:, 2], s=0.5, cmap="viridis", linewidths=0, alpha=0.6)
-    model_pts = np.asarray(model.points)
     colors: dict[str, str] = {}
     notes = []
     parts: list = []
@@ -276,8 +330,8 @@ def save_failure(
                 ax.scatter(tcp[:, i], tcp[:, j], s=6, color=color)
     for why, color in colors.items():
         top.plot([], [], color=color, label=f"refused grasps: {why}")
-    if bin_bounds is not None:
-        (x0, y0, z0), (x1, y1, z1) = np.asarray(bin_bounds, dtype=float)
+    if box is not None:
+        (x0, y0, z0), (x1, y1, z1) = box
         top.plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], "k--", linewidth=0.8, label="bin")
         side.plot([x0, x0, x1, x1], [z1, z0, z0, z1], "k--", linewidth=0.8)
     for ax, ylabel, name in ((top, "y (mm)", "from above"), (side, "z (mm)", "from the side (−y)")):
@@ -285,7 +339,7 @@ def save_failure(
         ax.set_xlabel("x (mm)")
         ax.set_ylabel(ylabel)
         ax.set_title(name)
-    if colors or bin_bounds is not None:
+    if colors or box is not None:
         top.legend(loc="upper right", fontsize=7)
     if notes:
         fig.text(0.01, 0.01, "\n".join(notes[:8]), fontsize=8, va="bottom", family="monospace")

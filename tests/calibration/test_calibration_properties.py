@@ -1,6 +1,7 @@
 """Property tests of the calibration API over its argument space (issue 16 item 6): board points
-and poses, checkerboard detection, camera, hand-eye, laser-plane and projector calibration, and
-the calibration file's readers each end in a result or a BinpickError (TypeError for a wrong
+and poses, checkerboard detection, camera, hand-eye, laser-plane and projector calibration (with
+the laser's points on the board and the board's depth on the optical axis), and the calibration
+file's readers each end in a result or a BinpickError (TypeError for a wrong
 Python type), within seconds, and what they return is what they promise.
 
 What these tests found in calibration/* is pinned in FOUND (each case now refused with an
@@ -16,10 +17,11 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from _properties import PROPERTY, anything, finite, ints, outcome, reals, rigid, transforms, vectors
+from _properties import PROPERTY, anything, finite, ints, mostly, outcome, reals, rigid, transforms, vectors
 from binpick import errors
 from binpick.calibration import (
     CellCalibration,
+    axis_depth,
     board_object_points,
     board_pose,
     calibrate_camera,
@@ -27,11 +29,13 @@ from binpick.calibration import (
     calibrate_projector,
     find_checkerboard,
     fit_plane,
+    laser_points_on_board,
 )
 from binpick.camera import CameraIntrinsics
 from binpick.sim import render_checkerboard
 
 CAMERA = CameraIntrinsics.pinhole(160, 120, 200.0, 200.0, 79.5, 59.5)
+DISTORTED = CameraIntrinsics.pinhole(160, 120, 200.0, 200.0, 79.5, 59.5, dist=(-0.05, 0.02, 0.001, -0.001, 0.0))
 PATTERN = (4, 3)
 T_BOARD = rigid(0.15, (1, 0.5, 0), (-15.0, -10.0, 250.0))
 BOARD = render_checkerboard(CAMERA, T_BOARD, pattern=PATTERN, square=10.0, supersample=1)
@@ -168,6 +172,51 @@ def test_property_calibrate_projector(distances, angles):
     cal = outcome(lambda: calibrate_projector(distances, angles), "calibrate_projector")
     if cal is not None:
         assert math.isfinite(cal.p_x) and math.isfinite(cal.p_z)
+
+
+#: Boards in front of the camera (turned up to 60° about an axis across it, 150–400 mm away),
+#: three times in four; else one edge-on, one behind the camera, or any transform.
+boards = mostly(
+    st.builds(
+        lambda angle, axis, x, y, z: rigid(angle, axis, (x, y, z)),
+        st.floats(-1.0, 1.0),
+        st.sampled_from([(1.0, 0.0, 0.0), (0.3, 1.0, 0.0)]),
+        st.floats(-40.0, 40.0),
+        st.floats(-40.0, 40.0),
+        st.floats(150.0, 400.0),
+    ),
+    st.sampled_from([rigid(math.pi / 2, (1, 0, 0), (0, 0, 200)), rigid(0.0, (1, 0, 0), (0, 0, -200))]),
+    transforms,
+)
+
+
+@PROPERTY
+@given(T=boards)
+def test_property_axis_depth(T):
+    depth = outcome(lambda: axis_depth(T), "axis_depth")
+    if depth is not None:
+        n, t = np.asarray(T, dtype=float)[:3, 2], np.asarray(T, dtype=float)[:3, 3]
+        assert depth > 0 and abs(n @ (np.array([0.0, 0.0, depth]) - t)) < 1e-9 * max(1.0, depth)  # on the board
+
+
+board_pixels = mostly(
+    st.integers(0, 30).map(lambda n: np.random.default_rng(n).uniform((0, 0), (159, 119), (n, 2))),
+    st.sampled_from([np.zeros((3, 3)), np.full((2, 2), np.inf), np.array([[1e12, 0.0]])]),
+    anything,
+)
+
+
+@PROPERTY
+@given(px=board_pixels, camera=mostly(st.just(DISTORTED)), T=boards)
+def test_property_laser_points_on_board(px, camera, T):
+    pts = outcome(lambda: laser_points_on_board(px, camera, T), "laser_points_on_board")
+    if pts is not None:
+        T = np.asarray(T, dtype=float)
+        assert pts.shape == (len(px), 3) and finite(pts) and (pts[:, 2] > 0).all()
+        np.testing.assert_allclose((pts - T[:3, 3]) @ T[:3, 2], 0.0, atol=1e-9 * np.abs(pts).max(initial=1.0))
+        if len(pts):  # on the rays through the pixels: they project back onto them
+            uv, _ = cv2.projectPoints(pts.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), DISTORTED.K, DISTORTED.dist)
+            np.testing.assert_allclose(uv.reshape(-1, 2), px, atol=1e-6)
 
 
 GOOD_TOML = CellCalibration(

@@ -15,7 +15,7 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from .. import parts
-from .._validate import parse_toml, read_text_file
+from .._validate import instance_of, parse_toml, read_text_file
 from ..calibration import CellCalibration
 from ..devices import (
     AiMotor,
@@ -225,19 +225,20 @@ def cell_from_file(
         gripper = open_gripper(robot)
         opened.append(gripper.close_port)
         camera = open_camera()
-    except BaseException:
+        opened.append(camera.close)
+        return Cell(config, robot=robot, motor=motor, gripper=gripper, camera=camera, progress=progress)
+    except BaseException:  # nothing opened is left open
         for close in reversed(opened):
             try:
                 close()
             except (BinpickError, OSError):
                 pass
         raise
-    return Cell(config, robot=robot, motor=motor, gripper=gripper, camera=camera, progress=progress)
 
 
 def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig:
     """The :class:`CellConfig` of a cell file: part, calibration, bin, poses, tool and limits."""
-    f = cell_file
+    f = instance_of(cell_file, CellFile, "cell_file", "load_cell_file(path)")
     here = os.path.dirname(os.path.abspath(f.path))
     name = f.text("part", "model")
     model = (

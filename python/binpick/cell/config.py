@@ -15,7 +15,7 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from .._validate import as_box, as_transform, count, non_negative, number, positive
+from .._validate import as_box, as_transform, count, instance_of, non_negative, number, positive
 from ..calibration import CellCalibration
 from ..devices import safety
 from ..errors import InvalidInputError, SafetyError
@@ -316,7 +316,7 @@ def sweep_angles(
 def check_static_poses(config: CellConfig) -> None:
     """The scan and drop poses and the clearance height against the cell's limits (SafetyError);
     the cell checks them when it is built, before any byte is sent."""
-    lim = config.limits
+    lim = instance_of(config, CellConfig, "config", "CellConfig(...) or config_from_file(...)").limits
     named = [(f"scan_poses[{i}]", T) for i, T in enumerate(config.scan_poses)]
     named += [(f"look_again_poses[{i}]", T) for i, T in enumerate(config.look_again_poses)]
     for name, T in named:

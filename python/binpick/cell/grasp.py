@@ -18,9 +18,9 @@ from typing import TYPE_CHECKING, Any, Optional
 
 import numpy as np
 
-from .._validate import count, instance_of, non_negative, positive
+from .._validate import as_points, as_transform, count, instance_of, non_negative, positive
 from ..devices import safety
-from ..errors import BinpickError, InvalidInputError, SafetyError
+from ..errors import BinpickError, InvalidInputError, InvalidTypeError, SafetyError
 from ..models import Model
 from ..transforms import inverse, rotation_about, rotation_angle_deg
 from .records import PickPlan
@@ -74,6 +74,11 @@ def _keep_some(samples: dict[str, list], why: str, T_bg: np.ndarray) -> None:
         have.extend(T_bg[np.unique(np.linspace(0, len(T_bg) - 1, min(room, len(T_bg))).round().astype(int))])
 
 
+#: Most approach directions :func:`branch_grasps` takes around a branch: one every 0.1°, far finer
+#: than a gripper needs; each direction makes 20 grasps per branch.
+MAX_BRANCH_STEPS = 3600
+
+
 def branch_grasps(
     model: Model,
     *,
@@ -86,7 +91,8 @@ def branch_grasps(
     branch axis, ``finger_width_mm / 2 + 7`` mm in from the end face, the fingers closing across
     the axis, approached from ``steps`` directions around it, each also pitched by
     ``pitches_deg`` about the closing direction (the approach leaning along the branch), and each
-    turned half a turn about the approach axis (the same grip with the wrist the other way round);
+    turned half a turn about the approach axis (the same grip with the wrist the other way round;
+    ``steps`` at most :data:`MAX_BRANCH_STEPS`, each direction named by its angle to 0.001°);
     every grasp also comes raised by half of ``tip_depth_mm`` (how far the fingertips reach past
     the TCP) along the approach, the fingertips half as far past the axis — still past the
     cylinder's widest line, where parallel fingers touch it — for parts lying on the bin floor.
@@ -108,7 +114,7 @@ def branch_grasps(
         )
     half = positive(finger_width_mm, "finger_width_mm") / 2.0
     raises = (0.0, non_negative(tip_depth_mm, "tip_depth_mm", "mm") / 2.0)
-    n = count(steps, "steps", 1)
+    n = count(steps, "steps", 1, MAX_BRANCH_STEPS)
     pitches = [float(p) for p in pitches_deg]
     if not pitches or any(not -90.0 < p < 90.0 for p in pitches):
         raise InvalidInputError(f"pitches_deg: expected one or more angles in (-90, 90) degrees, got {pitches_deg!r}")
@@ -138,7 +144,7 @@ def branch_grasps(
         T_go[:, 3, 3] = 1.0
         for T, (k, pitch, flip, lift) in zip(T_go, combos):
             name = (
-                f"branch{i}/{round(360 * k / n)}°"
+                f"branch{i}/{round(360 * k / n, 3):g}°"
                 + (f"/pitch{pitch:+g}°" if pitch else "")
                 + ("/flipped" if flip else "")
                 + (f"/raised{lift:g}mm" if lift else "")
@@ -352,17 +358,19 @@ class GraspMatcher:
     def __init__(
         self, grasps: Any, symmetries: Sequence[Any] = (), *, tolerance_deg: float, tolerance_mm: float
     ) -> None:
-        values = list(grasps.values()) if isinstance(grasps, Mapping) else list(grasps)
-        stack = np.stack([np.asarray(T, dtype=np.float64) for T in values])
-        syms = np.stack([np.eye(4), *[np.asarray(S, dtype=np.float64) for S in symmetries]])
-        self._stack = np.einsum("gij,sjk->gsik", stack, syms)  # T_go · S for every grasp and symmetry
+        named = grasps.items() if isinstance(grasps, Mapping) else enumerate(grasps)
+        stack = [as_transform(T, f"grasps[{k!r:.40}]") for k, T in named]
+        if not stack:
+            raise InvalidInputError("grasps: no grasps to match against; declare at least one")
+        syms = [np.eye(4), *[as_transform(S, f"symmetries[{i}]") for i, S in enumerate(symmetries)]]
+        self._stack = np.einsum("gij,sjk->gsik", np.stack(stack), np.stack(syms))  # T_go · S for every pair
         self.tolerance_deg = positive(tolerance_deg, "tolerance_deg", "deg")
         self.tolerance_mm = positive(tolerance_mm, "tolerance_mm")
 
     def error(self, T_gripper_object: np.ndarray) -> tuple[float, float]:
         """(rotation error deg, translation error mm) against the nearest declared grasp."""
         B = self._stack
-        A = np.asarray(T_gripper_object, dtype=np.float64)
+        A = as_transform(T_gripper_object, "T_gripper_object")
         deg = rotation_angle_deg(np.einsum("gsji,jk->gsik", B[:, :, :3, :3], A[:3, :3]))  # angle of B_Rᵀ A_R
         mm = np.linalg.norm(B[:, :, :3, 3] - A[:3, 3], axis=-1)
         s = np.argmin(deg / 5.0 + mm / 3.0, axis=1)  # pose_error's choice of symmetry, per grasp
@@ -469,6 +477,39 @@ _BATCH = 32
 batches of 4, 8, 16, …: planning stops at the first usable one clear of the scene)."""
 
 
+#: The fields of a :class:`~binpick.cell.CellConfig` the planners read (config.py imports this
+#: module, so the class is recognised by its fields rather than imported).
+_PLANNER_FIELDS = (
+    "model",
+    "gripper",
+    "grasps",
+    "symmetries",
+    "limits",
+    "bin_bounds",
+    "drop_pose",
+    "approach_distance_mm",
+    "clearance_z_mm",
+    "floor_clearance_mm",
+    "max_collision_points",
+    "reachable",
+)
+
+
+def plan_inputs(
+    config: Any, T_base_object: Any, scene: Any, T_now: Any, now_name: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The planners' arguments checked before any planning: ``config`` a CellConfig
+    (InvalidTypeError otherwise), the part's pose and the arm's flange pose rigid 4×4 transforms
+    and the scan an (N, 3) finite cloud (InvalidInputError naming the argument otherwise)."""
+    if not all(hasattr(config, name) for name in _PLANNER_FIELDS):
+        raise InvalidTypeError(f"config: expected a binpick.cell.CellConfig, got {type(config).__name__}")
+    return (
+        as_transform(T_base_object, "T_base_object"),
+        as_points(scene, "scene", min_points=0),
+        as_transform(T_now, now_name),
+    )
+
+
 def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarray], bool]]:
     """For a pose the scan cannot settle, the test ``T_base_gripper → bool`` a grasp must pass
     (None when the pose is unambiguous and has no free axis):
@@ -573,6 +614,9 @@ def plan_grasp(
     (``T_base_gripper → bool``, see :func:`grasp_filter`) accepts — of those, the one with the
     fewest scene points inside its gripper, the most vertical among equals; with that number of
     points. NoGraspError when none is."""
+    T_base_object, scene, here = plan_inputs(config, T_base_object, scene, here, "here")
+    if accept is not None and not callable(accept):
+        raise InvalidTypeError(f"accept: expected a function T_base_gripper → bool, got {type(accept).__name__}")
     rejected = {"tilt": 0, "bin": 0, "ambiguous": 0, "collision": 0, "self-collision": 0, "reach": 0, "safety": 0}
     # The part's own points lie between the fingers and are not in the scene, but the gripper must
     # not run into its other branches either: those are checked against the model at the located
@@ -582,7 +626,7 @@ def plan_grasp(
     z_mid, radius = _occupied_sphere(config.gripper)
     centre = part.mean(axis=0)
     reach = abs(z_mid) + radius + float(np.linalg.norm(part - centre, axis=1).max())
-    scene = _near(np.asarray(scene, dtype=np.float64).reshape(-1, 3), centre, reach)
+    scene = _near(scene, centre, reach)
     samples: dict[str, list] = {}
     candidates = _candidates(config, T_base_object, rejected, samples)
     # The grasps with scene points inside the gripper (up to max_collision_points: stray points,

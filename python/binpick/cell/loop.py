@@ -41,7 +41,7 @@ from ..devices import safety
 from ..devices.gripper import Gripper
 from ..devices.motor import LaserMotor
 from ..devices.robot import Robot
-from ..errors import BinpickError, DeviceError, InvalidInputError, NoObjectFound, SafetyError
+from ..errors import BinpickError, DeviceError, InvalidInputError, InvalidTypeError, NoObjectFound, SafetyError
 from ..poses import estimate_poses
 from ..vision import extract_line, triangulate
 from .config import CellConfig, check_static_poses
@@ -143,6 +143,8 @@ class Cell:
             raise InvalidInputError(f"config: expected a CellConfig, got {type(config).__name__}")
         if not isinstance(camera, FrameSource):
             raise InvalidInputError(f"camera: expected a binpick.cell.FrameSource, got {type(camera).__name__}")
+        if progress is not None and not callable(progress):
+            raise InvalidTypeError(f"progress: expected a function (stage, message), got {type(progress).__name__}")
         if robot.limits is not None and robot.limits != config.limits:
             raise InvalidInputError(
                 "robot: the driver's CellLimits differ from config.limits; open the robot with limits=config.limits"

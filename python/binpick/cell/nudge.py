@@ -36,7 +36,7 @@ from ..devices import safety
 from ..errors import BinpickError, SafetyError
 from ..transforms import inverse, look_down
 from .config import CellConfig
-from .grasp import bin_clash
+from .grasp import bin_clash, plan_inputs
 
 __all__ = ["NudgePlan", "NudgeRefused", "plan_nudge", "check_nudge", "nudge_directions"]
 
@@ -170,8 +170,7 @@ def plan_nudge(config: CellConfig, T_base_object: Any, scene: Any, T_now: Any) -
     """The first nudge of the located part ``T_base_object`` that passes :func:`check_nudge`,
     over :func:`nudge_directions`; NudgeRefused (nothing sent) when none does. ``scene``: the
     scan's points (base frame); ``T_now``: the arm's flange pose now."""
-    T = np.asarray(T_base_object, dtype=np.float64)
-    pts = np.asarray(scene, dtype=np.float64)
+    T, pts, T_now = plan_inputs(config, T_base_object, scene, T_now, "T_now")
     model = config.model
     verts = np.asarray(model.vertices) @ T[:3, :3].T + T[:3, 3]
     floor = float(config.bin_bounds[0][2])

@@ -53,7 +53,7 @@ from typing import Any, Callable, Optional, Union
 import numpy as np
 import serial
 
-from .._validate import check_int, check_number
+from .._validate import check_int, check_number, flag
 from ..errors import (
     DeviceError,
     DeviceFault,
@@ -549,10 +549,11 @@ class MelfaRobot(Robot):
         move from the current pose is checked against the approach rules. ``flags`` default to
         the arm's current posture flags. With ``wait`` the call returns when the arm has arrived.
         """
+        linear, wait = flag(linear, "linear"), flag(wait, "wait")
         target = check_pose(T_base_flange, self.limits)
         start_xyzabc, start_flags = self.read_xyzabc()
         check_move(transform_from_xyzabc(start_xyzabc), target, linear=linear, limits=self.limits)
-        self._execute(target, linear, flags or start_flags, wait)
+        self._execute(target, linear, start_flags if flags is None else flags, wait)
 
     def move_sequence(self, targets: Sequence[Any], *, linear: Union[bool, Sequence[bool]] = False) -> None:
         """Moves through ``targets`` in order, each step waited for.
@@ -561,7 +562,10 @@ class MelfaRobot(Robot):
         the arm is stopped, later steps are not sent, and the failure is raised naming the step.
         """
         targets = list(targets)
-        lin = [bool(linear)] * len(targets) if isinstance(linear, (bool, np.bool_)) else list(linear)
+        if isinstance(linear, (list, tuple, np.ndarray)):
+            lin = [flag(v, f"linear[{i}]") for i, v in enumerate(linear)]
+        else:
+            lin = [flag(linear, "linear")] * len(targets)
         for i, T in enumerate(targets):
             check_pose(T, self.limits, name=f"targets[{i}]")
         start_xyzabc, flags = self.read_xyzabc()

@@ -13,7 +13,7 @@ import time
 from dataclasses import dataclass
 from typing import Any, Optional
 
-from .._validate import check_number
+from .._validate import check_number, flag
 from ..errors import DeviceTimeout, InvalidInputError, SafetyError
 from ._link import SerialLink
 
@@ -104,7 +104,7 @@ class LaserMotor(abc.ABC):
 
         SafetyError, with nothing sent, when the angle is outside ``range``.
         """
-        a = check_number(angle_rad, "angle_rad", unit="rad")
+        a, wait = check_number(angle_rad, "angle_rad", unit="rad"), flag(wait, "wait")
         r = self.range
         if not r.min_angle_rad <= a <= r.max_angle_rad:
             raise SafetyError(

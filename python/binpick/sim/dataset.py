@@ -9,7 +9,7 @@ from typing import Optional
 
 import numpy as np
 
-from .._validate import MAX_IMAGE_SIDE, count, instance_of, non_negative, thread_count
+from .._validate import MAX_IMAGE_SIDE, MAX_SHEET_TILES, count, instance_of, non_negative, thread_count
 from ..errors import FileWriteError, InvalidInputError
 from ..models import Model
 from ..transforms import MAX_SWEEP_FRAMES
@@ -79,10 +79,6 @@ def simulate_scan(
     )
 
 
-#: Most tiles (and columns) of a contact sheet.
-MAX_SHEET_TILES = 1000
-
-
 def contact_sheet(frames: np.ndarray, *, picks: int = 6, columns: int = 3, width: int = 1200) -> np.ndarray:
     """A BGR image tiling ``picks`` evenly chosen RGB frames, each labelled with its index."""
     import cv2
@@ -115,6 +111,7 @@ def write_scan(scan: SimulatedScan, directory: str | os.PathLike[str]) -> Path:
 
     from ..scan import save_scan
 
+    instance_of(scan, SimulatedScan, "scan", "binpick.sim.simulate_scan(model)")
     root = save_scan(
         directory,
         [np.ascontiguousarray(f[:, :, ::-1]) for f in scan.frames],

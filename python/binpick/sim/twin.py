@@ -77,8 +77,7 @@ SIM_ARM = _sim_arm()
 def sim_limits(layout: Any = None, gripper: Optional[GripperGeometry] = None) -> safety.CellLimits:
     """The simulated cell's motion limits: a workspace around the bin and the drop area, and an
     approach height that keeps the gripper above the bin's rim for joint moves."""
-    layout = layout if layout is not None else Layout()
-    gripper = gripper or GripperGeometry()
+    layout, gripper = _layout_and_gripper(layout, gripper)
     lo, hi = layout.bin.bounds
     reach = float(gripper.T_flange_gripper[2, 3]) + gripper.tip_depth_mm
     return safety.CellLimits(
@@ -86,6 +85,15 @@ def sim_limits(layout: Any = None, gripper: Optional[GripperGeometry] = None) ->
         workspace_max_mm=(float(hi[0]) + 100.0, float(hi[1]) + 250.0, float(layout.T_base_flange[2, 3]) + 80.0),
         approach_height_mm=float(hi[2]) + reach + 30.0,
         max_lateral_below_mm=40.0,
+    )
+
+
+def _layout_and_gripper(layout: Any, gripper: Any) -> tuple[Layout, GripperGeometry]:
+    """The simulated hardware and the gripper, each its default when None (InvalidTypeError naming it
+    when it is not one)."""
+    return (
+        instance_of(Layout() if layout is None else layout, Layout, "layout", "binpick.sim.Cell()"),
+        instance_of(GripperGeometry() if gripper is None else gripper, GripperGeometry, "gripper", "GripperGeometry()"),
     )
 
 
@@ -150,13 +158,10 @@ class TwinWorld:
     ) -> None:
         if not isinstance(model, Model):
             raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}")
-        self.layout = instance_of(Layout() if layout is None else layout, Layout, "layout", "binpick.sim.Cell()")
+        self.layout, self.gripper_geometry = _layout_and_gripper(layout, gripper)
         self.model = model
         self.seed = _validate.count(seed, "seed")
         self.num_threads = thread_count(num_threads)
-        self.gripper_geometry = instance_of(
-            GripperGeometry() if gripper is None else gripper, GripperGeometry, "gripper", "GripperGeometry()"
-        )
         self.grip_tolerance_mm = positive(grip_tolerance_mm, "grip_tolerance_mm")
         self.grip_tolerance_deg = positive(grip_tolerance_deg, "grip_tolerance_deg", "deg")
         self.speed_scale = positive(speed_scale, "speed_scale", "")

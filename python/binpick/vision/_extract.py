@@ -8,7 +8,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .._validate import as_image, count, number, positive
+from .._validate import as_image, choice, count, number, positive
 from ..errors import InvalidInputError
 
 __all__ = ["extract_line", "laser_mask", "red_excess"]
@@ -44,12 +44,6 @@ def _threshold(value: Any) -> float:
     return t
 
 
-def _choose(name: str, value: Any, allowed: tuple[str, ...]) -> str:
-    if value not in allowed:
-        raise InvalidInputError(f"{name}: {value!r} is not one of {', '.join(repr(a) for a in allowed)}")
-    return value
-
-
 def _running_median(x: np.ndarray, half: int) -> np.ndarray:
     padded = np.pad(x, half, mode="edge")
     return np.median(np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1), axis=1)
@@ -82,8 +76,8 @@ def extract_line(
     """
     t = _threshold(threshold)
     window = count(window, "window", 1, 50)
-    _choose("method", method, _METHODS)
-    _choose("direction", direction, _DIRECTIONS)
+    choice(method, "method", _METHODS)
+    choice(direction, "direction", _DIRECTIONS)
     if max_jump is not None:
         max_jump = positive(max_jump, "max_jump", "pixels")
     signal = red_excess(image)

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _core
-from .._validate import as_angles, as_float_array, as_points, as_transform, check_finite, thread_count
+from .._validate import as_angles, as_float_array, as_points, as_transform, check_finite, choice, thread_count
 from ..calibration._file import CellCalibration
 from ..camera import CameraIntrinsics, camera_args
 from ..errors import InvalidInputError, ShapeError, SingularGeometryError
@@ -82,8 +82,7 @@ def triangulate(
     """
     if not isinstance(calibration, CellCalibration):
         raise InvalidInputError(f"calibration: expected a CellCalibration, got {type(calibration).__name__}")
-    if on_singular not in ("drop", "raise"):
-        raise InvalidInputError(f"on_singular: {on_singular!r} is not 'drop' or 'raise'")
+    choice(on_singular, "on_singular", ("drop", "raise"))
     threads = thread_count(num_threads)
     # NaN and pixels outside the image are named by the core's checks (NonFiniteError, InvalidInputError).
     px = as_float_array(pixels, "pixels")
