@@ -163,18 +163,20 @@ def emulate_main(argv: Optional[list[str]] = None) -> int:
         print(f"binpick emulate: {exc}", file=sys.stderr)
         return 2
     _take_signals()
-    with emulator:
-        print(emulator.slave_path, flush=True)
-        print(
-            f"binpick emulate: {args.device} emulator serving on {emulator.slave_path}; press Ctrl-C to stop",
-            file=sys.stderr,
-            flush=True,
-        )
-        try:
+    # Ctrl-C may come as soon as the path is out (a driver is quick), even before the serving
+    # loop is entered, or while the emulator closes: each is a clean stop.
+    try:
+        with emulator:
+            print(emulator.slave_path, flush=True)
+            print(
+                f"binpick emulate: {args.device} emulator serving on {emulator.slave_path}; press Ctrl-C to stop",
+                file=sys.stderr,
+                flush=True,
+            )
             while not emulator.port_closed:
                 time.sleep(0.1)
-        except KeyboardInterrupt:
-            pass
+    except KeyboardInterrupt:
+        pass
     return 0
 
 
