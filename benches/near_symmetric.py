@@ -25,7 +25,8 @@ where the feature is in view; where it is not, the share flagged ``ambiguous``; 
 (not pick-grade, not flagged, and no ``alternatives`` pick-grade to the truth); no pose; median
 and max time per ``estimate_pose`` call (one thread). Then the reliability table of
 ``confidence`` over all poses, and scenes without the part (uniform noise, the empty bin with and
-without ``bin=``, a pile of another part) for every method, each of which must raise
+without ``bin=``, a pile of another part, and the elbow — a tee without half its run — on the pile
+of tees) for every method, each of which must raise
 ``NoObjectFound``. ``confidence``, ``ambiguous`` and ``alternatives`` are read with ``getattr``
 and reported as n/a where the installed binpick has no such field.
 
@@ -347,10 +348,14 @@ def run_negatives(names: list[str], frames: int) -> list[dict]:
     rows = []
     models = {n: parts.NEAR_SYMMETRIC[n]() for n in names}
     models["tee"] = binpick.parts.tee()
+    # An elbow is a tee without half its run: asked on the pile of tees it is the hardest case.
+    models["elbow"] = binpick.parts.elbow()
     for scene, pts, box, pile_of in negative_scenes(frames):
         for name, model in models.items():
             if pile_of and (pile_of == "tee") == (name == "tee"):
                 continue  # the tee is asked for on a pile of shafts, the other parts on a pile of tees
+            if name == "elbow" and pile_of != "tee":
+                continue  # the elbow only where it is a piece of another part
             methods = ["auto", "ppf"] + (["ccp", "centroid"] if model.branches else [])
             for method in methods:
                 start = time.perf_counter()
