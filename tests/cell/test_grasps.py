@@ -60,3 +60,35 @@ def test_vectorised_grasp_matching_equals_pose_error_over_every_grasp(tee):
         T[:3, 3] += rng.normal(size=3) * (3.0 if k < 30 else 30.0)
         expected = min((pose_error(T, G, (S,)) for G in values), key=lambda e: e[0] / 12.0 + e[1] / 6.0)
         assert matcher.error(T) == pytest.approx(expected, abs=1e-6)
+
+
+def test_the_matcher_allows_any_turn_about_a_continuous_symmetry_axis():
+    # A shaft's pose about its own axis is arbitrary: a grip of the shaft turned by any angle about
+    # its axis (through a centre off the object origin) is the same grip, and the matcher finds the
+    # turn in closed form; a turn about another axis or a shift along the axis is still an error.
+    rng = np.random.default_rng(3)
+    centre, axis = np.array([2.0, -1.0, 5.0]), np.array([0.0, 0.0, 1.0])
+    grasps = []
+    for _ in range(5):
+        G = np.eye(4)
+        G[:3, :3] = rotation_about(rng.normal(size=3), rng.uniform(0.0, math.pi))
+        G[:3, 3] = rng.normal(size=3) * 20.0
+        grasps.append(G)
+    plain = GraspMatcher(grasps, tolerance_deg=12.0, tolerance_mm=6.0)
+    shaft = GraspMatcher(grasps, tolerance_deg=12.0, tolerance_mm=6.0, continuous=(centre, axis * 3.0))
+    for angle in (0.3, 1.7, -2.9):
+        turn = np.eye(4)
+        turn[:3, :3] = rotation_about(axis, angle)
+        turn[:3, 3] = centre - turn[:3, :3] @ centre
+        T = grasps[2] @ turn
+        deg, mm = shaft.error(T)
+        assert deg < 1e-6 and mm < 1e-6
+        assert plain.error(T)[0] > 15.0
+        tipped = T.copy()
+        tipped[:3, :3] = T[:3, :3] @ rotation_about(np.array([1.0, 0.0, 0.0]), math.radians(20.0))
+        assert shaft.error(tipped)[0] == pytest.approx(20.0, abs=1e-6)
+        slid = T.copy()
+        slid[:3, 3] += T[:3, :3] @ axis * 8.0
+        assert shaft.error(slid)[1] == pytest.approx(8.0, abs=1e-6)
+    with pytest.raises(binpick.InvalidInputError, match="continuous"):
+        GraspMatcher(grasps, tolerance_deg=12.0, tolerance_mm=6.0, continuous=(centre, np.zeros(3)))

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, Optional
 
 import numpy as np
 
-from .._validate import as_points, as_transform, count, instance_of, non_negative, positive
+from .._validate import as_points, as_transform, as_vector, count, instance_of, non_negative, positive
 from ..devices import safety
 from ..errors import BinpickError, InvalidInputError, InvalidTypeError, SafetyError
 from ..models import Model
@@ -41,6 +41,7 @@ __all__ = [
     "plan_grasp",
     "grasp_filter",
     "symmetry_maps",
+    "continuous_symmetry",
 ]
 
 Waypoint = tuple[str, np.ndarray, bool]
@@ -341,6 +342,17 @@ def symmetry_maps(symmetries: Any) -> tuple[np.ndarray, ...]:
     return tuple(S for S in maps if not np.allclose(S, np.eye(4)))
 
 
+def continuous_symmetry(symmetries: Any) -> Optional[tuple[np.ndarray, np.ndarray]]:
+    """A part's continuous symmetry (a :class:`binpick.models.Symmetries`) as (centre, unit axis)
+    in the object frame, for :class:`GraspMatcher`; None when it has none."""
+    from ..models import Symmetries
+
+    symmetries = instance_of(symmetries, Symmetries, "symmetries", "model.symmetries")
+    if symmetries.continuous_axis is None:
+        return None
+    return np.asarray(symmetries.center, dtype=np.float64), np.asarray(symmetries.continuous_axis, dtype=np.float64)
+
+
 class GraspMatcher:
     """Matches a part's pose in the gripper against every declared grasp at once.
 
@@ -353,10 +365,19 @@ class GraspMatcher:
         symmetries: ``T_object_object`` maps of the part onto itself (the identity is added).
         tolerance_deg: the grip tolerance in rotation, degrees …
         tolerance_mm: … and in translation, mm.
+        continuous: the part's continuous symmetry as (centre, axis) in the object frame (a
+            shaft turned about its axis is the same shaft), or None: every turn about it is
+            allowed too, the best one found in closed form per grasp and symmetry.
     """
 
     def __init__(
-        self, grasps: Any, symmetries: Sequence[Any] = (), *, tolerance_deg: float, tolerance_mm: float
+        self,
+        grasps: Any,
+        symmetries: Sequence[Any] = (),
+        *,
+        tolerance_deg: float,
+        tolerance_mm: float,
+        continuous: Optional[tuple[Any, Any]] = None,
     ) -> None:
         named = grasps.items() if isinstance(grasps, Mapping) else enumerate(grasps)
         stack = [as_transform(T, f"grasps[{k!r:.40}]") for k, T in named]
@@ -366,13 +387,38 @@ class GraspMatcher:
         self._stack = np.einsum("gij,sjk->gsik", np.stack(stack), np.stack(syms))  # T_go · S for every pair
         self.tolerance_deg = positive(tolerance_deg, "tolerance_deg", "deg")
         self.tolerance_mm = positive(tolerance_mm, "tolerance_mm")
+        self._axis: Optional[tuple[np.ndarray, np.ndarray]] = None
+        if continuous is not None:
+            centre = as_vector(continuous[0], "continuous centre", 3)
+            axis = as_vector(continuous[1], "continuous axis", 3)
+            norm = float(np.linalg.norm(axis))
+            if not norm > 1e-9:
+                raise InvalidInputError("continuous: the symmetry axis has no direction; pass a unit vector")
+            self._axis = (centre, axis / norm)
+
+    def _turned(self, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """For M = (B·S)_Rᵀ A_R per grasp and symmetry: the turn R_θ about the continuous axis that
+        brings B·S·R_θ nearest A in rotation (θ maximises tr(R_θᵀ M): closed form), and R_θ."""
+        _, a = self._axis
+        K = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+        along = np.einsum("i,...ij,j->...", a, M, a)
+        theta = np.arctan2(np.einsum("ij,...ij->...", K, M), np.trace(M, axis1=-2, axis2=-1) - along)
+        c, s = np.cos(theta)[..., None, None], np.sin(theta)[..., None, None]
+        R = c * np.eye(3) + s * K + (1.0 - c) * np.outer(a, a)
+        return np.einsum("...ji,...jk->...ik", R, M), R
 
     def error(self, T_gripper_object: np.ndarray) -> tuple[float, float]:
         """(rotation error deg, translation error mm) against the nearest declared grasp."""
         B = self._stack
         A = as_transform(T_gripper_object, "T_gripper_object")
-        deg = rotation_angle_deg(np.einsum("gsji,jk->gsik", B[:, :, :3, :3], A[:3, :3]))  # angle of B_Rᵀ A_R
-        mm = np.linalg.norm(B[:, :, :3, 3] - A[:3, 3], axis=-1)
+        M = np.einsum("gsji,jk->gsik", B[:, :, :3, :3], A[:3, :3])  # B_Rᵀ A_R
+        t = B[:, :, :3, 3]
+        if self._axis is not None:
+            M, R = self._turned(M)
+            c = self._axis[0]
+            t = t + np.einsum("gsij,gsj->gsi", B[:, :, :3, :3], c - np.einsum("gsij,j->gsi", R, c))
+        deg = rotation_angle_deg(M)
+        mm = np.linalg.norm(t - A[:3, 3], axis=-1)
         s = np.argmin(deg / 5.0 + mm / 3.0, axis=1)  # pose_error's choice of symmetry, per grasp
         g_idx = np.arange(len(B))
         deg, mm = deg[g_idx, s], mm[g_idx, s]
@@ -529,6 +575,7 @@ def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarr
             config.symmetries,
             tolerance_deg=config.ambiguity_tolerance_deg,
             tolerance_mm=config.ambiguity_tolerance_mm,
+            continuous=continuous_symmetry(config.model.symmetries),
         )
         alternatives = [np.asarray(a.T_scene_model, dtype=np.float64) for a in result.alternatives]
         tests.append(lambda T_bg: all(matcher.within(matcher.error(inverse(T_bg) @ T_a)) for T_a in alternatives))

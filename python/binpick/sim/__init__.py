@@ -23,7 +23,7 @@ from .cell import Bin, Camera, Cell, Laser, Lighting, SensorNoise, look_down, ro
 from .dataset import GLOSSY_PART_SPECULAR, SimulatedScan, contact_sheet, simulate_scan, write_scan
 from .pile import Pile, PushReport, SettleReport, convex_decomposition, max_interpenetration
 from .render import BIN_ID, NO_SURFACE, TABLE_ID, View, World, render_checkerboard
-from .twin import SIM_ARM, SimulatedCell, TwinWorld, sim_limits, simulated_cell
+from .twin import SIM_ARM, SimulatedCell, TwinWorld, sim_arm, sim_limits, simulated_cell
 
 __all__ = [
     "BIN_ID",
@@ -36,6 +36,7 @@ __all__ = [
     "NO_SURFACE",
     "RenderedCamera",
     "SIM_ARM",
+    "sim_arm",
     "SimCamera",
     "SimulatedCell",
     "Pile",

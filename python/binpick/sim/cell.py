@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Optional
+from typing import Any, Optional
 
 import numpy as np
 
@@ -144,6 +144,11 @@ class SensorNoise:
         )
 
 
+#: A part fits the default cell when its longest side is at most this share of the bin's inner
+#: length (the paper's tee, elbow and cross, and parts up to 200 mm); larger parts get a larger cell.
+PART_TO_BIN = 2.0 / 3.0
+
+
 @dataclass(frozen=True)
 class Bin:
     """An open box on the floor: inner ``size`` (x, y, height) mm, inner floor centre ``center``
@@ -249,6 +254,61 @@ class Cell:
             T_camera_laser=self.laser.T_camera_laser0,
             T_flange_camera=self.T_flange_camera,
         )
+
+    @classmethod
+    def for_part(cls, model: Any) -> Cell:
+        """The simulated cell for piles of ``model``: the paper's cell (the defaults) when the
+        part's longest side is at most :data:`PART_TO_BIN` of the default bin's inner length;
+        otherwise the same cell grown to the part, as an integrator would build it for large parts:
+
+        - the bin's inner size scaled by s = longest side / (PART_TO_BIN × 300 mm), its near wall
+          (toward the robot) where the default's is, centred on y = 0;
+        - the scan pose over the bin's centre, raised by the extra depth, so the camera stays as
+          far above the rim as in the default cell;
+        - a shorter lens (focal lengths scaled down, the same sensor) whose view holds the whole
+          bin at its rim, with 5 % to spare.
+
+        The laser, lighting, noise and hand-eye stay the default's; the calibration board moves
+        aside with the view, out of it as in the default cell.
+        The arm that reaches such a bin is :func:`binpick.sim.sim_arm`."""
+        from ..models import Model
+
+        instance_of(model, Model, "model", "binpick.parts.tee()")
+        default = cls()
+        extent = np.ptp(np.asarray(model.vertices, dtype=np.float64), axis=0)
+        size = np.array(default.bin.size)
+        scale = float(extent.max()) / (PART_TO_BIN * size[0])
+        if scale <= 1.0:
+            return default
+        size = size * scale
+        near = default.bin.bounds[0][0]
+        b = Bin(size=tuple(size), center=(float(near + size[0] / 2), 0.0), floor_z=default.bin.floor_z)
+        lift = float(size[2] - default.bin.size[2])
+        T_flange = default.T_base_flange.copy()
+        T_flange[:2, 3] = b.center
+        T_flange[2, 3] += lift
+        # The camera's height above the rim, and the focal length at which the rim's half-extent
+        # fills 95 % of the sensor's half-width (x) and half-height (y).
+        cam = default.camera
+        above_rim = float((T_flange @ default.T_flange_camera)[2, 3] - b.bounds[1][2])
+        f = min(
+            0.95 * cam.cx * above_rim / (size[0] / 2),
+            0.95 * cam.cy * above_rim / (size[1] / 2),
+            cam.fx,
+        )
+        camera = Camera(cam.width, cam.height, f, f * cam.fy / cam.fx, cam.cx, cam.cy, tuple(cam.dist))
+        # The board moves out along −y by as much as the view grew at the table, so that it stays
+        # out of the scan pose's view (as in the default cell), where rendering it would only cost.
+        board = default.board
+        table = float(board.T_base_board[2, 3])
+        half_view = [
+            c.cy / c.fy * float((T @ default.T_flange_camera)[2, 3] - table)
+            for c, T in ((cam, default.T_base_flange), (camera, T_flange))
+        ]
+        T_board = board.T_base_board.copy()
+        T_board[1, 3] -= half_view[1] - half_view[0]
+        moved = CalibrationBoard(board.pattern, board.square, board.margin, T_board)
+        return cls(camera=camera, bin=b, T_base_flange=T_flange, board=moved)
 
     def sweep(self, frames: int = 90, margin: float = 10.0) -> np.ndarray:
         """``frames`` motor angles (rad), evenly spaced, whose laser sheets cover the bin's inner

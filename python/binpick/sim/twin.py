@@ -25,7 +25,7 @@ import numpy as np
 from .. import _validate, parts
 from .._validate import instance_of, positive, thread_count
 from ..cell.config import CellConfig, GripperGeometry
-from ..cell.grasp import GraspMatcher, grip_width, symmetry_maps
+from ..cell.grasp import GraspMatcher, continuous_symmetry, grip_width, symmetry_maps
 from ..cell.loop import Cell, quiet
 from ..cell.records import PoseTruth
 from ..devices import (
@@ -54,24 +54,51 @@ CLOSED_OPENING_MM = 10.0
 #: Fastest sweep the physics is asked to run, mm/s: faster motions are pushed at this speed.
 MAX_SWEEP_SPEED = 1000.0
 
-__all__ = ["TwinWorld", "SimulatedCell", "simulated_cell", "sim_limits", "SIM_ARM"]
+__all__ = ["TwinWorld", "SimulatedCell", "simulated_cell", "sim_limits", "sim_arm", "SIM_ARM"]
 
 
-def _sim_arm() -> ArmModel:
+def _sim_arm(scale: float = 1.0) -> ArmModel:
     # A larger arm than the emulator's default RV-1A class, so that the simulated cell's scan pose
-    # 620 mm above the bin floor and every corner of the bin are within reach.
+    # 620 mm above the bin floor and every corner of the bin are within reach; ``scale`` grows its
+    # links (and workspace) for the larger cells of large parts.
     return ArmModel(
         base_height_mm=250.0,
-        upper_arm_mm=400.0,
-        forearm_mm=450.0,
+        upper_arm_mm=400.0 * scale,
+        forearm_mm=450.0 * scale,
         flange_mm=90.0,
-        workspace_min_mm=(-900.0, -900.0, -200.0),
-        workspace_max_mm=(900.0, 900.0, 1100.0),
+        workspace_min_mm=(-900.0 * scale, -900.0 * scale, -200.0),
+        workspace_max_mm=(900.0 * scale, 900.0 * scale, 1100.0 * scale),
     )
 
 
 SIM_ARM = _sim_arm()
 """The simulated cell's arm (see :class:`binpick.devices.emulators.ArmModel`)."""
+
+#: Arm sizes tried by :func:`sim_arm`: the links of :data:`SIM_ARM` scaled by these factors.
+_ARM_SCALES = (1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0)
+
+
+def sim_arm(layout: Any = None, gripper: Optional[GripperGeometry] = None) -> ArmModel:
+    """The arm of a simulated cell: :data:`SIM_ARM` when it reaches the layout's scan pose and,
+    tool straight down, every point of the bin (a grid 30 mm in from the walls, with the fingertips
+    20 mm above the floor, at the approach height above the rim, and at the scan height); else the
+    smallest arm with its links (not its base height) scaled by 1.25, 1.5, … that does — the
+    larger robot a cell for large parts has. InvalidInputError when none up to 3× does."""
+    layout, gripper = _layout_and_gripper(layout, gripper)
+    lo, hi = layout.bin.bounds
+    reach = float(gripper.T_flange_gripper[2, 3]) + gripper.tip_depth_mm
+    xs = np.linspace(lo[0] + 30.0, hi[0] - 30.0, 7)
+    ys = np.linspace(lo[1] + 30.0, hi[1] - 30.0, 5)
+    zs = (float(lo[2]) + reach + 20.0, float(hi[2]) + reach + 30.0, float(layout.T_base_flange[2, 3]))
+    poses = [layout.T_base_flange] + [look_down(x, y, z) for x in xs for y in ys for z in zs]
+    for k in _ARM_SCALES:
+        arm = SIM_ARM if k == 1.0 else _sim_arm(k)
+        if all(_Reach(arm)(T) for T in poses):
+            return arm
+    raise InvalidInputError(
+        f"layout: no simulated arm up to {_ARM_SCALES[-1]:g}× the default reaches the whole bin "
+        f"{np.round(lo, 1).tolist()}..{np.round(hi, 1).tolist()} mm; use a smaller bin or place it nearer the robot"
+    )
 
 
 def sim_limits(layout: Any = None, gripper: Optional[GripperGeometry] = None) -> safety.CellLimits:
@@ -158,7 +185,10 @@ class TwinWorld:
     ) -> None:
         if not isinstance(model, Model):
             raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}")
+        if layout is None:
+            layout = Layout.for_part(model)
         self.layout, self.gripper_geometry = _layout_and_gripper(layout, gripper)
+        self.arm = sim_arm(self.layout, self.gripper_geometry)
         self.model = model
         self.seed = _validate.count(seed, "seed")
         self.num_threads = thread_count(num_threads)
@@ -171,8 +201,10 @@ class TwinWorld:
         self.limits = config_overrides.pop("limits", None) or sim_limits(self.layout, self.gripper_geometry)
         self.config_overrides = config_overrides
         lo, hi = self.layout.bin.bounds
+        # Beside the bin, 350 mm up (higher when the approach height of a deep bin asks for it).
+        drop_z = max(350.0, float(self.limits.approach_height_mm) + 20.0)
         self.drop_pose = (
-            drop_pose if drop_pose is not None else look_down(float(lo[0] + hi[0]) / 2, float(lo[1]) - 150.0, 350.0)
+            drop_pose if drop_pose is not None else look_down(float(lo[0] + hi[0]) / 2, float(lo[1]) - 150.0, drop_z)
         )
         self.lock = threading.RLock()
         t0 = time.perf_counter()
@@ -211,7 +243,7 @@ class TwinWorld:
 
     def _start_emulators(self) -> None:
         self.robot_emulator = RobotEmulator(
-            config=RobotEmulatorConfig(arm=SIM_ARM, speed_scale=self.speed_scale)
+            config=RobotEmulatorConfig(arm=self.arm, speed_scale=self.speed_scale)
         ).start()
         self.robot_emulator.on_motion = self._on_motion
         self.motor_emulator = DynamixelEmulator().start()
@@ -241,7 +273,7 @@ class TwinWorld:
             frames=self.frames,
             gripper=self.gripper_geometry,
             limits=limits,
-            reachable=_Reach(SIM_ARM),
+            reachable=_Reach(self.arm),
             num_threads=self.num_threads,
             **overrides,
         )
@@ -282,7 +314,11 @@ class TwinWorld:
         if self._matcher is None:
             cfg = self.config
             self._matcher = GraspMatcher(
-                cfg.grasps, cfg.symmetries, tolerance_deg=self.grip_tolerance_deg, tolerance_mm=self.grip_tolerance_mm
+                cfg.grasps,
+                cfg.symmetries,
+                tolerance_deg=self.grip_tolerance_deg,
+                tolerance_mm=self.grip_tolerance_mm,
+                continuous=continuous_symmetry(self.model.symmetries),
             )
         return self._matcher
 
