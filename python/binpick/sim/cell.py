@@ -14,7 +14,7 @@ white border, on a 3 mm plate) lies face up on the table beside the bin, its cen
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Optional
 
 import numpy as np
@@ -307,8 +307,7 @@ class Cell:
         ]
         T_board = board.T_base_board.copy()
         T_board[1, 3] -= half_view[1] - half_view[0]
-        moved = CalibrationBoard(board.pattern, board.square, board.margin, T_board)
-        return cls(camera=camera, bin=b, T_base_flange=T_flange, board=moved)
+        return cls(camera=camera, bin=b, T_base_flange=T_flange, board=replace(board, T_base_board=T_board))
 
     def sweep(self, frames: int = 90, margin: float = 10.0) -> np.ndarray:
         """``frames`` motor angles (rad), evenly spaced, whose laser sheets cover the bin's inner
