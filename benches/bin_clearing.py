@@ -40,13 +40,14 @@ def _parts(quick: bool) -> list:
     return parts
 
 
-def _lowest_above_floor(gripper, floor: float, poses) -> float:
-    """The lowest point of the gripper's outline over the flange poses ``poses``, above the floor (mm)."""
+def _lowest_above_floor(gripper, floor: float, poses, opening=None) -> float:
+    """The lowest point of the gripper's outline, its fingers ``opening`` apart (fully open by
+    default), over the flange poses ``poses``, above the floor (mm)."""
     return (
         min(
             float(
                 (
-                    (gripper.outline() @ (T @ gripper.T_flange_gripper)[:3, :3].T)
+                    (gripper.outline(opening) @ (T @ gripper.T_flange_gripper)[:3, :3].T)
                     + (T @ gripper.T_flange_gripper)[:3, 3]
                 )[:, 2].min()
             )
@@ -66,7 +67,10 @@ def _floor_gap(sim) -> list:
         moves = check(plan)
         gaps.append(
             _lowest_above_floor(
-                gripper, floor, [T for name, (T, _) in moves.items() if name in ("approach", "grasp", "lift")]
+                gripper,
+                floor,
+                [T for name, (T, _) in moves.items() if name in ("approach", "grasp", "lift")],
+                cell.finger_opening(plan),
             )
         )
         return moves

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from types import MappingProxyType
 from typing import Any, Callable, Optional
 
@@ -21,7 +22,7 @@ from ..devices import safety
 from ..errors import InvalidInputError, SafetyError
 from ..models import Model
 from ..transforms import laser_sweep, rotation_about, translation
-from .grasp import branch_grasps, mesh_grasps
+from .grasp import branch_grasps, grasp_openings, mesh_grasps
 from .views import turned_scan_poses
 
 __all__ = ["CellConfig", "GripperGeometry", "check_static_poses", "sweep_angles", "turned_scan_poses"]
@@ -41,6 +42,11 @@ class GripperGeometry:
         tip_depth_mm: how far the fingertips reach past the TCP along +z, mm.
         body_radius_mm: radius of the gripper body above the fingers (a cylinder about z), mm.
         body_length_mm: length of that body along z, mm.
+        preshape_clearance_mm: a gripper that can be set to a width (see
+            :attr:`binpick.devices.Gripper.sets_width`) opens each grasp only to the part's width
+            across the fingers plus this much on each side (at most ``open_width_mm``): narrow
+            fingers fit between parts packed together and stay off the floor where open ones would
+            not. None = always fully open. Planning checks the fingers at the opening they will have.
     """
 
     T_flange_gripper: np.ndarray = field(default_factory=lambda: translation(0.0, 0.0, 150.0))
@@ -51,6 +57,7 @@ class GripperGeometry:
     tip_depth_mm: float = 10.0
     body_radius_mm: float = 45.0
     body_length_mm: float = 60.0
+    preshape_clearance_mm: Optional[float] = 5.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "T_flange_gripper", as_transform(self.T_flange_gripper, "T_flange_gripper"))
@@ -64,13 +71,25 @@ class GripperGeometry:
         ):
             positive(getattr(self, name), name)
         non_negative(self.tip_depth_mm, "tip_depth_mm", "mm")
+        if self.preshape_clearance_mm is not None:
+            non_negative(self.preshape_clearance_mm, "preshape_clearance_mm", "mm")
 
-    def occupied(self, points_gripper: np.ndarray) -> np.ndarray:
-        """Which points (N, 3, in the gripper frame) lie inside the open gripper (fingers or body)."""
+    def opening_for(self, width_mm: Optional[float]) -> float:
+        """The finger opening (mm) for a grasp across a part ``width_mm`` wide (None: nothing
+        between the fingers): the width plus ``preshape_clearance_mm`` on each side, at most
+        ``open_width_mm``; ``open_width_mm`` when the gripper does not pre-shape."""
+        if self.preshape_clearance_mm is None or width_mm is None:
+            return float(self.open_width_mm)
+        return float(min(self.open_width_mm, width_mm + 2.0 * self.preshape_clearance_mm))
+
+    def occupied(self, points_gripper: np.ndarray, opening_mm: Any = None) -> np.ndarray:
+        """Which points (N, 3, in the gripper frame) lie inside the gripper (fingers or body), the
+        fingers ``opening_mm`` apart (a number, or one per point; ``open_width_mm`` by default)."""
         x, y, z = points_gripper.T
         top = self.tip_depth_mm - self.finger_length_mm
         in_z = (z <= self.tip_depth_mm) & (z >= top)
-        offset = self.open_width_mm / 2 + self.finger_thickness_mm / 2
+        gap = self.open_width_mm if opening_mm is None else np.asarray(opening_mm, dtype=np.float64)
+        offset = gap / 2 + self.finger_thickness_mm / 2
         finger = (
             in_z
             & (np.abs(y) <= self.finger_width_mm / 2)
@@ -89,21 +108,32 @@ class GripperGeometry:
         (a disc of the body's radius at the flange origin). Against a convex box such as the bin's
         inner volume, checking these points checks every finger, the palm and the flange whole."""
         gap = self.open_width_mm if opening_mm is None else positive(opening_mm, "opening_mm")
+        return self.outlines(np.array([gap]), sides=sides)[0]
+
+    def outlines(self, openings_mm: np.ndarray, *, sides: int = 16) -> np.ndarray:
+        """:meth:`outline` for each of the openings (K,), as (K, M, 3): the palm and flange
+        points are the same, the finger corners move out with the opening."""
+        gap = np.asarray(openings_mm, dtype=np.float64).reshape(-1)
         top = self.tip_depth_mm - self.finger_length_mm
         t, w = self.finger_thickness_mm, self.finger_width_mm / 2
-        corners = [
-            (sign * (gap / 2 + dx), dy, z)
-            for sign in (-1.0, 1.0)
-            for dx in (0.0, t)
-            for dy in (-w, w)
-            for z in (top, self.tip_depth_mm)
-        ]
+        # The finger corners at zero opening, and the side (±1) each moves out to.
+        corners = np.array(
+            [
+                (sign * dx, dy, z, sign)
+                for sign in (-1.0, 1.0)
+                for dx in (0.0, t)
+                for dy in (-w, w)
+                for z in (top, self.tip_depth_mm)
+            ]
+        )
+        fingers = np.broadcast_to(corners[:, :3], (len(gap), len(corners), 3)).copy()
+        fingers[..., 0] += corners[:, 3] * gap[:, None] / 2
         a = np.linspace(0.0, 2 * np.pi, sides, endpoint=False)
         ring = np.column_stack([np.cos(a), np.sin(a), np.zeros_like(a)]) * self.body_radius_mm
         palm = [ring + (0.0, 0.0, z) for z in (top, top - self.body_length_mm)]
         T_gf = np.linalg.inv(self.T_flange_gripper)
-        flange = ring @ T_gf[:3, :3].T + T_gf[:3, 3]
-        return np.vstack([np.array(corners), *palm, flange])
+        rest = np.vstack([*palm, ring @ T_gf[:3, :3].T + T_gf[:3, 3]])
+        return np.concatenate([fingers, np.broadcast_to(rest, (len(gap), *rest.shape))], axis=1)
 
     def boxes(self, opening_mm: float) -> list[tuple[tuple[float, float, float], np.ndarray]]:
         """The gripper as boxes ``(half_extents, T_gripper_box)`` (gripper frame, mm) for a physics
@@ -286,6 +316,20 @@ class CellConfig:
                 self.model, finger_width_mm=self.gripper.finger_width_mm, tip_depth_mm=self.gripper.tip_depth_mm
             )
         return mesh_grasps(self.model, self.gripper)
+
+    def openings(self, names: Sequence[str]) -> np.ndarray:
+        """The finger opening (mm) of each named grasp, the one its plan is checked with and the
+        gripper opens to (:func:`~binpick.cell.grasp.grasp_openings`), NaN where the part does
+        not fit between the open fingers; each grasp measured on first use and remembered."""
+        known = self._openings
+        todo = [n for n in dict.fromkeys(names) if n not in known]
+        if todo:
+            known.update(grasp_openings(self.gripper, self.model, {n: self.grasps[n] for n in todo}))
+        return np.array([np.nan if known[n] is None else known[n] for n in names], dtype=np.float64)
+
+    @cached_property
+    def _openings(self) -> dict[str, Optional[float]]:
+        return {}
 
     def angles_for(self, i: int) -> np.ndarray:
         """The motor angles (rad) of scan pose ``i``."""

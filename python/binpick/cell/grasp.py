@@ -38,6 +38,7 @@ __all__ = [
     "points_in_gripper",
     "bin_clash",
     "grip_width",
+    "grasp_openings",
     "plan_grasp",
     "grasp_filter",
     "symmetry_maps",
@@ -256,8 +257,11 @@ def pick_waypoints(
     ]
 
 
-def points_in_gripper(gripper: GripperGeometry, points_base: np.ndarray, T_base_gripper: np.ndarray) -> int:
-    """How many of the points (N, 3, base frame) lie inside the open gripper at ``T_base_gripper``.
+def points_in_gripper(
+    gripper: GripperGeometry, points_base: np.ndarray, T_base_gripper: np.ndarray, opening_mm: Optional[float] = None
+) -> int:
+    """How many of the points (N, 3, base frame) lie inside the gripper at ``T_base_gripper``, its
+    fingers ``opening_mm`` apart (``open_width_mm`` by default).
 
     Only the points within the sphere about the fingers and body are tested piece by piece (one
     distance per point first), so that planning runs thousands of these against a full scan."""
@@ -265,7 +269,7 @@ def points_in_gripper(gripper: GripperGeometry, points_base: np.ndarray, T_base_
     z_mid, radius = _occupied_sphere(gripper)
     d = points_base - (t + z_mid * R[:, 2])
     near = points_base[np.einsum("ij,ij->i", d, d) <= radius * radius]
-    return int(gripper.occupied(near @ R - t @ R).sum())
+    return int(gripper.occupied(near @ R - t @ R, opening_mm).sum())
 
 
 def _occupied_sphere(gripper: GripperGeometry) -> tuple[float, float]:
@@ -279,17 +283,23 @@ def _occupied_sphere(gripper: GripperGeometry) -> tuple[float, float]:
 
 
 def bin_clash(
-    gripper: GripperGeometry, T_base_flange: np.ndarray, bin_bounds: np.ndarray, *, floor_clearance_mm: float = 0.0
+    gripper: GripperGeometry,
+    T_base_flange: np.ndarray,
+    bin_bounds: np.ndarray,
+    *,
+    floor_clearance_mm: float = 0.0,
+    opening_mm: Optional[float] = None,
 ) -> Optional[str]:
-    """Why the whole gripper (open fingers, palm, flange: :meth:`GripperGeometry.outline`) at the
-    flange pose ``T_base_flange`` hits the bin ``bin_bounds`` ((lo, hi) of its inner volume, hi z
-    the rim), or None when it is clear: any point below the floor plus ``floor_clearance_mm``
-    ("floor", with how far below), or below the rim and outside the inner walls ("wall").
+    """Why the whole gripper (fingers ``opening_mm`` apart, ``open_width_mm`` by default; palm;
+    flange: :meth:`GripperGeometry.outline`) at the flange pose ``T_base_flange`` hits the bin
+    ``bin_bounds`` ((lo, hi) of its inner volume, hi z the rim), or None when it is clear: any
+    point below the floor plus ``floor_clearance_mm`` ("floor", with how far below), or below
+    the rim and outside the inner walls ("wall").
 
     Each piece of the gripper is convex and the bin's inner volume too, so a straight move whose
     two ends are clear is clear all along: checking a motion's waypoints checks its whole path."""
     T_bg = T_base_flange @ gripper.T_flange_gripper
-    pts = gripper.outline() @ T_bg[:3, :3].T + T_bg[:3, 3]
+    pts = gripper.outline(opening_mm) @ T_bg[:3, :3].T + T_bg[:3, 3]
     below, wall = _bin_clashes(pts[None], bin_bounds, floor_clearance_mm)
     if below[0] > 1e-9:
         return f"floor ({below[0]:.1f} mm below)"
@@ -306,13 +316,21 @@ def _bin_clashes(points: np.ndarray, bin_bounds: Any, floor_clearance_mm: float)
     return below, outside.any(axis=-1)
 
 
-def plan_bin_clash(config: CellConfig, waypoints: Sequence[Waypoint]) -> Optional[tuple[str, str]]:
+def plan_bin_clash(
+    config: CellConfig, waypoints: Sequence[Waypoint], opening_mm: Optional[float] = None
+) -> Optional[tuple[str, str]]:
     """(waypoint, why) of the first waypoint of a pick's motion in the bin (approach, grasp,
-    lift: the straight moves into and out of it) where :func:`bin_clash` finds the gripper
-    hitting the bin's floor or walls, or None."""
+    lift: the straight moves into and out of it) where :func:`bin_clash` finds the gripper, its
+    fingers ``opening_mm`` apart, hitting the bin's floor or walls, or None."""
     for name, T, _ in waypoints:
         if name in ("approach", "grasp", "lift"):
-            why = bin_clash(config.gripper, T, config.bin_bounds, floor_clearance_mm=config.floor_clearance_mm)
+            why = bin_clash(
+                config.gripper,
+                T,
+                config.bin_bounds,
+                floor_clearance_mm=config.floor_clearance_mm,
+                opening_mm=opening_mm,
+            )
             if why is not None:
                 return name, why
     return None
@@ -326,6 +344,49 @@ def grip_width(gripper: GripperGeometry, model_points: np.ndarray, T_gripper_obj
     if not between.any():
         return None
     return float(2.0 * np.abs(local[between, 0]).max())
+
+
+def grasp_openings(
+    gripper: GripperGeometry, model: Model, grasps: Mapping[str, np.ndarray]
+) -> dict[str, Optional[float]]:
+    """Grasp name → the finger opening (mm) for it, or None when the part does not fit between
+    the open fingers there (a finger would come down on it).
+
+    The part's width across the fingers is twice the farthest of its points in the slab the
+    fingers sweep (more than :data:`GRAZE_MM` inside it: a finger's edge may graze the part),
+    out to the open fingers' outer faces (what lies beyond them is for the collision checks);
+    the opening is :meth:`GripperGeometry.opening_for` that width. Every grasp at once."""
+    names = list(grasps)
+    if not names:
+        return {}
+    pts = np.asarray(model.points, dtype=np.float64)
+    T = np.stack([np.asarray(grasps[n], dtype=np.float64) for n in names])
+    outer = gripper.open_width_mm / 2 + gripper.finger_thickness_mm
+    lo_z = gripper.tip_depth_mm - gripper.finger_length_mm + GRAZE_MM
+    hi_z = gripper.tip_depth_mm - GRAZE_MM
+    half_y = gripper.finger_width_mm / 2 - GRAZE_MM
+    widest = np.empty(len(T))
+    step = max(1, 2_000_000 // max(1, len(pts)))
+    for k in range(0, len(T), step):
+        R, t = T[k : k + step, :3, :3], T[k : k + step, :3, 3]
+        y = np.abs(R[:, 1] @ pts.T + t[:, 1, None])
+        kk, nn = np.nonzero(y < half_y)  # the slab is thin across y: most points are out of it
+        z = np.einsum("kj,kj->k", R[kk, 2], pts[nn]) + t[kk, 2]
+        x = np.abs(np.einsum("kj,kj->k", R[kk, 0], pts[nn]) + t[kk, 0])
+        keep = (z > lo_z) & (z < hi_z) & (x <= outer)
+        w = np.full(len(R), -1.0)
+        np.maximum.at(w, kk[keep], x[keep])
+        widest[k : k + step] = w
+    return {
+        n: (gripper.opening_for(2.0 * w if w >= 0.0 else None) if 2.0 * w <= gripper.open_width_mm else None)
+        for n, w in zip(names, widest.tolist())
+    }
+
+
+#: How far (mm) a point of the part must lie inside a finger's sweep to count as in its way: a
+#: finger's edge grazing the part is no collision. The simulated gripper counts a finger as
+#: landing on the part at twice this (:data:`binpick.sim.twin.FINGER_LANDING_MM`).
+GRAZE_MM = 0.5
 
 
 def symmetry_maps(symmetries: Any) -> tuple[np.ndarray, ...]:
@@ -437,7 +498,7 @@ class GraspMatcher:
 def _candidates(
     config: CellConfig, T_base_object: np.ndarray, rejected: dict[str, int], samples: dict[str, list]
 ) -> Iterator[tuple]:
-    """(tilt, name, T_base_gripper, T_base_flange, waypoints) of every grasp within the tool-tilt
+    """(tilt, name, T_base_gripper, T_base_flange, waypoints, opening) of every grasp within the tool-tilt
     limit whose gripper clears the bin's floor and walls along approach, grasp and lift, most
     vertical first; the others counted in ``rejected`` (a few kept in ``samples``). All grasps at
     once (one matrix product per check), so that thousands of grasps are planned in milliseconds."""
@@ -456,8 +517,13 @@ def _candidates(
     # The outline at the grasp, shifted back along the approach and straight up for the lift
     # (only for the grasps within the tilt limit: most are not).
     idx = np.flatnonzero(ok)
+    openings = config.openings([names[i] for i in idx])
+    fits = ~np.isnan(openings)
+    rejected["width"] += int((~fits).sum())
+    _keep_some(samples, "width", T_bg[idx[~fits]])
+    idx, openings = idx[fits], openings[fits]
     R, t = T_bg[idx, :3, :3], T_bg[idx, :3, 3]
-    at_grasp = config.gripper.outline() @ np.transpose(R, (0, 2, 1)) + t[:, None]
+    at_grasp = np.einsum("kmj,kij->kmi", config.gripper.outlines(openings), R) + t[:, None]
     back = at_grasp - config.approach_distance_mm * R[:, None, :, 2]
     up = at_grasp.copy()
     up[..., 2] += np.maximum(config.clearance_z_mm - T_bf[idx, 2, 3], 0.0)[:, None]
@@ -467,7 +533,7 @@ def _candidates(
         free &= (below <= 1e-9) & ~wall
     rejected["bin"] += int((~free).sum())
     _keep_some(samples, "bin", T_bg[idx[~free]])
-    clear = idx[free]
+    clear, opening_of = idx[free], dict(zip(idx[free].tolist(), openings[free].tolist()))
     for i in clear[np.argsort(tilt[clear], kind="stable")]:
         waypoints = pick_waypoints(
             T_bf[i],
@@ -476,7 +542,7 @@ def _candidates(
             clearance_z_mm=config.clearance_z_mm,
             drop_pose=config.drop_pose,
         )
-        yield float(tilt[i]), names[i], T_bg[i], T_bf[i], waypoints
+        yield float(tilt[i]), names[i], T_bg[i], T_bf[i], waypoints, opening_of[int(i)]
 
 
 def _near(points: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
@@ -486,10 +552,11 @@ def _near(points: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
     return points[np.einsum("ij,ij->i", points - centre, points - centre) <= radius * radius]
 
 
-def _hits_many(gripper: GripperGeometry, points: np.ndarray, T_bg: np.ndarray) -> np.ndarray:
-    """:func:`points_in_gripper` for each of the gripper poses ``T_bg`` (K, 4, 4): the distances
-    of every point to each pose's bounding sphere in one matrix product, then the piece-by-piece
-    test on the (point, pose) pairs inside a sphere, all at once."""
+def _hits_many(gripper: GripperGeometry, points: np.ndarray, T_bg: np.ndarray, openings: np.ndarray) -> np.ndarray:
+    """:func:`points_in_gripper` for each of the gripper poses ``T_bg`` (K, 4, 4), its fingers
+    ``openings`` (K,) apart: the distances of every point to each pose's bounding sphere in one
+    matrix product, then the piece-by-piece test on the (point, pose) pairs inside a sphere, all
+    at once."""
     if len(points) == 0 or len(T_bg) == 0:
         return np.zeros(len(T_bg), dtype=np.int64)
     z_mid, radius = _occupied_sphere(gripper)
@@ -497,7 +564,7 @@ def _hits_many(gripper: GripperGeometry, points: np.ndarray, T_bg: np.ndarray) -
     d2 = np.einsum("ij,ij->i", points, points)[:, None] - 2.0 * points @ C.T + np.einsum("ij,ij->i", C, C)[None]
     i, k = np.nonzero(d2 <= radius * radius + 1e-6 * (1.0 + np.abs(d2)))
     local = np.einsum("nj,nji->ni", points[i] - T_bg[k, :3, 3], T_bg[k, :3, :3])  # each pair in its gripper frame
-    return np.bincount(k[gripper.occupied(local)], minlength=len(T_bg))
+    return np.bincount(k[gripper.occupied(local, np.asarray(openings)[k])], minlength=len(T_bg))
 
 
 def _refusal(
@@ -609,6 +676,7 @@ def _plan(
     T_bf: np.ndarray,
     tilt: float,
     waypoints: list[Waypoint],
+    opening: float,
     rejected: dict[str, int],
 ) -> PickPlan:
     return PickPlan(
@@ -619,6 +687,7 @@ def _plan(
         waypoints=tuple(waypoints),
         considered=len(config.grasps),
         rejected=MappingProxyType(dict(rejected)),
+        opening_mm=opening,
     )
 
 
@@ -635,15 +704,15 @@ def _first_usable(
     counted in ``rejected`` (a few kept in ``samples``). None when none is usable."""
     clear = [c for c, h in batch if h <= config.max_collision_points]
     poses = np.array([c[2] for c in clear]).reshape(-1, 4, 4)
-    own = dict(zip((id(c) for c in clear), _hits_many(config.gripper, part, poses)))
+    own = dict(zip((id(c) for c in clear), _hits_many(config.gripper, part, poses, [c[5] for c in clear])))
     for c, hits in batch:
-        tilt, name, T_bg, T_bf, waypoints = c
+        tilt, name, T_bg, T_bf, waypoints, opening = c
         why = _refusal(config, waypoints, hits, int(own.get(id(c), 0)), here)
         if why is not None:
             rejected[why] += 1
             _keep_some(samples, why, T_bg[None])
             continue
-        return _plan(config, name, T_bg, T_bf, tilt, waypoints, rejected), hits
+        return _plan(config, name, T_bg, T_bf, tilt, waypoints, opening, rejected), hits
     return None
 
 
@@ -664,7 +733,16 @@ def plan_grasp(
     T_base_object, scene, here = plan_inputs(config, T_base_object, scene, here, "here")
     if accept is not None and not callable(accept):
         raise InvalidTypeError(f"accept: expected a function T_base_gripper → bool, got {type(accept).__name__}")
-    rejected = {"tilt": 0, "bin": 0, "ambiguous": 0, "collision": 0, "self-collision": 0, "reach": 0, "safety": 0}
+    rejected = {
+        "tilt": 0,
+        "width": 0,
+        "bin": 0,
+        "ambiguous": 0,
+        "collision": 0,
+        "self-collision": 0,
+        "reach": 0,
+        "safety": 0,
+    }
     # The part's own points lie between the fingers and are not in the scene, but the gripper must
     # not run into its other branches either: those are checked against the model at the located
     # pose, which also covers the part's unseen underside. Only scene points the fingers and
@@ -694,7 +772,7 @@ def plan_grasp(
             batch = kept
         if not batch:
             continue
-        scene_hits = _hits_many(config.gripper, scene, np.stack([c[2] for c in batch]))
+        scene_hits = _hits_many(config.gripper, scene, np.stack([c[2] for c in batch]), [c[5] for c in batch])
         now = []
         for c, h in zip(batch, scene_hits.tolist()):
             if 0 < h <= config.max_collision_points:

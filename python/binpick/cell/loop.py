@@ -36,7 +36,7 @@ from typing import Any, Callable, Optional, TextIO
 
 import numpy as np
 
-from .._validate import as_transform, count
+from .._validate import as_transform, count, number
 from ..devices import safety
 from ..devices.gripper import Gripper
 from ..devices.motor import LaserMotor
@@ -149,6 +149,9 @@ class Cell:
             raise InvalidInputError(
                 "robot: the driver's CellLimits differ from config.limits; open the robot with limits=config.limits"
             )
+        if config.gripper.preshape_clearance_mm is not None and not getattr(gripper, "sets_width", False):
+            # Its fingers open fully for every grasp: plan every grasp with them fully open.
+            config = replace(config, gripper=replace(config.gripper, preshape_clearance_mm=None))
         self.config = config
         self.robot = robot
         self.motor = motor
@@ -574,22 +577,32 @@ class Cell:
         limits = self.config.limits
         poses = [safety.check_pose(plan.pose(n), limits, name=label) for n, label in zip(names, labels)]
         safety.check_sequence(self.robot.read_pose(), poses, flags, limits, names=labels)
-        clash = plan_bin_clash(self.config, list(zip(names, poses, flags)))
+        clash = plan_bin_clash(self.config, list(zip(names, poses, flags)), self.finger_opening(plan))
         if clash is not None:
             raise SafetyError(
-                f"plan waypoint {clash[0]!r}: the gripper (fingers open, palm, flange) would hit the bin's "
+                f"plan waypoint {clash[0]!r}: the gripper (fingers {self.finger_opening(plan):.0f} mm apart, palm, "
+                f"flange) would hit the bin's "
                 f"{clash[1]}; nothing was sent — choose a grasp that keeps the whole gripper inside the bin "
                 "and above its floor"
             )
         return {name: (T, lin) for name, T, lin in zip(names, poses, flags)}
+
+    def finger_opening(self, plan: PickPlan) -> float:
+        """How far apart the fingers will be on the way in for ``plan``: its opening where the
+        gripper can be set to a width, fully open otherwise; InvalidInputError for an opening
+        that is not a width between 0 and the gripper's ``open_width_mm``."""
+        full = float(self.config.gripper.open_width_mm)
+        if plan.opening_mm is None or not getattr(self.gripper, "sets_width", False):
+            return full
+        return number(plan.opening_mm, "plan.opening_mm", 1e-3, full)
 
     def _execute(self, plan: PickPlan) -> Optional[bool]:
         """Runs the plan, checked whole first (:meth:`check_plan`); returns what the gripper said
         about holding. Faults stop the arm and are raised."""
         moves = self.check_plan(plan)
         try:
-            # Open as wide as the collision check assumed (fully when the gripper cannot be set to a width).
-            self.gripper.open_for_grasp(self.config.gripper.open_width_mm)
+            # Open as wide as the collision checks assumed (fully when the gripper cannot be set to a width).
+            self.gripper.open_for_grasp(self.finger_opening(plan))
             for name in ("above", "approach", "grasp"):
                 self._move(*moves[name])
             held = self.gripper.close()

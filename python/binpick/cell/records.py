@@ -100,7 +100,9 @@ def _truth_dict(truth: Optional[PoseTruth]) -> Optional[dict]:
 
 @dataclass(frozen=True, eq=False)
 class PickPlan:
-    """The chosen grasp and the motion: ``waypoints`` are (name, T_base_flange, linear) in order."""
+    """The chosen grasp and the motion: ``waypoints`` are (name, T_base_flange, linear) in order;
+    ``opening_mm`` how far apart the fingers are on the way in, the opening the plan was checked
+    with (None: fully open)."""
 
     grasp: str
     T_base_gripper: np.ndarray
@@ -109,6 +111,7 @@ class PickPlan:
     waypoints: tuple[tuple[str, np.ndarray, bool], ...]
     considered: int
     rejected: Mapping[str, int]
+    opening_mm: Optional[float] = None
 
     def pose(self, name: str) -> np.ndarray:
         """The flange pose of waypoint ``name``."""

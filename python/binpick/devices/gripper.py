@@ -90,6 +90,10 @@ class Gripper(abc.ABC):
     :meth:`activate`, :meth:`open_for_grasp` and :meth:`close_port` where the device has them
     (their defaults do nothing, or open fully)."""
 
+    sets_width: bool = False
+    """Whether :meth:`open_for_grasp` opens the fingers to the width asked for (then the cell
+    opens each grasp only as wide as the part needs); False: it opens them fully."""
+
     def activate(self) -> Any:
         """Makes the gripper ready to move (a reset and activation where the device needs one); nothing by default."""
 
@@ -317,6 +321,8 @@ class ModbusGripper(Gripper):
         port: serial device path, or an open ``serial.SerialBase``.
         config: slave address, line settings, stroke, speed and force.
     """
+
+    sets_width = True
 
     def __init__(self, port: Union[str, serial.SerialBase], *, config: GripperConfig = GripperConfig()) -> None:
         if not isinstance(config, GripperConfig):

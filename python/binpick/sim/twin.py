@@ -50,6 +50,9 @@ from .pile import Pile, PushReport
 
 #: The gripper counts as closed (a pushing tool) when its fingers are at most this far apart, mm.
 CLOSED_OPENING_MM = 10.0
+#: A part's surface more than this far inside a finger (mm) means the finger came down on the
+#: part instead of beside it: no grip. Twice the planner's :data:`binpick.cell.grasp.GRAZE_MM`.
+FINGER_LANDING_MM = 1.0
 
 #: Fastest sweep the physics is asked to run, mm/s: faster motions are pushed at this speed.
 MAX_SWEEP_SPEED = 1000.0
@@ -324,7 +327,9 @@ class TwinWorld:
 
     def grip_check(self) -> Optional[tuple[int, float]]:
         """The part between the fingers now, if any, and its width across them (mm): the part
-        nearest the TCP whose pose in the gripper is within the grip tolerance of a declared grasp."""
+        nearest the TCP whose pose in the gripper is within the grip tolerance of a declared grasp,
+        and which fits between the fingers as they are open now — a part wider than the opening,
+        or off to one side of it, had a finger land on it on the way in and is not held."""
         self.settle_pending()
         matcher = self.grasp_matcher
         T_gb = inverse(self.T_base_tcp())
@@ -339,7 +344,21 @@ class TwinWorld:
         if best is None or not matcher.within(best[1]):
             return None
         pid, _, T_go = best
-        width = grip_width(self.gripper_geometry, self.model.points, T_go)
+        g = self.gripper_geometry
+        local = np.asarray(self.model.points) @ T_go[:3, :3].T + T_go[:3, 3]
+        x, y, z = np.abs(local[:, 0]), np.abs(local[:, 1]), local[:, 2]
+        d = FINGER_LANDING_MM
+        inner = self.finger_opening_mm() / 2.0
+        in_finger = (
+            (x > inner + d)
+            & (x < inner + g.finger_thickness_mm - d)
+            & (y < g.finger_width_mm / 2 - d)
+            & (z > g.tip_depth_mm - g.finger_length_mm + d)
+            & (z < g.tip_depth_mm - d)
+        )
+        if in_finger.any():
+            return None
+        width = grip_width(g, self.model.points, T_go)
         return None if width is None else (pid, width)
 
     def on_gripper_command(self, closing: bool, emulator: Any) -> None:
