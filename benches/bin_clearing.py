@@ -116,11 +116,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="one seed, piles of 8, 45 frames: a smoke run")
     ap.add_argument("--seeds", type=int, default=10)
+    ap.add_argument("--first-seed", type=int, default=0, help="run seeds first-seed .. first-seed + seeds - 1")
     ap.add_argument("--parts", default="", help="comma-separated part names to run (default: all)")
     ap.add_argument("--frames", type=int, default=0, help="laser frames per scan (default: 45 quick, 90 full)")
     ap.add_argument("--out", default="bin_clearing.json")
     args = ap.parse_args()
-    seeds = range(1) if args.quick else range(args.seeds)
+    seeds = range(1) if args.quick else range(args.first_seed, args.first_seed + args.seeds)
     frames = args.frames or (45 if args.quick else 90)
     wanted = {p for p in args.parts.split(",") if p}
     rows = {}
