@@ -82,6 +82,11 @@ PICK_MOVES: tuple[tuple[str, Optional[bool]], ...] = (
 )
 
 
+#: Scan points more than this far (mm) inside the bin's walls and above its floor are something in
+#: the bin (many times the scan's noise, less than any part is thick): see :meth:`Cell._something_in_bin`.
+IN_BIN_MM = 3.0
+
+
 def _ms_since(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
 
@@ -695,9 +700,10 @@ class Cell:
                 try:
                     located, plan = self.locate_and_plan(scan, skipped)
                 except (NoObjectFound, NoGraspError):
-                    # Two looks that found no part at all: the bin is empty, as far as the cell
-                    # can see; parts found but not pickable are worth every view there is.
-                    if k == len(views) - 1 or (k >= 1 and not skipped):
+                    # Two looks that found no part in a bin with nothing in it: the bin is empty,
+                    # as far as the cell can see; parts found but not pickable, or something in
+                    # the bin that no pose explains, are worth every view there is.
+                    if k == len(views) - 1 or (k >= 1 and not skipped and not self._something_in_bin(scan)):
                         raise
                     if k == 0:
                         views[1:] = self._deciding_first(views[1:], skipped)
@@ -727,6 +733,18 @@ class Cell:
             times["total"] = _ms_since(t0)
             record = self._failed(i, scan, located, exc, times, failure=failure)
             return replace(record, skipped=tuple(skipped), looks=looks, scan=scan), why
+
+    def _something_in_bin(self, scan: ScanResult) -> bool:
+        """Whether the scan shows something standing in the bin: at least 10 points more than
+        :data:`IN_BIN_MM` inside its walls and above its floor, spanning a fifth of the part's
+        size (what :meth:`locate_all` needs to search at all)."""
+        lo, hi = self.config.bin_bounds
+        m = IN_BIN_MM
+        p = scan.points
+        inside = p[
+            np.all(p[:, :2] > lo[:2] + m, axis=1) & np.all(p[:, :2] < hi[:2] - m, axis=1) & (p[:, 2] > lo[2] + m)
+        ]
+        return len(inside) >= 10 and float(np.linalg.norm(np.ptp(inside, axis=0))) >= 0.2 * self.config.model.diameter
 
     def _deciding_first(self, views: list, skipped: list[Skipped]) -> list:
         """The look-again views, the one that best shows what tells the first ambiguous part

@@ -224,6 +224,8 @@ class TwinWorld:
         self.pushes: list[PushReport] = []
         self.config = self._config(self.limits)
         self._matcher: Optional[GraspMatcher] = None
+        self._centre = np.zeros(3)
+        self._grasp_reach = math.inf
         self._gripper_config = GripperConfig(serial=SerialSettings(baudrate=115200, timeout_s=0.3), speed=255)
         self.robot_emulator = self.motor_emulator = self.gripper_emulator = None
 
@@ -323,6 +325,11 @@ class TwinWorld:
                 tolerance_mm=self.grip_tolerance_mm,
                 continuous=continuous_symmetry(self.model.symmetries),
             )
+            # How far from the part's centre any grasp puts the TCP (the matcher's reach, with its tolerance).
+            T = np.stack(list(cfg.grasps.values()))
+            tcp = -np.einsum("kji,kj->ki", T[:, :3, :3], T[:, :3, 3])
+            self._centre = np.asarray(self.model.points, dtype=np.float64).mean(axis=0)
+            self._grasp_reach = float(np.linalg.norm(tcp - self._centre, axis=1).max()) + self.grip_tolerance_mm
         return self._matcher
 
     def grip_check(self) -> Optional[tuple[int, float]]:
@@ -332,11 +339,14 @@ class TwinWorld:
         or off to one side of it, had a finger land on it on the way in and is not held."""
         self.settle_pending()
         matcher = self.grasp_matcher
-        T_gb = inverse(self.T_base_tcp())
+        T_bg = self.T_base_tcp()
+        T_gb = inverse(T_bg)
         best = None
         for pid, T_bo in zip(self.pile.ids, self.pile.poses):
             if int(pid) == self._held:
                 continue
+            if np.linalg.norm(T_bo[:3, :3] @ self._centre + T_bo[:3, 3] - T_bg[:3, 3]) > self._grasp_reach:
+                continue  # no grasp of this part puts the TCP here (the fingers pre-shaping above the bin)
             T_go = T_gb @ T_bo
             err = matcher.error(T_go)
             if best is None or matcher.cost(err) < matcher.cost(best[1]):
