@@ -247,6 +247,10 @@ class TwinWorld:
         return self
 
     def _start_emulators(self) -> None:
+        # The grip matcher of the cell's grasps, built now: built on the first gripper command it
+        # held up the emulator's reply past the driver's timeout (thousands of grasps, under load).
+        self._matcher = None
+        _ = self.grasp_matcher
         self.robot_emulator = RobotEmulator(
             config=RobotEmulatorConfig(arm=self.arm, speed_scale=self.speed_scale)
         ).start()
