@@ -89,6 +89,9 @@ def test_the_planner_agrees_with_checking_every_grasp_one_by_one(tee):
                 T_bf = T_bg @ np.linalg.inv(cfg.gripper.T_flange_gripper)
                 if math.radians(tool_tilt_deg(T_bf)) > cfg.limits.max_tool_tilt_rad:
                     continue
+                opening = float(cfg.openings([name])[0])  # the fingers pre-shaped to the part
+                if math.isnan(opening):
+                    continue  # the part does not fit between the open fingers there
                 wps = pick_waypoints(
                     T_bf,
                     T_bg,
@@ -96,12 +99,16 @@ def test_the_planner_agrees_with_checking_every_grasp_one_by_one(tee):
                     clearance_z_mm=cfg.clearance_z_mm,
                     drop_pose=cfg.drop_pose,
                 )
-                if any(bin_clash(cfg.gripper, W, cfg.bin_bounds) for n, W, _ in wps if n != "above" and n != "drop"):
+                if any(
+                    bin_clash(cfg.gripper, W, cfg.bin_bounds, opening_mm=opening)
+                    for n, W, _ in wps
+                    if n != "above" and n != "drop"
+                ):
                     continue
-                hits = points_in_gripper(cfg.gripper, scene, T_bg)
+                hits = points_in_gripper(cfg.gripper, scene, T_bg, opening)
                 if hits > cfg.max_collision_points:
                     continue
-                if points_in_gripper(cfg.gripper, part, T_bg) > cfg.max_collision_points:
+                if points_in_gripper(cfg.gripper, part, T_bg, opening) > cfg.max_collision_points:
                     continue
                 if not all(cfg.reachable(W) for _, W, _ in wps):
                     continue

@@ -154,13 +154,14 @@ class GripperGeometry:
             out.append((body, T))
         return out
 
-    def between_fingers(self, points_gripper: np.ndarray) -> np.ndarray:
-        """Which points (N, 3, in the gripper frame) lie in the slab the closing fingers sweep."""
+    def between_fingers(self, points_gripper: np.ndarray, margin_mm: float = 0.0) -> np.ndarray:
+        """Which points (N, 3, in the gripper frame) lie in the slab the closing fingers sweep
+        (more than ``margin_mm`` inside it along the fingers' width and length)."""
         _, y, z = points_gripper.T
         return (
-            (np.abs(y) <= self.finger_width_mm / 2)
-            & (z <= self.tip_depth_mm)
-            & (z >= self.tip_depth_mm - self.finger_length_mm)
+            (np.abs(y) <= self.finger_width_mm / 2 - margin_mm)
+            & (z <= self.tip_depth_mm - margin_mm)
+            & (z >= self.tip_depth_mm - self.finger_length_mm + margin_mm)
         )
 
 

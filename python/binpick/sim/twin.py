@@ -360,16 +360,9 @@ class TwinWorld:
         pid, _, T_go = best
         g = self.gripper_geometry
         local = np.asarray(self.model.points) @ T_go[:3, :3].T + T_go[:3, 3]
-        x, y, z = np.abs(local[:, 0]), np.abs(local[:, 1]), local[:, 2]
-        d = FINGER_LANDING_MM
+        x, d = np.abs(local[:, 0]), FINGER_LANDING_MM
         inner = self.finger_opening_mm() / 2.0
-        in_finger = (
-            (x > inner + d)
-            & (x < inner + g.finger_thickness_mm - d)
-            & (y < g.finger_width_mm / 2 - d)
-            & (z > g.tip_depth_mm - g.finger_length_mm + d)
-            & (z < g.tip_depth_mm - d)
-        )
+        in_finger = g.between_fingers(local, d) & (x > inner + d) & (x < inner + g.finger_thickness_mm - d)
         if in_finger.any():
             return None
         width = grip_width(g, self.model.points, T_go)
