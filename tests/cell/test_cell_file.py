@@ -4,6 +4,8 @@ the reader gives only valid configurations or BinpickErrors."""
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 import binpick
@@ -50,8 +52,11 @@ def test_the_example_reads(cell_dir):
         ("bin_min_mm = [250.0, -100.0, 0.0]", 'bin_min_mm = ["a", 1, 2]', r"\[cell\] bin_min_mm must be a list of 3"),
         ("bin_min_mm = [250.0, -100.0, 0.0]", "bin_min_mm = 250.0", r"\[cell\] bin_min_mm must be a list of 3"),
         ("scan_pose = [400.0, 0.0, 620.0, 180.0, 0.0, 0.0]", "scan_pose = [400.0, 0.0]", r"\[cell\] scan_pose"),
-        ("tool = [0.0, 0.0, 150.0, 0.0, 0.0, 0.0]", "tool = [0, 0, nan, 0, 0, 0]", r"\[cell\] tool"),
-        ("approach_height_mm = 270.0", 'approach_height_mm = "high"', r"\[limits\] approach_height_mm must be a"),
+        ("tool = [0.0, 0.0, 195.0, 0.0, 0.0, 0.0]", "tool = [0, 0, nan, 0, 0, 0]", r"\[cell\] tool"),
+        ("finger_length_mm = 90.0", 'finger_length_mm = "long"', r"\[gripper\] finger_length_mm must be a finite"),
+        ("finger_length_mm = 90.0", "finger_length_mm = -5.0", r"\[gripper\] finger_length_mm.*positive"),
+        ("preshape_clearance_mm = 5.0", "preshape_clearance_mm = true", r"\[gripper\] preshape_clearance_mm must"),
+        ("approach_height_mm = 315.0", 'approach_height_mm = "high"', r"\[limits\] approach_height_mm must be a"),
         ("max_tool_tilt_deg = 45.0", "max_tool_tilt_deg = inf", r"\[limits\] max_tool_tilt_deg"),
         ("# d_star = 12.0", "dstar = 12.0", r"\[estimate\] 'dstar' is not an option of binpick.estimate_pose"),
         ("baudrate = 9600", 'baudrate = "fast"', r"\[robot\] baudrate must be a whole number"),
@@ -68,6 +73,18 @@ def test_a_wrong_value_names_the_file_table_and_key_before_any_port_is_opened(ce
     with pytest.raises(InvalidInputError, match=match) as info:
         cell_from_file(load_cell_file(cell_dir / "cell.toml"))  # the ports in the example do not exist
     assert str(info.value).startswith(str(cell_dir / "cell.toml"))
+
+
+def test_the_gripper_shape_is_read_from_the_gripper_table(cell_dir):
+    g = _config(cell_dir).gripper
+    assert g.finger_length_mm == 90.0 and g.T_flange_gripper[2, 3] == 195.0 and g.preshape_clearance_mm == 5.0
+    text = CELL_FILE_EXAMPLE.replace("finger_length_mm = 90.0", "finger_length_mm = 120.0").replace(
+        "preshape_clearance_mm = 5.0", "preshape_clearance_mm = false"
+    )
+    g = _config(cell_dir, text).gripper
+    assert g.finger_length_mm == 120.0 and g.preshape_clearance_mm is None
+    g = _config(cell_dir, re.sub(r"finger_length_mm = 90.0.*\n", "", CELL_FILE_EXAMPLE)).gripper
+    assert g.finger_length_mm == binpick.cell.GripperGeometry().finger_length_mm  # absent: the default
 
 
 @pytest.mark.parametrize("table", ["limits", "estimate"])

@@ -172,3 +172,32 @@ def test_the_deciding_view_faces_the_surface_the_alternative_lacks(tee):
     assert order.index(1) < order.index(0)
     # Without a difference between the poses, the views keep their order.
     assert deciding_views(tee, T, [T], views, np.eye(4)) == [0, 1, 2]
+
+
+def test_a_shaft_located_at_any_turn_about_its_axis_is_grasped_from_straight_above():
+    # A plain shaft lying on the floor: its located turn about its own axis is arbitrary, and
+    # every turn must give the same choice of grasps — the most upright one straight down.
+    shaft = binpick.parts.keyed_shaft(diameter=30.0, length=150.0, feature=False, spacing=3.0)
+    assert shaft.symmetries.continuous_axis is not None
+    with SimulatedCell(shaft, count=1, seed=0, frames=4) as sim:
+        cfg = sim.cell.config
+        here = sim.robot_emulator.pose()
+        a = np.asarray(shaft.symmetries.continuous_axis, dtype=np.float64)
+        c = np.asarray(shaft.symmetries.center, dtype=np.float64)
+        T = sim.pile.poses[0]
+        assert abs((T[:3, :3] @ a)[2]) < 0.2, "the shaft should lie on the floor"
+        tilts = []
+        for turn in np.radians([0.0, 37.0, 90.0, 151.0, 233.0, 300.0]):
+            S = np.eye(4)
+            S[:3, :3] = rotation_about(a, turn)
+            S[:3, 3] = c - S[:3, :3] @ c
+            plan, _ = plan_grasp(cfg, T @ S, np.zeros((0, 3)), here)
+            tilts.append(plan.tilt_deg)
+            # The grasp is one of the cell's, turned about the axis: the part sits in the gripper
+            # as a declared grasp puts it, modulo the turn.
+            matcher = binpick.cell.grasp.GraspMatcher(
+                cfg.grasps, tolerance_deg=0.5, tolerance_mm=0.5, continuous=(c, a)
+            )
+            assert matcher.within(matcher.error(np.linalg.inv(plan.T_base_gripper) @ T)), plan.grasp
+        # Across the shaft, straight down but for the axis's own slope (under 12° here).
+        assert max(tilts) - min(tilts) < 1.0 and max(tilts) < 12.0, tilts

@@ -129,20 +129,21 @@ def test_a_plan_whose_fingers_go_below_the_floor_moves_nothing(sim):
     _assert_refused_without_motion(sim, low, SafetyError, "bin's floor")
 
 
-def test_a_plan_whose_palm_crosses_a_wall_moves_nothing(sim):
+def test_a_plan_whose_fingers_cross_a_wall_moves_nothing(sim):
     cfg = sim.cell.config
     lo, hi = cfg.bin_bounds
     plan = _plan(sim)
-    # The TCP 30 mm above the floor puts the palm below the rim; half of it over the wall.
+    # The TCP 30 mm above the floor and 5 mm inside the wall: the fingers (20 mm wide along the
+    # wall's normal) reach through it below the rim on the way down.
     plan = _descend(plan, plan.pose("grasp")[2, 3] - (cfg.gripper.T_flange_gripper[2, 3] + float(lo[2]) + 30.0))
     shifted = []
     for n, T, lin in plan.waypoints:
         T = T.copy()
         if n != "drop":
-            T[1, 3] = float(hi[1]) - cfg.gripper.body_radius_mm / 2
+            T[1, 3] = float(hi[1]) - 5.0
         shifted.append((n, T, lin))
     plan = replace(plan, waypoints=tuple(shifted))
-    _assert_refused_without_motion(sim, plan, SafetyError, "plan waypoint 'grasp'.*bin's wall")
+    _assert_refused_without_motion(sim, plan, SafetyError, "plan waypoint '(approach|grasp)'.*bin's wall")
 
 
 def test_the_planner_skips_grasps_whose_gripper_hits_the_floor():

@@ -112,6 +112,23 @@ def test_joint_limits_enforced_by_the_controller():
             assert "STOP" in commands(emu)
 
 
+def test_j6_stays_continuous_through_half_a_turn():
+    # J6 turns ±360°: a pose just past J6 = 180° is reached by turning on to 181°, not by
+    # unwinding a whole turn to -179° (as the controller keeps it through a straight move).
+    arm = ArmModel()
+    q = np.radians([10.0, 20.0, 100.0, 5.0, 60.0, 179.0])
+    on = q.copy()
+    on[5] = math.radians(181.0)
+    np.testing.assert_allclose(np.degrees(arm.inverse(arm.forward(on), 7, q)), np.degrees(on), atol=1e-6)
+    back = q.copy()
+    back[5] = math.radians(-179.0)
+    np.testing.assert_allclose(np.degrees(arm.inverse(arm.forward(back), 7, back)), np.degrees(back), atol=1e-6)
+    at_limit = q.copy()
+    at_limit[5] = math.radians(359.0)  # 361° is past the +360° limit: the nearest turn within it
+    got = arm.inverse(arm.forward(np.radians([10.0, 20.0, 100.0, 5.0, 60.0, 1.0])), 7, at_limit)
+    assert math.degrees(got[5]) == pytest.approx(1.0, abs=1e-6)
+
+
 def test_operation_range_enforced_by_the_controller():
     arm = ArmModel(workspace_min_mm=(-450, -450, 180), workspace_max_mm=(450, 450, 750))
     with RobotEmulator(config=RobotEmulatorConfig(arm=arm, speed_scale=40)) as emu:

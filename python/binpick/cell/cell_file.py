@@ -76,6 +76,15 @@ kind = "modbus"              # or "hand": the robot's hand outputs (HNDON/HNDOFF
 port = "/dev/ttyUSB2"        # EDIT: the gripper's port
 slave = 9
 baudrate = 115200
+# The gripper's shape, for collision checks (gripper frame: z = approach, x = closing; mm):
+open_width_mm = 50.0
+finger_length_mm = 90.0      # along z, from the fingertips up to the palm
+finger_width_mm = 20.0
+finger_thickness_mm = 8.0
+tip_depth_mm = 10.0          # how far the fingertips reach past the TCP
+body_radius_mm = 45.0        # the palm: a cylinder about z above the fingers …
+body_length_mm = 60.0        # … this long
+preshape_clearance_mm = 5.0  # a gripper set to a width opens to the part's width plus this on each side (false: fully)
 
 [camera]                     # EDIT: the whole table
 source = "opencv"            # or "twin": the camera of `binpick emulate cell` (socket = "DIR/camera.sock"),
@@ -93,7 +102,7 @@ bin_max_mm = [550.0, 100.0, 80.0]
 scan_pose = [400.0, 0.0, 620.0, 180.0, 0.0, 0.0]
 drop_pose = [400.0, -250.0, 350.0, 180.0, 0.0, 0.0]
 frames = 90
-tool = [0.0, 0.0, 150.0, 0.0, 0.0, 0.0]   # the gripper's TCP in the flange frame
+tool = [0.0, 0.0, 195.0, 0.0, 0.0, 0.0]   # the gripper's TCP in the flange frame
 
 [calibration_board]          # the printed checkerboard lying face up, for `binpick calibrate capture`
 pattern = [9, 6]             # inner corners: columns, rows
@@ -107,7 +116,7 @@ center_mm = [400.0, -250.0, -5.0]      # the centre of the corner grid in the ba
 [limits]
 workspace_min_mm = [100.0, -350.0, 60.0]
 workspace_max_mm = [650.0, 350.0, 700.0]
-approach_height_mm = 270.0
+approach_height_mm = 315.0
 max_tool_tilt_deg = 45.0
 max_lateral_below_mm = 40.0
 max_override_percent = 50
@@ -261,7 +270,7 @@ def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig
         scan_poses=(f.pose("cell", "scan_pose"),),
         drop_pose=f.pose("cell", "drop_pose"),
         frames=f.integer("cell", "frames", 90),
-        gripper=GripperGeometry(T_flange_gripper=tool),
+        gripper=_gripper_geometry(f, tool),
         limits=_limits(f),
         num_threads=num_threads,
         estimate_options=_estimate_options(f),
@@ -339,6 +348,36 @@ def _limits(f: CellFile) -> safety.CellLimits:
         max_linear_speed_mm_s=f.number("limits", "max_linear_speed_mm_s", d.max_linear_speed_mm_s),
         max_push_mm=f.number("limits", "max_push_mm", d.max_push_mm),
     )
+
+
+#: The keys of the ``[gripper]`` table that give its shape (:class:`GripperGeometry`'s fields, mm).
+GRIPPER_SHAPE_KEYS = (
+    "open_width_mm",
+    "finger_length_mm",
+    "finger_width_mm",
+    "finger_thickness_mm",
+    "tip_depth_mm",
+    "body_radius_mm",
+    "body_length_mm",
+    "preshape_clearance_mm",
+)
+
+
+def _gripper_geometry(f: CellFile, tool: np.ndarray) -> GripperGeometry:
+    """The gripper's shape: ``[cell] tool`` and the ``[gripper]`` keys of :data:`GRIPPER_SHAPE_KEYS`
+    (each :class:`GripperGeometry`'s default where absent; ``preshape_clearance_mm = false``: always
+    open fully)."""
+    d = GripperGeometry()
+    shape: dict[str, Any] = {
+        k: None
+        if k == "preshape_clearance_mm" and f.get("gripper", k, 0.0) is False
+        else f.number("gripper", k, getattr(d, k))
+        for k in GRIPPER_SHAPE_KEYS
+    }
+    try:
+        return GripperGeometry(T_flange_gripper=tool, **shape)
+    except InvalidInputError as exc:
+        raise InvalidInputError(f"{f.path}: [gripper] {exc}") from None
 
 
 def _robot(f: CellFile, limits: safety.CellLimits) -> Callable[[], MelfaRobot]:

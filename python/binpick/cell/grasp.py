@@ -508,7 +508,11 @@ def _candidates(
     T_og[:, :3, :3] = np.transpose(T_go[:, :3, :3], (0, 2, 1))
     T_og[:, :3, 3] = -np.einsum("nji,nj->ni", T_go[:, :3, :3], T_go[:, :3, 3])
     T_og[:, 3, 3] = 1.0
-    T_bg = np.asarray(T_base_object, dtype=np.float64) @ T_og
+    T_bo = np.asarray(T_base_object, dtype=np.float64)
+    continuous = continuous_symmetry(config.model.symmetries)
+    if continuous is not None:
+        T_og = _most_upright(T_bo, T_og, *continuous)
+    T_bg = T_bo @ T_og
     T_bf = T_bg @ inverse(config.gripper.T_flange_gripper)
     tilt = np.degrees(np.arccos(np.clip(-T_bf[:, 2, 2], -1.0, 1.0)))
     ok = np.radians(tilt) <= config.limits.max_tool_tilt_rad
@@ -543,6 +547,26 @@ def _candidates(
             drop_pose=config.drop_pose,
         )
         yield float(tilt[i]), names[i], T_bg[i], T_bf[i], waypoints, opening_of[int(i)]
+
+
+def _most_upright(T_bo: np.ndarray, T_og: np.ndarray, centre: np.ndarray, axis: np.ndarray) -> np.ndarray:
+    """The grasps ``T_og`` (K, 4, 4, object frame) of a part that any turn about ``axis`` through
+    ``centre`` (object frame) maps onto itself, each turned about that axis so that its approach
+    (the gripper's z) points down in the base frame as nearly as it can: the located turn of such
+    a part is arbitrary, so its grasps' tilts must not be. Closed form per grasp: with g the
+    approach and w the downward direction in the object frame, g·w after a turn θ is
+    cos θ (g·w − (a·g)(a·w)) + sin θ (a×g)·w + const."""
+    a = axis / np.linalg.norm(axis)
+    w = T_bo[:3, :3].T @ np.array([0.0, 0.0, -1.0])
+    g = T_og[:, :3, 2]
+    theta = np.arctan2(np.cross(a, g) @ w, g @ w - (g @ a) * float(a @ w))
+    K = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+    c, s = np.cos(theta)[:, None, None], np.sin(theta)[:, None, None]
+    S = np.zeros_like(T_og)
+    S[:, :3, :3] = c * np.eye(3) + s * K + (1.0 - c) * np.outer(a, a)
+    S[:, :3, 3] = centre - S[:, :3, :3] @ centre
+    S[:, 3, 3] = 1.0
+    return S @ T_og
 
 
 def _near(points: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:

@@ -7,7 +7,7 @@ and the digital twin (:class:`SimulatedCell`): the pick loop on emulated devices
 * :mod:`~binpick.sim.dataset` — simulated scans written to disk
 * :mod:`~binpick.sim.camera` — virtual cameras for the pick loop
 * :mod:`~binpick.sim.twin` — :class:`TwinWorld` (the twin's pile and emulators), :class:`SimulatedCell`, its arm
-  and limits
+  gripper and limits
 * :mod:`~binpick.sim.twin_process` — the twin as its own process (``binpick emulate cell``)
 
 >>> import binpick
@@ -23,7 +23,7 @@ from .cell import Bin, Camera, Cell, Laser, Lighting, SensorNoise, look_down, ro
 from .dataset import GLOSSY_PART_SPECULAR, SimulatedScan, contact_sheet, simulate_scan, write_scan
 from .pile import Pile, PushReport, SettleReport, convex_decomposition, max_interpenetration
 from .render import BIN_ID, NO_SURFACE, TABLE_ID, View, World, render_checkerboard
-from .twin import SIM_ARM, SimulatedCell, TwinWorld, sim_arm, sim_limits, simulated_cell
+from .twin import SIM_ARM, SimulatedCell, TwinWorld, sim_arm, sim_gripper, sim_limits, simulated_cell
 
 __all__ = [
     "BIN_ID",
@@ -37,6 +37,7 @@ __all__ = [
     "RenderedCamera",
     "SIM_ARM",
     "sim_arm",
+    "sim_gripper",
     "SimCamera",
     "SimulatedCell",
     "Pile",

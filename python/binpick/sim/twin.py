@@ -57,7 +57,7 @@ FINGER_LANDING_MM = 1.0
 #: Fastest sweep the physics is asked to run, mm/s: faster motions are pushed at this speed.
 MAX_SWEEP_SPEED = 1000.0
 
-__all__ = ["TwinWorld", "SimulatedCell", "simulated_cell", "sim_limits", "sim_arm", "SIM_ARM"]
+__all__ = ["TwinWorld", "SimulatedCell", "simulated_cell", "sim_limits", "sim_arm", "sim_gripper", "SIM_ARM"]
 
 
 def _sim_arm(scale: float = 1.0) -> ArmModel:
@@ -118,12 +118,35 @@ def sim_limits(layout: Any = None, gripper: Optional[GripperGeometry] = None) ->
     )
 
 
+#: The longest fingers :func:`sim_gripper` gives a simulated gripper, mm: deeper bins (those of
+#: large parts) get fingers this long, and parts against their walls may be out of reach.
+MAX_SIM_FINGER_MM = 150.0
+
+
+def sim_gripper(layout: Any = None) -> GripperGeometry:
+    """The simulated cell's gripper: :class:`GripperGeometry`'s defaults but for fingers long
+    enough to reach the bin's floor with the palm above the rim (the bin's depth plus the
+    fingertips' reach past the TCP; at least the default 45 mm, at most :data:`MAX_SIM_FINGER_MM`),
+    the TCP moved away from the flange by what the fingers grew — the fingers a bin-picking cell
+    fits so that the palm clears the walls when a part lies against them."""
+    layout = instance_of(Layout() if layout is None else layout, Layout, "layout", "binpick.sim.Cell()")
+    base = GripperGeometry()
+    lo, hi = layout.bin.bounds
+    length = float(np.clip(float(hi[2] - lo[2]) + base.tip_depth_mm, base.finger_length_mm, MAX_SIM_FINGER_MM))
+    T = base.T_flange_gripper.copy()
+    T[:3, 3] += T[:3, 2] * (length - base.finger_length_mm)
+    return GripperGeometry(T_flange_gripper=T, finger_length_mm=length)
+
+
 def _layout_and_gripper(layout: Any, gripper: Any) -> tuple[Layout, GripperGeometry]:
-    """The simulated hardware and the gripper, each its default when None (InvalidTypeError naming it
-    when it is not one)."""
+    """The simulated hardware and the gripper, each its default when None (:func:`sim_gripper` of
+    the layout; InvalidTypeError naming it when it is not one)."""
+    layout = instance_of(Layout() if layout is None else layout, Layout, "layout", "binpick.sim.Cell()")
     return (
-        instance_of(Layout() if layout is None else layout, Layout, "layout", "binpick.sim.Cell()"),
-        instance_of(GripperGeometry() if gripper is None else gripper, GripperGeometry, "gripper", "GripperGeometry()"),
+        layout,
+        sim_gripper(layout)
+        if gripper is None
+        else instance_of(gripper, GripperGeometry, "gripper", "binpick.sim.sim_gripper(layout)"),
     )
 
 
@@ -402,7 +425,18 @@ class TwinWorld:
         pts = np.einsum("kij,mj->kmi", path[:, :3, :3], outline) + path[:, None, :3, 3]
         lo, hi = self.layout.bin.bounds
         if ((pts >= lo) & (pts <= hi)).all(axis=2).any():
-            self._pushes.append((path, opening, min(max(speed, 1.0), MAX_SWEEP_SPEED)))
+            # ``speed`` is the flange's along its path; the physics paces a push by the tool's
+            # fastest point (its travel plus its turn times its reach), so that the push lasts
+            # as long as the motion did (a joint move that mostly turns the tool is fast there).
+            flange = float(np.linalg.norm(np.diff(T_base_flange[:, :3, 3], axis=0), axis=1).sum())
+            if flange <= 1e-9:
+                return
+            reach = float(np.linalg.norm(outline, axis=1).max())
+            turns = np.einsum("kji,kjl->kil", path[:-1, :3, :3], path[1:, :3, :3])
+            angles = np.arccos(np.clip((np.trace(turns, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0))
+            travel = float((np.linalg.norm(np.diff(path[:, :3, 3], axis=0), axis=1) + angles * reach).sum())
+            tool_speed = travel * speed / flange
+            self._pushes.append((path, opening, min(max(tool_speed, 1.0), MAX_SWEEP_SPEED)))
 
     def _run_pushes(self) -> None:
         """Runs the queued sweeps; sweeps that follow on from each other (one ends where the next

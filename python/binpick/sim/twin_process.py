@@ -35,6 +35,7 @@ import numpy as np
 
 from .._validate import write_atomic
 from ..cell import camera_socket as wire
+from ..cell.cell_file import GRIPPER_SHAPE_KEYS
 from ..devices.xyzabc import xyzabc_from_transform
 from ..errors import BinpickError
 from ..models import Model
@@ -246,6 +247,7 @@ kind = "modbus"
 port = "{w.gripper_emulator.slave_path}"   # Modbus RTU gripper emulator
 slave = 9
 baudrate = 115200
+{self._gripper_shape()}
 
 [camera]
 source = "twin"
@@ -274,6 +276,12 @@ max_override_percent = {lim.max_override_percent:g}
 max_linear_speed_mm_s = {lim.max_linear_speed_mm_s:g}
 max_push_mm = {lim.max_push_mm:g}   # sideways travel of a nudge below the approach height
 """
+
+    def _gripper_shape(self) -> str:
+        """cell.toml's [gripper] shape keys: the twin's gripper (see :func:`binpick.sim.sim_gripper`)."""
+        g = self.world.gripper_geometry
+        values = {k: getattr(g, k) for k in GRIPPER_SHAPE_KEYS}
+        return "\n".join(f"{k} = {'false' if v is None else f'{float(v):.6f}'}" for k, v in values.items())
 
     def _board_table(self) -> str:
         """cell.toml's [calibration_board]: the twin's checkerboard, for `binpick calibrate capture`

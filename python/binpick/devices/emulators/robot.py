@@ -142,6 +142,14 @@ class ArmModel:
             if not fl1 & 1:
                 j4, j5, j6 = _wrap(j4 + math.pi), -j5, _wrap(j6 + math.pi)
         q = np.array([j1, _wrap(j2), j3, j4, j5, j6])
+        # A joint that turns more than once (J6: ±360°) takes the turn nearest q_ref that its
+        # limits allow, as the controller keeps it continuous through a straight move.
+        lo, hi = np.radians(self.joint_min_deg), np.radians(self.joint_max_deg)
+        for i in np.flatnonzero(hi - lo > 2 * math.pi):
+            turns = q[i] + 2 * math.pi * np.arange(-2, 3)
+            turns = turns[(turns >= lo[i] - 1e-9) & (turns <= hi[i] + 1e-9)]
+            if len(turns):
+                q[i] = turns[np.argmin(np.abs(turns - float(q_ref[i])))]
         self.check(q, T)
         return q
 
