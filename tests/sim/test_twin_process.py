@@ -27,6 +27,7 @@ import pytest
 import binpick
 from binpick.cell import FolderReplay, ReplayMismatchError, ScanRecorder, cell_from_file, load_cell_file
 from binpick.cell import camera_socket as wire
+from binpick.cell.cell_file import GRIPPER_SHAPE_KEYS
 from binpick.errors import CalibrationError, DeviceTimeout, PortClosedError, ProtocolError, TruncatedReplyError
 from binpick.scan import load_scan
 from binpick.sim import Cell as Layout
@@ -125,6 +126,12 @@ def test_the_twin_writes_a_cell_file_pick_can_load_and_its_true_calibration(twin
     assert cell_file.numbers("calibration_board", "pattern", 2).tolist() == list(board.pattern)
     assert cell_file.number("calibration_board", "square_mm") == board.square
     np.testing.assert_allclose(cell_file.numbers("calibration_board", "center_mm", 3), board.center, atol=1e-6)
+    # The gripper a cell reads from the file is the twin's, shape and TCP.
+    mine, true = binpick.cell.config_from_file(cell_file).gripper, binpick.sim.sim_gripper(Layout())
+    for key in GRIPPER_SHAPE_KEYS:
+        assert getattr(mine, key) == pytest.approx(getattr(true, key)), key
+    assert true.finger_length_mm == 90.0  # the paper's 80 mm deep bin, 10 mm tip reach
+    np.testing.assert_allclose(mine.T_flange_gripper, true.T_flange_gripper, atol=1e-6)
 
 
 def test_the_ports_reopen_again_and_again_with_the_real_drivers(twin):

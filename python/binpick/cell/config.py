@@ -107,7 +107,7 @@ class GripperGeometry:
         finger, ``sides`` points round the bottom and top of the body (palm) and round the flange
         (a disc of the body's radius at the flange origin). Against a convex box such as the bin's
         inner volume, checking these points checks every finger, the palm and the flange whole."""
-        gap = self.open_width_mm if opening_mm is None else positive(opening_mm, "opening_mm")
+        gap = self.open_width_mm if opening_mm is None else non_negative(opening_mm, "opening_mm", "mm")
         return self.outlines(np.array([gap]), sides=sides)[0]
 
     def outlines(self, openings_mm: np.ndarray, *, sides: int = 16) -> np.ndarray:

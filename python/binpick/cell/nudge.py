@@ -2,7 +2,8 @@
 the tool-tilt limit), the closed gripper pushes one of them over and the cell looks again.
 
 A nudge of a located part (``T_base_object``) is planned with the tool pointing straight down:
-above a start point ``NUDGE_START_MM`` outside the part's footprint, straight down until the
+above a start point ``NUDGE_START_MM`` outside the part's footprint (30 mm, else 8 mm: between
+a part and a wall), straight down until the
 fingertips are at two thirds of the part's height above the floor (its top minus a third of its
 height), straight across through the part to ``NUDGE_PAST_MM`` beyond its centre (to the centre when
 that would bring the gripper against a wall; in steps no
@@ -14,7 +15,7 @@ the nearest wall, then the others — and the first plan that passes every check
 - every pose within the workspace and the tool-attitude limit, the whole sequence from the arm's
   pose now within the approach and push rules (:mod:`binpick.devices.safety`, rules 3 and 5);
 - every pose reachable with the arm's kinematics (``config.reachable``);
-- the whole gripper (fingers open as the check assumes, palm, flange) clear of the bin's floor and
+- the whole gripper (fingers closed, as they are throughout; palm, flange) clear of the bin's floor and
   walls at every waypoint (:func:`~binpick.cell.grasp.bin_clash`; convex pieces in a convex bin,
   so the straight moves between them are clear too);
 - the straight descent lands on no scanned point but the part's own (the closed fingers' and the
@@ -40,8 +41,9 @@ from .grasp import bin_clash, plan_inputs
 
 __all__ = ["NudgePlan", "NudgeRefused", "plan_nudge", "check_nudge", "nudge_directions"]
 
-#: How far outside the part's footprint the fingers go down, mm.
-NUDGE_START_MM = 30.0
+#: How far outside the part's footprint the closed fingers go down, mm: the first distance
+#: tried, then the second (a part near a wall leaves a narrow gap between them).
+NUDGE_START_MM = (30.0, 8.0)
 #: How far past the part's centre the push goes, mm.
 NUDGE_PAST_MM = 20.0
 #: Directions tried per part (towards the bin centre, away from the nearest wall, then others).
@@ -112,10 +114,10 @@ def _waypoints(
     config: CellConfig, start: np.ndarray, end: np.ndarray, tip_z: float
 ) -> list[tuple[str, np.ndarray, bool]]:
     lim = config.limits
+    span = float(np.linalg.norm(end - start))
     above = _tool_down(config, *start, tip_z)
     above[2, 3] = config.clearance_z_mm
     down = _tool_down(config, *start, tip_z)
-    span = float(np.linalg.norm(end - start))
     steps = max(1, math.ceil(span / (0.95 * lim.max_lateral_below_mm)))
     moves = [("above", above, False), ("descend", down, True)]
     for k in range(1, steps + 1):
@@ -157,7 +159,9 @@ def check_nudge(config: CellConfig, waypoints: list, T_now: np.ndarray, scene: n
             if not config.reachable(T):
                 return f"{n}: out of the arm's reach"
     for n, T in zip(names[1:], poses[1:]):
-        why = bin_clash(config.gripper, T, config.bin_bounds, floor_clearance_mm=config.floor_clearance_mm)
+        why = bin_clash(
+            config.gripper, T, config.bin_bounds, floor_clearance_mm=config.floor_clearance_mm, opening_mm=0.0
+        )
         if why is not None:
             return f"{n}: the gripper would hit the bin's {why}"
     hits = _descent_hits(config, poses[1], scene)
@@ -179,17 +183,19 @@ def plan_nudge(config: CellConfig, T_base_object: Any, scene: Any, T_now: Any) -
     centre = (verts[:, :2].min(axis=0) + verts[:, :2].max(axis=0)) / 2
     own = _near(pts, np.asarray(model.points) @ T[:3, :3].T + T[:3, 3], OWN_POINT_MM)
     others = pts[~own]
+    # The closed fingers reach this far from the TCP across, whichever way the push goes.
     g = config.gripper
     reach = math.hypot(g.finger_thickness_mm, g.finger_width_mm / 2)
     why: list[str] = []
     for d in nudge_directions(config, centre):
         s = (verts[:, :2] - centre) @ d
-        start = centre + (float(s.min()) - NUDGE_START_MM - reach) * d
-        for past in (NUDGE_PAST_MM, 0.0):  # a push that would reach a wall may still reach the centre
-            moves = _waypoints(config, start, centre + past * d, tip_z)
-            problem = check_nudge(config, moves, T_now, others)
-            if problem is None:
-                return NudgePlan(T_base_object=T, direction=d, tip_z_mm=tip_z, waypoints=tuple(moves))
+        for gap in NUDGE_START_MM:
+            start = centre + (float(s.min()) - gap - reach) * d
+            for past in (NUDGE_PAST_MM, 0.0):  # a push that would reach a wall may still reach the centre
+                moves = _waypoints(config, start, centre + past * d, tip_z)
+                problem = check_nudge(config, moves, T_now, others)
+                if problem is None:
+                    return NudgePlan(T_base_object=T, direction=d, tip_z_mm=tip_z, waypoints=tuple(moves))
         why.append(f"{math.degrees(math.atan2(d[1], d[0])):.0f}°: {problem}")
     raise NudgeRefused(
         f"no nudge of the {model.name} at ({T[0, 3]:.1f}, {T[1, 3]:.1f}, {T[2, 3]:.1f}) mm passes the checks "
