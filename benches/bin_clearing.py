@@ -107,6 +107,8 @@ def run_pile(make, seed: int, count: int, frames: int) -> dict:
         "looks": sum(r.looks for r in recs),
         "skipped": sum(len(r.skipped) for r in recs),
         "cpu_s_per_pick": cpu / max(1, len(recs)),
+        # Measuring each grasp's finger opening, once per grasp and part (not per pick), ms.
+        "grasp_widths_ms": float(sum(r.timings.get("cpu.grasp_widths", 0.0) for r in recs)),
         "wall_s": wall,
         "stopped": report.stopped,
     }
@@ -140,8 +142,9 @@ def main() -> None:
     print(
         f"\n{'part':<14}{'removed':>9}{'emptied':>9}{'wrong':>7}{'empty':>7}{'floor':>7}"
         f"{'nudges':>8}{'scan ms':>9}{'loc+plan':>9}{'motion':>8}{'cpu s/pick':>11}"
-        f"{'extract':>9}{'pose':>7}{'plan':>7}  (binpick's own CPU ms per cycle)"
+        f"{'extract':>9}{'pose':>7}{'plan':>7}  (binpick's own CPU ms per cycle){'widths':>8}"
     )
+    print("  (cpu s/pick: the whole process, the simulator's rendering and physics included; widths: ms per pile)")
     for name, piles in rows.items():
         n = sum(p["count"] for p in piles)
         print(
@@ -154,6 +157,7 @@ def main() -> None:
             f"{np.mean([p['stages_ms']['motion'] for p in piles]):>8.0f}"
             f"{np.mean([p['cpu_s_per_pick'] for p in piles]):>11.2f}"
             + "".join(f"{np.mean([p['stages_ms'][s] for p in piles]):>{w}.0f}" for s, w in zip(CPU, (9, 7, 7)))
+            + f"{'':>34}{np.mean([p.get('grasp_widths_ms', 0.0) for p in piles]):>8.0f}"
         )
     Path(args.out).write_text(json.dumps(rows, indent=1))
 

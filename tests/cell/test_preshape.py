@@ -112,8 +112,14 @@ def test_a_gripper_that_cannot_be_set_to_a_width_plans_every_grasp_fully_open(si
         camera=sim.cell.camera,
     )
     assert cell.config.gripper.preshape_clearance_mm is None
+    assert cell.config.openings_cpu_ms == 0.0
     openings = cell.config.openings(list(cell.config.grasps)[:50])
     assert set(openings[~np.isnan(openings)]) == {cell.config.gripper.open_width_mm}
+    # Measured once: asked again, the openings are looked up, and the time spent stays put.
+    spent = cell.config.openings_cpu_ms
+    assert spent > 0.0
+    assert np.array_equal(cell.config.openings(list(cell.config.grasps)[:50]), openings, equal_nan=True)
+    assert cell.config.openings_cpu_ms == spent
     plan = SimpleNamespace(opening_mm=30.0)
     assert cell.finger_opening(plan) == cell.config.gripper.open_width_mm
     assert sim.cell.finger_opening(plan) == 30.0

@@ -8,6 +8,7 @@ Lengths in mm, angles in radians; transforms are 4×4 ``T_to_from``.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -325,12 +326,24 @@ class CellConfig:
         known = self._openings
         todo = [n for n in dict.fromkeys(names) if n not in known]
         if todo:
+            c0 = time.process_time()
             known.update(grasp_openings(self.gripper, self.model, {n: self.grasps[n] for n in todo}))
+            self._openings_cpu[0] += time.process_time() - c0
         return np.array([np.nan if known[n] is None else known[n] for n in names], dtype=np.float64)
+
+    @property
+    def openings_cpu_ms(self) -> float:
+        """CPU time (ms) spent so far measuring grasp openings: once per grasp and part, so the
+        pick loop counts it apart from each pick's planning."""
+        return self._openings_cpu[0] * 1e3
 
     @cached_property
     def _openings(self) -> dict[str, Optional[float]]:
         return {}
+
+    @cached_property
+    def _openings_cpu(self) -> list[float]:
+        return [0.0]
 
     def angles_for(self, i: int) -> np.ndarray:
         """The motor angles (rad) of scan pose ``i``."""

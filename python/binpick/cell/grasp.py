@@ -366,17 +366,16 @@ def grasp_openings(
     hi_z = gripper.tip_depth_mm - GRAZE_MM
     half_y = gripper.finger_width_mm / 2 - GRAZE_MM
     widest = np.empty(len(T))
-    step = max(1, 2_000_000 // max(1, len(pts)))
+    step = max(1, 1_000_000 // max(1, len(pts)))
+    P = pts.T
     for k in range(0, len(T), step):
         R, t = T[k : k + step, :3, :3], T[k : k + step, :3, 3]
-        y = np.abs(R[:, 1] @ pts.T + t[:, 1, None])
-        kk, nn = np.nonzero(y < half_y)  # the slab is thin across y: most points are out of it
-        z = np.einsum("kj,kj->k", R[kk, 2], pts[nn]) + t[kk, 2]
-        x = np.abs(np.einsum("kj,kj->k", R[kk, 0], pts[nn]) + t[kk, 0])
-        keep = (z > lo_z) & (z < hi_z) & (x <= outer)
-        w = np.full(len(R), -1.0)
-        np.maximum.at(w, kk[keep], x[keep])
-        widest[k : k + step] = w
+        # Every point in every grasp's gripper frame, a dense matrix product per axis.
+        y = np.abs(R[:, 1] @ P + t[:, 1, None])
+        z = R[:, 2] @ P + t[:, 2, None]
+        x = np.abs(R[:, 0] @ P + t[:, 0, None])
+        inside = (y < half_y) & (z > lo_z) & (z < hi_z) & (x <= outer)
+        widest[k : k + step] = np.where(inside, x, -1.0).max(axis=1)
     return {
         n: (gripper.opening_for(2.0 * w if w >= 0.0 else None) if 2.0 * w <= gripper.open_width_mm else None)
         for n, w in zip(names, widest.tolist())
