@@ -186,6 +186,7 @@ def test_a_shaft_located_at_any_turn_about_its_axis_is_grasped_from_straight_abo
         c = np.asarray(shaft.symmetries.center, dtype=np.float64)
         T = sim.pile.poses[0]
         assert abs((T[:3, :3] @ a)[2]) < 0.2, "the shaft should lie on the floor"
+        matcher = binpick.cell.grasp.GraspMatcher(cfg.grasps, tolerance_deg=0.5, tolerance_mm=0.5, continuous=(c, a))
         tilts = []
         for turn in np.radians([0.0, 37.0, 90.0, 151.0, 233.0, 300.0]):
             S = np.eye(4)
@@ -195,9 +196,6 @@ def test_a_shaft_located_at_any_turn_about_its_axis_is_grasped_from_straight_abo
             tilts.append(plan.tilt_deg)
             # The grasp is one of the cell's, turned about the axis: the part sits in the gripper
             # as a declared grasp puts it, modulo the turn.
-            matcher = binpick.cell.grasp.GraspMatcher(
-                cfg.grasps, tolerance_deg=0.5, tolerance_mm=0.5, continuous=(c, a)
-            )
             assert matcher.within(matcher.error(np.linalg.inv(plan.T_base_gripper) @ T)), plan.grasp
         # Across the shaft, straight down but for the axis's own slope (under 12° here).
         assert max(tilts) - min(tilts) < 1.0 and max(tilts) < 12.0, tilts

@@ -114,10 +114,10 @@ def _waypoints(
     config: CellConfig, start: np.ndarray, end: np.ndarray, tip_z: float
 ) -> list[tuple[str, np.ndarray, bool]]:
     lim = config.limits
-    span = float(np.linalg.norm(end - start))
     above = _tool_down(config, *start, tip_z)
     above[2, 3] = config.clearance_z_mm
     down = _tool_down(config, *start, tip_z)
+    span = float(np.linalg.norm(end - start))
     steps = max(1, math.ceil(span / (0.95 * lim.max_lateral_below_mm)))
     moves = [("above", above, False), ("descend", down, True)]
     for k in range(1, steps + 1):

@@ -43,7 +43,7 @@ from ..devices.emulators import ArmModel, DynamixelEmulator, GripperEmulator, Ro
 from ..devices.gripper import GTO
 from ..errors import InvalidInputError, NoObjectFound
 from ..models import Model
-from ..transforms import inverse, look_down
+from ..transforms import inverse, look_down, rotation_angle_deg
 from .camera import SimCamera
 from .cell import Cell as Layout
 from .pile import Pile, PushReport
@@ -433,7 +433,7 @@ class TwinWorld:
                 return
             reach = float(np.linalg.norm(outline, axis=1).max())
             turns = np.einsum("kji,kjl->kil", path[:-1, :3, :3], path[1:, :3, :3])
-            angles = np.arccos(np.clip((np.trace(turns, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0))
+            angles = np.radians(rotation_angle_deg(turns))
             travel = float((np.linalg.norm(np.diff(path[:, :3, 3], axis=0), axis=1) + angles * reach).sum())
             tool_speed = travel * speed / flange
             self._pushes.append((path, opening, min(max(tool_speed, 1.0), MAX_SWEEP_SPEED)))
