@@ -85,11 +85,83 @@ pub fn render_checkerboard(
         )
     });
     let k = supersample;
+    let (gx, gy) = (
+        (board.cols - 1) as f64 * board.square,
+        (board.rows - 1) as f64 * board.square,
+    );
+    // The board point seen along ray (x, y, 1), camera frame and board frame; None where the
+    // ray runs parallel to the board or meets its plane behind the camera.
+    let meet = |x: f64, y: f64| -> Option<(Point, Point)> {
+        let r = Vector3::new(x, y, 1.0);
+        let den = n.dot(&r);
+        let tt = if den.abs() > 1e-12 {
+            n.dot(&p0.coords) / den
+        } else {
+            -1.0
+        };
+        (tt > 0.0).then(|| {
+            let p = Point::from(r * tt);
+            (p, t_board_camera * p)
+        })
+    };
+    // A region of the board's plane that is convex and of one colour: a square, one of the
+    // four bands of the white margin, or one of the half-planes beyond the board. A pixel whose
+    // footprint has its four corners in the same region is of that colour throughout.
+    let region = |b: &Point| -> (i64, i64) {
+        if b.x < xmin {
+            (-10, 0)
+        } else if b.x > xmax {
+            (-11, 0)
+        } else if b.y < ymin {
+            (-12, 0)
+        } else if b.y > ymax {
+            (-13, 0)
+        } else if b.x < -board.square {
+            (-20, 0)
+        } else if b.x >= gx {
+            (-21, 0)
+        } else if b.y < -board.square {
+            (-22, 0)
+        } else if b.y >= gy {
+            (-23, 0)
+        } else {
+            ((b.x / board.square).floor() as i64, (b.y / board.square).floor() as i64)
+        }
+    };
+    // The radiance of the board at `x` (camera frame), board point `b`.
+    let radiance = |x: &Point, b: &Point| -> [f64; 3] {
+        if b.x < xmin || b.x > xmax || b.y < ymin || b.y > ymax {
+            return [lighting.background; 3];
+        }
+        let inside = b.x >= -board.square && b.x < gx && b.y >= -board.square && b.y < gy;
+        let black =
+            inside && ((b.x / board.square).floor() as i64 + (b.y / board.square).floor() as i64).rem_euclid(2) == 0;
+        let albedo = if black { 0.08 } else { 0.85 };
+        let mut rgb = [albedo * shade; 3];
+        if let Some((l, o, xl, yl, zl)) = &laser_frame {
+            let wv = x - o;
+            let along = zl.dot(&wv);
+            if along > 0.0 && yl.dot(&wv).abs() <= (l.fan_angle / 2.0).tan() * along {
+                let d = xl.dot(&wv);
+                let dist = wv.norm();
+                let cos_i = n.dot(&(wv / dist)).abs();
+                let e = l.power * (-0.5 * d * d / (l.sheet_sigma * l.sheet_sigma)).exp() * l.reference_distance / dist
+                    * cos_i
+                    * albedo;
+                for (v, c) in rgb.iter_mut().zip(&l.color) {
+                    *v += e * c;
+                }
+            }
+        }
+        rgb
+    };
+    // The laser's light is below a millionth of its peak this far from the sheet.
+    let dark = laser_frame.as_ref().map(|(l, ..)| 5.3 * l.sheet_sigma);
     let img: Vec<[f32; 3]> = (0..h)
         .into_par_iter()
         .flat_map_iter(|v| {
             let table = &table;
-            let laser_frame = &laser_frame;
+            let (meet, region, radiance, laser_frame) = (&meet, &region, &radiance, &laser_frame);
             (0..w).map(move |u| {
                 let at = |uu: usize, vv: usize| table[vv * w + uu];
                 let c = at(u, v);
@@ -103,59 +175,52 @@ pub fn render_checkerboard(
                     (at(u, v1)[0] - at(u, v0)[0]) / (v1 - v0).max(1) as f64,
                     (at(u, v1)[1] - at(u, v0)[1]) / (v1 - v0).max(1) as f64,
                 ];
+                let ray = |su: f64, sv: f64| (c[0] + su * du[0] + sv * dv[0], c[1] + su * du[1] + sv * dv[1]);
+                // One sample stands for the pixel when its footprint (the parallelogram the
+                // supersamples fill) is of one colour with no laser light: its four corners all
+                // miss the board's plane, or all lie in one convex region of one colour, on the
+                // same side of the sheet and far from it (the sheet's distance is affine on the
+                // board, so the footprint's nearest point to it is a corner).
+                if k > 1 {
+                    let corners = [(-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)].map(|(su, sv)| {
+                        let (x, y) = ray(su, sv);
+                        meet(x, y)
+                    });
+                    let uniform = if corners.iter().all(Option::is_none) {
+                        true
+                    } else if let [Some(a), Some(b), Some(c2), Some(d)] = &corners {
+                        let r0 = region(&a.1);
+                        let same = [b, c2, d].iter().all(|q| region(&q.1) == r0);
+                        let unlit = match (laser_frame, dark) {
+                            (Some((_, o, xl, ..)), Some(far)) => {
+                                let side = |q: &(Point, Point)| xl.dot(&(q.0 - o));
+                                let s0 = side(a);
+                                s0.abs() > far && [b, c2, d].iter().all(|q| (side(q) * s0.signum()) > far)
+                            }
+                            _ => true,
+                        };
+                        same && unlit
+                    } else {
+                        false
+                    };
+                    if uniform {
+                        let (x, y) = ray(0.0, 0.0);
+                        let rgb = match meet(x, y) {
+                            Some((p, b)) => radiance(&p, &b),
+                            None => [lighting.background; 3],
+                        };
+                        return [rgb[0] as f32, rgb[1] as f32, rgb[2] as f32];
+                    }
+                }
                 let mut acc = [0.0f64; 3];
                 for i in 0..k {
                     for j in 0..k {
                         let (su, sv) = ((i as f64 + 0.5) / k as f64 - 0.5, (j as f64 + 0.5) / k as f64 - 0.5);
-                        let r = Vector3::new(c[0] + su * du[0] + sv * dv[0], c[1] + su * du[1] + sv * dv[1], 1.0);
-                        let den = n.dot(&r);
-                        let tt = if den.abs() > 1e-12 {
-                            n.dot(&p0.coords) / den
-                        } else {
-                            -1.0
+                        let (x, y) = ray(su, sv);
+                        let rgb = match meet(x, y) {
+                            Some((p, b)) => radiance(&p, &b),
+                            None => [lighting.background; 3],
                         };
-                        if tt <= 0.0 {
-                            for a in acc.iter_mut() {
-                                *a += lighting.background;
-                            }
-                            continue;
-                        }
-                        let x = Point::from(r * tt);
-                        let b = t_board_camera * x;
-                        if b.x < xmin || b.x > xmax || b.y < ymin || b.y > ymax {
-                            for a in acc.iter_mut() {
-                                *a += lighting.background;
-                            }
-                            continue;
-                        }
-                        let inside = b.x >= -board.square
-                            && b.x < (board.cols - 1) as f64 * board.square
-                            && b.y >= -board.square
-                            && b.y < (board.rows - 1) as f64 * board.square;
-                        let black = inside
-                            && ((b.x / board.square).floor() as i64 + (b.y / board.square).floor() as i64)
-                                .rem_euclid(2)
-                                == 0;
-                        let albedo = if black { 0.08 } else { 0.85 };
-                        let mut rgb = [albedo * shade; 3];
-                        if let Some((l, o, xl, yl, zl)) = laser_frame {
-                            let wv = x - o;
-                            let along = zl.dot(&wv);
-                            if along > 0.0 && yl.dot(&wv).abs() <= (l.fan_angle / 2.0).tan() * along {
-                                let d = xl.dot(&wv);
-                                let dist = wv.norm();
-                                let cos_i = n.dot(&(wv / dist)).abs();
-                                let e = l.power
-                                    * (-0.5 * d * d / (l.sheet_sigma * l.sheet_sigma)).exp()
-                                    * l.reference_distance
-                                    / dist
-                                    * cos_i
-                                    * albedo;
-                                for (v, c) in rgb.iter_mut().zip(&l.color) {
-                                    *v += e * c;
-                                }
-                            }
-                        }
                         for ch in 0..3 {
                             acc[ch] += rgb[ch];
                         }

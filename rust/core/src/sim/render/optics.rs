@@ -2,14 +2,22 @@
 //! [`crate::Camera`]), the laser projector, materials, lighting and sensor noise.
 
 use super::*;
+use std::sync::Mutex;
 
 /// The largest image side the renderer draws, px (its buffers hold several values per pixel).
 const MAX_SIDE: u32 = 16384;
 
+/// How many cameras' ray grids [`pixel_ray_grid`] keeps (a cell renders through one or two).
+const GRID_CACHE: usize = 2;
+
 /// Undistorted normalised rays `(x, y)` (`z = 1`) of every pixel centre, row-major, from the one
 /// camera model ([`Camera::ray`]): the rays the renderer casts are the ones triangulation
-/// inverts. NaN where the distortion cannot be inverted (such a pixel sees nothing).
-pub(super) fn pixel_ray_grid(camera: &Camera) -> Result<Vec<[f64; 2]>> {
+/// inverts. NaN where the distortion cannot be inverted (such a pixel sees nothing). Built on
+/// first use and kept for the last few cameras: every frame of a capture or a scan after the
+/// first skips the per-pixel undistortion.
+pub(super) fn pixel_ray_grid(camera: &Camera) -> Result<Arc<Vec<[f64; 2]>>> {
+    type Grids = Vec<(Camera, Arc<Vec<[f64; 2]>>)>;
+    static CACHE: Mutex<Grids> = Mutex::new(Vec::new());
     camera.validate()?;
     if camera.width > MAX_SIDE || camera.height > MAX_SIDE {
         return Err(Error::invalid(
@@ -20,16 +28,31 @@ pub(super) fn pixel_ray_grid(camera: &Camera) -> Result<Vec<[f64; 2]>> {
             ),
         ));
     }
+    let find = |cache: &Grids| cache.iter().find(|(c, _)| c == camera).map(|(_, g)| g.clone());
+    if let Some(grid) = find(&CACHE.lock().unwrap_or_else(|e| e.into_inner())) {
+        return Ok(grid);
+    }
     let (w, h) = (camera.width as usize, camera.height as usize);
-    Ok((0..h)
-        .into_par_iter()
-        .flat_map_iter(|v| {
-            (0..w).map(move |u| match camera.ray(u as f64, v as f64) {
-                Some(r) => [r.x, r.y],
-                None => [f64::NAN; 2],
+    let grid: Arc<Vec<[f64; 2]>> = Arc::new(
+        (0..h)
+            .into_par_iter()
+            .flat_map_iter(|v| {
+                (0..w).map(move |u| match camera.ray(u as f64, v as f64) {
+                    Some(r) => [r.x, r.y],
+                    None => [f64::NAN; 2],
+                })
             })
-        })
-        .collect())
+            .collect(),
+    );
+    let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(g) = find(&cache) {
+        return Ok(g);
+    }
+    if cache.len() == GRID_CACHE {
+        cache.remove(0);
+    }
+    cache.push((*camera, grid.clone()));
+    Ok(grid)
 }
 
 /// The laser line projector on the flange, turned by the motor about its own y axis.
