@@ -137,3 +137,35 @@ def test_a_part_near_a_wall_is_pushed_off_it_from_the_gap_when_the_closed_finger
                 )
             else:
                 assert not from_gap, plan.heading_deg
+
+
+def test_a_part_against_a_wall_leaning_away_from_it_is_pushed_over_towards_the_wall(tee):
+    # The tee on its run along the -y wall (5 mm off it), its branch turned 20° from straight up:
+    # leaning away from the wall, every approach to the branch within the 45° tilt limit comes
+    # over the wall, and no push can start between the part and the wall; pushed towards the wall
+    # it leans the other way. Leaning towards the wall, or lying flat, or away from the wall, it
+    # is pushed as before (towards the bin's centre first).
+    with SimulatedCell(tee, count=1, seed=0, frames=4) as sim:
+        cfg = sim.cell.config
+        lo, hi = cfg.bin_bounds
+        T_now, nothing = sim.robot_emulator.pose(), np.zeros((0, 3))
+        verts = np.asarray(tee.vertices)
+
+        def against_wall(lean_deg: float, gap: float = 5.0) -> np.ndarray:
+            # object x (the run) along base -x, object y (the branch) up, turned about the run.
+            a = np.radians(lean_deg)
+            T = np.eye(4)
+            T[:3, :3] = np.array([[-1.0, 0.0, 0.0], [0.0, np.sin(a), np.cos(a)], [0.0, np.cos(a), -np.sin(a)]])
+            placed = verts @ T[:3, :3].T
+            T[:3, 3] = [(lo[0] + hi[0]) / 2, lo[1] + gap - placed[:, 1].min(), lo[2] - placed[:, 2].min()]
+            return T
+
+        def heading(T: np.ndarray) -> float:
+            return nudge.plan_nudge(cfg, T, nothing, T_now).heading_deg
+
+        assert heading(against_wall(20.0)) == pytest.approx(-90.0, abs=1.0)  # leaning away: over towards the wall
+        assert abs(heading(against_wall(-20.0)) + 90.0) > 30.0  # leaning towards the wall already
+        assert abs(heading(against_wall(20.0, gap=60.0)) + 90.0) > 30.0  # room to push it off the wall
+        flat = np.eye(4)
+        flat[:3, 3] = [(lo[0] + hi[0]) / 2, lo[1] + 5.0 - verts[:, 1].min(), lo[2] - verts[:, 2].min()]
+        assert abs(heading(flat) + 90.0) > 30.0  # lying flat: nothing to push over

@@ -10,7 +10,12 @@ that would bring the gripper against a wall; in steps no
 longer than the cell's ``max_lateral_below_mm``, the whole push within ``max_push_mm``: the
 safety module's rule 5), and
 straight up again. Directions are tried in turn — towards the bin's centre first, then away from
-the nearest wall, then the others — and the first plan that passes every check is run:
+the nearest wall, then the others — and the first plan that passes every check is run. A part
+lying against a wall (too close for the closed fingers to go down between them) whose top leans
+away from that wall (by ``LEAN_MM`` or more past its bottom) is pushed towards the wall first: a
+push from the wall's side cannot start, a push along the wall only slides it, and every approach
+to its leaning top within the tool-tilt limit comes from the wall's side; pushed over towards
+the wall, it leans the other way and is grasped from the open side.
 
 - every pose within the workspace and the tool-attitude limit, the whole sequence from the arm's
   pose now within the approach and push rules (:mod:`binpick.devices.safety`, rules 3 and 5);
@@ -50,6 +55,8 @@ NUDGE_PAST_MM = 20.0
 NUDGE_DIRECTIONS = 8
 #: Scanned points within this distance of the located part's model belong to the part, mm.
 OWN_POINT_MM = 4.0
+#: A part's top (its highest third) this far or more off its footprint's centre leans, mm.
+LEAN_MM = 5.0
 #: The fingertips stay at least this far above the floor (beyond ``floor_clearance_mm``), mm.
 TIP_FLOOR_MARGIN_MM = 5.0
 
@@ -82,18 +89,23 @@ class NudgePlan:
         }
 
 
-def nudge_directions(config: CellConfig, centre_xy: np.ndarray) -> list[np.ndarray]:
-    """Unit push directions for a part at ``centre_xy``: towards the bin's centre, away from the
-    nearest wall, then the rest of :data:`NUDGE_DIRECTIONS` evenly spaced ones, nearest first."""
+def nudge_directions(
+    config: CellConfig, centre_xy: np.ndarray, *, first: Optional[np.ndarray] = None
+) -> list[np.ndarray]:
+    """Unit push directions for a part at ``centre_xy``: ``first`` if given, towards the bin's
+    centre, away from the nearest wall, then the rest of :data:`NUDGE_DIRECTIONS` evenly spaced
+    ones, nearest first."""
     lo, hi = (np.asarray(b, dtype=float) for b in config.bin_bounds)
     to_centre = (lo[:2] + hi[:2]) / 2 - centre_xy
     gaps = [centre_xy[0] - lo[0], hi[0] - centre_xy[0], centre_xy[1] - lo[1], hi[1] - centre_xy[1]]
     away = [np.array(v, dtype=float) for v in ((1, 0), (-1, 0), (0, 1), (0, -1))][int(np.argmin(gaps))]
-    first = to_centre / np.linalg.norm(to_centre) if np.linalg.norm(to_centre) > 1.0 else away
-    angle0 = math.atan2(first[1], first[0])
+    towards = to_centre / np.linalg.norm(to_centre) if np.linalg.norm(to_centre) > 1.0 else away
+    angle0 = math.atan2(towards[1], towards[0])
     ring = [angle0 + 2 * math.pi * k / NUDGE_DIRECTIONS for k in range(1, NUDGE_DIRECTIONS)]
     ring.sort(key=lambda a: abs(math.remainder(a - angle0, 2 * math.pi)))
-    out = [first, away] + [np.array([math.cos(a), math.sin(a)]) for a in ring]
+    out = [towards, away] + [np.array([math.cos(a), math.sin(a)]) for a in ring]
+    if first is not None:
+        out.insert(0, np.asarray(first, dtype=float) / np.linalg.norm(first))
     unique: list[np.ndarray] = []
     for d in out:
         if all(float(d @ u) < math.cos(math.radians(10.0)) for u in unique):
@@ -187,7 +199,7 @@ def plan_nudge(config: CellConfig, T_base_object: Any, scene: Any, T_now: Any) -
     g = config.gripper
     reach = math.hypot(g.finger_thickness_mm, g.finger_width_mm / 2)
     why: list[str] = []
-    for d in nudge_directions(config, centre):
+    for d in nudge_directions(config, centre, first=_topple(config, verts, reach)):
         s = (verts[:, :2] - centre) @ d
         for gap in NUDGE_START_MM:
             start = centre + (float(s.min()) - gap - reach) * d
@@ -201,6 +213,26 @@ def plan_nudge(config: CellConfig, T_base_object: Any, scene: Any, T_now: Any) -
         f"no nudge of the {model.name} at ({T[0, 3]:.1f}, {T[1, 3]:.1f}, {T[2, 3]:.1f}) mm passes the checks "
         f"({'; '.join(why)}); nothing was sent"
     )
+
+
+def _topple(config: CellConfig, verts: np.ndarray, reach: float) -> Optional[np.ndarray]:
+    """The push towards the nearest wall for a part (``verts``, base frame) lying too close to it
+    for the closed fingers (``reach`` from the TCP) to go down between them, whose top (highest
+    third) leans away from it by :data:`LEAN_MM` or more past its bottom (lowest third); None for any other part."""
+    lo, hi = (np.asarray(b, dtype=float) for b in config.bin_bounds)
+    low, high = verts[:, :2].min(axis=0), verts[:, :2].max(axis=0)
+    gaps = np.array([low[0] - lo[0], hi[0] - high[0], low[1] - lo[1], hi[1] - high[1]])
+    wall = int(np.argmin(gaps))
+    if gaps[wall] >= min(NUDGE_START_MM) + 2.0 * reach:
+        return None
+    towards = np.array([(-1.0, 0.0), (1.0, 0.0), (0.0, -1.0), (0.0, 1.0)][wall])
+    top = float(verts[:, 2].max())
+    bottom = float(verts[:, 2].min())
+    height = top - bottom
+    lean = verts[verts[:, 2] >= top - height / 3.0, :2].mean(axis=0) - verts[
+        verts[:, 2] <= bottom + height / 3.0, :2
+    ].mean(axis=0)
+    return towards if float(lean @ -towards) >= LEAN_MM else None
 
 
 def _near(points: np.ndarray, model_points: np.ndarray, radius: float) -> np.ndarray:
