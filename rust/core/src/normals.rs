@@ -72,20 +72,34 @@ pub fn normals_at(
             if cancel.requested() {
                 return Vector3::z();
             }
-            index.knn_into(p, k, found);
-            let (_, cov) = covariance_of(found.iter().map(|f| &cloud[f.1 as usize]));
-            let n = extreme_axis(&cov, false).unwrap_or_else(|| principal_axes(&cov).1[2]);
-            let facing = match orientation {
-                Orientation::TowardPoint(v) => v - p,
-                Orientation::TowardDirection(d) => d,
-            };
-            if n.dot(&facing) < 0.0 {
-                -n
-            } else {
-                n
-            }
+            normal_at(p, cloud, index, k, orientation, found)
         })
         .collect()
+}
+
+/// The unit normal at `p` from the PCA of its `k` nearest points of `cloud` (`index` built over
+/// `cloud`), flipped to face `orientation`; `found` is a reused buffer. One query of
+/// [`normals_at`], for callers that need the normals of only some points, as they come.
+pub fn normal_at(
+    p: &Point,
+    cloud: &[Point],
+    index: &KdIndex,
+    k: usize,
+    orientation: Orientation,
+    found: &mut Vec<(f64, u32)>,
+) -> Vector3<f64> {
+    index.knn_into(p, k, found);
+    let (_, cov) = covariance_of(found.iter().map(|f| &cloud[f.1 as usize]));
+    let n = extreme_axis(&cov, false).unwrap_or_else(|| principal_axes(&cov).1[2]);
+    let facing = match orientation {
+        Orientation::TowardPoint(v) => v - p,
+        Orientation::TowardDirection(d) => d,
+    };
+    if n.dot(&facing) < 0.0 {
+        -n
+    } else {
+        n
+    }
 }
 
 #[cfg(test)]

@@ -240,10 +240,13 @@ pub struct SegmentConfig {
 
 /// Table 2: the region of the highest point that makes a whole object. Returns indices into
 /// `points` (of the first region with at least `min_points`), or `NoObjectFound`. Points marked
-/// in `excluded` (regions already tried) are neither seeds nor members.
+/// in `excluded` (regions already tried) are neither seeds nor members. With `normal_of`, a
+/// neighbour joins only if its normal (`normal_of(i)`, asked for as the growth reaches point `i`:
+/// a caller may compute normals on demand, only for the points the regions reach) is within
+/// `max_normal_angle` of its neighbour's.
 pub fn segment_top(
     points: &[Point],
-    normals: Option<&[Vector3<f64>]>,
+    mut normal_of: Option<&mut dyn FnMut(usize) -> Vector3<f64>>,
     index: &KdIndex,
     cfg: &SegmentConfig,
     excluded: Option<&[bool]>,
@@ -275,8 +278,8 @@ pub fn segment_top(
                 if label[i] || (points[i] - points[seed]).norm() > cfg.max_extent {
                     continue;
                 }
-                if let Some(ns) = normals {
-                    if ns[i].dot(&ns[g]).abs() < cos_limit {
+                if let Some(normal) = normal_of.as_deref_mut() {
+                    if normal(i).dot(&normal(g)).abs() < cos_limit {
                         continue;
                     }
                 }
@@ -377,5 +380,49 @@ mod tests {
             segment_top(&pts, None, &idx, &cfg_big, None),
             Err(Error::NoObjectFound { .. })
         ));
+    }
+
+    #[test]
+    fn normals_on_demand_give_the_region_of_every_normal_computed_first_from_few_of_them() {
+        use crate::normals::{estimate_normals, normal_at, Orientation};
+        // A 40 mm cube's top and one side wall (a crease the normals must stop at), on a wide
+        // floor of scan lines: the top region is a small part of the cloud.
+        let mut pts: Vec<Point> = Vec::new();
+        for i in 0..120 {
+            for j in 0..600 {
+                pts.push(Point::new(2.0 * i as f64, 0.5 * j as f64, 0.0));
+            }
+        }
+        for i in 0..20 {
+            for j in 0..80 {
+                pts.push(Point::new(100.0 + 2.0 * i as f64, 100.0 + 0.5 * j as f64, 40.0));
+                pts.push(Point::new(140.0, 100.0 + 0.5 * j as f64, 2.0 * i as f64));
+            }
+        }
+        let idx = KdIndex::new(&pts);
+        let up = Orientation::TowardDirection(Vector3::z());
+        let cfg = SegmentConfig {
+            d_star: 2.5,
+            min_points: 100,
+            max_normal_angle: 0.5,
+            max_extent: 120.0,
+            up: Vector3::z(),
+        };
+        let all = estimate_normals(&pts, &idx, 24, up).unwrap();
+        let eager = segment_top(&pts, Some(&mut |i: usize| all[i]), &idx, &cfg, None).unwrap();
+        let mut memo: Vec<Option<Vector3<f64>>> = vec![None; pts.len()];
+        let mut found = Vec::new();
+        let mut on_demand =
+            |i: usize| *memo[i].get_or_insert_with(|| normal_at(&pts[i], &pts, &idx, 24, up, &mut found));
+        let lazy = segment_top(&pts, Some(&mut on_demand), &idx, &cfg, None).unwrap();
+        assert_eq!(lazy, eager);
+        assert_eq!(eager.len(), 1600, "the cube's top, not its wall or the floor");
+        assert!(eager.iter().all(|&i| pts[i].z == 40.0));
+        let computed = memo.iter().filter(|n| n.is_some()).count();
+        assert!(
+            computed < pts.len() / 10,
+            "{computed} of {} normals computed",
+            pts.len()
+        );
     }
 }

@@ -9,8 +9,8 @@ use super::judge::Judge;
 use super::scene::scene_indices;
 use super::{CoarseMethod, Laps, PoseConfig, PoseEstimate, PoseModel, Timings};
 use crate::error::{Error, Result};
-use crate::geometry::{centroid, covariance, principal_axes, Point};
-use crate::normals::{estimate_normals, Orientation};
+use crate::geometry::{centroid, check_count, covariance, principal_axes, Point};
+use crate::normals::{normal_at, Orientation};
 use crate::registration::ccp::ccp;
 use crate::registration::verify::{coarse_inlier_fraction, depth_evidence, inlier_stats, HeightMap};
 use crate::registration::{icp, IcpConfig, RobustKernel};
@@ -185,13 +185,20 @@ pub(super) fn run(
         along: spacing.along.max(1e-3),
         across: spacing.across.max(spacing.along.max(1e-3)),
     };
-    let normals = scan_normals(pts, &index, sampling, up)?;
+    // The normals are computed as the segmentation reaches each point (and kept): the regions
+    // tried touch a small part of a bin's scan, and a normal is tens of neighbours' PCA.
+    let k = normals_k(pts, sampling)?;
+    let mut memo: Vec<Option<Vector3<f64>>> = vec![None; pts.len()];
+    let mut found = Vec::new();
+    let mut normal_of = |i: usize| -> Vector3<f64> {
+        *memo[i].get_or_insert_with(|| normal_at(&pts[i], pts, &index, k, Orientation::TowardDirection(up), &mut found))
+    };
     laps.lap("normals");
     let seg_cfg = segment_config(model, cfg, sampling, up);
     let mut excluded = vec![false; pts.len()];
     let mut last_failure: Option<Error> = None;
     for _ in 0..cfg.ccp_path.max_regions {
-        let region = match segment_top(pts, Some(&normals), &index, &seg_cfg, Some(&excluded)) {
+        let region = match segment_top(pts, Some(&mut normal_of), &index, &seg_cfg, Some(&excluded)) {
             Ok(r) => r,
             Err(e) => return Err(last_failure.unwrap_or(e)),
         };
@@ -212,12 +219,13 @@ pub(super) fn run(
     }))
 }
 
-/// Normals of the scan, facing `up`, from neighbours of more than one scan line.
-fn scan_normals(pts: &[Point], index: &KdIndex, s: Sampling, up: Vector3<f64>) -> Result<Vec<Vector3<f64>>> {
-    let k = ((8.0 * s.across / s.along).round() as usize)
+/// How many neighbours a scan normal is fitted to: enough to span more than one scan line
+/// (the points lie far closer along a line than across lines).
+fn normals_k(pts: &[Point], s: Sampling) -> Result<usize> {
+    check_count("points", pts, 3, "normals need at least 3 points")?;
+    Ok(((8.0 * s.across / s.along).round() as usize)
         .clamp(12, 64)
-        .min(pts.len());
-    estimate_normals(pts, index, k, Orientation::TowardDirection(up))
+        .min(pts.len()))
 }
 
 /// Table 2's parameters, defaults derived from the scan's sampling and the model's size.
