@@ -4,6 +4,7 @@ nothing sent."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from types import SimpleNamespace
 
@@ -164,6 +165,17 @@ def test_a_part_against_a_wall_leaning_away_from_it_is_pushed_over_towards_the_w
             return nudge.plan_nudge(cfg, T, nothing, T_now).heading_deg
 
         assert heading(against_wall(20.0)) == pytest.approx(-90.0, abs=1.0)  # leaning away: over towards the wall
+        # Pushed that way and still blocked, it is pushed another way next (along the wall).
+        first = nudge.plan_nudge(cfg, against_wall(20.0), nothing, T_now)
+        moved = against_wall(20.0)
+        moved[0, 3] += 10.0
+        again = nudge.plan_nudge(cfg, moved, nothing, T_now, tried=[first])
+        assert abs(math.remainder(again.heading_deg + 90.0, 360.0)) >= nudge.RETRY_APART_DEG
+        elsewhere = moved.copy()
+        elsewhere[0, 3] -= tee.diameter  # another part, or this one pushed far: the first choice again
+        assert nudge.plan_nudge(cfg, elsewhere, nothing, T_now, tried=[first]).heading_deg == pytest.approx(
+            -90.0, abs=1.0
+        )
         assert abs(heading(against_wall(-20.0)) + 90.0) > 30.0  # leaning towards the wall already
         assert abs(heading(against_wall(20.0, gap=60.0)) + 90.0) > 30.0  # room to push it off the wall
         flat = np.eye(4)

@@ -234,7 +234,7 @@ class CellConfig:
     max_candidates: int = 8
     look_again_poses: Optional[Sequence[Any]] = None
     reachable: Optional[Callable[[np.ndarray], bool]] = None
-    max_nudges: int = 2
+    max_nudges: int = 3
     symmetries: Sequence[Any] = ()
     min_score: float = 0.0
     estimate_options: Mapping[str, Any] = field(default_factory=dict)

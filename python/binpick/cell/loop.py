@@ -666,7 +666,7 @@ class Cell:
                 after = f" (after {len(nudges)} nudges)" if nudges else ""
                 return replace(record, nudges=tuple(nudges)), f"{why}{after}"
             try:
-                plan = nudge_blocked(self, list(record.skipped), record.scan)
+                plan = nudge_blocked(self, list(record.skipped), record.scan, nudges)
             except BinpickError as exc:
                 error = f"nudge: {type(exc).__name__}: {exc}"
                 record = replace(record, nudges=tuple(nudges), failure="fault", fault=True, error=error)

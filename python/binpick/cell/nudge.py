@@ -33,6 +33,7 @@ Nothing moves before the plan is checked whole; a refused plan raises :class:`Nu
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Optional
 
@@ -53,6 +54,9 @@ NUDGE_START_MM = (30.0, 8.0)
 NUDGE_PAST_MM = 20.0
 #: Directions tried per part (towards the bin centre, away from the nearest wall, then others).
 NUDGE_DIRECTIONS = 8
+#: A part pushed once and still blocked is pushed next in a direction at least this far from
+#: the first push's, where one passes the checks, degrees.
+RETRY_APART_DEG = 45.0
 #: Scanned points within this distance of the located part's model belong to the part, mm.
 OWN_POINT_MM = 4.0
 #: A part's top (its highest third) this far or more off its footprint's centre leans, mm.
@@ -182,10 +186,15 @@ def check_nudge(config: CellConfig, waypoints: list, T_now: np.ndarray, scene: n
     return None
 
 
-def plan_nudge(config: CellConfig, T_base_object: Any, scene: Any, T_now: Any) -> NudgePlan:
+def plan_nudge(
+    config: CellConfig, T_base_object: Any, scene: Any, T_now: Any, *, tried: Sequence[NudgePlan] = ()
+) -> NudgePlan:
     """The first nudge of the located part ``T_base_object`` that passes :func:`check_nudge`,
     over :func:`nudge_directions`; NudgeRefused (nothing sent) when none does. ``scene``: the
-    scan's points (base frame); ``T_now``: the arm's flange pose now."""
+    scan's points (base frame); ``T_now``: the arm's flange pose now; ``tried``: the nudges
+    already made in this pick — a direction within :data:`RETRY_APART_DEG` of one that already
+    pushed this part (a nudged part within half its diameter of here) and left it blocked is
+    tried last, after the others."""
     T, pts, T_now = plan_inputs(config, T_base_object, scene, T_now, "T_now")
     model = config.model
     verts = np.asarray(model.vertices) @ T[:3, :3].T + T[:3, 3]
@@ -199,7 +208,11 @@ def plan_nudge(config: CellConfig, T_base_object: Any, scene: Any, T_now: Any) -
     g = config.gripper
     reach = math.hypot(g.finger_thickness_mm, g.finger_width_mm / 2)
     why: list[str] = []
-    for d in nudge_directions(config, centre, first=_topple(config, verts, reach)):
+    directions = nudge_directions(config, centre, first=_topple(config, verts, reach))
+    before = [p.direction for p in tried if np.linalg.norm(p.T_base_object[:2, 3] - T[:2, 3]) < model.diameter / 2]
+    cos_apart = math.cos(math.radians(RETRY_APART_DEG))
+    directions.sort(key=lambda d: any(float(d @ b) > cos_apart for b in before))  # stable: the order otherwise kept
+    for d in directions:
         s = (verts[:, :2] - centre) @ d
         for gap in NUDGE_START_MM:
             start = centre + (float(s.min()) - gap - reach) * d
@@ -247,10 +260,11 @@ def _near(points: np.ndarray, model_points: np.ndarray, radius: float) -> np.nda
     return out
 
 
-def nudge_blocked(cell: Any, skipped: list, scan: Any) -> Optional[NudgePlan]:
+def nudge_blocked(cell: Any, skipped: list, scan: Any, made: Sequence[NudgePlan] = ()) -> Optional[NudgePlan]:
     """Plans a nudge of the first pose in ``skipped`` (the located parts the loop passed over,
     every look's estimate) that has one, and runs it on ``cell`` (closes the gripper, the moves, gripper left closed);
-    the plan run, or None when no part has one (nothing was sent). Faults stop the arm and are raised."""
+    the plan run, or None when no part has one (nothing was sent); ``made``: the nudges already
+    made in this pick (see :func:`plan_nudge`). Faults stop the arm and are raised."""
     cfg = cell.config
     T_now = cell.robot.read_pose()
     tried: list[np.ndarray] = []
@@ -262,7 +276,7 @@ def nudge_blocked(cell: Any, skipped: list, scan: Any) -> Optional[NudgePlan]:
             continue
         tried.append(k.T_base_object)
         try:
-            plan = plan_nudge(cfg, k.T_base_object, scan.points, T_now)
+            plan = plan_nudge(cfg, k.T_base_object, scan.points, T_now, tried=made)
         except NudgeRefused as exc:
             refusals.append(str(exc))
             continue
