@@ -15,7 +15,8 @@ lying against a wall (too close for the closed fingers to go down between them) 
 away from that wall (by ``LEAN_MM`` or more past its bottom) is pushed towards the wall first: a
 push from the wall's side cannot start, a push along the wall only slides it, and every approach
 to its leaning top within the tool-tilt limit comes from the wall's side; pushed over towards
-the wall, it leans the other way and is grasped from the open side.
+the wall, it leans the other way and is grasped from the open side. A part pushed once and
+still blocked is pushed another way next (``RETRY_APART_DEG``).
 
 - every pose within the workspace and the tool-attitude limit, the whole sequence from the arm's
   pose now within the approach and push rules (:mod:`binpick.devices.safety`, rules 3 and 5);
@@ -59,7 +60,7 @@ NUDGE_DIRECTIONS = 8
 RETRY_APART_DEG = 45.0
 #: Scanned points within this distance of the located part's model belong to the part, mm.
 OWN_POINT_MM = 4.0
-#: A part's top (its highest third) this far or more off its footprint's centre leans, mm.
+#: A part whose top (highest third) lies this far or more past its bottom (lowest third) leans, mm.
 LEAN_MM = 5.0
 #: The fingertips stay at least this far above the floor (beyond ``floor_clearance_mm``), mm.
 TIP_FLOOR_MARGIN_MM = 5.0

@@ -9,11 +9,14 @@ const MAX_SIDE: u32 = 16384;
 
 /// How many cameras' ray grids [`pixel_ray_grid`] keeps (a cell renders through one or two).
 const GRID_CACHE: usize = 2;
+/// The largest camera whose ray grid is kept, pixels (16 MP: 256 MB of rays); a larger one's grid
+/// is built for each frame and dropped with it.
+const GRID_CACHE_MAX_PIXELS: usize = 1 << 24;
 
 /// Undistorted normalised rays `(x, y)` (`z = 1`) of every pixel centre, row-major, from the one
 /// camera model ([`Camera::ray`]): the rays the renderer casts are the ones triangulation
 /// inverts. NaN where the distortion cannot be inverted (such a pixel sees nothing). Built on
-/// first use and kept for the last few cameras: every frame of a capture or a scan after the
+/// first use and kept for the last few cameras (up to 16 MP): every frame of a capture or a scan after the
 /// first skips the per-pixel undistortion.
 pub(super) fn pixel_ray_grid(camera: &Camera) -> Result<Arc<Vec<[f64; 2]>>> {
     type Grids = Vec<(Camera, Arc<Vec<[f64; 2]>>)>;
@@ -44,6 +47,9 @@ pub(super) fn pixel_ray_grid(camera: &Camera) -> Result<Arc<Vec<[f64; 2]>>> {
             })
             .collect(),
     );
+    if w * h > GRID_CACHE_MAX_PIXELS {
+        return Ok(grid);
+    }
     let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
     if let Some(g) = find(&cache) {
         return Ok(g);
