@@ -69,6 +69,42 @@ const TABLE_ACCEPT: f64 = 1e-5;
 /// Cameras whose ray tables are kept by [`RayTable::shared`].
 const TABLE_CACHE: usize = 4;
 
+/// Values built from a camera (a ray table, a renderer's ray grid), kept for the last `cap`
+/// cameras seen: the one cache of per-camera work.
+pub(crate) struct PerCamera<T> {
+    slots: Mutex<Vec<(Camera, Arc<T>)>>,
+    cap: usize,
+}
+
+impl<T> PerCamera<T> {
+    /// An empty cache keeping `cap` cameras' values (usable in a `static`).
+    pub(crate) const fn new(cap: usize) -> Self {
+        PerCamera {
+            slots: Mutex::new(Vec::new()),
+            cap,
+        }
+    }
+
+    /// The value of `camera`, from the cache or made by `build` (outside the lock: other
+    /// cameras' lookups need not wait for it) and kept, the oldest camera's dropped.
+    pub(crate) fn get_or_build(&self, camera: &Camera, build: impl FnOnce() -> T) -> Arc<T> {
+        let find = |slots: &[(Camera, Arc<T>)]| slots.iter().find(|(c, _)| c == camera).map(|(_, v)| v.clone());
+        if let Some(v) = find(&self.slots.lock().unwrap_or_else(|e| e.into_inner())) {
+            return v;
+        }
+        let value = Arc::new(build());
+        let mut slots = self.slots.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(v) = find(&slots) {
+            return v;
+        }
+        if slots.len() >= self.cap {
+            slots.remove(0);
+        }
+        slots.push((*camera, value.clone()));
+        value
+    }
+}
+
 impl Camera {
     /// A camera from the 3×3 intrinsic matrix `k = [[fx, s, cx], [0, fy, cy], [0, 0, 1]]`, the
     /// distortion and the image size, checked by [`Camera::validate`].
@@ -299,22 +335,8 @@ impl RayTable {
     /// The table of `camera`, built on first use and kept for the last few cameras seen, so
     /// that every scan of a camera after the first skips the build.
     pub fn shared(camera: &Camera) -> Arc<RayTable> {
-        static CACHE: Mutex<Vec<Arc<RayTable>>> = Mutex::new(Vec::new());
-        let find = |cache: &[Arc<RayTable>]| cache.iter().find(|t| t.camera == *camera).cloned();
-        if let Some(t) = find(&CACHE.lock().unwrap_or_else(|e| e.into_inner())) {
-            return t;
-        }
-        // Built outside the lock: other cameras' lookups need not wait for it.
-        let table = Arc::new(RayTable::new(camera));
-        let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(t) = find(&cache) {
-            return t;
-        }
-        if cache.len() == TABLE_CACHE {
-            cache.remove(0);
-        }
-        cache.push(table.clone());
-        table
+        static CACHE: PerCamera<RayTable> = PerCamera::new(TABLE_CACHE);
+        CACHE.get_or_build(camera, || RayTable::new(camera))
     }
 
     /// The camera the table belongs to.

@@ -6,6 +6,7 @@ mod cloud;
 mod kabsch;
 mod plane;
 
+pub(crate) use camera::PerCamera;
 pub use camera::{Camera, RayTable};
 pub use cloud::{
     centroid, check_count, check_finite, check_spread, covariance, covariance_of, extreme_axis, isometry_from_matrix,

@@ -2,7 +2,7 @@
 //! [`crate::Camera`]), the laser projector, materials, lighting and sensor noise.
 
 use super::*;
-use std::sync::Mutex;
+use crate::geometry::PerCamera;
 
 /// The largest image side the renderer draws, px (its buffers hold several values per pixel).
 const MAX_SIDE: u32 = 16384;
@@ -19,8 +19,7 @@ const GRID_CACHE_MAX_PIXELS: usize = 1 << 24;
 /// first use and kept for the last few cameras (up to 16 MP): every frame of a capture or a scan after the
 /// first skips the per-pixel undistortion.
 pub(super) fn pixel_ray_grid(camera: &Camera) -> Result<Arc<Vec<[f64; 2]>>> {
-    type Grids = Vec<(Camera, Arc<Vec<[f64; 2]>>)>;
-    static CACHE: Mutex<Grids> = Mutex::new(Vec::new());
+    static CACHE: PerCamera<Vec<[f64; 2]>> = PerCamera::new(GRID_CACHE);
     camera.validate()?;
     if camera.width > MAX_SIDE || camera.height > MAX_SIDE {
         return Err(Error::invalid(
@@ -31,12 +30,8 @@ pub(super) fn pixel_ray_grid(camera: &Camera) -> Result<Arc<Vec<[f64; 2]>>> {
             ),
         ));
     }
-    let find = |cache: &Grids| cache.iter().find(|(c, _)| c == camera).map(|(_, g)| g.clone());
-    if let Some(grid) = find(&CACHE.lock().unwrap_or_else(|e| e.into_inner())) {
-        return Ok(grid);
-    }
     let (w, h) = (camera.width as usize, camera.height as usize);
-    let grid: Arc<Vec<[f64; 2]>> = Arc::new(
+    let build = || -> Vec<[f64; 2]> {
         (0..h)
             .into_par_iter()
             .flat_map_iter(|v| {
@@ -45,20 +40,13 @@ pub(super) fn pixel_ray_grid(camera: &Camera) -> Result<Arc<Vec<[f64; 2]>>> {
                     None => [f64::NAN; 2],
                 })
             })
-            .collect(),
-    );
-    if w * h > GRID_CACHE_MAX_PIXELS {
-        return Ok(grid);
-    }
-    let mut cache = CACHE.lock().unwrap_or_else(|e| e.into_inner());
-    if let Some(g) = find(&cache) {
-        return Ok(g);
-    }
-    if cache.len() == GRID_CACHE {
-        cache.remove(0);
-    }
-    cache.push((*camera, grid.clone()));
-    Ok(grid)
+            .collect()
+    };
+    Ok(if w * h > GRID_CACHE_MAX_PIXELS {
+        Arc::new(build())
+    } else {
+        CACHE.get_or_build(camera, build)
+    })
 }
 
 /// The laser line projector on the flange, turned by the motor about its own y axis.
