@@ -103,6 +103,7 @@ scan_pose = [400.0, 0.0, 620.0, 180.0, 0.0, 0.0]
 drop_pose = [400.0, -250.0, 350.0, 180.0, 0.0, 0.0]
 frames = 90
 tool = [0.0, 0.0, 195.0, 0.0, 0.0, 0.0]   # the gripper's TCP in the flange frame
+# scan_height_mm = 120.0     # how far above the rim parts are looked for (default: the bin's depth or the part's size)
 
 [calibration_board]          # the printed checkerboard lying face up, for `binpick calibrate capture`
 pattern = [9, 6]             # inner corners: columns, rows
@@ -270,6 +271,7 @@ def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig
         scan_poses=(f.pose("cell", "scan_pose"),),
         drop_pose=f.pose("cell", "drop_pose"),
         frames=f.integer("cell", "frames", 90),
+        scan_height_mm=None if f.get("cell", "scan_height_mm", None) is None else f.number("cell", "scan_height_mm"),
         gripper=_gripper_geometry(f, tool),
         limits=_limits(f),
         num_threads=num_threads,

@@ -17,7 +17,7 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from .._validate import as_box, as_transform, count, instance_of, non_negative, number, positive
+from .._validate import MAX_COORDINATE, as_box, as_transform, count, instance_of, non_negative, number, positive
 from ..calibration import CellCalibration
 from ..devices import safety
 from ..errors import InvalidInputError, SafetyError
@@ -211,6 +211,9 @@ class CellConfig:
         min_score: a located pose scoring lower counts as not found.
         estimate_options: extra keyword arguments for :func:`binpick.estimate_pose`.
         keep_frames: how many frames of each scan to keep in memory (evenly spaced; for pictures).
+        scan_height_mm: how far above the bin's rim the scan looks for parts, mm; None = the bin's
+            depth or the part's diameter, whichever is larger. Each frame's laser line is looked
+            for only where the sheet can meet :attr:`scan_volume` (:class:`~binpick.vision.LaserWindow`).
         num_threads: worker threads for extraction and pose estimation, 0 = all cores.
     """
 
@@ -239,6 +242,7 @@ class CellConfig:
     min_score: float = 0.0
     estimate_options: Mapping[str, Any] = field(default_factory=dict)
     keep_frames: int = 6
+    scan_height_mm: Optional[float] = None
     num_threads: int = 0
 
     def __post_init__(self) -> None:
@@ -261,6 +265,9 @@ class CellConfig:
         )
         non_negative(self.min_score, "min_score")
         count(self.keep_frames, "keep_frames")
+        if self.scan_height_mm is not None:
+            height = number(self.scan_height_mm, "scan_height_mm", 0.0, MAX_COORDINATE, unit="mm")
+            object.__setattr__(self, "scan_height_mm", height)
         count(self.num_threads, "num_threads")
         if self.reachable is not None and not callable(self.reachable):
             raise InvalidInputError("reachable: expected a function T_base_flange -> bool, or None")
@@ -344,6 +351,17 @@ class CellConfig:
     @cached_property
     def _openings_cpu(self) -> list[float]:
         return [0.0]
+
+    @property
+    def scan_volume(self) -> np.ndarray:
+        """Where the scan looks for parts, ((xmin, ymin, zmin), (xmax, ymax, zmax)) mm: the bin's
+        inner volume, widened by half the part's diameter around (a part lying over the rim),
+        10 mm below the floor (sensor noise) and ``scan_height_mm`` above the rim (a full pile)."""
+        lo, hi = self.bin_bounds
+        depth = hi[2] - lo[2]
+        height = max(depth, self.model.diameter) if self.scan_height_mm is None else self.scan_height_mm
+        side = self.model.diameter / 2
+        return np.array([lo - (side, side, 10.0), hi + (side, side, height)])
 
     def angles_for(self, i: int) -> np.ndarray:
         """The motor angles (rad) of scan pose ``i``."""

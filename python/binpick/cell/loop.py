@@ -5,7 +5,8 @@ camera) and a :class:`CellConfig` (calibration, part model and grasps, bin box, 
 poses, gripper geometry, motion limits). One pick is::
 
     cell.scan()    robot to the scan pose (checked by the safety layer), sweep the laser motor,
-                   grab a frame per angle, extract the line, triangulate → cloud in the base frame
+                   grab a frame per angle, extract the line where the sheet can meet the scan
+                   volume (``config.scan_volume``), triangulate → cloud in the base frame
     cell.locate_all()  estimate_poses(cloud, model, bin box) → every distinct part found, most
                    pickable first; :meth:`Cell.locate_and_plan` tries each in turn (and searches
                    the points left for more), and :meth:`Cell.run` looks again from
@@ -43,7 +44,7 @@ from ..devices.motor import LaserMotor
 from ..devices.robot import Robot
 from ..errors import BinpickError, DeviceError, InvalidInputError, InvalidTypeError, NoObjectFound, SafetyError
 from ..poses import estimate_poses
-from ..vision import extract_line, triangulate
+from ..vision import LaserWindow, extract_line, triangulate
 from .config import CellConfig, check_static_poses
 from .frames import FrameSource
 from .grasp import NoGraspError, grasp_filter, plan_bin_clash, plan_grasp
@@ -273,20 +274,18 @@ class Cell:
     def _sweep_laser(self, sweep: _Sweep, wanted: np.ndarray, T_bf: np.ndarray) -> tuple[float, float]:
         """Turns the laser through ``wanted`` at flange pose ``T_bf``, a frame per angle into
         ``sweep``; returns the seconds (wall clock, and this thread's CPU) spent extracting lines."""
-        keep_n = self.config.keep_frames
-        keep = (
-            set(np.unique(np.linspace(0, len(wanted) - 1, min(keep_n, len(wanted))).round().astype(int)).tolist())
-            if keep_n
-            else set()
-        )
+        n_keep = min(self.config.keep_frames, len(wanted))
+        keep = set(np.linspace(0, len(wanted) - 1, n_keep).round().astype(int).tolist())
         self.camera.begin(T_bf)
         extract_s = extract_cpu = 0.0
+        window = LaserWindow(self.config.calibration, T_bf, self.config.scan_volume)
         for k, a in enumerate(wanted):
             reached = float(self.motor.move_to(float(a), wait=True))
             self.camera.laser_at(reached)
             img = self.camera.grab()
             te, ce = time.perf_counter(), time.thread_time()
-            uv = extract_line(img)
+            roi = window.roi(reached)  # None: the sheet misses the scan volume; the frame holds no point
+            uv = np.zeros((0, 2)) if roi is None else extract_line(img, roi=roi)
             extract_s += time.perf_counter() - te
             extract_cpu += time.thread_time() - ce
             sweep.add(uv, reached, T_bf, img if k in keep else None)

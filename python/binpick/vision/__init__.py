@@ -6,5 +6,16 @@ from __future__ import annotations
 from ._extract import extract_line, laser_mask, red_excess
 from ._reconstruct import reconstruct
 from ._triangulate import Cloud, pixel_rays, triangulate
+from ._window import LaserWindow
 
-__all__ = ["Cloud", "extract_line", "laser_mask", "pixel_rays", "reconstruct", "red_excess", "triangulate"]
+__all__ = [
+    "Cloud",
+    "LaserWindow",
+    "extract_line",
+    "laser_mask",
+    "laser_window",
+    "pixel_rays",
+    "reconstruct",
+    "red_excess",
+    "triangulate",
+]

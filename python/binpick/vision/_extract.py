@@ -57,6 +57,7 @@ def extract_line(
     method: str = "cog",
     direction: str = "auto",
     max_jump: float | None = 6.0,
+    roi: tuple[int, int, int, int] | None = None,
 ) -> np.ndarray:
     """The laser line's centre in ``image``, one sub-pixel point per scan line: (M, 2) float64 (u, v).
 
@@ -71,6 +72,8 @@ def extract_line(
       further than this (pixels) from the running median of its neighbours is replaced by the
       strongest peak within ``max_jump`` of that median, or dropped. The median spans 17 scan
       lines, so a stray reflection over fewer than 9 of them is rejected. None keeps the strongest.
+    - ``roi``: ``(u0, v0, u1, v1)``, only the pixels ``u0 ≤ u < u1``, ``v0 ≤ v < v1`` are searched
+      (:meth:`LaserWindow.roi` gives where the sheet can meet the working volume); None: the whole image.
 
     Scan lines without a peak above ``threshold`` give no point.
     """
@@ -80,7 +83,11 @@ def extract_line(
     choice(direction, "direction", _DIRECTIONS)
     if max_jump is not None:
         max_jump = positive(max_jump, "max_jump", "pixels")
-    signal = red_excess(image)
+    img = as_image(image, "image")
+    if roi is not None:
+        u0, v0, u1, v1 = _roi(roi, img.shape)
+        img = img[v0:v1, u0:u1]
+    signal = red_excess(img)
     if direction == "auto":
         lit_rows = np.count_nonzero(signal.max(axis=1) > t)
         lit_cols = np.count_nonzero(signal.max(axis=0) > t)
@@ -89,7 +96,24 @@ def extract_line(
         signal = cv2.transpose(signal)
     across, along = _centres(signal, t, int(window), method, max_jump)
     uv = np.stack([across, along], axis=1) if direction == "rows" else np.stack([along, across], axis=1)
+    if roi is not None:
+        uv += (u0, v0)
     return uv
+
+
+def _roi(roi: Any, shape: tuple[int, ...]) -> tuple[int, int, int, int]:
+    """``roi`` as four ints inside an image of ``shape``, or InvalidInputError naming it."""
+    r = np.asarray(roi)
+    if r.shape != (4,) or r.dtype.kind not in "iu":
+        raise InvalidInputError(f"roi: expected four integers (u0, v0, u1, v1) in pixels, got {roi!r}")
+    u0, v0, u1, v1 = (int(x) for x in r)
+    height, width = shape[:2]
+    if not (0 <= u0 <= u1 - 2 and u1 <= width and 0 <= v0 <= v1 - 2 and v1 <= height):
+        raise InvalidInputError(
+            f"roi: ({u0}, {v0}, {u1}, {v1}) must satisfy 0 ≤ u0 < u1 ≤ {width} and 0 ≤ v0 < v1 ≤ {height} "
+            "(the image's width and height) and span at least 2 pixels each way; pass None to search the whole image"
+        )
+    return u0, v0, u1, v1
 
 
 def _centres(
