@@ -5,7 +5,10 @@ present), seeds × piles: parts removed per pile, bins emptied, wrong-pose lifts
 the part's symmetries by the cell), grasps on nothing (the gripper closed empty), gripper-floor
 contacts (executed plans whose gripper outline reaches the bin floor), time per cycle by stage
 (ms), and the process CPU time per pick (it includes the simulator's renderer and emulators,
-which run in the same process, so it bounds binpick's own compute from above).
+which run in the same process, so it bounds binpick's own compute from above), and binpick's
+own CPU time per cycle by stage (extraction, pose, planning). Everything runs on one thread
+unless ``--threads`` says otherwise, so that binpick's compute is measured on one core; run
+two benches at a time on a two-core machine, not more.
 
     PYTHONPATH=python python benches/bin_clearing.py --quick
 """
@@ -79,8 +82,10 @@ def _floor_gap(sim) -> list:
     return gaps
 
 
-def run_pile(make, seed: int, count: int, frames: int) -> dict:
-    with SimulatedCell(make(), count=count, seed=seed, frames=frames, estimate_options=ESTIMATE) as sim:
+def run_pile(make, seed: int, count: int, frames: int, threads: int = 1) -> dict:
+    with SimulatedCell(
+        make(), count=count, seed=seed, frames=frames, estimate_options=ESTIMATE, num_threads=threads
+    ) as sim:
         gaps = _floor_gap(sim)
         cpu0, wall0 = time.process_time(), time.perf_counter()
         report = sim.cell.run(count + 2)
@@ -121,6 +126,12 @@ def main() -> None:
     ap.add_argument("--first-seed", type=int, default=0, help="run seeds first-seed .. first-seed + seeds - 1")
     ap.add_argument("--parts", default="", help="comma-separated part names to run (default: all)")
     ap.add_argument("--frames", type=int, default=0, help="laser frames per scan (default: 45 quick, 90 full)")
+    ap.add_argument(
+        "--threads",
+        type=int,
+        default=1,
+        help="threads for rendering and binpick (default 1: binpick's compute is measured on one core)",
+    )
     ap.add_argument("--out", default="bin_clearing.json")
     args = ap.parse_args()
     seeds = range(1) if args.quick else range(args.first_seed, args.first_seed + args.seeds)
@@ -133,7 +144,7 @@ def main() -> None:
         piles = []
         for s in seeds:
             count = 8 if args.quick else 8 + s % 5
-            piles.append(run_pile(make, s, count, frames))
+            piles.append(run_pile(make, s, count, frames, args.threads))
             p = piles[-1]
             print(
                 f"{name} seed {s}: removed {p['removed']}/{p['count']} in {p['cycles']} cycles, stopped: {p['stopped']}"

@@ -235,19 +235,19 @@ pub(super) fn assess(
     let mut free = false;
     let mut runner_up = f64::NEG_INFINITY;
     for (i, c) in candidates.iter().enumerate() {
-        if i == best || !scored[i].1 {
+        let s = scored[i].0.score;
+        let Some(open) = standing(s, scored[i].1, scored[best].0.score, margin) else {
             continue;
-        }
+        };
         let same = |t: &Isometry3<f64>| {
             let (r, d) = model.symmetries.pose_error(&c.t_scene_model, t);
             r < p.pick_rotation && d < p.pick_translation
         };
-        if same(&kept) {
+        if i == best || same(&kept) {
             continue;
         }
-        let s = scored[i].0.score;
         runner_up = runner_up.max(s);
-        if scored[best].0.score - s < margin && !alternatives.iter().any(|a| same(&a.t_scene_model)) {
+        if open && !alternatives.iter().any(|a| same(&a.t_scene_model)) {
             free |= c.continuous;
             alternatives.push(Alternative {
                 t_scene_model: model.symmetries.canonical(&c.t_scene_model),
@@ -286,6 +286,17 @@ pub(super) fn assess(
         evidence: Some(scored[best].0),
     };
     (trust, kept)
+}
+
+/// How a candidate with feature score `score` stands against the pose kept (score `kept`):
+/// `None` when it is ruled out — the judge refuses it (`judged_ok` false: a see-through patch,
+/// say) and the feature does not favour it either; else whether the scan cannot rule it out:
+/// its score is within `margin` of the kept pose's, or ahead of it. A turn the judge refuses
+/// but the feature favours means the scan contradicts the pose kept where the two differ: the
+/// pose is then in doubt, not confirmed.
+pub(super) fn standing(score: f64, judged_ok: bool, kept: f64, margin: f64) -> Option<bool> {
+    let ahead = score > kept;
+    (judged_ok || ahead).then_some(ahead || kept - score < margin)
 }
 
 /// The turns of every near-symmetry (model frame; `true` for a continuous axis's), and the

@@ -109,3 +109,19 @@ fn a_boss_out_of_view_is_ambiguous_with_the_truth_among_the_alternatives() {
         assert_eq!(est.alternatives.len(), 1, "yaw {yaw}");
     }
 }
+
+#[test]
+fn a_turn_the_judge_refuses_but_the_feature_favours_keeps_the_pose_in_doubt() {
+    let margin = 30.0;
+    // Judged possible: ruled out only by a lead of a margin or more.
+    assert_eq!(trust::standing(100.0, true, 200.0, margin), Some(false));
+    assert_eq!(trust::standing(180.0, true, 200.0, margin), Some(true));
+    assert_eq!(trust::standing(250.0, true, 200.0, margin), Some(true));
+    // Refused by the judge and trailing on the feature: ruled out, even within the margin.
+    assert_eq!(trust::standing(180.0, false, 200.0, margin), None);
+    assert_eq!(trust::standing(-50.0, false, 200.0, margin), None);
+    // Refused by the judge (a see-through patch of 10 probes) but far ahead on the feature: the
+    // flipped tee of a simulated pile, whose kept pose had 161 fits and 246 misfits there and
+    // the refused turn 366 and 41. The scan contradicts the kept pose; it stays open.
+    assert_eq!(trust::standing(261.3, false, -141.2, margin), Some(true));
+}
