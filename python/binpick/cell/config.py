@@ -84,9 +84,10 @@ class GripperGeometry:
         return float(min(self.open_width_mm, width_mm + 2.0 * self.preshape_clearance_mm))
 
     def occupied(self, points_gripper: np.ndarray, opening_mm: Any = None) -> np.ndarray:
-        """Which points (N, 3, in the gripper frame) lie inside the gripper (fingers or body), the
-        fingers ``opening_mm`` apart (a number, or one per point; ``open_width_mm`` by default)."""
-        x, y, z = points_gripper.T
+        """Which points (N, 3, in the gripper frame; or any shape (..., 3)) lie inside the gripper
+        (fingers or body), the fingers ``opening_mm`` apart (a number, or an array that
+        broadcasts against the points' leading shape; ``open_width_mm`` by default)."""
+        x, y, z = np.moveaxis(points_gripper, -1, 0)
         top = self.tip_depth_mm - self.finger_length_mm
         in_z = (z <= self.tip_depth_mm) & (z >= top)
         gap = self.open_width_mm if opening_mm is None else np.asarray(opening_mm, dtype=np.float64)

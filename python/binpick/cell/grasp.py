@@ -473,16 +473,23 @@ def _near(points: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
 def _hits_many(gripper: GripperGeometry, points: np.ndarray, T_bg: np.ndarray, openings: np.ndarray) -> np.ndarray:
     """:func:`points_in_gripper` for each of the gripper poses ``T_bg`` (K, 4, 4), its fingers
     ``openings`` (K,) apart: the distances of every point to each pose's bounding sphere in one
-    matrix product, then the piece-by-piece test on the (point, pose) pairs inside a sphere, all
-    at once."""
+    matrix product (single precision, the sphere 1 mm larger to cover its rounding), then the
+    piece-by-piece test, pose by pose, on the points inside its sphere."""
     if len(points) == 0 or len(T_bg) == 0:
         return np.zeros(len(T_bg), dtype=np.int64)
     z_mid, radius = _occupied_sphere(gripper)
-    C = T_bg[:, :3, 3] + z_mid * T_bg[:, :3, 2]
-    d2 = np.einsum("ij,ij->i", points, points)[:, None] - 2.0 * points @ C.T + np.einsum("ij,ij->i", C, C)[None]
-    i, k = np.nonzero(d2 <= radius * radius + 1e-6 * (1.0 + np.abs(d2)))
-    local = np.einsum("nj,nji->ni", points[i] - T_bg[k, :3, 3], T_bg[k, :3, :3])  # each pair in its gripper frame
-    return np.bincount(k[gripper.occupied(local, np.asarray(openings)[k])], minlength=len(T_bg))
+    R, t = T_bg[:, :3, :3], T_bg[:, :3, 3]
+    C = (t + z_mid * R[:, :, 2]).astype(np.float32)
+    p32 = points.astype(np.float32)
+    d2 = np.einsum("ij,ij->i", C, C)[:, None] - 2.0 * (C @ p32.T) + np.einsum("ij,ij->i", p32, p32)[None]
+    k, i = np.nonzero(d2 <= np.float32((radius + 1.0) ** 2))  # pose-major: each pose's points together
+    bounds = np.searchsorted(k, np.arange(len(T_bg) + 1))
+    openings = np.asarray(openings, dtype=np.float64)
+    hits = np.zeros(len(T_bg), dtype=np.int64)
+    for j in np.flatnonzero(np.diff(bounds)):
+        local = (points[i[bounds[j] : bounds[j + 1]]] - t[j]) @ R[j]
+        hits[j] = np.count_nonzero(gripper.occupied(local, openings[j]))
+    return hits
 
 
 def _refusal(
