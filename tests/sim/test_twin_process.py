@@ -192,7 +192,7 @@ def test_a_replayed_scan_gives_the_live_cloud(twin, cell, tmp_path):
         cell.camera = twin_camera
         cell.close()  # the replay below opens the twin's ports again, from a cell file
     assert len(live.points) > 5000
-    rebuilt = reconstruct(load_scan(folder))
+    rebuilt = reconstruct(load_scan(folder), volume=cell.config.scan_volume)
     np.testing.assert_array_equal(np.asarray(rebuilt.points), np.asarray(live.points))
     text = (twin.out / "cell.toml").read_text()
     twin_camera_table = 'source = "twin"\nsocket = "camera.sock"'
