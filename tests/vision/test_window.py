@@ -52,6 +52,7 @@ def test_the_line_extracted_inside_the_window_is_the_line_extracted_in_the_whole
         u0, v0, u1, v1 = roi = window.roi(angle)
         whole, part = extract_line(img), extract_line(img, roi=roi)
         assert len(part) > 300
+        assert np.array_equal(window.extract(img, angle), part)
         in_roi = (whole[:, 0] >= u0 + 8) & (whole[:, 0] < u1 - 8) & (whole[:, 1] >= v0) & (whole[:, 1] < v1)
         # Matched by row: the same sub-pixel centre, in the whole frame's coordinates.
         rows = dict(zip(part[:, 1].tolist(), part[:, 0].tolist()))
@@ -71,6 +72,8 @@ def test_a_sheet_that_misses_the_volume_or_a_volume_out_of_view_gives_no_window(
     window = LaserWindow(cell.calibration, cell.T_base_flange, VOLUME)
     # Turned far aside, the sheet passes beside the box.
     assert window.roi(cell.angle_for_column(520.0) + 1.2) is None
+    blank = np.zeros((*cell.calibration.camera.shape, 3), np.uint8)
+    assert window.extract(blank, cell.angle_for_column(520.0) + 1.2).shape == (0, 2)
     # A sheet through a box behind the camera, and through one far outside its view.
     for in_camera in ([0.0, 0.0, -100.0], [3000.0, 0.0, 480.0]):
         centre = (T_base_camera @ [*in_camera, 1.0])[:3]

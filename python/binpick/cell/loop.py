@@ -44,7 +44,7 @@ from ..devices.motor import LaserMotor
 from ..devices.robot import Robot
 from ..errors import BinpickError, DeviceError, InvalidInputError, InvalidTypeError, NoObjectFound, SafetyError
 from ..poses import estimate_poses
-from ..vision import LaserWindow, extract_line, triangulate
+from ..vision import LaserWindow, triangulate
 from .config import CellConfig, check_static_poses
 from .frames import FrameSource
 from .grasp import NoGraspError, grasp_filter, plan_bin_clash, plan_grasp
@@ -284,8 +284,7 @@ class Cell:
             self.camera.laser_at(reached)
             img = self.camera.grab()
             te, ce = time.perf_counter(), time.thread_time()
-            roi = window.roi(reached)  # None: the sheet misses the scan volume; the frame holds no point
-            uv = np.zeros((0, 2)) if roi is None else extract_line(img, roi=roi)
+            uv = window.extract(img, reached)
             extract_s += time.perf_counter() - te
             extract_cpu += time.thread_time() - ce
             sweep.add(uv, reached, T_bf, img if k in keep else None)

@@ -44,11 +44,6 @@ def _threshold(value: Any) -> float:
     return t
 
 
-def _running_median(x: np.ndarray, half: int) -> np.ndarray:
-    padded = np.pad(x, half, mode="edge")
-    return np.median(np.lib.stride_tricks.sliding_window_view(padded, 2 * half + 1), axis=1)
-
-
 def extract_line(
     image: np.ndarray,
     *,
@@ -89,7 +84,7 @@ def extract_line(
         img = img[v0:v1, u0:u1]
     signal = red_excess(img)
     if direction == "auto":
-        lit_rows = np.count_nonzero(signal.max(axis=1) > t)
+        lit_rows = np.count_nonzero(cv2.reduce(signal, 1, cv2.REDUCE_MAX) > t)
         lit_cols = np.count_nonzero(signal.max(axis=0) > t)
         direction = "columns" if lit_cols > lit_rows else "rows"
     if direction == "columns":
@@ -120,52 +115,87 @@ def _centres(
     signal: np.ndarray, threshold: float, window: int, method: str, max_jump: float | None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Sub-pixel peak positions along each row of ``signal``: (position across, row index)."""
+    signal = np.ascontiguousarray(signal)
     height, width = signal.shape
     # The strongest peak after a box blur of about the line's width: a wide, bright line wins
-    # over a single hot pixel of noise.
+    # over a single hot pixel of noise. (The first maximum of each row, found through the row
+    # maxima: numpy's row-wise argmax pays a call per row.)
     smooth = cv2.blur(signal, (2 * (window // 2) + 1, 1))
-    peak_col = smooth.argmax(axis=1)
-    rows = np.arange(height)
-    ok = smooth[rows, peak_col] > 0
+    top = cv2.reduce(smooth, 1, cv2.REDUCE_MAX)
+    peak_col = (smooth == top).argmax(axis=1)
+    ok = top[:, 0] > 0
     if max_jump is not None and np.count_nonzero(ok) > 2 * _TRACK_HALF:
-        lit = np.nonzero(ok)[0]
-        predicted = _running_median(peak_col[lit].astype(np.float64), _TRACK_HALF)
-        stray = np.abs(peak_col[lit] - predicted) > max_jump
-        if stray.any():
-            r = lit[stray]
-            jump = int(np.ceil(max_jump))
-            band = np.clip(
-                np.rint(predicted[stray]).astype(np.intp)[:, None] + np.arange(-jump, jump + 1), 0, width - 1
-            )
-            peak_col[r] = band[np.arange(len(r)), smooth[r[:, None], band].argmax(axis=1)]
+        _follow_track(smooth, peak_col, np.nonzero(ok)[0], max_jump)
     offsets = np.arange(-window, window + 1)
+    flat = signal.reshape(-1)
 
-    def around(cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        idx = cols[:, None] + offsets
+    def around(rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The window's values about ``cols`` on ``rows``, one row per offset: (2·window + 1, N),
+        and which of them lie inside the image."""
+        idx = cols[None, :] + offsets[:, None]
         inside = (idx >= 0) & (idx < width)
-        return signal[rows[:, None], np.clip(idx, 0, width - 1)].astype(np.float32), inside
+        np.clip(idx, 0, width - 1, out=idx)
+        idx += rows * width
+        return flat[idx].astype(np.float32), inside
 
     # The centre is refined about the raw maximum near the blurred peak; that maximum must
     # clear the threshold.
-    vals, _ = around(peak_col)
-    raw_best = vals.argmax(axis=1)
-    keep = ok & (vals[rows, raw_best] > threshold)
-    rows, cols = rows[keep], (peak_col + raw_best - window)[keep]
-    vals, inside = around(cols)
-    vals[~inside] = np.nan
+    rows = np.nonzero(ok)[0]
+    vals, _ = around(rows, peak_col[rows])
+    best = vals.max(axis=0)
+    raw_best = np.full(len(rows), window, dtype=np.intp)
+    for k in range(2 * window, -1, -1):  # the first offset holding the maximum
+        raw_best[vals[k] == best] = k
+    keep = best > threshold
+    rows, cols = rows[keep], (peak_col[rows] + raw_best - window)[keep]
+    vals, inside = around(rows, cols)
+    everywhere = bool(inside.all())
+    lowest = vals.min(axis=0) if everywhere else np.where(inside, vals, np.inf).min(axis=0)
     if method == "cog":
         # Weights above the window's floor, or a fifth of the peak if higher: ambient light and
         # the noisy tails then carry no weight.
-        floor = np.maximum(np.nanmin(vals, axis=1, keepdims=True), 0.2 * np.nanmax(vals, axis=1, keepdims=True))
-        weights = np.maximum(vals - floor, 0.0)
-        weights[~inside] = 0.0
-        total = weights.sum(axis=1)
+        highest = vals.max(axis=0) if everywhere else np.where(inside, vals, -np.inf).max(axis=0)
+        weights = np.maximum(vals - np.maximum(lowest, 0.2 * highest), 0.0)
+        if not everywhere:
+            weights[~inside] = 0.0
+        total = weights.sum(axis=0)
         good = total > 0
-        shift = (weights @ offsets.astype(np.float32))[good] / total[good]
+        shift = (offsets.astype(np.float32) @ weights[:, good]) / total[good]
         return cols[good] + shift.astype(np.float64), rows[good].astype(np.float64)
-    above = vals[:, window - 1 : window + 2] - np.nanmin(vals, axis=1, keepdims=True)
+    above = vals[window - 1 : window + 2] - lowest
+    if not everywhere:
+        above[~inside[window - 1 : window + 2]] = np.nan
     logs = np.log(np.maximum(above, 0.5))
-    denom = logs[:, 0] - 2 * logs[:, 1] + logs[:, 2]
+    denom = logs[0] - 2 * logs[1] + logs[2]
     good = np.isfinite(denom) & (denom < 0)
-    shift = np.clip(0.5 * (logs[good, 0] - logs[good, 2]) / denom[good], -1, 1)
+    shift = np.clip(0.5 * (logs[0, good] - logs[2, good]) / denom[good], -1, 1)
     return cols[good] + shift.astype(np.float64), rows[good].astype(np.float64)
+
+
+def _follow_track(smooth: np.ndarray, peak_col: np.ndarray, lit: np.ndarray, max_jump: float) -> None:
+    """Moves, in place, each peak of ``peak_col`` on the scan lines ``lit`` that lies further
+    than ``max_jump`` from the running median of its neighbours' peaks onto the strongest
+    peak of ``smooth`` within ``max_jump`` of that median."""
+    cols = peak_col[lit].astype(np.float64)
+    half = _TRACK_HALF
+    # A peak within max_jump of all its neighbours is within max_jump of their median: only
+    # the others need the median. (Running max and min as a dilation and erosion.)
+    row = cols.astype(np.float32)[None, :]
+    span = np.ones((1, 2 * half + 1), np.uint8)
+    highest = cv2.dilate(row, span, borderType=cv2.BORDER_REPLICATE)[0]
+    lowest = cv2.erode(row, span, borderType=cv2.BORDER_REPLICATE)[0]
+    maybe = np.nonzero(np.maximum(highest - cols, cols - lowest) > max_jump)[0]
+    if not len(maybe):
+        return
+    padded = np.concatenate([np.full(half, cols[0]), cols, np.full(half, cols[-1])])
+    neighbours = padded[maybe[:, None] + np.arange(2 * half + 1)]
+    predicted = np.partition(neighbours, half, axis=1)[:, half]  # the median of 2·half + 1
+    stray = np.abs(cols[maybe] - predicted) > max_jump
+    if not stray.any():
+        return
+    r = lit[maybe[stray]]
+    jump = int(np.ceil(max_jump))
+    band = np.clip(
+        np.rint(predicted[stray]).astype(np.intp)[:, None] + np.arange(-jump, jump + 1), 0, smooth.shape[1] - 1
+    )
+    peak_col[r] = band[np.arange(len(r)), smooth[r[:, None], band].argmax(axis=1)]

@@ -28,13 +28,13 @@ def reconstruct(scan: Scan, *, volume: Any = None, num_threads: int = 0, **extra
     pixels, frames = [], []
     for f, frame in enumerate(scan.frames):
         img = as_image(frame.image(), f"frame {f} ({frame.image_path})", shape=shape)
-        roi = None
-        if volume is not None:
+        if volume is None:
+            uv = extract_line(img, **extract_options)
+        else:
             key = frame.T_base_flange.tobytes()
             if key not in windows:
                 windows[key] = LaserWindow(scan.calibration, frame.T_base_flange, volume)
-            roi = windows[key].roi(frame.angle)
-        uv = np.zeros((0, 2)) if volume is not None and roi is None else extract_line(img, roi=roi, **extract_options)
+            uv = windows[key].extract(img, frame.angle, **extract_options)
         pixels.append(uv)
         frames.append(np.full(len(uv), f, dtype=np.int64))
     return triangulate(

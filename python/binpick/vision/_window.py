@@ -5,8 +5,7 @@ image wide), and a reflection outside the band can no longer be taken for the li
 
 from __future__ import annotations
 
-from functools import lru_cache
-from typing import Optional
+from typing import Any, Optional
 
 import cv2
 import numpy as np
@@ -16,6 +15,7 @@ from ..calibration._file import CellCalibration
 from ..camera import CameraIntrinsics
 from ..errors import InvalidInputError
 from ..transforms import inverse
+from ._extract import extract_line
 from ._triangulate import pixel_rays
 
 __all__ = ["LaserWindow"]
@@ -35,7 +35,7 @@ class LaserWindow:
     """Where the laser line can appear in the frames of one sweep: the pixels whose ray meets the
     laser sheet inside ``volume`` (an axis-aligned box ((xmin, ymin, zmin), (xmax, ymax, zmax))
     in the base frame, mm), seen with the flange at ``T_base_flange``. Built once per sweep;
-    :meth:`roi` gives each frame's rectangle, to pass as ``extract_line(image, roi=...)``."""
+    :meth:`extract` finds a frame's line there, :meth:`roi` gives the frame's rectangle."""
 
     def __init__(
         self,
@@ -53,7 +53,7 @@ class LaserWindow:
         T_camera_base = inverse(as_transform(T_base_flange, "T_base_flange") @ calibration.T_flange_camera)
         corners = np.array([[(hi if i >> k & 1 else lo)[k] for k in range(3)] for i in range(8)])
         self._corners = corners @ T_camera_base[:3, :3].T + T_camera_base[:3, 3]
-        xmin, xmax, ymin, ymax = _field_of_view(*_camera_key(calibration.camera))
+        xmin, xmax, ymin, ymax = _field_of_view(calibration.camera)
         # The view as half-spaces p · n ≥ offset in the camera frame: in front of the lens, and
         # inside the rays through the image border.
         self._view = [
@@ -94,6 +94,13 @@ class LaserWindow:
             return None
         return int(u0), int(v0), int(u1), int(v1)
 
+    def extract(self, image: np.ndarray, angle: float, **options: Any) -> np.ndarray:
+        """The laser line in ``image``, grabbed with the laser at motor ``angle`` (rad), searched
+        only inside :meth:`roi`: :func:`extract_line` (``options`` passed on), or no point (0, 2)
+        when the sheet meets no part of the volume in view."""
+        roi = self.roi(angle)
+        return np.zeros((0, 2)) if roi is None else extract_line(image, roi=roi, **options)
+
 
 def _cut(corners: np.ndarray, side: np.ndarray, inplane: np.ndarray) -> Optional[np.ndarray]:
     """The convex polygon (K, 3), in order around it, where the plane ``side == 0`` (spanned by
@@ -126,22 +133,14 @@ def _clip(polygon: np.ndarray, normal: np.ndarray, offset: float) -> Optional[np
     return np.array(out) if len(out) >= 3 else None
 
 
-def _camera_key(cam: CameraIntrinsics) -> tuple:
-    return cam.width, cam.height, cam.K.tobytes(), cam.dist.tobytes()
-
-
-@lru_cache(maxsize=8)
-def _field_of_view(width: int, height: int, K: bytes, dist: bytes) -> tuple[float, float, float, float]:
+def _field_of_view(cam: CameraIntrinsics) -> tuple[float, float, float, float]:
     """The camera's view as bounds on x/z and y/z: those of the rays through the image border,
     where the calibrated lens model holds (beyond it a polynomial distortion can fold back)."""
-    cam = CameraIntrinsics(
-        width, height, np.frombuffer(K, dtype=np.float64).reshape(3, 3), np.frombuffer(dist, dtype=np.float64)
-    )
-    u = np.linspace(0.0, width - 1.0, 65)
-    v = np.linspace(0.0, height - 1.0, 65)
+    u = np.linspace(0.0, cam.width - 1.0, 65)
+    v = np.linspace(0.0, cam.height - 1.0, 65)
     border = np.concatenate(
-        [np.stack([u, np.zeros_like(u)], 1), np.stack([u, np.full_like(u, height - 1.0)], 1)]
-        + [np.stack([np.zeros_like(v), v], 1), np.stack([np.full_like(v, width - 1.0), v], 1)]
+        [np.stack([u, np.zeros_like(u)], 1), np.stack([u, np.full_like(u, cam.height - 1.0)], 1)]
+        + [np.stack([np.zeros_like(v), v], 1), np.stack([np.full_like(v, cam.width - 1.0), v], 1)]
     )
     rays = pixel_rays(border, cam)
     return float(rays[:, 0].min()), float(rays[:, 0].max()), float(rays[:, 1].min()), float(rays[:, 1].max())
