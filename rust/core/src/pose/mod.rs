@@ -140,10 +140,11 @@ fn trusted(
     judge: &Judge,
     cfg: &PoseConfig,
 ) -> Vec<PoseEstimate> {
+    let region = trust::Region::new(model, judge, &cfg.trust);
     found
         .into_iter()
         .map(|mut e| {
-            let (t, kept) = trust::assess(&e, pts, model, judge, cfg);
+            let (t, kept) = trust::assess(&e, pts, model, judge, cfg, &region);
             if kept != e.t_scene_model {
                 e.t_scene_model = model.symmetries.canonical(&kept);
                 let idx = scene::scene_indices(scene, model, &e.t_scene_model, judge.tol);

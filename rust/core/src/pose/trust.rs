@@ -132,6 +132,7 @@ pub(super) fn assess(
     model: &PoseModel,
     judge: &Judge,
     cfg: &PoseConfig,
+    region: &Region,
 ) -> (Trust, Isometry3<f64>) {
     let p = &cfg.trust;
     let e0 = judge.evidence(model, &est.t_scene_model);
@@ -158,7 +159,7 @@ pub(super) fn assess(
         };
         return (trust, est.t_scene_model);
     }
-    let (turns, region) = turns_and_region(model, p);
+    let turns = region.turns.clone();
     let sample = thin(&local, p.refine_points);
     let refine = IcpConfig::robust_plane(3.0 * judge.tol, p.iterations, 1e-5, 1e-3);
     let polish = |turn: &Isometry3<f64>, pts: &[Point], cfg: &IcpConfig| {
@@ -167,11 +168,14 @@ pub(super) fn assess(
             .ok()
             .map(|r| r.t_target_source.inverse())
     };
-    let region_cells = |t: &Isometry3<f64>| RegionCells::new(&region, t, (2.0 * model.spacing).max(judge.tol));
     // Every candidate is `est` turned by a near-symmetry, so its feature and the place it turns
     // the feature to both lie in the region posed by `est`: the scan points there judge them all.
-    let cells = region_cells(&est.t_scene_model);
-    let judged: Vec<Point> = local.iter().filter(|l| cells.contains(l)).copied().collect();
+    let to_model = est.t_scene_model.inverse();
+    let judged: Vec<Point> = local
+        .iter()
+        .filter(|l| region.contains(&(to_model * *l)))
+        .copied()
+        .collect();
     let tol0 = fine_tolerance(&sample, model, &est.t_scene_model, judge.tol, p);
     // Many turns (a continuous near axis): a quick look on a thinned sample picks the finalists
     // that get the full refinement and comparison.
@@ -299,21 +303,47 @@ pub(super) fn standing(score: f64, judged_ok: bool, kept: f64, margin: f64) -> O
     (judged_ok || ahead).then_some(ahead || kept - score < margin)
 }
 
-/// The turns of every near-symmetry (model frame; `true` for a continuous axis's), and the
-/// model-frame region where the features can lie: each feature under the identity and every turn.
-fn turns_and_region(model: &PoseModel, p: &TrustParams) -> (Vec<(Isometry3<f64>, bool)>, Vec<Point>) {
-    let mut turns = Vec::new();
-    let mut region = Vec::new();
-    for n in &model.near_symmetries {
-        let own = turns_of(n, p);
-        region.extend(n.feature.iter().copied());
-        for (t, _) in &own {
-            region.extend(n.feature.iter().map(|q| t * q));
-            region.extend(n.feature.iter().map(|q| t.inverse() * q));
+/// The turns of every near-symmetry (model frame; `true` for a continuous axis's) and the
+/// model-frame region where the features can lie (each feature under the identity and every
+/// turn), as grid cells: within about one cell of it. The same for every pose of one call.
+pub(super) struct Region {
+    turns: Vec<(Isometry3<f64>, bool)>,
+    cell: f64,
+    cells: HashSet<[i64; 3]>,
+}
+
+impl Region {
+    pub(super) fn new(model: &PoseModel, judge: &Judge, p: &TrustParams) -> Self {
+        let mut turns = Vec::new();
+        let mut region = Vec::new();
+        for n in &model.near_symmetries {
+            let own = turns_of(n, p);
+            region.extend(n.feature.iter().copied());
+            for (t, _) in &own {
+                region.extend(n.feature.iter().map(|q| t * q));
+                region.extend(n.feature.iter().map(|q| t.inverse() * q));
+            }
+            turns.extend(own);
         }
-        turns.extend(own);
+        let cell = (2.0 * model.spacing).max(judge.tol).max(1e-3);
+        let own: HashSet<[i64; 3]> = region.iter().map(|q| key(q, cell)).collect();
+        let mut cells = HashSet::with_capacity(own.len() * 27);
+        for k in own {
+            for dx in -1..=1 {
+                for dy in -1..=1 {
+                    for dz in -1..=1 {
+                        cells.insert([k[0] + dx, k[1] + dy, k[2] + dz]);
+                    }
+                }
+            }
+        }
+        Region { turns, cell, cells }
     }
-    (turns, region)
+
+    /// Whether the model-frame point `q` lies within about one cell of the region.
+    fn contains(&self, q: &Point) -> bool {
+        self.cells.contains(&key(q, self.cell))
+    }
 }
 
 /// The turns (model frame; `true` for a continuous axis's) of one near-symmetry: its half turn,
@@ -386,35 +416,6 @@ fn feature_evidence(
         seen_through: violated,
         tolerance: tol,
         score: fits as f64 - misfits as f64 - violated as f64 * per_probe,
-    }
-}
-
-/// The cells of a grid that lie within about one cell of a posed region: a cheap membership test
-/// for many scan points against a region of a few thousand.
-struct RegionCells {
-    cell: f64,
-    set: HashSet<[i64; 3]>,
-}
-
-impl RegionCells {
-    fn new(region: &[Point], t_scene_model: &Isometry3<f64>, cell: f64) -> Self {
-        let cell = cell.max(1e-3);
-        let own: HashSet<[i64; 3]> = region.iter().map(|p| key(&(t_scene_model * p), cell)).collect();
-        let mut set = HashSet::with_capacity(own.len() * 27);
-        for k in own {
-            for dx in -1..=1 {
-                for dy in -1..=1 {
-                    for dz in -1..=1 {
-                        set.insert([k[0] + dx, k[1] + dy, k[2] + dz]);
-                    }
-                }
-            }
-        }
-        RegionCells { cell, set }
-    }
-
-    fn contains(&self, p: &Point) -> bool {
-        self.set.contains(&key(p, self.cell))
     }
 }
 

@@ -77,7 +77,14 @@ fn a_boss_in_view_decides_the_pose_and_a_flipped_start_is_corrected() {
                 t_scene_model: truth * n.transform(0.0),
                 ..est.clone()
             };
-            let (trust, t) = trust::assess(&wrong, &pts, model, &judge, &cfg);
+            let (trust, t) = trust::assess(
+                &wrong,
+                &pts,
+                model,
+                &judge,
+                &cfg,
+                &trust::Region::new(model, &judge, &cfg.trust),
+            );
             assert!(
                 pick_grade(model, &t, &truth),
                 "yaw {yaw}, turn about {:?}: not corrected",

@@ -28,9 +28,13 @@ const TURNS_DEG: [f64; 11] = [
 /// The slides probed along a weak slide, as shares of the part's diameter (both ways).
 const SLIDES: [f64; 3] = [0.05, 0.1, 0.2];
 /// Claimed points each turn is refined on, at most.
-const REFINE_POINTS: usize = 600;
+const REFINE_POINTS: usize = 300;
 /// ICP iterations of each turn's refinement.
 const ITERATIONS: usize = 12;
+/// Claimed points and ICP iterations of the quick look that drops, before the full
+/// refinement, a move that falls back onto the pose or onto a known alternative.
+const QUICK_POINTS: usize = 150;
+const QUICK_ITERATIONS: usize = 5;
 /// A turn explains the claimed points as well when it loses at most this many of them from the
 /// judge's tolerance — twice the 15 points at which a feature counts as in view, as the trust
 /// stage's margin — …
@@ -168,17 +172,32 @@ pub(super) fn unseen_turns(
         let (r, d) = model.symmetries.pose_error(a, b);
         r < trust.pick_rotation && d < trust.pick_translation
     };
+    let known_pose = |t: &Isometry3<f64>, found: &[Alternative]| {
+        same(t, t_scene_model) || found.iter().chain(known).any(|a| same(&a.t_scene_model, t))
+    };
+    let few = thin(&sample, QUICK_POINTS);
+    let quick = IcpConfig {
+        max_iterations: QUICK_ITERATIONS,
+        ..refine.clone()
+    };
     let mut found: Vec<Alternative> = Vec::new();
     for motion in moves {
         if crate::cancel::requested() {
             break;
         }
         let start = t_scene_model * motion.inverse();
-        let Ok(r) = icp(&sample, model.fine_target(), &start.inverse(), &refine) else {
+        let Ok(q) = icp(&few, model.fine_target(), &start.inverse(), &quick) else {
+            continue;
+        };
+        let glance = q.t_target_source.inverse();
+        if known_pose(&glance, &found) {
+            continue;
+        }
+        let Ok(r) = icp(&sample, model.fine_target(), &q.t_target_source, &refine) else {
             continue;
         };
         let t = r.t_target_source.inverse();
-        if same(&t, t_scene_model) || found.iter().chain(known).any(|a| same(&a.t_scene_model, &t)) {
+        if known_pose(&t, &found) {
             continue;
         }
         // A slide refined into a turn about a near-symmetry's axis is the trust stage's too.
