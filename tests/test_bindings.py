@@ -35,6 +35,7 @@ def test_configs_carry_the_core_defaults():
     assert (pose.method, pose.up, pose.min_fitness, pose.min_coverage) == ("auto", (0.0, 0.0, 1.0), 0.6, 0.8)
     assert pose.max_normal_angle == pytest.approx(np.radians(70.0), abs=1e-15)
     assert (pose.reference_fraction, pose.max_hypotheses, pose.max_instances, pose.num_threads) == (0.1, 16, 1, 0)
+    assert pose.search_instances == 5
     assert pose.bin is None and pose.viewpoint is None and pose.d_star is None and pose.ccp_tau is None
     icp = _core.IcpConfig()
     assert (icp.method, icp.max_iterations, icp.kernel, icp.kernel_scale) == ("point_to_plane", 50, "none", None)

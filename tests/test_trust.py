@@ -158,6 +158,28 @@ def test_estimate_pose_is_exactly_the_first_of_estimate_poses(tee, tee_pile, met
         np.testing.assert_array_equal(one.indices, first.indices)
 
 
+def test_fewer_instances_of_a_wider_search_are_the_first_of_its_answer(tee):
+    cell, _, scene, _ = pile_view(tee, 14, seed=2, step=2)
+    box = cell.bin.bounds
+    wide = binpick.estimate_poses(scene, tee, bin=box, max_instances=8, num_threads=1)
+    few = binpick.estimate_poses(scene, tee, bin=box, max_instances=2, search_instances=8, num_threads=1)
+    assert len(wide) > 2 and len(few) == 2
+    for a, b in zip(few, wide):
+        np.testing.assert_array_equal(a.T_scene_model, b.T_scene_model)
+        assert (a.score, a.confidence, a.ambiguous, len(a.alternatives)) == (
+            b.score,
+            b.confidence,
+            b.ambiguous,
+            len(b.alternatives),
+        )
+    # The narrower search of the default (sized for 5) answers differently on this pile: the
+    # width is what makes the two agree.
+    narrow = binpick.estimate_poses(scene, tee, bin=box, max_instances=2, num_threads=1)
+    assert not all(np.array_equal(a.T_scene_model, b.T_scene_model) for a, b in zip(narrow, wide))
+    with pytest.raises(binpick.InvalidInputError, match="search_instances"):
+        binpick.estimate_poses(scene, tee, search_instances=0)
+
+
 def test_in_a_pile_an_uncovered_instance_comes_first(tee, tee_pile):
     cell, pile, scene, _ = tee_pile
     found = binpick.estimate_poses(scene, tee, bin=cell.bin.bounds, max_instances=5, num_threads=1)

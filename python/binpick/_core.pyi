@@ -207,6 +207,7 @@ class PoseConfig:
         reference_fraction: float | None = None,
         max_hypotheses: int | None = None,
         max_instances: int | None = None,
+        search_instances: int | None = None,
         num_threads: int | None = None,
     ) -> PoseConfig:
         """``bin`` (2, 3) box corners, ``method`` ``"auto"``|``"ppf"``|``"ccp"``|``"centroid"``; mm and rad."""
@@ -240,6 +241,8 @@ class PoseConfig:
     def max_hypotheses(self) -> int: ...
     @property
     def max_instances(self) -> int: ...
+    @property
+    def search_instances(self) -> int: ...
     @property
     def num_threads(self) -> int: ...
 

@@ -262,6 +262,7 @@ def estimate_poses(
     ccp_tau: Optional[float] = None,
     reference_fraction: Optional[float] = None,
     max_hypotheses: Optional[int] = None,
+    search_instances: int = _POSE.search_instances,
     num_threads: int = _POSE.num_threads,
 ) -> list[PoseResult]:
     """Up to ``max_instances`` (at most 1000) verified instances of ``model`` in ``scene``, most
@@ -280,7 +281,10 @@ def estimate_poses(
       every hypothesis, verification against the scan (a depth test of the surface each pose
       predicts), one pose per instance, ranked by pickability (height, visible share, nothing on
       top). ``reference_fraction`` of the scene samples vote (default 0.1, at least 60 samples);
-      ``max_hypotheses`` clusters are refined (default 16, at least 8 per requested instance).
+      ``max_hypotheses`` clusters are refined (default 16, at least 8 per instance searched for).
+      The search is sized for ``max(max_instances, search_instances)`` instances (default 5):
+      asking for fewer instances of the same search only truncates the answer, so a caller that
+      takes instances a few at a time (as the cell does) keeps the search of a wider one.
     - ``"ccp"``: the paper's computed closer point on the top object (needs the model's branches,
       :meth:`Model.declare_branches`); top-object segmentation (Table 2) → CCP → ICP. One instance.
     - ``"centroid"``: the paper's baseline, ICP from the centroids. One instance.
@@ -313,6 +317,7 @@ def estimate_poses(
         reference_fraction=optional_number(reference_fraction, "reference_fraction"),
         max_hypotheses=optional_count(max_hypotheses, "max_hypotheses", 0, MAX_HYPOTHESES),
         max_instances=count(max_instances, "max_instances", 1, MAX_INSTANCES),
+        search_instances=count(search_instances, "search_instances", 1, MAX_INSTANCES),
         num_threads=thread_count(num_threads),
     )
     if config.method == "ccp" and not model.branches:

@@ -133,6 +133,9 @@ class Cell:
     EMPTY_GRIP_TURN_DEG = 15.0
     """The angle (modulo the part's symmetries) for :attr:`EMPTY_GRIP_RADIUS_MM`: a pose as near
     but turned differently is another answer for what lies there, and is tried."""
+    LOCATE_BATCH = 3
+    """Parts located (their poses' trust assessed) per search, sized for ``max_candidates``;
+    most picks take the first, and each further batch searches without the parts tried."""
 
     def __init__(
         self,
@@ -316,6 +319,7 @@ class Cell:
             )
         options = dict(cfg.estimate_options)
         options.setdefault("num_threads", cfg.num_threads)
+        options.setdefault("search_instances", cfg.max_candidates)
         # The camera's position at the first pose of the scan orients the scan's normals (PPF).
         options.setdefault("viewpoint", (np.asarray(scan.T_base_flanges[0]) @ cfg.calibration.T_flange_camera)[:3, 3])
         wanted = count(max_instances, "max_instances") or cfg.max_candidates
@@ -359,14 +363,10 @@ class Cell:
 
     def _report_located(self, result: Any, T: np.ndarray, truth: Optional[PoseTruth]) -> None:
         t = T[:3, 3]
-        judged = (
-            ""
-            if truth is None
-            else (
-                f"; vs truth {truth.rotation_error_deg:.2f}°, {truth.translation_error_mm:.2f} mm "
-                f"({'pick-grade' if truth.pick_grade else 'NOT pick-grade'})"
-            )
-        )
+        judged = ""
+        if truth is not None:
+            grade = "pick-grade" if truth.pick_grade else "NOT pick-grade"
+            judged = f"; vs truth {truth.rotation_error_deg:.2f}°, {truth.translation_error_mm:.2f} mm ({grade})"
         self.progress(
             "locate",
             f"{result.method} score {result.score:.2f}, rmse {result.rmse:.2f} "
@@ -386,7 +386,8 @@ class Cell:
         tried: list[np.ndarray] = []
         while len(tried) < self.config.max_candidates:
             try:
-                found = self.locate_all(scan, exclude=excluded, max_instances=self.config.max_candidates - len(tried))
+                wanted = min(self.LOCATE_BATCH, self.config.max_candidates - len(tried))
+                found = self.locate_all(scan, exclude=excluded, max_instances=wanted)
             except NoObjectFound:
                 if last is None:
                     raise

@@ -203,7 +203,7 @@ pub struct PoseConfig {
 impl PoseConfig {
     /// Keyword-only; see `binpick.estimate_poses` for each argument.
     #[new]
-    #[pyo3(signature = (*, bin=None, up=None, method=None, viewpoint=None, d_star=None, min_points=None, max_normal_angle=None, inlier_distance=None, min_fitness=None, min_coverage=None, ccp_closer_radius=None, ccp_tau=None, reference_fraction=None, max_hypotheses=None, max_instances=None, num_threads=None))]
+    #[pyo3(signature = (*, bin=None, up=None, method=None, viewpoint=None, d_star=None, min_points=None, max_normal_angle=None, inlier_distance=None, min_fitness=None, min_coverage=None, ccp_closer_radius=None, ccp_tau=None, reference_fraction=None, max_hypotheses=None, max_instances=None, search_instances=None, num_threads=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         bin: Option<PyReadonlyArrayDyn<'_, f64>>,
@@ -221,6 +221,7 @@ impl PoseConfig {
         reference_fraction: Option<f64>,
         max_hypotheses: Option<usize>,
         max_instances: Option<usize>,
+        search_instances: Option<usize>,
         num_threads: Option<usize>,
     ) -> PyResult<Self> {
         let d = binpick_core::PoseConfig::default();
@@ -255,6 +256,7 @@ impl PoseConfig {
                 None => d.viewpoint,
             },
             max_instances: max_instances.unwrap_or(d.max_instances),
+            search_instances: search_instances.unwrap_or(d.search_instances),
             num_threads: num_threads.map(threads).transpose()?.unwrap_or(d.num_threads),
         };
         Ok(PoseConfig { inner })
@@ -335,6 +337,11 @@ impl PoseConfig {
     fn max_instances(&self) -> usize {
         self.inner.max_instances
     }
+    /// PPF: instances the search is sized for, at least.
+    #[getter]
+    fn search_instances(&self) -> usize {
+        self.inner.search_instances
+    }
     /// Worker threads; 0 = all cores.
     #[getter]
     fn num_threads(&self) -> usize {
@@ -349,7 +356,7 @@ impl PoseConfig {
         format!(
             "PoseConfig(bin={}, up={:?}, method='{}', viewpoint={}, d_star={}, min_points={}, max_normal_angle={:?}, \
              inlier_distance={}, min_fitness={:?}, min_coverage={:?}, ccp_closer_radius={}, ccp_tau={}, \
-             reference_fraction={:?}, max_hypotheses={}, max_instances={}, num_threads={})",
+             reference_fraction={:?}, max_hypotheses={}, max_instances={}, search_instances={}, num_threads={})",
             bin.unwrap_or_else(|| "None".into()),
             triple(&c.up),
             c.method.name(),
@@ -366,6 +373,7 @@ impl PoseConfig {
             c.detect.reference_fraction,
             c.detect.max_hypotheses,
             c.max_instances,
+            c.search_instances,
             c.num_threads
         )
     }

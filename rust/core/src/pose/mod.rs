@@ -67,8 +67,8 @@ pub fn estimate_pose(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Re
     Ok(all.swap_remove(0))
 }
 
-/// The search (hypotheses voted, poses polished) is sized for at least this many instances, so
-/// that asking for fewer only truncates the answer.
+/// The search (hypotheses voted, poses polished) is sized for at least this many instances by
+/// default ([`PoseConfig::search_instances`]), so that asking for fewer only truncates the answer.
 pub const SEARCH_INSTANCES: usize = 5;
 
 /// Estimates up to `cfg.max_instances` instances, most pickable first. CCP and the centroid

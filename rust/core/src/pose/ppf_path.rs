@@ -133,9 +133,9 @@ impl DetectionScene {
 }
 
 /// The instances the search is sized for: as many as asked, and never fewer than
-/// [`super::SEARCH_INSTANCES`], so that asking for fewer only truncates the answer.
+/// `cfg.search_instances`, so that asking for fewer only truncates the answer.
 fn search_instances(cfg: &PoseConfig) -> usize {
-    cfg.max_instances.max(super::SEARCH_INSTANCES)
+    cfg.max_instances.max(cfg.search_instances)
 }
 
 /// All instances found by PPF, most pickable first (at most `cfg.max_instances`), and the

@@ -91,6 +91,10 @@ pub struct PoseConfig {
     pub viewpoint: Option<Point>,
     /// Instances returned by [`estimate_poses`].
     pub max_instances: usize,
+    /// Instances the PPF search is sized for (hypotheses refined, poses polished) when more than
+    /// `max_instances`: asking for fewer instances of the same search only truncates the answer.
+    /// Default [`super::SEARCH_INSTANCES`].
+    pub search_instances: usize,
     /// Worker threads; 0 = all cores.
     pub num_threads: usize,
 }
@@ -113,6 +117,7 @@ impl Default for PoseConfig {
             trust: TrustParams::default(),
             viewpoint: None,
             max_instances: 1,
+            search_instances: super::SEARCH_INSTANCES,
             num_threads: 0,
         }
     }
@@ -157,6 +162,7 @@ impl PoseConfig {
         }
         at_least_one("max_hypotheses", Some(self.detect.max_hypotheses))?;
         at_least_one("max_instances", Some(self.max_instances))?;
+        at_least_one("search_instances", Some(self.search_instances))?;
         if let Some(v) = self.viewpoint {
             if !v.coords.iter().all(|c| c.is_finite()) {
                 return Err(Error::invalid("viewpoint", "must be a finite point"));
@@ -266,6 +272,13 @@ mod tests {
                 "max_instances",
                 PoseConfig {
                     max_instances: 0,
+                    ..d()
+                },
+            ),
+            (
+                "search_instances",
+                PoseConfig {
+                    search_instances: 0,
                     ..d()
                 },
             ),
