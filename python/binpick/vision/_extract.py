@@ -85,7 +85,8 @@ def extract_line(
     signal = red_excess(img)
     if direction == "auto":
         lit_rows = np.count_nonzero(cv2.reduce(signal, 1, cv2.REDUCE_MAX) > t)
-        lit_cols = np.count_nonzero(signal.max(axis=0) > t)
+        # More rows lit than the image has columns: the columns cannot win (a tall window).
+        lit_cols = 0 if lit_rows >= signal.shape[1] else np.count_nonzero(signal.max(axis=0) > t)
         direction = "columns" if lit_cols > lit_rows else "rows"
     if direction == "columns":
         signal = cv2.transpose(signal)
