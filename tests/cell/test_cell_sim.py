@@ -69,3 +69,19 @@ def test_config_checks_scan_pose_below_the_approach_height(tee):
     )
     with pytest.raises(SafetyError, match="approach height"):
         check_static_poses(config)
+
+
+def test_a_part_passed_over_earlier_in_the_run_is_tried_after_the_others(tee):
+    with SimulatedCell(tee, count=6, seed=1, frames=60, estimate_options=ESTIMATE) as sim:
+        cell = sim.cell
+        scan = cell.scan()
+        first, _ = cell.locate_and_plan(scan)
+        # Where a part was passed over earlier in the run (Cell.run records each cycle's), a part
+        # found there again is planned only after the others of its search.
+        cell._passed_over = [first.T_base_object]
+        other, plan = cell.locate_and_plan(scan)
+        assert np.linalg.norm(other.T_base_object[:3, 3] - first.T_base_object[:3, 3]) > tee.diameter / 4
+        assert plan is not None
+        cell._passed_over = []
+        again, _ = cell.locate_and_plan(scan)
+        np.testing.assert_allclose(again.T_base_object, first.T_base_object)

@@ -49,7 +49,7 @@ from .config import CellConfig, check_static_poses
 from .frames import FrameSource
 from .grasp import NoGraspError, grasp_filter, plan_bin_clash, plan_grasp
 from .nudge import nudge_blocked
-from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult, Skipped
+from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult, Skipped, located_line
 from .views import deciding_views
 
 __all__ = ["Cell", "PICK_MOVES", "ProgressPrinter", "quiet"]
@@ -129,7 +129,7 @@ class Cell:
     EMPTY_GRIP_RADIUS_MM = 15.0
     """A pose located within this distance, and :attr:`EMPTY_GRIP_TURN_DEG`, of one at which the
     gripper closed on nothing earlier in the run is passed over: it is most likely the same wrong
-    pose found again."""
+    pose found again. One as near a part passed over earlier in the run is tried after the others."""
     EMPTY_GRIP_TURN_DEG = 15.0
     """The angle (modulo the part's symmetries) for :attr:`EMPTY_GRIP_RADIUS_MM`: a pose as near
     but turned differently is another answer for what lies there, and is tried."""
@@ -169,6 +169,7 @@ class Cell:
         self.progress = progress or quiet
         self.truth = truth
         self._empty_grips: list[np.ndarray] = []
+        self._passed_over: list[np.ndarray] = []  # where parts were passed over earlier in the run
         self._cpu: dict[str, float] = {}
         check_static_poses(config)
 
@@ -332,7 +333,7 @@ class Cell:
                 continue
             T = np.asarray(result.T_scene_model, dtype=np.float64)
             truth = self._judge_located(result, T)
-            self._report_located(result, T, truth)
+            self.progress("locate", located_line(result, T, truth))
             idx = np.asarray(result.indices, dtype=np.int64)
             found.append(
                 Located(
@@ -361,19 +362,6 @@ class Cell:
             truths += [self.truth.judge(np.asarray(a.T_scene_model, dtype=np.float64)) for a in result.alternatives]
         return min(truths, key=lambda t: (not t.pick_grade, t.rotation_error_deg / 5.0 + t.translation_error_mm / 3.0))
 
-    def _report_located(self, result: Any, T: np.ndarray, truth: Optional[PoseTruth]) -> None:
-        t = T[:3, 3]
-        judged = ""
-        if truth is not None:
-            grade = "pick-grade" if truth.pick_grade else "NOT pick-grade"
-            judged = f"; vs truth {truth.rotation_error_deg:.2f}°, {truth.translation_error_mm:.2f} mm ({grade})"
-        self.progress(
-            "locate",
-            f"{result.method} score {result.score:.2f}, rmse {result.rmse:.2f} "
-            f"mm, at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm "
-            f"in {sum(result.timings.values()):.0f} ms{judged}",
-        )
-
     def locate_and_plan(self, scan: ScanResult, skipped: Optional[list[Skipped]] = None) -> tuple[Located, PickPlan]:
         """Locates the parts in ``scan`` and plans the pick of the first one that can be picked:
         every part :meth:`locate_all` finds, in turn; when none can, their points are left out
@@ -392,6 +380,9 @@ class Cell:
                 if last is None:
                     raise
                 break  # the parts found had no usable grasp: that is the reason to report
+            # A part passed over earlier in the run and still in place is tried after the others.
+            passed = [k.T_base_object for k in skipped] + self._passed_over
+            found.sort(key=lambda located: self._near_any(located.T_base_object, passed))
             fresh = False
             for located in found:
                 fresh |= bool(len(located.indices)) and not excluded[located.indices].all()
@@ -429,10 +420,14 @@ class Cell:
             raise NoObjectFound("no part was found that had not been tried already")
         raise last
 
+    def _near_any(self, T: np.ndarray, poses: Sequence[np.ndarray]) -> bool:
+        """Whether ``T`` is within :attr:`EMPTY_GRIP_RADIUS_MM` and :attr:`EMPTY_GRIP_TURN_DEG` of one of ``poses``."""
+        errors = (self.config.model.pose_error(T, P) for P in poses)
+        return any(mm < self.EMPTY_GRIP_RADIUS_MM and deg < self.EMPTY_GRIP_TURN_DEG for deg, mm in errors)
+
     def _refuse_empty_grip_spot(self, located: Located) -> None:
         t = located.T_base_object[:3, 3]
-        errors = (self.config.model.pose_error(located.T_base_object, T) for T in self._empty_grips)
-        if any(mm < self.EMPTY_GRIP_RADIUS_MM and deg < self.EMPTY_GRIP_TURN_DEG for deg, mm in errors):
+        if self._near_any(located.T_base_object, self._empty_grips):
             raise NoGraspError(
                 f"the gripper closed on nothing at this located {self.config.model.name} "
                 f"({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm in an earlier pick of this run",
@@ -632,13 +627,14 @@ class Cell:
         """Up to ``n_picks`` picks; stops early when nothing is found, no grasp fits, or a device
         faults (the arm is stopped)."""
         n = count(n_picks, "n_picks", 1)
-        self._empty_grips = []
+        self._empty_grips, self._passed_over = [], []
         records: list[PickRecord] = []
         self._last: tuple[Optional[ScanResult], Optional[Located]] = (None, None)
         stopped: Optional[str] = None
         for i in range(1, n + 1):
             self.progress("pick", f"— pick {i} of {n} —")
             record, stopped = self._cycle(i)
+            self._passed_over += [k.T_base_object for k in record.skipped]
             records.append(record)
             if stopped is not None:
                 break

@@ -54,6 +54,19 @@ class PoseTruth:
         return self.rotation_error_deg < 5.0 and self.translation_error_mm < 3.0
 
 
+def located_line(result: Any, T: np.ndarray, truth: Optional[PoseTruth]) -> str:
+    """The progress line of a located part: method, score, where, how long, and against the truth."""
+    t = T[:3, 3]
+    judged = ""
+    if truth is not None:
+        grade = "pick-grade" if truth.pick_grade else "NOT pick-grade"
+        judged = f"; vs truth {truth.rotation_error_deg:.2f}°, {truth.translation_error_mm:.2f} mm ({grade})"
+    return (
+        f"{result.method} score {result.score:.2f}, rmse {result.rmse:.2f} mm, at ({t[0]:.1f}, {t[1]:.1f}, "
+        f"{t[2]:.1f}) mm in {sum(result.timings.values()):.0f} ms{judged}"
+    )
+
+
 @dataclass(frozen=True, eq=False)
 class Located:
     """The part found in a scan: the pose result, ``T_base_object``, the indices of its points in
