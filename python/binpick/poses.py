@@ -161,7 +161,8 @@ class PoseResult:
             lies where the sensor saw through it).
         rmse: RMS distance of the inlier points, mm.
         indices: scene indices of the points on the posed model.
-        timings: milliseconds per stage (bin_removal, normals, ... as the method runs them).
+        timings: milliseconds per stage (bin_removal, normals, ... as the method runs them); a
+            stage that ran more than once (CCP's, once per region it tried) gives its total.
         method: the coarse method that found it: ``"ccp"``, ``"ppf"`` or ``"centroid"``.
         iterations: ICP iterations of the refinement.
         visible_fraction: share of the model's sensor-facing surface that the scan confirms

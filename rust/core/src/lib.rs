@@ -51,8 +51,8 @@ pub use mesh::{sample_surface, unit_scale, Density, SurfaceSamples, TriMesh};
 pub use normals::{estimate_normals, Orientation};
 pub use parallel::with_threads;
 pub use pose::{
-    estimate_pose, estimate_poses, Alternative, CcpPathParams, CheckIcpParams, CoarseMethod, FeatureEvidence,
-    FineIcpParams, FitQuality, PoseConfig, PoseEstimate, PoseModel, Timings, TrustParams,
+    estimate_pose, estimate_poses, stage_totals, Alternative, CcpPathParams, CheckIcpParams, CoarseMethod,
+    FeatureEvidence, FineIcpParams, FitQuality, PoseConfig, PoseEstimate, PoseModel, Timings, TrustParams,
 };
 pub use registration::ccp::{ccp, BranchLayout, CcpConfig, CcpResult};
 pub use registration::ppf::{DetectConfig, PpfConfig, PpfModel};

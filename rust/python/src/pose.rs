@@ -5,7 +5,7 @@ use crate::convert::{bin_box, bin_box_to_py, branch_layout, indices_to_py, isome
 use crate::convert::{points, points_to_py, real_number, rotations_to_rows, threads, vector3, vectors, whole_number};
 use crate::errors::{run, to_py};
 use binpick_core::{estimate_poses as core_estimate, isometry_from_matrix, CcpConfig, CoarseMethod, DetectConfig};
-use binpick_core::{FeatureEvidence, FitQuality, PoseModel, PpfConfig, PpfModel};
+use binpick_core::{stage_totals, FeatureEvidence, FitQuality, PoseModel, PpfConfig, PpfModel};
 use nalgebra::{Point3, Vector3};
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn};
 use pyo3::prelude::*;
@@ -439,12 +439,13 @@ impl PoseEstimate {
     fn indices<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<i64>> {
         indices_to_py(py, &self.inner.indices)
     }
-    /// Milliseconds per stage, in the order the stages ran.
+    /// Milliseconds per stage, in the order the stages first ran; a stage that ran more than
+    /// once (CCP's, once per region it tried) reports its total.
     #[getter]
     fn timings<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let t = PyDict::new(py);
-        for (k, v) in &self.inner.timings {
-            t.set_item(*k, *v)?;
+        for (k, v) in stage_totals(&self.inner.timings) {
+            t.set_item(k, v)?;
         }
         Ok(t)
     }

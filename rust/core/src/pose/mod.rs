@@ -29,7 +29,7 @@ pub use ccp_path::{CcpPathParams, CheckIcpParams, FineIcpParams};
 pub use fit::FitQuality;
 pub use model::PoseModel;
 pub use trust::{Alternative, FeatureEvidence, TrustParams};
-pub use types::{CoarseMethod, PoseConfig, PoseEstimate, Timings};
+pub use types::{stage_totals, CoarseMethod, PoseConfig, PoseEstimate, Timings};
 
 use crate::error::{Error, Result};
 use crate::geometry::Point;
@@ -209,8 +209,14 @@ fn detect_instances(
     Ok((found.into_iter().map(|e| reindex(e, kept)).collect(), prepared))
 }
 
-/// Auto with a branch layout: PPF over the pile and CCP on the top object; the verified
-/// winner leads.
+/// Regions CCP tries when it runs beside PPF's instances (auto with a branch layout): the top
+/// object, the paper's reading. The regions below it lie among the instances PPF searched the
+/// whole pile for; on the cell's piles trying up to eight cost 40–60 ms each, a third of the
+/// pose stage, for a pose PPF had mostly found already.
+pub const AUTO_CCP_REGIONS: usize = 1;
+
+/// Auto with a branch layout: PPF over the pile and CCP on the top object (the next objects
+/// down too when PPF finds nothing); the verified winner leads.
 fn auto(
     scene: &[Point],
     pts: &[Point],
@@ -236,7 +242,21 @@ fn auto(
             Ok((_, prepared)) => &prepared.judge,
             Err(_) => own.get_or_insert_with(|| Judge::new(scene, &ccp_pts, removed, model, cfg)),
         };
-        run(scene, &ccp_pts, model, cfg, CoarseMethod::Ccp, judge, &mut ccp_timings).map(|e| reindex(e, &ccp_kept))
+        // Beside PPF's instances CCP reads the top object only; alone it goes on down the pile.
+        let mut ccp_cfg = cfg.clone();
+        if detected.is_ok() {
+            ccp_cfg.ccp_path.max_regions = ccp_cfg.ccp_path.max_regions.min(AUTO_CCP_REGIONS);
+        }
+        run(
+            scene,
+            &ccp_pts,
+            model,
+            &ccp_cfg,
+            CoarseMethod::Ccp,
+            judge,
+            &mut ccp_timings,
+        )
+        .map(|e| reindex(e, &ccp_kept))
     };
     timings.extend(ccp_timings.into_iter().map(|(name, ms)| (ccp_stage(name), ms)));
     match (detected, by_ccp) {

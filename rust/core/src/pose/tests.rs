@@ -342,3 +342,41 @@ fn the_judge_refuses_a_pose_whose_surface_the_sensor_saw_through_in_a_patch() {
     whole.extend(scene.iter().filter(|p| p.z == floor_z));
     assert!(judge_of(&whole).verdict(model, &truth, &cfg).is_ok());
 }
+
+/// A flat plate above the tee, off to its side: the top object, and not the part.
+fn tee_below_a_plate() -> (Vec<Point>, Isometry3<f64>) {
+    let (_, mesh) = tee_model();
+    let truth = random_pose(&mut Rng::new(9));
+    let mut scene = top_view(mesh, &truth, 9);
+    scene.extend((0..60 * 60).map(|i| Point::new(490.0 + 0.8 * (i % 60) as f64, 0.8 * (i / 60) as f64, 170.0)));
+    (scene, truth)
+}
+
+#[test]
+fn ccp_alone_goes_on_down_the_pile_but_beside_ppf_reads_the_top_object_only() {
+    let (model, _) = tee_model();
+    let (scene, truth) = tee_below_a_plate();
+    let laps = |e: &PoseEstimate, name: &str| e.timings.iter().filter(|(n, _)| *n == name).count();
+    // CCP alone: the plate's region fails, the tee's below it is found.
+    let ccp = estimate_pose(&scene, model, &config(CoarseMethod::Ccp)).unwrap();
+    assert!(laps(&ccp, "segmentation") >= 2, "{:?}", ccp.timings);
+    // Beside PPF: CCP tries the plate only, and PPF's tee leads.
+    let auto = estimate_pose(&scene, model, &config(CoarseMethod::Auto)).unwrap();
+    assert_eq!(laps(&auto, "ccp_segmentation"), AUTO_CCP_REGIONS, "{:?}", auto.timings);
+    assert_eq!(auto.method, CoarseMethod::Ppf);
+    for est in [&ccp, &auto] {
+        let (rot, shift) = model.symmetries.pose_error(&est.t_scene_model, &truth);
+        assert!(
+            rot.to_degrees() < 1.0 && shift < 1.0,
+            "{:.3}° {shift:.3} mm",
+            rot.to_degrees()
+        );
+    }
+}
+
+#[test]
+fn stage_totals_add_up_the_runs_of_a_stage_in_first_run_order() {
+    let laps = vec![("a", 1.0), ("b", 2.0), ("a", 3.0), ("c", 0.5), ("b", 1.0)];
+    assert_eq!(stage_totals(&laps), vec![("a", 4.0), ("b", 3.0), ("c", 0.5)]);
+    assert!(stage_totals(&[]).is_empty());
+}

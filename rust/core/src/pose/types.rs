@@ -10,8 +10,21 @@ use crate::registration::ccp::CcpConfig;
 use crate::registration::ppf::DetectConfig;
 use nalgebra::{Isometry3, Vector3};
 
-/// Milliseconds per stage, in order.
+/// Milliseconds per stage, in order; a stage that runs more than once (CCP's, once per region
+/// it tries) has an entry per run.
 pub type Timings = Vec<(&'static str, f64)>;
+
+/// Total milliseconds per stage, in the order the stages first ran.
+pub fn stage_totals(timings: &[(&'static str, f64)]) -> Timings {
+    let mut totals: Timings = Vec::new();
+    for &(name, ms) in timings {
+        match totals.iter_mut().find(|(n, _)| *n == name) {
+            Some((_, total)) => *total += ms,
+            None => totals.push((name, ms)),
+        }
+    }
+    totals
+}
 
 /// How the coarse pose is found.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
