@@ -71,6 +71,17 @@ pub(super) fn config(method: CoarseMethod) -> PoseConfig {
     }
 }
 
+/// The tee's estimate `est` is within 1° and 1 mm of `truth` (modulo its symmetries).
+fn assert_near_truth(est: &PoseEstimate, truth: &Isometry3<f64>, what: &str) {
+    let (model, _) = tee_model();
+    let (rot, shift) = model.symmetries.pose_error(&est.t_scene_model, truth);
+    assert!(
+        rot.to_degrees() < 1.0 && shift < 1.0,
+        "{what}: {:.3}° {shift:.3} mm",
+        rot.to_degrees()
+    );
+}
+
 fn assert_recovered(method: CoarseMethod, seed: u64) {
     let (model, mesh) = tee_model();
     let mut rng = Rng::new(seed);
@@ -79,12 +90,7 @@ fn assert_recovered(method: CoarseMethod, seed: u64) {
         let scene = top_view(mesh, &truth, seed * 10 + trial);
         let est = estimate_pose(&scene, model, &config(method))
             .unwrap_or_else(|e| panic!("{method:?}, seed {seed}, trial {trial}: {e}"));
-        let (rot, shift) = model.symmetries.pose_error(&est.t_scene_model, &truth);
-        assert!(
-            rot.to_degrees() < 1.0 && shift < 1.0,
-            "{method:?}, seed {seed}, trial {trial}: {:.3}° {shift:.3} mm",
-            rot.to_degrees()
-        );
+        assert_near_truth(&est, &truth, &format!("{method:?}, seed {seed}, trial {trial}"));
         assert_eq!(est.method, method);
         assert!(est.score > 0.9, "score {}", est.score);
     }
@@ -364,14 +370,8 @@ fn ccp_alone_goes_on_down_the_pile_but_beside_ppf_reads_the_top_object_only() {
     let auto = estimate_pose(&scene, model, &config(CoarseMethod::Auto)).unwrap();
     assert_eq!(laps(&auto, "ccp_segmentation"), AUTO_CCP_REGIONS, "{:?}", auto.timings);
     assert_eq!(auto.method, CoarseMethod::Ppf);
-    for est in [&ccp, &auto] {
-        let (rot, shift) = model.symmetries.pose_error(&est.t_scene_model, &truth);
-        assert!(
-            rot.to_degrees() < 1.0 && shift < 1.0,
-            "{:.3}° {shift:.3} mm",
-            rot.to_degrees()
-        );
-    }
+    assert_near_truth(&ccp, &truth, "CCP alone");
+    assert_near_truth(&auto, &truth, "auto");
 }
 
 #[test]
