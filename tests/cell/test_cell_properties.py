@@ -412,7 +412,8 @@ def test_branch_grasps_finer_than_a_degree_keep_every_direction(tee):
     """Grasps were named by the whole degree: with 400 steps, 40 directions shared a name with their
     neighbour and were silently dropped (21600 grasps instead of 24000)."""
     grasps = branch_grasps(tee, steps=400)
-    assert len(grasps) == 400 * 5 * 2 * 2 * len(tee.branches)
+    # per direction: 5 pitches and 2 end pitches, both wrist ways, and the end-on one, each raised or not
+    assert len(grasps) == 400 * (5 * 2 + 2 * 2 + 1) * 2 * len(tee.branches)
     assert "branch0/0.9°/flipped" in grasps and "branch0/5°" in branch_grasps(tee, steps=72)
 
 

@@ -28,7 +28,7 @@ def test_a_tilted_branch_has_a_grasp_within_half_a_step_of_its_elevation(tee, el
     # The most vertical approach square to a branch tilted e from horizontal is tilted e itself;
     # pitched by q along the branch it is tilted |e - q|, least over the pitches. The grasps must come
     # within half a step (2.5°) of it for every branch.
-    grasps = branch_grasps(tee, pitches_deg=(-pitch_deg, 0.0, pitch_deg) if pitch_deg else (0.0,))
+    grasps = branch_grasps(tee, pitches_deg=(-pitch_deg, 0.0, pitch_deg) if pitch_deg else (0.0,), end_pitches_deg=())
     rng = np.random.default_rng(3)
     for _ in range(5):
         R = rotation_about(np.array([0.0, 0.0, 1.0]), rng.uniform(0, 2 * math.pi))
@@ -45,6 +45,36 @@ def test_a_tilted_branch_has_a_grasp_within_half_a_step_of_its_elevation(tee, el
             )
             lowest = min(abs(elev - q) for q in (0.0, pitch_deg))
             assert lowest - 1e-6 <= best <= lowest + 2.5 + 1e-6
+
+
+@pytest.mark.parametrize("elevation_deg", [50.0, 70.0, 90.0])
+def test_a_branch_standing_up_is_gripped_from_its_end_nearly_upright(tee, elevation_deg):
+    # Square approaches to a branch standing e above the horizontal tilt at least e - 30° (the
+    # largest pitch); from the end at q from square, the approach tilts |q - e|. With q in 60, 75
+    # and 90 a standing branch has an end grasp within 15° (+ half a step) of vertical, the
+    # fingertips a finger's width in from the end face, closing square to the axis.
+    grasps = branch_grasps(tee)
+    rng = np.random.default_rng(5)
+    for b_index, b in enumerate(tee.branches):
+        d = np.asarray(b.direction, dtype=float)
+        for _ in range(3):
+            # turn the part so that branch b points elevation_deg above the horizontal, any heading
+            up = np.array([0.0, 0.0, 1.0])
+            h = np.cross(d, up) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+            T = np.eye(4)
+            T[:3, :3] = rotation_about(up, rng.uniform(0, 2 * math.pi)) @ rotation_about(h, math.radians(elevation_deg))
+            assert math.degrees(math.asin((T[:3, :3] @ d)[2])) == pytest.approx(elevation_deg, abs=1e-6)
+            ends = {n: G for n, G in grasps.items() if n.startswith(f"branch{b_index}/") and "/end" in n}
+            tilts = {n: _tilt_deg(grasp_pose(T, G)) for n, G in ends.items()}
+            best = min(tilts, key=tilts.get)
+            lowest = min(abs(q - elevation_deg) for q in (60.0, 75.0, 90.0))
+            assert lowest - 1e-6 <= tilts[best] <= lowest + 2.5 + 1e-6
+            # square to the axis, tips on the axis 20 mm in from the end face (or mid-branch)
+            T_og = np.linalg.inv(ends[best])
+            assert abs(T_og[:3, 0] @ d) < 1e-9
+            tip = T_og[:3, 3] + 10.0 * T_og[:3, 2]  # the default tip depth
+            lift = 5.0 if best.endswith("/raised5mm") else 0.0  # raised: half the tip depth back along the approach
+            assert np.allclose(tip, max(b.length - 20.0, b.length / 2) * d - lift * T_og[:3, 2], atol=1e-6)
 
 
 def test_vectorised_grasp_matching_equals_pose_error_over_every_grasp(tee):

@@ -5,12 +5,13 @@ once) agrees with checking every grasp one by one."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
 import binpick
-from binpick.cell.grasp import bin_clash, pick_waypoints, plan_grasp, points_in_gripper, tool_tilt_deg
+from binpick.cell.grasp import bin_clash, branch_grasps, pick_waypoints, plan_grasp, points_in_gripper, tool_tilt_deg
 from binpick.cell.views import deciding_views, turned_scan_poses
 from binpick.devices import safety
 from binpick.errors import SafetyError
@@ -199,3 +200,49 @@ def test_a_shaft_located_at_any_turn_about_its_axis_is_grasped_from_straight_abo
             assert matcher.within(matcher.error(np.linalg.inv(plan.T_base_gripper) @ T)), plan.grasp
         # Across the shaft, straight down but for the axis's own slope (under 12° here).
         assert max(tilts) - min(tilts) < 1.0 and max(tilts) < 12.0, tilts
+
+
+def _standing_pose(columns, origin) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3] = np.column_stack(columns)
+    T[:3, 3] = origin
+    return T
+
+
+_SIN, _COS = math.sin(math.radians(70.0)), math.cos(math.radians(70.0))
+#: The last part of three simulator piles that ended in a dead end before grasps from a
+#: branch's end existed (bin 250..550 × -100..100 mm): no square grasp within the 45° tool-tilt
+#: limit, and no nudge freed them.
+STANDING = {
+    # on edge, flat against the +x wall, one arm straight up
+    "cross": _standing_pose([(0, 1, 0), (0, 0, -1), (-1, 0, 0)], (536.6, -58.0, 40.3)),
+    # on its run along the +x wall, the stem up 70° and leaning away from the wall
+    "tee": _standing_pose([(0, -1, 0), (-_COS, 0, _SIN), (-_SIN, 0, -_COS)], (532.7, -15.0, 13.3)),
+    # one branch along the floor, the other straight up, against the -y wall
+    "elbow": _standing_pose([(0, 0, 1), (1, 0, 0), (0, 1, 0)], (410.3, -86.7, 13.3)),
+}
+
+
+@pytest.mark.parametrize("name", sorted(STANDING))
+def test_a_part_standing_against_a_wall_is_gripped_from_the_end_of_its_upright_branch(name):
+    part = getattr(binpick.parts, name)()
+    T = STANDING[name]
+    with SimulatedCell(part, count=1, seed=0, frames=4) as sim:
+        cfg = sim.cell.config
+        here = sim.robot_emulator.pose()
+        lo, hi = (np.asarray(b, dtype=float) for b in cfg.bin_bounds)
+        points = np.asarray(part.points) @ T[:3, :3].T + T[:3, 3]
+        assert (points >= lo - 1.0).all() and (points <= hi + 1.0).all()  # in the bin, on its floor
+        assert points[:, 2].min() == pytest.approx(lo[2], abs=1.0)
+        plan, hits = plan_grasp(cfg, T, np.zeros((0, 3)), here)
+        assert "/end" in plan.grasp and hits == 0
+        assert math.radians(plan.tilt_deg) <= cfg.limits.max_tool_tilt_rad
+        # The grasp closes square to a branch that points up and stands within 90° - 45° of it.
+        T_og = np.linalg.inv(cfg.grasps[plan.grasp])
+        branch = part.branches[int(plan.grasp.split("/")[0].removeprefix("branch"))]
+        d = T[:3, :3] @ np.asarray(branch.direction, dtype=float)
+        assert abs((T[:3, :3] @ T_og[:3, 0]) @ d) < 1e-9 and d[2] > math.sin(math.radians(45.0))
+        # Only square grasps (as before the end grasps): the same part is a dead end.
+        square = replace(cfg, grasps=branch_grasps(part, end_pitches_deg=()))
+        with pytest.raises(binpick.cell.NoGraspError, match="tilt"):
+            plan_grasp(square, T, np.zeros((0, 3)), here)

@@ -89,6 +89,7 @@ def branch_grasps(
     tip_depth_mm: float = 10.0,
     steps: int = 72,
     pitches_deg: Sequence[float] = (-30.0, -15.0, 0.0, 15.0, 30.0),
+    end_pitches_deg: Sequence[float] = (90.0, 75.0, 60.0),
 ) -> dict[str, np.ndarray]:
     """Grasps across every cylindrical branch of ``model`` (``model.branches``): the TCP on the
     branch axis, ``finger_width_mm / 2 + 7`` mm in from the end face, the fingers closing across
@@ -107,6 +108,15 @@ def branch_grasps(
     line across their pads; the pitch lets the palm lean away from a bin wall or a neighbour
     beside a part lying flat, where turning about the axis would dip the fingertips into the floor.
 
+    Grasps from the branch's end (``end_pitches_deg``, 0 excluded, 90 = straight along the axis)
+    close the same way, square to the axis, with the approach leaning that far from square
+    towards the end face: the pads then touch the cylinder along its length, the fingertips on
+    the axis ``finger_width_mm`` in from the end face (or halfway along a shorter branch), so
+    the contact is as long as a square grasp's. They grip a branch standing up, which no square
+    approach within a tool-tilt limit reaches (a cross on edge against a wall, an elbow or a tee
+    with a branch pointing up), from above it. At 90° a half turn about the axis is the
+    flipped grip, so only the unflipped one is made.
+
     Returns name → ``T_gripper_object``.
     """
     instance_of(model, Model, "model", "binpick.parts.tee()")
@@ -116,17 +126,26 @@ def branch_grasps(
             "with model.add_grasp(name, T_gripper_object)"
         )
     half = positive(finger_width_mm, "finger_width_mm") / 2.0
-    raises = (0.0, non_negative(tip_depth_mm, "tip_depth_mm", "mm") / 2.0)
+    tip = non_negative(tip_depth_mm, "tip_depth_mm", "mm")
+    raises = (0.0, tip / 2.0)
     n = count(steps, "steps", 1, MAX_BRANCH_STEPS)
     pitches = [float(p) for p in pitches_deg]
     if not pitches or any(not -90.0 < p < 90.0 for p in pitches):
         raise InvalidInputError(f"pitches_deg: expected one or more angles in (-90, 90) degrees, got {pitches_deg!r}")
+    ends = [float(q) for q in end_pitches_deg]
+    if any(not 0.0 < q <= 90.0 for q in ends):
+        raise InvalidInputError(
+            f"end_pitches_deg: expected angles in (0, 90] degrees (90: along the branch's axis), "
+            f"got {end_pitches_deg!r}"
+        )
     grasps: dict[str, np.ndarray] = {}
-    combos = list(itertools.product(range(n), pitches, (0, 1), raises))
-    a = np.array([2 * math.pi * k / n for k, _, _, _ in combos])
-    p = np.radians([c[1] for c in combos])
-    sign = np.array([-1.0 if c[2] else 1.0 for c in combos])[:, None]
-    raised = np.array([c[3] for c in combos])[:, None]
+    square = list(itertools.product(range(n), pitches, (0, 1), raises))
+    from_end = [(k, q, f, r) for k, q, f, r in itertools.product(range(n), ends, (0, 1), raises) if q < 90.0 or not f]
+    a = np.array([2 * math.pi * k / n for k, _, _, _ in square + from_end])
+    p = np.radians([c[1] for c in square + from_end])
+    sign = np.array([-1.0 if c[2] else 1.0 for c in square + from_end])[:, None]
+    raised = np.array([c[3] for c in square + from_end])[:, None]
+    end = np.arange(len(a)) >= len(square)
     for i, b in enumerate(model.branches):
         d = np.asarray(b.direction, dtype=np.float64)
         d = d / np.linalg.norm(d)
@@ -135,20 +154,24 @@ def branch_grasps(
         z0 = np.cross(d, helper)
         z0 /= np.linalg.norm(z0)
         # z0 turned about the branch by a (square to it), the closing direction across both, and
-        # the approach pitched about the closing direction by p (z_square is square to x).
+        # the approach pitched about the closing direction by p (z_square is square to x); from
+        # the end, the approach leans by p from z_square towards -d (into the end face).
         z_square = np.cos(a)[:, None] * z0 + np.sin(a)[:, None] * np.cross(d, z0)
         x = sign * np.cross(d, z_square)
-        z = np.cos(p)[:, None] * z_square + np.sin(p)[:, None] * np.cross(x, z_square)
+        z = np.cos(p)[:, None] * z_square + np.sin(p)[:, None] * np.where(end[:, None], -d, np.cross(x, z_square))
         R = np.stack([x, np.cross(z, x), z], axis=2)  # columns: the gripper axes in the object frame
-        origin = s * d - raised * z
-        T_go = np.zeros((len(combos), 4, 4))
+        # Square: the TCP on the axis s from the origin. From the end: the fingertips on the axis
+        # a finger's width in from the end face, the TCP tip_depth back along the approach.
+        tip_at = max(b.length - 2.0 * half, b.length / 2.0)
+        origin = np.where(end[:, None], tip_at * d - tip * z, s * d) - raised * z
+        T_go = np.zeros((len(a), 4, 4))
         T_go[:, :3, :3] = np.transpose(R, (0, 2, 1))
         T_go[:, :3, 3] = -np.einsum("nji,nj->ni", R, origin)
         T_go[:, 3, 3] = 1.0
-        for T, (k, pitch, flip, lift) in zip(T_go, combos):
+        for T, (k, pitch, flip, lift), is_end in zip(T_go, square + from_end, end):
             name = (
                 f"branch{i}/{round(360 * k / n, 3):g}°"
-                + (f"/pitch{pitch:+g}°" if pitch else "")
+                + (f"/end{pitch:g}°" if is_end else f"/pitch{pitch:+g}°" if pitch else "")
                 + ("/flipped" if flip else "")
                 + (f"/raised{lift:g}mm" if lift else "")
             )
