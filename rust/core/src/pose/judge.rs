@@ -24,6 +24,10 @@ const MIN_SEEN: usize = 12;
 /// longer cylinder continues past one of its two ends at least (half its facing outline); a
 /// plate touching a neighbour edge to edge at one height, past one side of four (a quarter).
 const MAX_CONTINUED: f64 = 0.4;
+/// The largest share of a pose's surface that may lie beyond the bin's floor or walls or the
+/// removed support planes (more than twice the tolerance): a part rests on them, it does not
+/// pass through them.
+pub(super) const MAX_THROUGH: f64 = 0.02;
 /// The fewest confirmed outline cells for the outline test to decide.
 const MIN_OUTLINE: usize = 4;
 /// Probe points of the judge over the model's dense surface.
@@ -147,7 +151,7 @@ impl Judge {
     }
 
     /// Fraction of the posed part's surface more than twice the tolerance beyond a support.
-    fn through_supports(&self, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> f64 {
+    pub(super) fn through_supports(&self, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> f64 {
         if self.supports.is_empty() {
             return 0.0;
         }
@@ -189,7 +193,7 @@ impl Judge {
     ) -> Result<()> {
         let fail = |what: String| Err(Error::NoObjectFound { reason: what });
         let through = self.through_supports(model, t_scene_model);
-        if through >= 0.02 {
+        if through >= MAX_THROUGH {
             return fail(format!(
                 "the best pose puts {:.0} % of the part through the bin's floor or walls",
                 100.0 * through

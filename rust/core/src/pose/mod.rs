@@ -165,9 +165,16 @@ fn trusted(
             // A free axis already says the turn is unknown.
             let noise = e.fit.map(|f| f.noise_floor);
             let unseen = match t.free_axis {
-                None => {
-                    unseen_turns::unseen_turns(&claimed, model, &e.t_scene_model, judge, cfg, noise, &e.alternatives)
-                }
+                None => unseen_turns::unseen_turns_of_all(
+                    &claimed,
+                    model,
+                    &e.t_scene_model,
+                    t.evidence.unwrap_or_default(),
+                    &e.alternatives,
+                    judge,
+                    cfg,
+                    noise,
+                ),
                 Some(_) => Vec::new(),
             };
             if !unseen.is_empty() {

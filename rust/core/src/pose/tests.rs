@@ -17,7 +17,7 @@ use std::sync::OnceLock;
 
 /// The tee prepared as binpick's `parts.tee()` prepares it: samples every 1 mm, the branch
 /// layout with the boss as special feature, and the PPF table.
-fn tee_model() -> &'static (PoseModel, crate::mesh::TriMesh) {
+pub(super) fn tee_model() -> &'static (PoseModel, crate::mesh::TriMesh) {
     static MODEL: OnceLock<(PoseModel, crate::mesh::TriMesh)> = OnceLock::new();
     MODEL.get_or_init(|| {
         let part = tee(&TeeParams::default()).unwrap();

@@ -6,9 +6,13 @@
 //! happens to show. Each turn is posed about the weak axis (each slide along the weak direction),
 //! refined on the claimed points and judged; a move the judge passes that explains the claimed points as well is an alternative
 //! the scan cannot rule out, and the pose is reported ambiguous rather than confidently wrong.
+//! A move that puts the part through the bin's floor or a wall is taken back towards the pose
+//! until it no longer does: a part at rest lies against what bounds its unseen turn (a tee with
+//! its stem hidden, leaning in the corner of floor and wall), so the turn that just touches the
+//! bin is the one the scan cannot rule out, and a probe a few degrees past it is refused.
 
 use super::fit::{eigen_ascending, plane_residuals, thinned_sigma, FREE_RATIO};
-use super::judge::Judge;
+use super::judge::{Judge, MAX_THROUGH};
 use super::trust::{thin, Alternative, FeatureEvidence};
 use super::{PoseConfig, PoseModel};
 use crate::geometry::Point;
@@ -27,6 +31,9 @@ const TURNS_DEG: [f64; 11] = [
 ];
 /// The slides probed along a weak slide, as shares of the part's diameter (both ways).
 const SLIDES: [f64; 3] = [0.05, 0.1, 0.2];
+/// A move the bin refuses is halved back towards the pose this many times (a 30° turn comes
+/// within 2° of where the part touches the bin).
+const BIN_HALVINGS: usize = 4;
 /// Claimed points each turn is refined on, at most.
 const REFINE_POINTS: usize = 300;
 /// ICP iterations of each turn's refinement.
@@ -48,6 +55,27 @@ const SIGMA_SLACK: f64 = 1.5;
 const SEEN_THROUGH_SHARE: f64 = 0.01;
 /// … or this many, when more.
 const SEEN_THROUGH_MARGIN: usize = 3;
+
+/// A move probed from the pose: a turn (radians) about an axis through a point, or a slide.
+#[derive(Clone, Copy)]
+enum Move {
+    Turn(Unit<Vector3<f64>>, Point, f64),
+    Slide(Vector3<f64>),
+}
+
+impl Move {
+    /// The move scaled by `s` (the same axis, `s` times the angle; `s` times the slide), model frame.
+    fn scaled(&self, s: f64) -> Isometry3<f64> {
+        match *self {
+            Move::Turn(axis, x, angle) => {
+                Translation3::from(x.coords)
+                    * UnitQuaternion::from_axis_angle(&axis, s * angle)
+                    * Translation3::from(-x.coords)
+            }
+            Move::Slide(v) => Isometry3::from_parts(Translation3::from(s * v), UnitQuaternion::identity()),
+        }
+    }
+}
 
 /// The weakest slide of the point-to-plane constraints of `q` (model-frame points with their
 /// model normals), model frame, when it is weak (see [`WEAK_SHARE`]): along a cylinder seen
@@ -139,22 +167,13 @@ pub(super) fn unseen_turns(
         continuous.chain(near).any(along)
     };
     let turn_axis = weak_axis(&q).filter(|(axis, _)| !trusts_axis(axis));
-    let mut moves: Vec<Isometry3<f64>> = Vec::new();
+    let mut moves: Vec<Move> = Vec::new();
     if let Some((axis, x)) = turn_axis {
-        moves.extend(TURNS_DEG.iter().map(|deg| {
-            Translation3::from(x.coords)
-                * UnitQuaternion::from_axis_angle(&axis, deg.to_radians())
-                * Translation3::from(-x.coords)
-        }));
+        moves.extend(TURNS_DEG.iter().map(|deg| Move::Turn(axis, x, deg.to_radians())));
     }
     if let Some(u) = weak_slide(&q) {
         let slides = SLIDES.iter().flat_map(|s| [*s, -*s]);
-        moves.extend(slides.map(|s| {
-            Isometry3::from_parts(
-                Translation3::from(u.into_inner() * s * model.diameter),
-                UnitQuaternion::identity(),
-            )
-        }));
+        moves.extend(slides.map(|s| Move::Slide(u.into_inner() * s * model.diameter)));
     }
     if moves.is_empty() {
         return Vec::new();
@@ -180,12 +199,18 @@ pub(super) fn unseen_turns(
         max_iterations: QUICK_ITERATIONS,
         ..refine.clone()
     };
+    let refined = |motion: &Isometry3<f64>| {
+        let start = t_scene_model * motion.inverse();
+        icp(&sample, model.fine_target(), &start.inverse(), &refine)
+            .ok()
+            .map(|r| r.t_target_source.inverse())
+    };
     let mut found: Vec<Alternative> = Vec::new();
-    for motion in moves {
+    for probe in moves {
         if crate::cancel::requested() {
             break;
         }
-        let start = t_scene_model * motion.inverse();
+        let start = t_scene_model * probe.scaled(1.0).inverse();
         let Ok(q) = icp(&few, model.fine_target(), &start.inverse(), &quick) else {
             continue;
         };
@@ -196,7 +221,27 @@ pub(super) fn unseen_turns(
         let Ok(r) = icp(&sample, model.fine_target(), &q.t_target_source, &refine) else {
             continue;
         };
-        let t = r.t_target_source.inverse();
+        let mut t = r.t_target_source.inverse();
+        if judge.through_supports(model, &t) >= MAX_THROUGH {
+            // Through the bin: halve the move back towards the pose, keeping the largest share
+            // of it that stays clear.
+            let (mut clear, mut through) = (0.0, 1.0);
+            let mut last_clear = None;
+            for _ in 0..BIN_HALVINGS {
+                let mid = 0.5 * (clear + through);
+                match refined(&probe.scaled(mid)) {
+                    Some(m) if judge.through_supports(model, &m) < MAX_THROUGH => {
+                        clear = mid;
+                        last_clear = Some(m);
+                    }
+                    _ => through = mid,
+                }
+            }
+            let Some(m) = last_clear else {
+                continue;
+            };
+            t = m;
+        }
         if known_pose(&t, &found) {
             continue;
         }
@@ -228,4 +273,35 @@ pub(super) fn unseen_turns(
         });
     }
     found
+}
+
+/// The unseen turns (see [`unseen_turns`]) of the pose `t_scene_model` (its feature evidence
+/// `evidence`) and of each of its near-symmetric `alternatives`, each new one beyond the pose,
+/// the alternatives and those already found: the truth may be a flip of the pose turned about
+/// the axis the view leaves open (a tee leaning on a wall, its boss and stem hidden, read
+/// flipped and turned about its run), which no turn of the pose itself reaches.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn unseen_turns_of_all(
+    claimed: &[Point],
+    model: &PoseModel,
+    t_scene_model: &Isometry3<f64>,
+    evidence: FeatureEvidence,
+    alternatives: &[Alternative],
+    judge: &Judge,
+    cfg: &PoseConfig,
+    noise_floor: Option<f64>,
+) -> Vec<Alternative> {
+    let mut unseen = unseen_turns(claimed, model, t_scene_model, judge, cfg, noise_floor, alternatives);
+    let mut known = alternatives.to_vec();
+    known.extend(unseen.iter().cloned());
+    known.push(Alternative {
+        t_scene_model: *t_scene_model,
+        evidence,
+    });
+    for a in alternatives {
+        let more = unseen_turns(claimed, model, &a.t_scene_model, judge, cfg, noise_floor, &known);
+        known.extend(more.iter().cloned());
+        unseen.extend(more);
+    }
+    unseen
 }
