@@ -6,13 +6,15 @@
 //! happens to show. Each turn is posed about the weak axis (each slide along the weak direction),
 //! refined on the claimed points and judged; a move the judge passes that explains the claimed points as well is an alternative
 //! the scan cannot rule out, and the pose is reported ambiguous rather than confidently wrong.
-//! A move that puts the part through the bin's floor or a wall is taken back towards the pose
-//! until it no longer does: a part at rest lies against what bounds its unseen turn (a tee with
-//! its stem hidden, leaning in the corner of floor and wall), so the turn that just touches the
-//! bin is the one the scan cannot rule out, and a probe a few degrees past it is refused.
+//! A move that puts the part deeper into the bin's floor or a wall than the pose is taken back
+//! towards the pose until it no longer does: a part at rest lies against what bounds its unseen
+//! turn (a tee with its stem hidden, leaning in the corner of floor and wall), so the turn that
+//! just touches the bin is the one the scan cannot rule out, and a probe a few degrees past it
+//! is refused; a slide of a long shaft a few millimetres into the floor, which the judge's
+//! tolerance would let pass, is no alternative either.
 
 use super::fit::{eigen_ascending, plane_residuals, thinned_sigma, FREE_RATIO};
-use super::judge::{Judge, MAX_THROUGH};
+use super::judge::Judge;
 use super::trust::{thin, Alternative, FeatureEvidence};
 use super::{PoseConfig, PoseModel};
 use crate::geometry::Point;
@@ -34,6 +36,9 @@ const SLIDES: [f64; 3] = [0.05, 0.1, 0.2];
 /// A move the bin refuses is halved back towards the pose this many times (a 30° turn comes
 /// within 2° of where the part touches the bin).
 const BIN_HALVINGS: usize = 4;
+/// A move may put this much more of the part's surface through the bin than the pose does:
+/// about two of the judge's 500 bin probes, the refinement's own jitter.
+pub(super) const BIN_SLACK: f64 = 0.005;
 /// Claimed points each turn is refined on, at most.
 const REFINE_POINTS: usize = 300;
 /// ICP iterations of each turn's refinement.
@@ -205,6 +210,7 @@ pub(super) fn unseen_turns(
             .ok()
             .map(|r| r.t_target_source.inverse())
     };
+    let through0 = judge.through_supports(model, t_scene_model);
     let mut found: Vec<Alternative> = Vec::new();
     for probe in moves {
         if crate::cancel::requested() {
@@ -222,15 +228,15 @@ pub(super) fn unseen_turns(
             continue;
         };
         let mut t = r.t_target_source.inverse();
-        if judge.through_supports(model, &t) >= MAX_THROUGH {
-            // Through the bin: halve the move back towards the pose, keeping the largest share
-            // of it that stays clear.
+        if judge.through_supports(model, &t) > through0 + BIN_SLACK {
+            // Deeper into the bin: halve the move back towards the pose, keeping the largest
+            // share of it that goes no deeper than the pose.
             let (mut clear, mut through) = (0.0, 1.0);
             let mut last_clear = None;
             for _ in 0..BIN_HALVINGS {
                 let mid = 0.5 * (clear + through);
                 match refined(&probe.scaled(mid)) {
-                    Some(m) if judge.through_supports(model, &m) < MAX_THROUGH => {
+                    Some(m) if judge.through_supports(model, &m) <= through0 + BIN_SLACK => {
                         clear = mid;
                         last_clear = Some(m);
                     }
