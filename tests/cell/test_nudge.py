@@ -18,7 +18,8 @@ from binpick.errors import SafetyError
 from binpick.sim import SimulatedCell
 
 #: Tee pile seed 1 of 9 parts (benches/bin_clearing.py): taken out in this order, the last part
-#: left stands against the +y wall, where no grasp within the 45° tool-tilt limit can take it.
+#: left stands against the +y wall, where no square grasp within the 45° tool-tilt limit can
+#: take it (a grasp from its upright branch's end can: the cell is given square grasps only).
 DEAD_END_SEED, DEAD_END_COUNT, DEAD_END_REMOVED = 1, 9, (8, 7, 2, 0, 5, 3, 4, 6)
 
 
@@ -28,7 +29,8 @@ def tee():
 
 
 def _dead_end(tee, **kwargs):
-    sim = SimulatedCell(tee, count=DEAD_END_COUNT, seed=DEAD_END_SEED, frames=90, **kwargs)
+    square = binpick.cell.branch_grasps(tee, end_pitches_deg=())
+    sim = SimulatedCell(tee, count=DEAD_END_COUNT, seed=DEAD_END_SEED, frames=90, grasps=square, **kwargs)
     for pid in DEAD_END_REMOVED:
         sim.pile.remove(pid)
     return sim
