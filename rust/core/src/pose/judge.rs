@@ -27,7 +27,7 @@ const MAX_CONTINUED: f64 = 0.4;
 /// The largest share of a pose's surface that may lie beyond the bin's floor or walls or the
 /// removed support planes (more than twice the tolerance): a part rests on them, it does not
 /// pass through them.
-pub(super) const MAX_THROUGH: f64 = 0.02;
+const MAX_THROUGH: f64 = 0.02;
 /// The fewest confirmed outline cells for the outline test to decide.
 const MIN_OUTLINE: usize = 4;
 /// Probe points of the judge over the model's dense surface.

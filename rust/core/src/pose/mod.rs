@@ -169,7 +169,6 @@ fn trusted(
                     &claimed,
                     model,
                     &e.t_scene_model,
-                    t.evidence.unwrap_or_default(),
                     &e.alternatives,
                     judge,
                     cfg,

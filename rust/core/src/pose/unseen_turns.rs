@@ -281,17 +281,14 @@ pub(super) fn unseen_turns(
     found
 }
 
-/// The unseen turns (see [`unseen_turns`]) of the pose `t_scene_model` (its feature evidence
-/// `evidence`) and of each of its near-symmetric `alternatives`, each new one beyond the pose,
+/// The unseen turns (see [`unseen_turns`]) of the pose `t_scene_model` and of each of its near-symmetric `alternatives`, each new one beyond the pose,
 /// the alternatives and those already found: the truth may be a flip of the pose turned about
 /// the axis the view leaves open (a tee leaning on a wall, its boss and stem hidden, read
 /// flipped and turned about its run), which no turn of the pose itself reaches.
-#[allow(clippy::too_many_arguments)]
 pub(super) fn unseen_turns_of_all(
     claimed: &[Point],
     model: &PoseModel,
     t_scene_model: &Isometry3<f64>,
-    evidence: FeatureEvidence,
     alternatives: &[Alternative],
     judge: &Judge,
     cfg: &PoseConfig,
@@ -300,9 +297,10 @@ pub(super) fn unseen_turns_of_all(
     let mut unseen = unseen_turns(claimed, model, t_scene_model, judge, cfg, noise_floor, alternatives);
     let mut known = alternatives.to_vec();
     known.extend(unseen.iter().cloned());
+    // Only the poses of the known alternatives are compared.
     known.push(Alternative {
         t_scene_model: *t_scene_model,
-        evidence,
+        evidence: FeatureEvidence::default(),
     });
     for a in alternatives {
         let more = unseen_turns(claimed, model, &a.t_scene_model, judge, cfg, noise_floor, &known);

@@ -238,7 +238,6 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
         &claimed,
         model,
         &flipped,
-        trust::FeatureEvidence::default(),
         std::slice::from_ref(&alternative),
         &judge,
         &cfg,
