@@ -252,18 +252,21 @@ fn one_pose_per_instance(
     judged.sort_by(|a, b| claim(b).total_cmp(&claim(a)));
     let mut owner = vec![false; scene.fine.len()];
     let mut instances: Vec<Judged> = Vec::new();
-    for j in judged.into_iter().filter_map(|j| {
-        let (t_scene_model, evidence) = scene.judge.accept(j.evidence, model, &j.t_scene_model, cfg).ok()?;
-        Some(Judged {
-            t_scene_model,
-            evidence,
-            ..j
-        })
-    }) {
+    for j in judged {
+        // The claim test first: it is cheap, and a hypothesis whose points are claimed already
+        // is no new instance whatever the judge says of it.
         let shared = j.support.iter().filter(|&&i| owner[i]).count();
         if j.support.len() < 12 || shared as f64 > 0.3 * j.support.len() as f64 {
             continue;
         }
+        let Ok((t_scene_model, evidence)) = scene.judge.accept(j.evidence, model, &j.t_scene_model, cfg) else {
+            continue;
+        };
+        let j = Judged {
+            t_scene_model,
+            evidence,
+            ..j
+        };
         for &i in &j.support {
             owner[i] = true;
         }
