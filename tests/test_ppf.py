@@ -72,12 +72,17 @@ def test_ppf_recovers_random_poses_of_meshes_the_test_makes(parts, name):
     for _ in range(trials):
         T = random_pose(rng)
         scene = rendered_view(model, T, rng)
-        res = binpick.estimate_pose(scene, model, method="ppf", viewpoint=sim.Cell().T_base_camera[:3, 3])
+        try:
+            res = binpick.estimate_pose(scene, model, method="ppf", viewpoint=sim.Cell().T_base_camera[:3, 3])
+        except binpick.NoObjectFound:
+            continue  # a miss: no pose rather than a guess
         rot_err, trans_err = symmetric_pose_error(res.T_scene_model, T, **truth_group)
         ok += rot_err < 5 and trans_err < 3
         assert res.method == "ppf" and 0.6 <= res.score <= 1.0
     # Measured: every trial pick-grade for each part; one miss in eight is allowed for the
-    # views that show a single face.
+    # views that show a single face. (The bracket's sixth view shows only its L-shaped face,
+    # which point pairs of one plane cannot place: its hypotheses confirm pieces of that face
+    # and the continuation test refuses them, so the answer is NoObjectFound.)
     assert ok >= trials - 1, f"{name}: {ok}/{trials} pick-grade"
 
 

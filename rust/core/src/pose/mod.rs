@@ -7,6 +7,7 @@
 //! otherwise the pipeline answers `NoObjectFound` rather than a guess.
 
 mod ccp_path;
+mod continuation;
 mod fit;
 mod judge;
 mod model;

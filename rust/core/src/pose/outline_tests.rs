@@ -99,3 +99,41 @@ fn a_rod_laid_along_a_longer_one_is_refused() {
         }
     }
 }
+
+/// A pose of a rod along x turned 45° about y (its +x end up), centred `s` mm along its axis
+/// from (400, 0, 60).
+fn tilted(s: f64) -> Isometry3<f64> {
+    let turn = nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::y_axis(), -std::f64::consts::FRAC_PI_4);
+    let axis = turn * nalgebra::Vector3::x();
+    Isometry3::from_parts(
+        Translation3::from(nalgebra::Vector3::new(400.0, 0.0, 60.0) + s * axis),
+        turn,
+    )
+}
+
+#[test]
+fn a_rod_along_a_longer_one_tilted_45_degrees_is_refused_by_its_continuation() {
+    use super::continuation::continuation;
+    let model = short_rod();
+    let cfg = config(CoarseMethod::Ppf);
+    // Alone, tilted: the scan ends where the rod ends.
+    let alone = scene(&[(rod(40.0), tilted(0.0))]);
+    let judge = judge_of(&alone, model);
+    let c = continuation(&judge, model, &tilted(0.0));
+    assert!(c.confirmed >= 20 && c.beyond_fraction() < 0.1, "{c:?}");
+    assert!(judge.verdict(model, &tilted(0.0), &cfg).is_ok());
+    // Along a rod three times as long: no face of it is turned toward the sensor within 30°, so
+    // the outline test says nothing; the scan runs on past both ends in the rod's tangent planes.
+    let long = scene(&[(rod(120.0), tilted(0.0))]);
+    let judge = judge_of(&long, model);
+    for s in [0.0, -10.0] {
+        let o = outline(&judge, model, &tilted(s));
+        assert!(o.continued_fraction() <= 0.4, "at s = {s}: {o:?}");
+        let c = continuation(&judge, model, &tilted(s));
+        assert!(c.beyond_fraction() > 0.5, "at s = {s}: {c:?}");
+        match judge.verdict(model, &tilted(s), &cfg) {
+            Err(Error::NoObjectFound { reason }) => assert!(reason.contains("runs on"), "{reason}"),
+            other => panic!("a piece of a longer tilted rod passed at s = {s}: {other:?}"),
+        }
+    }
+}

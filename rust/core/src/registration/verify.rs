@@ -126,6 +126,27 @@ impl HeightMap {
         (Some(a as usize * self.size.1 + b as usize), h)
     }
 
+    /// The grid's size in cells along its two axes.
+    pub fn size(&self) -> (usize, usize) {
+        self.size
+    }
+
+    /// The grid cell (along the two axes) holding `p`, if inside the grid.
+    pub fn cell_of(&self, p: &Point) -> Option<(usize, usize)> {
+        let k = self.key(p).0?;
+        Some((k / self.size.1, k % self.size.1))
+    }
+
+    /// The highest scan point of cell (`a`, `b`), or `None` where nothing was scanned.
+    pub fn top_of(&self, a: usize, b: usize) -> Option<Point> {
+        let k = a * self.size.1 + b;
+        if a >= self.size.0 || b >= self.size.1 || self.height[k].is_nan() {
+            return None;
+        }
+        let t = self.top[k];
+        Some(Point::new(t[0] as f64, t[1] as f64, t[2] as f64))
+    }
+
     /// The map's in-plane axes (unit, orthogonal to [`HeightMap::up`] and to each other).
     pub fn axes(&self) -> (Vector3<f64>, Vector3<f64>) {
         (self.e1, self.e2)
