@@ -35,7 +35,8 @@ const PROBES: usize = 2000;
 pub(crate) struct Continuation {
     /// Height-map cells the scan confirms the posed part in (in 3-D, in the tangent plane).
     pub confirmed: usize,
-    /// Cells off the part reached from them in the tangent plane of the part's surface.
+    /// Cells off the part reached from them in the tangent plane of the part's surface (the
+    /// search stops once they outnumber the confirmed cells).
     pub beyond: usize,
 }
 
@@ -107,7 +108,12 @@ pub(crate) fn continuation(judge: &Judge, model: &PoseModel, t_scene_model: &Iso
     // sampling is too coarse to tell).
     let off_part = |p: &Point| plane_residual(model, &(to_model * p), 2.0 * tol).is_none();
     let mut beyond = 0;
+    // Past as many cells as confirm the pose the verdict is decided: the search stops there, so
+    // that a wide tilted plane (a box's side, a tilted floor) costs no more than the part.
     while let Some((a, b)) = queue.pop_front() {
+        if beyond > confirmed {
+            break;
+        }
         let Some(Some(r)) = state.get(&(a, b)).copied() else {
             continue;
         };
