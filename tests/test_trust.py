@@ -142,6 +142,19 @@ def test_scenes_without_the_part_give_no_pose_for_every_method(tee, bracket_pile
                 binpick.estimate_poses(scene, tee, bin=box, method=method, num_threads=1)
 
 
+def test_a_plate_is_not_read_on_a_pile_of_tees(tee):
+    """The cut plate asked for on a pile of tees: before the judge's continuation test its face
+    was confirmed on a tee of this pile (confidence 0.98 without the bin box), while the scan ran
+    on past the plate in its face's plane (measured: 14 of 28 such calls on 7 piles gave a plate,
+    4 do now, at confidence 0.02 and 0.32)."""
+    cell, _, scene, _ = pile_view(tee, 8, seed=11, step=2)
+    plate = binpick.parts.cut_plate()
+    for box in (cell.bin.bounds, None):
+        for method in ("auto", "ppf"):
+            with pytest.raises(binpick.NoObjectFound):
+                binpick.estimate_poses(scene, plate, bin=box, method=method, num_threads=1)
+
+
 @pytest.fixture(scope="module")
 def tee_pile(tee):
     return pile_view(tee, 6, seed=8, step=2)
