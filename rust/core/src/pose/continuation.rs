@@ -14,12 +14,12 @@
 //! followed: parts resting on the floor have their top faces at one height, and a neighbour's
 //! flush face is common in a pile; the outline test weighs those.
 
-use super::judge::Judge;
+use super::judge::{share, Judge, JUDGE_PROBES};
 use super::trust::plane_residual;
 use super::PoseModel;
 use crate::geometry::Point;
 use nalgebra::{Isometry3, Vector3};
-use std::collections::VecDeque;
+use std::collections::{HashMap, VecDeque};
 
 /// The least share of a normal along the sensor's direction for a probe to seed the test.
 const MIN_FACING: f64 = 0.3;
@@ -27,8 +27,6 @@ const MIN_FACING: f64 = 0.3;
 const PARALLEL_TO_SUPPORT: f64 = 0.985;
 /// How far past the confirmed surface the scan is followed, as a share of the part's diameter.
 const REACH: f64 = 0.5;
-/// Probes of the part's surface that seed the test (about).
-const PROBES: usize = 2000;
 
 /// The continuation test of one pose.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -43,11 +41,7 @@ pub(crate) struct Continuation {
 impl Continuation {
     /// Beyond over confirmed (0 with nothing confirmed).
     pub fn beyond_fraction(&self) -> f64 {
-        if self.confirmed == 0 {
-            0.0
-        } else {
-            self.beyond as f64 / self.confirmed as f64
-        }
+        share(self.beyond, self.confirmed)
     }
 }
 
@@ -76,9 +70,9 @@ pub(crate) fn continuation(judge: &Judge, model: &PoseModel, t_scene_model: &Iso
             .any(|s| s.normal.dot(n).abs() >= PARALLEL_TO_SUPPORT)
     };
     // Cells the posed part's surface is confirmed in, each seeded with the part's tangent plane.
-    let mut state: std::collections::HashMap<(usize, usize), Option<Reached>> = std::collections::HashMap::new();
+    let mut state: HashMap<(usize, usize), Option<Reached>> = HashMap::new();
     let mut queue = VecDeque::new();
-    let step = Judge::probe_step(model, PROBES);
+    let step = Judge::probe_step(model, JUDGE_PROBES);
     for (p, n) in target.points().iter().zip(normals).step_by(step) {
         let q = t_scene_model * p;
         let n = t_scene_model.rotation * n;

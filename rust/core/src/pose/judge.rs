@@ -39,7 +39,7 @@ const MAX_THROUGH: f64 = 0.02;
 /// The fewest confirmed outline cells for the outline test to decide.
 const MIN_OUTLINE: usize = 4;
 /// Probe points of the judge over the model's dense surface.
-const JUDGE_PROBES: usize = 2000;
+pub(super) const JUDGE_PROBES: usize = 2000;
 /// Seen-through probes with at least this many seen-through neighbours within two probe
 /// spacings lie inside a patch of them (on an even sampling a disc of that radius holds about
 /// twelve probes; a strip along a silhouette, where cells straddle the edge, about four).
@@ -48,6 +48,15 @@ const PATCH_NEIGHBOURS: usize = 6;
 /// the sensor saw free space — a branch standing where the scan looks past it — is material
 /// that is not there, whatever else the pose explains.
 const MAX_PATCH_PROBES: usize = 8;
+
+/// `part` over `whole`, 0 when `whole` is 0: the shares the outline and continuation tests decide on.
+pub(super) fn share(part: usize, whole: usize) -> f64 {
+    if whole == 0 {
+        0.0
+    } else {
+        part as f64 / whole as f64
+    }
+}
 
 /// The scene as the judge sees it.
 pub(crate) struct Judge {

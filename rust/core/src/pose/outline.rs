@@ -9,7 +9,7 @@
 //! outward and the scan's top there compared with it. Support surfaces (the bin's floor and
 //! walls) do not count: a thin part lying on the floor meets the floor at its edges.
 
-use super::judge::Judge;
+use super::judge::{share, Judge};
 use super::PoseModel;
 use crate::geometry::Point;
 use nalgebra::{Isometry3, Vector3};
@@ -33,11 +33,7 @@ pub(crate) struct Outline {
 impl Outline {
     /// Continued over counted (0 with nothing counted).
     pub fn continued_fraction(&self) -> f64 {
-        if self.counted == 0 {
-            0.0
-        } else {
-            self.continued as f64 / self.counted as f64
-        }
+        share(self.continued, self.counted)
     }
 }
 

@@ -281,8 +281,9 @@ pub(super) fn unseen_turns(
     found
 }
 
-/// The unseen turns (see [`unseen_turns`]) of the pose `t_scene_model` and of each of its near-symmetric `alternatives`, each new one beyond the pose,
-/// the alternatives and those already found: the truth may be a flip of the pose turned about
+/// The unseen turns (see [`unseen_turns`]) of the pose `t_scene_model` and of each of its
+/// near-symmetric `alternatives`, each new one beyond the pose, the alternatives and those
+/// already found: the truth may be a flip of the pose turned about
 /// the axis the view leaves open (a tee leaning on a wall, its boss and stem hidden, read
 /// flipped and turned about its run), which no turn of the pose itself reaches.
 pub(super) fn unseen_turns_of_all(
