@@ -17,6 +17,13 @@ use nalgebra::Vector3;
 /// than the coarse checks' correspondences reach for a densely sampled model).
 const FIELD_CELLS: f64 = 64.0;
 const FIELD_MARGIN: f64 = 0.35;
+/// The PPF screen's nearest field, for a model without a branch layout (one with a layout keeps
+/// the coarse checks' field, and its screen the exact search): cells of 1/128 of the diameter,
+/// over the box grown by the screen's reach. Its few ICP steps bring a hypothesis within reach of
+/// the exact polish, which the field's error (up to about a cell diagonal) does not prevent;
+/// coarser cells (1/64) turned a confident right pose of a keyed shaft ambiguous in the
+/// near-symmetric bench.
+const SCREEN_FIELD_CELLS: f64 = 128.0;
 
 /// A model prepared for pose estimation: dense points with normals and their search structure,
 /// its symmetries and (once built) its point-pair-feature table.
@@ -153,8 +160,18 @@ impl PoseModel {
             self.diameter,
             config,
         )?;
-        self.ppf = Some(ppf);
+        self.install_ppf(ppf);
         Ok(())
+    }
+
+    /// Installs a PPF table and, for a model without a branch layout, the screen's nearest field
+    /// reaching as far as the screen's correspondences at the table's step.
+    fn install_ppf(&mut self, ppf: PpfModel) {
+        if self.layout.is_none() {
+            let reach = super::ppf_path::SCREEN_REACH * ppf.step();
+            self.target.set_field(self.diameter / SCREEN_FIELD_CELLS, reach);
+        }
+        self.ppf = Some(ppf);
     }
 
     /// Installs a table read from a cache; it must have been built for this model's diameter.
@@ -165,7 +182,7 @@ impl PoseModel {
                 "the cached table was built for another model; it will be rebuilt",
             ));
         }
-        self.ppf = Some(ppf);
+        self.install_ppf(ppf);
         Ok(())
     }
 }

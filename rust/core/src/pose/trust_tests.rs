@@ -51,6 +51,29 @@ fn posed(yaw: f64, upside_down: bool) -> Isometry3<f64> {
 }
 
 #[test]
+fn the_ppf_table_brings_the_screens_nearest_field_out_to_its_reach() {
+    let (model, _) = bossed_block();
+    let field = model
+        .target()
+        .field()
+        .expect("a model without a layout gets the screen's field");
+    let reach = super::ppf_path::SCREEN_REACH * model.ppf.as_ref().unwrap().step();
+    let cell_diagonal = 3f64.sqrt() * model.diameter / 128.0;
+    // Over the middle of the top face (z = 10), just inside the reach: the field answers with a
+    // point of the face no farther than the nearest one plus the field's error.
+    let q = Point::new(-5.0, 0.0, 10.0 + 0.95 * reach);
+    let j = field.nearest(&[q.x, q.y, q.z]).expect("inside the field");
+    let p = model.target().points()[j];
+    assert!((p.z - 10.0).abs() < 0.1, "{p:?} is not on the top face");
+    assert!(
+        (p - q).norm() <= 0.95 * reach + 2.0 * cell_diagonal,
+        "{p:?} is too far from {q:?}"
+    );
+    // Well past the reach over the boss (top at z = 13) the field holds nothing.
+    assert!(field.nearest(&[20.0, 12.0, 13.0 + 2.0 * reach]).is_none());
+}
+
+#[test]
 fn the_block_has_three_near_half_turns() {
     let (model, _) = bossed_block();
     assert!(model.symmetries.is_trivial());

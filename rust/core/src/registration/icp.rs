@@ -77,8 +77,13 @@ impl IcpTarget {
     /// Adds the approximate nearest field that coarse checks use (cells of about `cell` mm over
     /// the target's box grown by `margin` mm).
     pub fn with_field(mut self, cell: f64, margin: f64) -> Self {
-        self.field = NearestField::new(&self.points, cell, margin);
+        self.set_field(cell, margin);
         self
+    }
+
+    /// Builds (or rebuilds) the approximate nearest field in place; see [`IcpTarget::with_field`].
+    pub fn set_field(&mut self, cell: f64, margin: f64) {
+        self.field = NearestField::new(&self.points, cell, margin);
     }
 
     /// The approximate nearest field, when built.
