@@ -18,12 +18,13 @@ use nalgebra::Vector3;
 const FIELD_CELLS: f64 = 64.0;
 const FIELD_MARGIN: f64 = 0.35;
 /// The PPF screen's nearest field, for a model without a branch layout (one with a layout keeps
-/// the coarse checks' field, and its screen the exact search): cells of 1/128 of the diameter,
-/// over the box grown by the screen's reach. Its few ICP steps bring a hypothesis within reach of
-/// the exact polish, which the field's error (up to about a cell diagonal) does not prevent;
-/// coarser cells (1/64) turned a confident right pose of a keyed shaft ambiguous in the
-/// near-symmetric bench.
-const SCREEN_FIELD_CELLS: f64 = 128.0;
+/// the coarse checks' field, and its screen the exact search): cells of 1/256 of the diameter
+/// (finer than the 1 mm samples of parts up to 250 mm, within the field's cell budget), over the
+/// box grown by the screen's reach. The field's answer lies within about a cell diagonal of the
+/// exact nearest sample, so the screen's few ICP steps land about where exact steps would; the
+/// polish after it is exact. With cells of 1/64 a confident right pose of a keyed shaft in the
+/// near-symmetric bench came back ambiguous.
+pub(super) const SCREEN_FIELD_CELLS: f64 = 256.0;
 
 /// A model prepared for pose estimation: dense points with normals and their search structure,
 /// its symmetries and (once built) its point-pair-feature table.

@@ -8,7 +8,6 @@
 
 use super::judge::Judge;
 use super::scene::{scene_indices, DetectionScene};
-use super::trust::thin;
 use super::{CoarseMethod, Laps, PoseConfig, PoseEstimate, PoseModel, Timings};
 use crate::error::{Error, Result};
 use crate::geometry::Point;
@@ -30,12 +29,6 @@ use rayon::prelude::*;
 /// coarse checks' (1/64 of the diameter), which answered a pile of tees differently and was not
 /// measured for the screen.
 pub(super) const SCREEN_REACH: f64 = 1.5;
-/// The polish converges on this many of the neighbourhood's points first, then on all of them
-/// (at most 1200): most of its steps are spent bringing a screened pose in, and a thinned sample
-/// does that at a quarter of the cost. The two stages keep the former single stage's reach (its
-/// 20 iterations, then 10 more on every point), which a tee standing against a bin wall needs;
-/// a cap of 10 single-stage iterations lost it.
-const POLISH_COARSE_POINTS: usize = 300;
 
 /// A refined, judged hypothesis.
 #[derive(Debug, Clone)]
@@ -115,12 +108,8 @@ impl DetectionScene {
         if local.len() < 12 {
             return None;
         }
-        let reach = (3.0 * self.judge.tol).max(0.5 * step);
-        let coarse = IcpConfig::robust_plane(reach, 20, 1e-4, 1e-2);
-        let fine = IcpConfig::robust_plane(reach, 10, 1e-6, 1e-4);
-        let few = thin(&local, POLISH_COARSE_POINTS);
-        let r0 = icp(&few, model.target(), &j.t_scene_model.inverse(), &coarse).ok()?;
-        let r = icp(&local, model.target(), &r0.t_target_source, &fine).ok()?;
+        let fine = IcpConfig::robust_plane((3.0 * self.judge.tol).max(0.5 * step), 20, 1e-6, 1e-4);
+        let r = icp(&local, model.target(), &j.t_scene_model.inverse(), &fine).ok()?;
         let t_scene_model = r.t_target_source.inverse();
         let evidence = self.judge.evidence(model, &t_scene_model);
         let tol2 = self.judge.tol * self.judge.tol;
@@ -151,7 +140,7 @@ impl DetectionScene {
             coarse: j.coarse,
             evidence,
             rmse,
-            iterations: j.iterations + r0.iterations + r.iterations,
+            iterations: j.iterations + r.iterations,
             support,
         })
     }
