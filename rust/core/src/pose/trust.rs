@@ -43,8 +43,13 @@ pub struct TrustParams {
     /// be ruled out: twice the 15 points beyond 4σ at which the bench calls a feature in view,
     /// so that one chance cluster of misfits does not decide. Default 30.
     pub min_margin: f64,
-    /// ... nor by less than this fraction of the points in the feature regions. Default 0.1.
-    pub margin_fraction: f64,
+    /// ... nor by less than this many standard deviations of the lead that chance alone gives
+    /// two equally good poses: with d scan points that fit one of them and not the other (and
+    /// probes one of them puts where the sensor saw free space), each falls to either side, so
+    /// the lead (2 × the difference) spreads by 2√d. The points both poses fit or both miss —
+    /// most of a feature region as wide as a flange's whole face — say nothing of which is
+    /// right. Default 3.
+    pub margin_sigmas: f64,
     /// Poses closer than this rotation (rad, default 5°) ...
     pub pick_rotation: f64,
     /// ... and this translation (mm, default 3) are one pose (pick-grade of each other).
@@ -63,7 +68,7 @@ impl Default for TrustParams {
             noise_sigmas: 4.0,
             min_fine_tolerance: 0.3,
             min_margin: 30.0,
-            margin_fraction: 0.1,
+            margin_sigmas: 3.0,
             pick_rotation: 5f64.to_radians(),
             pick_translation: 3.0,
         }
@@ -218,29 +223,31 @@ pub(super) fn assess(
     }
     let tol = fine_tolerance(&sample, model, &candidates[0].t_scene_model, judge.tol, p);
     let per_probe = local.len() as f64 / e0.seen.max(1) as f64;
-    let scored: Vec<(FeatureEvidence, bool)> = candidates
+    let scored: Vec<(FeatureEvidence, bool, Vec<bool>)> = candidates
         .iter()
         .map(|c| {
             let e = judge.evidence(model, &c.t_scene_model);
             let ok = judge.check(&e, model, &c.t_scene_model, cfg).is_ok();
-            (
-                feature_evidence(&judged, model, &c.t_scene_model, tol, e.violated, per_probe),
-                ok,
-            )
+            let fits = fit_flags(&judged, model, &c.t_scene_model, tol);
+            (evidence_of(&fits, tol, e.violated, per_probe), ok, fits)
         })
         .collect();
     let best = (0..candidates.len())
         .filter(|&i| scored[i].1 || i == 0)
         .max_by(|&a, &b| scored[a].0.score.total_cmp(&scored[b].0.score))
         .unwrap_or(0);
-    let margin = p.min_margin.max(p.margin_fraction * judged.len() as f64);
+    let margin = |i: usize| {
+        let (a, b) = (&scored[best], &scored[i]);
+        margin_between(p, (&a.2, a.0.seen_through), (&b.2, b.0.seen_through), per_probe)
+    };
     let kept = candidates[best].t_scene_model;
     let mut alternatives: Vec<Alternative> = Vec::new();
     let mut free = false;
-    let mut runner_up = f64::NEG_INFINITY;
+    // The smallest lead of the pose kept over a distinct candidate, in that candidate's margins.
+    let mut lead = f64::INFINITY;
     for (i, c) in candidates.iter().enumerate() {
         let s = scored[i].0.score;
-        let Some(open) = standing(s, scored[i].1, scored[best].0.score, margin) else {
+        let Some(open) = standing(s, scored[i].1, scored[best].0.score, margin(i)) else {
             continue;
         };
         let same = |t: &Isometry3<f64>| {
@@ -250,7 +257,7 @@ pub(super) fn assess(
         if i == best || same(&kept) {
             continue;
         }
-        runner_up = runner_up.max(s);
+        lead = lead.min((scored[best].0.score - s) / margin(i));
         if open && !alternatives.iter().any(|a| same(&a.t_scene_model)) {
             free |= c.continuous;
             alternatives.push(Alternative {
@@ -264,12 +271,11 @@ pub(super) fn assess(
     } else {
         base_confidence(judge.evidence(model, &kept).coverage(), cfg.min_coverage)
     };
-    let lead = scored[best].0.score - runner_up;
     let confidence = if alternatives.is_empty() {
         // How far the best leads the runner-up, in margins: 1 margin halves the confidence, each
         // further margin shrinks the doubt e-fold.
-        let decisive = if runner_up.is_finite() {
-            1.0 - 0.5 * (-(lead / margin - 1.0).max(0.0)).exp()
+        let decisive = if lead.is_finite() {
+            1.0 - 0.5 * (-(lead - 1.0).max(0.0)).exp()
         } else {
             1.0
         };
@@ -290,6 +296,15 @@ pub(super) fn assess(
         evidence: Some(scored[best].0),
     };
     (trust, kept)
+}
+
+/// The margin by which one pose's feature evidence must lead another's to rule it out (see
+/// [`TrustParams::margin_sigmas`]): from the judged points' fit under each (`fits`) and the probes
+/// each puts where the sensor saw free space, `per_probe` scan points apiece.
+pub(super) fn margin_between(p: &TrustParams, a: (&[bool], usize), b: (&[bool], usize), per_probe: f64) -> f64 {
+    let split = a.0.iter().zip(b.0).filter(|(x, y)| x != y).count() as f64;
+    let seen = a.1.abs_diff(b.1) as f64 * per_probe;
+    p.min_margin.max(p.margin_sigmas * 2.0 * (split + seen).sqrt())
 }
 
 /// How a candidate with feature score `score` stands against the pose kept (score `kept`):
@@ -404,12 +419,22 @@ fn feature_evidence(
     violated: usize,
     per_probe: f64,
 ) -> FeatureEvidence {
+    evidence_of(&fit_flags(judged, model, t_scene_model, tol), tol, violated, per_probe)
+}
+
+/// Whether each of `judged` lies within `tol` of the posed model's surface.
+fn fit_flags(judged: &[Point], model: &PoseModel, t_scene_model: &Isometry3<f64>, tol: f64) -> Vec<bool> {
     let inv = t_scene_model.inverse();
-    let fits = judged
+    judged
         .iter()
-        .filter(|l| plane_residual(model, &(inv * *l), 3.0 * tol).is_some_and(|r| r.abs() <= tol))
-        .count();
-    let misfits = judged.len() - fits;
+        .map(|l| plane_residual(model, &(inv * *l), 3.0 * tol).is_some_and(|r| r.abs() <= tol))
+        .collect()
+}
+
+/// The evidence of a pose from the fit of each judged point and its probes seen through.
+fn evidence_of(fit: &[bool], tol: f64, violated: usize, per_probe: f64) -> FeatureEvidence {
+    let fits = fit.iter().filter(|&&f| f).count();
+    let misfits = fit.len() - fits;
     FeatureEvidence {
         fits,
         misfits,
