@@ -168,11 +168,18 @@ impl PoseModel {
     /// Installs a PPF table and, for a model without a branch layout, the screen's nearest field
     /// reaching as far as the screen's correspondences at the table's step.
     fn install_ppf(&mut self, ppf: PpfModel) {
-        if self.layout.is_none() {
+        if self.screens_on_field() {
             let reach = super::ppf_path::SCREEN_REACH * ppf.step();
             self.target.set_field(self.diameter / SCREEN_FIELD_CELLS, reach);
         }
         self.ppf = Some(ppf);
+    }
+
+    /// Whether the PPF screen reads the model's nearest field (built for it with the table): a
+    /// model without a branch layout; one with a layout keeps the exact search (its field is the
+    /// coarse checks').
+    pub(super) fn screens_on_field(&self) -> bool {
+        self.layout.is_none()
     }
 
     /// Installs a table read from a cache; it must have been built for this model's diameter.

@@ -77,7 +77,7 @@ impl DetectionScene {
         }
         // The nearest field answers these steps where it is the screen's (see `SCREEN_REACH`).
         let quick = IcpConfig {
-            approximate: model.layout.is_none(),
+            approximate: model.screens_on_field(),
             ..IcpConfig::robust_plane(SCREEN_REACH * step, 8, 1e-3, 5e-2)
         };
         let r = icp(&local, model.target(), &start.inverse(), &quick).ok()?;

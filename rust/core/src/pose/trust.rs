@@ -223,31 +223,33 @@ pub(super) fn assess(
     }
     let tol = fine_tolerance(&sample, model, &candidates[0].t_scene_model, judge.tol, p);
     let per_probe = local.len() as f64 / e0.seen.max(1) as f64;
-    let scored: Vec<(FeatureEvidence, bool, Vec<bool>)> = candidates
+    let scored: Vec<Scored> = candidates
         .iter()
         .map(|c| {
             let e = judge.evidence(model, &c.t_scene_model);
-            let ok = judge.check(&e, model, &c.t_scene_model, cfg).is_ok();
+            let judged_ok = judge.check(&e, model, &c.t_scene_model, cfg).is_ok();
             let fits = fit_flags(&judged, model, &c.t_scene_model, tol);
-            (evidence_of(&fits, tol, e.violated, per_probe), ok, fits)
+            Scored {
+                evidence: evidence_of(&fits, tol, e.violated, per_probe),
+                judged_ok,
+                fits,
+            }
         })
         .collect();
     let best = (0..candidates.len())
-        .filter(|&i| scored[i].1 || i == 0)
-        .max_by(|&a, &b| scored[a].0.score.total_cmp(&scored[b].0.score))
+        .filter(|&i| scored[i].judged_ok || i == 0)
+        .max_by(|&a, &b| scored[a].evidence.score.total_cmp(&scored[b].evidence.score))
         .unwrap_or(0);
-    let margin = |i: usize| {
-        let (a, b) = (&scored[best], &scored[i]);
-        margin_between(p, (&a.2, a.0.seen_through), (&b.2, b.0.seen_through), per_probe)
-    };
+    let top = &scored[best];
     let kept = candidates[best].t_scene_model;
     let mut alternatives: Vec<Alternative> = Vec::new();
     let mut free = false;
     // The smallest lead of the pose kept over a distinct candidate, in that candidate's margins.
     let mut lead = f64::INFINITY;
     for (i, c) in candidates.iter().enumerate() {
-        let s = scored[i].0.score;
-        let Some(open) = standing(s, scored[i].1, scored[best].0.score, margin(i)) else {
+        let s = scored[i].evidence.score;
+        let margin = margin_between(p, &scored[best], &scored[i], per_probe);
+        let Some(open) = standing(s, scored[i].judged_ok, top.evidence.score, margin) else {
             continue;
         };
         let same = |t: &Isometry3<f64>| {
@@ -257,12 +259,12 @@ pub(super) fn assess(
         if i == best || same(&kept) {
             continue;
         }
-        lead = lead.min((scored[best].0.score - s) / margin(i));
+        lead = lead.min((top.evidence.score - s) / margin);
         if open && !alternatives.iter().any(|a| same(&a.t_scene_model)) {
             free |= c.continuous;
             alternatives.push(Alternative {
                 t_scene_model: model.symmetries.canonical(&c.t_scene_model),
-                evidence: scored[i].0,
+                evidence: scored[i].evidence,
             });
         }
     }
@@ -293,17 +295,27 @@ pub(super) fn assess(
         ambiguous: !alternatives.is_empty(),
         alternatives,
         free_axis: axis.filter(|_| free).map(|a| kept.rotation * a),
-        evidence: Some(scored[best].0),
+        evidence: Some(top.evidence),
     };
     (trust, kept)
 }
 
-/// The margin by which one pose's feature evidence must lead another's to rule it out (see
-/// [`TrustParams::margin_sigmas`]): from the judged points' fit under each (`fits`) and the probes
-/// each puts where the sensor saw free space, `per_probe` scan points apiece.
-pub(super) fn margin_between(p: &TrustParams, a: (&[bool], usize), b: (&[bool], usize), per_probe: f64) -> f64 {
-    let split = a.0.iter().zip(b.0).filter(|(x, y)| x != y).count() as f64;
-    let seen = a.1.abs_diff(b.1) as f64 * per_probe;
+/// A refined candidate as the comparison weighs it.
+pub(super) struct Scored {
+    /// Its feature evidence.
+    pub evidence: FeatureEvidence,
+    /// Whether the judge accepts it.
+    pub judged_ok: bool,
+    /// Whether each judged point lies within the fine tolerance of it.
+    pub fits: Vec<bool>,
+}
+
+/// The margin by which one candidate's feature evidence must lead another's to rule it out (see
+/// [`TrustParams::margin_sigmas`]): from the judged points that fit one and not the other and the
+/// difference of their probes seen through, `per_probe` scan points apiece.
+pub(super) fn margin_between(p: &TrustParams, a: &Scored, b: &Scored, per_probe: f64) -> f64 {
+    let split = a.fits.iter().zip(&b.fits).filter(|(x, y)| x != y).count() as f64;
+    let seen = a.evidence.seen_through.abs_diff(b.evidence.seen_through) as f64 * per_probe;
     p.min_margin.max(p.margin_sigmas * 2.0 * (split + seen).sqrt())
 }
 

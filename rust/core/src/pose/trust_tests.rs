@@ -76,18 +76,26 @@ fn the_ppf_table_brings_the_screens_nearest_field_out_to_its_reach() {
 #[test]
 fn the_margin_grows_with_the_points_two_poses_disagree_on_not_with_those_they_share() {
     let p = TrustParams::default();
-    // The judged points' fit under a pose that misses the first `misses` of them.
-    let fits = |n: usize, misses: usize| -> Vec<bool> { (0..n).map(|i| i >= misses).collect() };
+    // A candidate that misses the first `misses` of `n` judged points and puts `seen` probes
+    // where the sensor saw free space.
+    let scored = |n: usize, misses: usize, seen: usize| trust::Scored {
+        evidence: FeatureEvidence {
+            seen_through: seen,
+            ..FeatureEvidence::default()
+        },
+        judged_ok: true,
+        fits: (0..n).map(|i| i >= misses).collect(),
+    };
     // Nothing to tell them apart: the floor of the margin.
-    let all = fits(4000, 0);
-    assert_eq!(trust::margin_between(&p, (&all, 0), (&all, 0), 1.0), p.min_margin);
+    let all = scored(4000, 0, 0);
+    assert_eq!(trust::margin_between(&p, &all, &all, 1.0), p.min_margin);
     // 52 points fit one and not the other: 3 × 2√52 ≈ 43.3 points, among 400 or 4000 judged.
     for n in [400, 4000] {
-        let m = trust::margin_between(&p, (&fits(n, 0), 0), (&fits(n, 52), 0), 1.0);
+        let m = trust::margin_between(&p, &scored(n, 0, 0), &scored(n, 52, 0), 1.0);
         assert!((m - 6.0 * 52f64.sqrt()).abs() < 1e-9, "{n}: {m}");
     }
     // Probes seen through count as the scan points they stand for.
-    let m = trust::margin_between(&p, (&fits(400, 0), 10), (&fits(400, 52), 0), 2.0);
+    let m = trust::margin_between(&p, &scored(400, 0, 10), &scored(400, 52, 0), 2.0);
     assert!((m - 6.0 * 72f64.sqrt()).abs() < 1e-9, "{m}");
 }
 
