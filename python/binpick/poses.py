@@ -191,7 +191,7 @@ class PoseResult:
             ``ratio``; ``factor``: the share of ``confidence`` it keeps — 1 up to 2 times the
             noise, an e-fold fall per further 0.5), or None where too few points judge it. A
             pose whose points sit several times the noise off the surface is wrong, or the part
-            differs from its model.
+            differs from its model; beyond 2.5 times it is not reported at all.
     """
 
     T_scene_model: np.ndarray

@@ -38,6 +38,11 @@ const FLOOR_SHARE_OF_TOLERANCE: f64 = 0.1;
 pub(super) const FREE_RATIO: f64 = 2.0;
 /// Beyond it, each further this-many noise floors shrinks the confidence e-fold.
 const DECAY_RATIO: f64 = 0.5;
+/// Residuals beyond this many noise floors (one decay past the free ratio) say the points are not
+/// the part, or not a part like its CAD model: the pose is not reported. Right poses read at most
+/// 1.54 over the near-symmetric bench's views and piles (78 poses, session 19), a rod read on a
+/// pile of tees 3.2.
+pub(super) const MAX_RATIO: f64 = FREE_RATIO + DECAY_RATIO;
 
 /// How well a pose's points lie on the posed model, against the scan's own noise.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -70,6 +75,13 @@ pub(super) fn fit_quality(
         ratio,
         factor: confidence_factor(ratio),
     })
+}
+
+impl FitQuality {
+    /// Whether the residuals are within [`MAX_RATIO`] noise floors.
+    pub fn acceptable(&self) -> bool {
+        self.ratio <= MAX_RATIO
+    }
 }
 
 /// 1 up to [`FREE_RATIO`], then an exponential fall.

@@ -116,7 +116,7 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
     };
     let clock = Instant::now();
     crate::cancel::check()?;
-    let found = trusted(found, scene, &pts, model, &judge, cfg);
+    let found = trusted(found, scene, &pts, model, &judge, cfg)?;
     timings.push(("trust", clock.elapsed().as_secs_f64() * 1e3));
     crate::cancel::check()?;
     Ok(found
@@ -132,6 +132,8 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
 /// alternative of the truth is replaced by the one it supports; the confidence also carries
 /// the fit of the pose's points against the scan's own noise (see [`fit`]), and the turns and
 /// slides the view leaves open are alternatives too (see [`unseen_turns`]).
+/// A pose whose points lie further off the model than [`fit::MAX_RATIO`] noise floors is not
+/// reported; `NoObjectFound` when no pose is left.
 /// `pts` are the points left after bin removal (the comparison runs on them).
 fn trusted(
     found: Vec<PoseEstimate>,
@@ -140,11 +142,12 @@ fn trusted(
     model: &PoseModel,
     judge: &Judge,
     cfg: &PoseConfig,
-) -> Vec<PoseEstimate> {
+) -> Result<Vec<PoseEstimate>> {
     let region = trust::Region::new(model, judge, &cfg.trust);
-    found
+    let mut misfit: Option<fit::FitQuality> = None;
+    let kept: Vec<PoseEstimate> = found
         .into_iter()
-        .map(|mut e| {
+        .filter_map(|mut e| {
             let (t, kept) = trust::assess(&e, pts, model, judge, cfg, &region);
             if kept != e.t_scene_model {
                 e.t_scene_model = model.symmetries.canonical(&kept);
@@ -160,6 +163,10 @@ fn trusted(
                 .filter(|p| judge.off_supports(p))
                 .collect();
             e.fit = fit::fit_quality(&claimed, model, &e.t_scene_model, judge.tol);
+            if let Some(f) = e.fit.filter(|f| !f.acceptable()) {
+                misfit.get_or_insert(f);
+                return None;
+            }
             e.confidence = t.confidence * e.fit.map_or(1.0, |f| f.factor);
             e.ambiguous = t.ambiguous;
             e.alternatives = t.alternatives;
@@ -186,9 +193,22 @@ fn trusted(
             }
             e.free_axis = t.free_axis;
             e.feature_evidence = t.evidence;
-            e
+            Some(e)
         })
-        .collect()
+        .collect();
+    match misfit {
+        Some(f) if kept.is_empty() => Err(Error::NoObjectFound {
+            reason: format!(
+                "the pose's points lie {:.1} noise floors off the model (residual σ {:.2} mm, scan noise {:.2} mm; \
+                 at most {:.1}): not this part, or a part unlike its CAD model",
+                f.ratio,
+                f.residual_sigma,
+                f.noise_floor,
+                fit::MAX_RATIO
+            ),
+        }),
+        _ => Ok(kept),
+    }
 }
 
 /// Indices of the points a method saw (`kept` of the scene) become scene indices.

@@ -257,3 +257,24 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
         assert!(deeper <= BIN_SLACK, "{deeper}");
     }
 }
+
+#[test]
+fn a_part_fatter_than_its_model_by_more_than_the_noise_is_no_object() {
+    let (model, _) = elbow_model();
+    let (truth, right) = scene(false);
+    let est = estimate_pose(&right, model, &config(CoarseMethod::Ppf)).unwrap();
+    let (r, d) = model.symmetries.pose_error(&est.t_scene_model, &truth);
+    assert!(r < 2f64.to_radians() && d < 1.0, "{r} {d}");
+    // 1 mm more radius: within the judge's 1 mm tolerance, eight times the scan's 0.1 mm noise.
+    let fat = elbow(&FittingParams {
+        outer_diameter: 28.0,
+        ..FittingParams::default()
+    })
+    .unwrap()
+    .mesh;
+    let wrong = seen_from_above(&fat, &truth, &[], 5, 3);
+    match estimate_pose(&wrong, model, &config(CoarseMethod::Ppf)) {
+        Err(crate::error::Error::NoObjectFound { reason }) => assert!(reason.contains("noise floors"), "{reason}"),
+        other => panic!("{:?}", other.map(|e| e.fit)),
+    }
+}
