@@ -27,11 +27,13 @@ pub struct TrustParams {
     pub continuous_turns: usize,
     /// With more turns than this, a quick look picks this many finalists. Default 3.
     pub finalists: usize,
-    /// Scan points of the quick look's refinement and comparison, at most. Default 400.
+    /// Scan points of the quick look's refinement, at most (its comparison uses as many as a
+    /// refinement). Default 400.
     pub quick_points: usize,
     /// ICP iterations of the quick look. Default 6.
     pub quick_iterations: usize,
-    /// Scan points each alternative is refined on, at most. Default 1500.
+    /// Scan points each alternative is refined on, and the quick look compares on, at most.
+    /// Default 1500.
     pub refine_points: usize,
     /// ICP iterations of each alternative's refinement. Default 15.
     pub iterations: usize,
@@ -189,18 +191,22 @@ pub(super) fn assess(
             max_iterations: p.quick_iterations,
             ..refine.clone()
         };
-        let (few, glance) = (thin(&sample, p.quick_points), thin(&judged, p.quick_points));
-        let mut quick: Vec<(f64, (Isometry3<f64>, bool))> = turns
+        // Each turn is scored on as many judged points as a refinement uses (a flange's notch is
+        // a few dozen of them: among 400 it was left to chance), by how many more of them it fits
+        // than the pose assessed (the points both fit or both miss cancel).
+        let few = thin(&sample, p.quick_points);
+        let glance = thin(&judged, p.refine_points);
+        let at_est = fit_flags(&glance, model, &est.t_scene_model, tol0);
+        let mut quick: Vec<(i64, (Isometry3<f64>, bool))> = turns
             .into_iter()
             .filter_map(|(turn, continuous)| {
                 let t = polish(&turn, &few, &quick_cfg)?;
-                Some((
-                    feature_evidence(&glance, model, &t, tol0, 0, 0.0).score,
-                    (turn, continuous),
-                ))
+                let fits = fit_flags(&glance, model, &t, tol0);
+                let lead = fits.iter().zip(&at_est).map(|(&a, &b)| a as i64 - b as i64).sum();
+                Some((lead, (turn, continuous)))
             })
             .collect();
-        quick.sort_by(|x, y| y.0.total_cmp(&x.0));
+        quick.sort_by_key(|q| std::cmp::Reverse(q.0));
         quick.into_iter().take(p.finalists).map(|q| q.1).collect()
     } else {
         turns
@@ -421,17 +427,6 @@ pub(super) fn plane_residual(model: &PoseModel, q: &Point, reach: f64) -> Option
         Some(n) => n.dot(&(q - target.points()[j])),
         None => (q - target.points()[j]).norm(),
     })
-}
-
-fn feature_evidence(
-    judged: &[Point],
-    model: &PoseModel,
-    t_scene_model: &Isometry3<f64>,
-    tol: f64,
-    violated: usize,
-    per_probe: f64,
-) -> FeatureEvidence {
-    evidence_of(&fit_flags(judged, model, t_scene_model, tol), tol, violated, per_probe)
 }
 
 /// Whether each of `judged` lies within `tol` of the posed model's surface.
