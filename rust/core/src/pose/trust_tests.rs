@@ -1,6 +1,7 @@
 //! The trust stage against known poses: a block whose only asymmetry is a small boss is
 //! recovered (and a flipped pose corrected) where the scan shows the boss, and reported
-//! ambiguous — the truth among the alternatives — where the boss faces away from the sensor.
+//! ambiguous — the truth among the alternatives — where the boss faces away from the sensor; a
+//! disc whose only asymmetry is a notch in its rim is turned back from any turn about its axis.
 
 use super::tests::{config, top_view};
 use super::*;

@@ -265,7 +265,7 @@ fn a_part_fatter_than_its_model_by_more_than_the_noise_is_no_object() {
     let est = estimate_pose(&right, model, &config(CoarseMethod::Ppf)).unwrap();
     let (r, d) = model.symmetries.pose_error(&est.t_scene_model, &truth);
     assert!(r < 2f64.to_radians() && d < 1.0, "{r} {d}");
-    // 1 mm more radius: within the judge's 1 mm tolerance, eight times the scan's 0.1 mm noise.
+    // 1 mm more radius: within the judge's 1 mm tolerance, ten times the scan's 0.1 mm noise.
     let fat = elbow(&FittingParams {
         outer_diameter: 28.0,
         ..FittingParams::default()
