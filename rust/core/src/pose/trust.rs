@@ -191,19 +191,16 @@ pub(super) fn assess(
             max_iterations: p.quick_iterations,
             ..refine.clone()
         };
-        // Each turn is scored on as many judged points as a refinement uses (a flange's notch is
-        // a few dozen of them: among 400 it was left to chance), by how many more of them it fits
-        // than the pose assessed (the points both fit or both miss cancel).
+        // Each turn is scored by how many judged points it fits, on as many as a refinement
+        // uses: a flange's notch is a few dozen of them, and among 400 it was left to chance.
         let few = thin(&sample, p.quick_points);
         let glance = thin(&judged, p.refine_points);
-        let at_est = fit_flags(&glance, model, &est.t_scene_model, tol0);
-        let mut quick: Vec<(i64, (Isometry3<f64>, bool))> = turns
+        let mut quick: Vec<(usize, (Isometry3<f64>, bool))> = turns
             .into_iter()
             .filter_map(|(turn, continuous)| {
                 let t = polish(&turn, &few, &quick_cfg)?;
-                let fits = fit_flags(&glance, model, &t, tol0);
-                let lead = fits.iter().zip(&at_est).map(|(&a, &b)| a as i64 - b as i64).sum();
-                Some((lead, (turn, continuous)))
+                let fits = fit_flags(&glance, model, &t, tol0).into_iter().filter(|&f| f).count();
+                Some((fits, (turn, continuous)))
             })
             .collect();
         quick.sort_by_key(|q| std::cmp::Reverse(q.0));
