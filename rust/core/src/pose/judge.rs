@@ -4,6 +4,7 @@
 //! planes.
 
 use super::continuation::continuation;
+use super::extension::{read_ends, MAX_CARRIED};
 use super::outline::outline;
 use super::trust::near_turns;
 use super::{PoseConfig, PoseModel};
@@ -30,7 +31,7 @@ const MAX_CONTINUED: f64 = 0.4;
 /// read on a tee's tilted run runs on over 0.35–2.5 times as many cells as confirm it; parts in
 /// the near-symmetric bench's views and piles, at most 0.25 (they meet their neighbours at an
 /// angle or a step). An elbow read on a tee's run and stem reaches 0.25 too: this test does not
-/// tell it from a part.
+/// tell it from a part; the extension test ([`super::extension`]) does.
 const MAX_BEYOND: f64 = 0.5;
 /// The largest share of a pose's surface that may lie beyond the bin's floor or walls or the
 /// removed support planes (more than twice the tolerance): a part rests on them, it does not
@@ -251,6 +252,16 @@ impl Judge {
                 "the scan's surface runs on past the best pose in the tangent planes of its own surface, over {:.0} % as many cells as confirm the pose (at most {:.0} %): it fits a piece of a larger shape, not the part",
                 100.0 * c.beyond_fraction(),
                 100.0 * MAX_BEYOND
+            ));
+        }
+        if let Some(end) = read_ends(self, model, t_scene_model)
+            .into_iter()
+            .find(|r| r.carried_on())
+        {
+            return fail(format!(
+                "the scan carries a branch's cylinder on past its end, over {:.0} % as much surface as just inside the end (at most {:.0} %): it fits a piece of a larger fitting, not the part",
+                100.0 * share(end.past, end.inside),
+                100.0 * MAX_CARRIED
             ));
         }
         self.check_patch(e, model, t_scene_model)

@@ -8,6 +8,9 @@
 
 mod ccp_path;
 mod continuation;
+mod extension;
+#[cfg(test)]
+mod extension_tests;
 mod fit;
 mod judge;
 mod model;

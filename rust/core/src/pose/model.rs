@@ -52,6 +52,8 @@ pub struct PoseModel {
     /// The mesh surface sampled densely, when the samples are much sparser than that: the final
     /// refinement and its verification run against it.
     pub surface: Option<IcpTarget>,
+    /// With a branch layout: probes on and past each end of each branch (see [`super::extension`]).
+    pub(crate) branch_ends: Vec<super::extension::BranchEnd>,
 }
 
 impl PoseModel {
@@ -92,7 +94,17 @@ impl PoseModel {
         if layout.is_some() {
             target = target.with_field(diameter / FIELD_CELLS, FIELD_MARGIN * diameter);
         }
+        let branch_ends = match &layout {
+            Some(layout) => super::extension::branch_ends(layout, spacing, |p| {
+                target
+                    .search()
+                    .nearest_within(&[p.x, p.y, p.z], f64::INFINITY)
+                    .map_or(f64::INFINITY, |(_, d)| d.sqrt())
+            }),
+            None => Vec::new(),
+        };
         Ok(PoseModel {
+            branch_ends,
             target,
             diameter,
             area,

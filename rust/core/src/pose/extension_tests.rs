@@ -1,0 +1,102 @@
+//! The extension test: an elbow read on the corner of a tee is a piece of a larger fitting (the
+//! tee's run goes on past the elbow's corner); the elbow itself, in the same place, is a part.
+
+use super::extension::read_ends;
+use super::judge::Judge;
+use super::tests::{config, top_view};
+use super::*;
+use crate::geometry::BinBox;
+use crate::mesh::parts::{elbow, tee, FittingParams, Part, TeeParams};
+use crate::mesh::{sample_surface, Density, TriMesh};
+use crate::registration::ccp::BranchLayout;
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use std::sync::OnceLock;
+
+/// The elbow prepared as binpick's `parts.elbow()` prepares it (1 mm samples, its branches).
+fn elbow_model() -> &'static (PoseModel, TriMesh) {
+    static MODEL: OnceLock<(PoseModel, TriMesh)> = OnceLock::new();
+    MODEL.get_or_init(|| {
+        let part = elbow(&FittingParams::default()).unwrap();
+        let s = sample_surface(&part.mesh, Density::Spacing(1.0), 0).unwrap();
+        let layout = layout_of(&part);
+        let model = PoseModel::new(
+            s.points,
+            s.normals,
+            part.mesh.diameter(),
+            part.mesh.area(),
+            Some(layout),
+        )
+        .unwrap();
+        (model, part.mesh)
+    })
+}
+
+fn layout_of(part: &Part) -> BranchLayout {
+    BranchLayout {
+        directions: part.branches.iter().map(|b| b.direction).collect(),
+        lengths: part.branches.iter().map(|b| b.length).collect(),
+        radius: part.branches.iter().map(|b| b.radius).fold(0.0, f64::max),
+        special: None,
+    }
+}
+
+/// A fitting lying on the floor (its axes level, 13 mm radius), turned `yaw` about the vertical.
+fn lying(yaw: f64) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(400.0, 0.0, 13.0),
+        UnitQuaternion::from_scaled_axis(Vector3::z() * yaw),
+    )
+}
+
+/// `mesh` at `pose` seen from above, on a floor at z = 0, and the judge of the scene.
+fn judged_scene(mesh: &TriMesh, pose: &Isometry3<f64>, model: &PoseModel) -> Judge {
+    let mut pts = top_view(mesh, pose, 1);
+    for i in -100..100 {
+        for j in -100..100 {
+            let p = Point::new(400.0 + 1.0 * i as f64, 1.0 * j as f64, 0.0);
+            if pts.iter().all(|q| (q.xy() - p.xy()).norm() > 1.0 || q.z < 0.5) {
+                pts.push(p);
+            }
+        }
+    }
+    let mut cfg = config(CoarseMethod::Ppf);
+    cfg.bin = Some(BinBox {
+        min: Point::new(280.0, -120.0, 0.0),
+        max: Point::new(520.0, 120.0, 100.0),
+    });
+    Judge::new(&pts, &pts, Vec::new(), model, &cfg)
+}
+
+#[test]
+fn an_elbow_read_on_the_corner_of_a_tee_is_refused_and_the_elbow_itself_is_not() {
+    let (model, elbow_mesh) = elbow_model();
+    let tee_mesh = tee(&TeeParams {
+        boss_height: 0.0,
+        ..TeeParams::default()
+    })
+    .unwrap()
+    .mesh;
+    let cfg = config(CoarseMethod::Ppf);
+    for yaw in [0.3, 2.0, -1.2] {
+        let pose = lying(yaw);
+        // The elbow's arms lie on the tee's run (+x half) and its branch: every face of the
+        // elbow is the tee's, but the run goes on past the elbow's corner.
+        let on_tee = judged_scene(&tee_mesh, &pose, model);
+        let ends = read_ends(&on_tee, model, &pose);
+        assert!(ends.iter().any(|e| e.carried_on()), "yaw {yaw}: {ends:?}");
+        match on_tee.verdict(model, &pose, &cfg) {
+            Err(Error::NoObjectFound { reason }) => assert!(reason.contains("past its end"), "{reason}"),
+            other => panic!("yaw {yaw}: an elbow on a tee's corner passed: {other:?}"),
+        }
+        let alone = judged_scene(elbow_mesh, &pose, model);
+        let ends = read_ends(&alone, model, &pose);
+        assert!(
+            ends.iter().all(|e| !e.carried_on() && e.past == 0),
+            "yaw {yaw}: {ends:?}"
+        );
+        assert!(
+            alone.verdict(model, &pose, &cfg).is_ok(),
+            "yaw {yaw}: the elbow itself was refused"
+        );
+    }
+}
