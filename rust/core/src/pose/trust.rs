@@ -17,7 +17,6 @@ use crate::geometry::Point;
 use crate::registration::{icp, IcpConfig};
 use crate::symmetry::NearSymmetry;
 use nalgebra::{Isometry3, Vector3};
-use std::collections::HashSet;
 use std::f64::consts::TAU;
 
 /// Tunables of the disambiguation and the confidence.
@@ -333,13 +332,20 @@ pub(super) fn standing(score: f64, judged_ok: bool, kept: f64, margin: f64) -> O
     (judged_ok || ahead).then_some(ahead || kept - score < margin)
 }
 
+/// The most cells of the feature region's grid (one byte each).
+const MAX_REGION_CELLS: usize = 1 << 22;
+
 /// The turns of every near-symmetry (model frame; `true` for a continuous axis's) and the
 /// model-frame region where the features can lie (each feature under the identity and every
 /// turn), as grid cells: within about one cell of it. The same for every pose of one call.
 pub(super) struct Region {
     turns: Vec<(Isometry3<f64>, bool)>,
     cell: f64,
-    cells: HashSet<[i64; 3]>,
+    /// Key of the grid's first cell and its size in cells (the region's keys grown by one).
+    lo: [i64; 3],
+    dims: [usize; 3],
+    /// Whether each grid cell (x fastest) lies within one cell of the region.
+    cells: Vec<bool>,
 }
 
 impl Region {
@@ -355,24 +361,69 @@ impl Region {
             }
             turns.extend(own);
         }
-        let cell = (2.0 * model.spacing).max(judge.tol).max(1e-3);
-        let own: HashSet<[i64; 3]> = region.iter().map(|q| key(q, cell)).collect();
-        let mut cells = HashSet::with_capacity(own.len() * 27);
+        let mut cell = (2.0 * model.spacing).max(judge.tol).max(1e-3);
+        // A dense grid over the region's keys grown by one cell: the region lies in the part's
+        // box, a few thousand cells for the parts measured, and the comparison asks about every
+        // judged point. Cells grow where a large part would need more than MAX_REGION_CELLS.
+        let (own, lo, dims) = loop {
+            let own: Vec<[i64; 3]> = region.iter().map(|q| key(q, cell)).collect();
+            let mut lo = [i64::MAX; 3];
+            let mut hi = [i64::MIN; 3];
+            for k in &own {
+                for d in 0..3 {
+                    lo[d] = lo[d].min(k[d] - 1);
+                    hi[d] = hi[d].max(k[d] + 1);
+                }
+            }
+            let dims: [usize; 3] = std::array::from_fn(|d| {
+                if own.is_empty() {
+                    0
+                } else {
+                    (hi[d] - lo[d] + 1) as usize
+                }
+            });
+            if dims.iter().product::<usize>() <= MAX_REGION_CELLS {
+                break (own, lo, dims);
+            }
+            cell *= 1.5;
+        };
+        let mut r = Region {
+            turns,
+            cell,
+            lo,
+            dims,
+            cells: vec![false; dims.iter().product()],
+        };
         for k in own {
-            for dx in -1..=1 {
+            for dz in -1..=1 {
                 for dy in -1..=1 {
-                    for dz in -1..=1 {
-                        cells.insert([k[0] + dx, k[1] + dy, k[2] + dz]);
+                    for dx in -1..=1 {
+                        if let Some(i) = r.index(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
+                            r.cells[i] = true;
+                        }
                     }
                 }
             }
         }
-        Region { turns, cell, cells }
+        r
+    }
+
+    /// The grid index of cell key `k`, if the grid holds it.
+    fn index(&self, k: &[i64; 3]) -> Option<usize> {
+        let mut i = 0;
+        for d in (0..3).rev() {
+            let o = k[d] - self.lo[d];
+            if o < 0 || o >= self.dims[d] as i64 {
+                return None;
+            }
+            i = i * self.dims[d] + o as usize;
+        }
+        Some(i)
     }
 
     /// Whether the model-frame point `q` lies within about one cell of the region.
     fn contains(&self, q: &Point) -> bool {
-        self.cells.contains(&key(q, self.cell))
+        self.index(&key(q, self.cell)).is_some_and(|i| self.cells[i])
     }
 }
 
@@ -418,7 +469,16 @@ pub(super) fn thin(v: &[Point], n: usize) -> Vec<Point> {
 /// when that point lies within `reach`.
 pub(super) fn plane_residual(model: &PoseModel, q: &Point, reach: f64) -> Option<f64> {
     let target = model.fine_target();
-    let (j, _) = target.search().nearest_within(&[q.x, q.y, q.z], reach * reach)?;
+    let at = [q.x, q.y, q.z];
+    // Most points asked about lie on the surface, within a sample spacing of their nearest
+    // sample: a search that narrow finds it (nothing nearer lies outside it) at a fraction of
+    // the cost of one out to `reach`, which only the points it misses need.
+    let near = model.spacing.min(reach);
+    let (j, _) = target.search().nearest_within(&at, near * near).or_else(|| {
+        (reach > near)
+            .then(|| target.search().nearest_within(&at, reach * reach))
+            .flatten()
+    })?;
     let n = target.normals().map(|n| n[j]);
     Some(match n {
         Some(n) => n.dot(&(q - target.points()[j])),
