@@ -367,22 +367,26 @@ impl Region {
         // judged point. Cells grow where a large part would need more than MAX_REGION_CELLS.
         let (own, lo, dims) = loop {
             let own: Vec<[i64; 3]> = region.iter().map(|q| key(q, cell)).collect();
-            let mut lo = [i64::MAX; 3];
-            let mut hi = [i64::MIN; 3];
+            let (mut lo, mut hi) = ([0i64; 3], [-1i64; 3]);
+            if let Some(first) = own.first() {
+                (lo, hi) = (*first, *first);
+            }
             for k in &own {
                 for d in 0..3 {
-                    lo[d] = lo[d].min(k[d] - 1);
-                    hi[d] = hi[d].max(k[d] + 1);
+                    lo[d] = lo[d].min(k[d]);
+                    hi[d] = hi[d].max(k[d]);
                 }
             }
+            // Grown by one cell on every side.
+            lo = lo.map(|v| v.saturating_sub(1));
             let dims: [usize; 3] = std::array::from_fn(|d| {
-                if own.is_empty() {
-                    0
-                } else {
-                    (hi[d] - lo[d] + 1) as usize
-                }
+                usize::try_from(hi[d].saturating_add(1).saturating_sub(lo[d]).saturating_add(1)).unwrap_or(0)
             });
-            if dims.iter().product::<usize>() <= MAX_REGION_CELLS {
+            if dims
+                .iter()
+                .try_fold(1usize, |a, &b| a.checked_mul(b))
+                .is_some_and(|n| n <= MAX_REGION_CELLS)
+            {
                 break (own, lo, dims);
             }
             cell *= 1.5;
@@ -412,17 +416,23 @@ impl Region {
     fn index(&self, k: &[i64; 3]) -> Option<usize> {
         let mut i = 0;
         for d in (0..3).rev() {
-            let o = k[d] - self.lo[d];
-            if o < 0 || o >= self.dims[d] as i64 {
+            let o = usize::try_from(k[d].checked_sub(self.lo[d])?).ok()?;
+            if o >= self.dims[d] {
                 return None;
             }
-            i = i * self.dims[d] + o as usize;
+            i = i * self.dims[d] + o;
         }
         Some(i)
     }
 
+    /// The grid's cell edge, mm.
+    #[cfg(test)]
+    pub(super) fn cell(&self) -> f64 {
+        self.cell
+    }
+
     /// Whether the model-frame point `q` lies within about one cell of the region.
-    fn contains(&self, q: &Point) -> bool {
+    pub(super) fn contains(&self, q: &Point) -> bool {
         self.index(&key(q, self.cell)).is_some_and(|i| self.cells[i])
     }
 }

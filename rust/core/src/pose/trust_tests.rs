@@ -108,6 +108,44 @@ fn the_block_has_three_near_half_turns() {
 }
 
 #[test]
+fn the_feature_region_holds_the_points_within_a_cell_of_every_feature_image() {
+    let (model, mesh) = bossed_block();
+    let cfg = config(CoarseMethod::Ppf);
+    let scene = top_view(mesh, &posed(0.3, false), 0);
+    let judge = judge::Judge::new(&scene, &scene, Vec::new(), model, &cfg);
+    let region = trust::Region::new(model, &judge, &cfg.trust);
+    let cell = region.cell();
+    let key = |q: &Point| [q.x, q.y, q.z].map(|v| (v / cell).floor() as i64);
+    let mut images = std::collections::HashSet::new();
+    for n in &model.near_symmetries {
+        let t = n.transform(0.0);
+        for q in &n.feature {
+            for image in [*q, t * q, t.inverse() * q] {
+                images.insert(key(&image));
+            }
+        }
+    }
+    // The region is every cell next to (or at) one holding a feature image: checked on the
+    // model's own points and on points scattered around the part.
+    let mut rng = crate::rng::Rng::new(3);
+    let scattered = (0..4000).map(|_| {
+        let r = 1.2 * model.radius;
+        model.symmetries.center + Vector3::new(rng.range(-r, r), rng.range(-r, r), rng.range(-r, r))
+    });
+    let (mut inside, mut total) = (0, 0);
+    for q in model.target().points().iter().copied().chain(scattered) {
+        let k = key(&q);
+        let near = (-1..=1).any(|dx| {
+            (-1..=1).any(|dy| (-1..=1).any(|dz| images.contains(&[k[0] + dx, k[1] + dy, k[2] + dz])))
+        });
+        assert_eq!(region.contains(&q), near, "{q:?}");
+        inside += near as usize;
+        total += 1;
+    }
+    assert!(inside > 100 && inside < total, "{inside} of {total} in the region");
+}
+
+#[test]
 fn a_boss_in_view_decides_the_pose_and_a_flipped_start_is_corrected() {
     let (model, mesh) = bossed_block();
     let cfg = config(CoarseMethod::Ppf);
