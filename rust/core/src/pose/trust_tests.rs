@@ -135,9 +135,8 @@ fn the_feature_region_holds_the_points_within_a_cell_of_every_feature_image() {
     let (mut inside, mut total) = (0, 0);
     for q in model.target().points().iter().copied().chain(scattered) {
         let k = key(&q);
-        let near = (-1..=1).any(|dx| {
-            (-1..=1).any(|dy| (-1..=1).any(|dz| images.contains(&[k[0] + dx, k[1] + dy, k[2] + dz])))
-        });
+        let near = (-1..=1)
+            .any(|dx| (-1..=1).any(|dy| (-1..=1).any(|dz| images.contains(&[k[0] + dx, k[1] + dy, k[2] + dz]))));
         assert_eq!(region.contains(&q), near, "{q:?}");
         inside += near as usize;
         total += 1;
