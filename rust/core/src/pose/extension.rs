@@ -17,6 +17,7 @@ use super::judge::Judge;
 use super::PoseModel;
 use crate::geometry::Point;
 use crate::registration::ccp::BranchLayout;
+use crate::registration::IcpTarget;
 use nalgebra::{Isometry3, Vector3};
 
 /// The least share of a normal along the sensor's direction for a probe to be judged: within 60°
@@ -66,11 +67,18 @@ pub(crate) struct EndReading {
 
 /// The probes of every branch end of `layout`: the tip (past the end face, one radius long) and
 /// the back (through the junction, from one radius behind it to two, inside from one to two
-/// radii out), on a grid of about `spacing` mm. `distance` gives a model-frame point's distance
-/// from the part's surface.
-pub(crate) fn branch_ends(layout: &BranchLayout, spacing: f64, distance: impl Fn(&Point) -> f64) -> Vec<BranchEnd> {
+/// radii out), on a grid of about `spacing` mm (at most a tenth of the radius), each past probe
+/// with its distance from `surface` (the part's densest surface: its mesh's samples where the
+/// model's own are sparse).
+pub(crate) fn branch_ends(layout: &BranchLayout, spacing: f64, surface: &IcpTarget) -> Vec<BranchEnd> {
+    let distance = |p: &Point| {
+        surface
+            .search()
+            .nearest_within(&[p.x, p.y, p.z], f64::INFINITY)
+            .map_or(f64::INFINITY, |(_, d)| d.sqrt())
+    };
     let r = layout.radius;
-    let step = spacing.max(1e-3);
+    let step = spacing.min(r / 10.0).max(1e-3);
     let around = ((std::f64::consts::TAU * r / step).ceil() as usize).max(8);
     let along = ((r / step).ceil() as usize).max(2);
     let mut ends = Vec::new();
@@ -130,7 +138,8 @@ pub(crate) fn read_ends(judge: &Judge, model: &PoseModel, t_scene_model: &Isomet
             .map(|(_, at)| to_model * at)
     };
     let far = (2.0 * tol).powi(2);
-    let off_part = |m: &Point| model.target().search().nearest_within(&[m.x, m.y, m.z], far).is_none();
+    let surface = model.fine_target();
+    let off_part = |m: &Point| surface.search().nearest_within(&[m.x, m.y, m.z], far).is_none();
     let r = layout.radius;
     model
         .branch_ends

@@ -95,12 +95,7 @@ impl PoseModel {
             target = target.with_field(diameter / FIELD_CELLS, FIELD_MARGIN * diameter);
         }
         let branch_ends = match &layout {
-            Some(layout) => super::extension::branch_ends(layout, spacing, |p| {
-                target
-                    .search()
-                    .nearest_within(&[p.x, p.y, p.z], f64::INFINITY)
-                    .map_or(f64::INFINITY, |(_, d)| d.sqrt())
-            }),
+            Some(layout) => super::extension::branch_ends(layout, spacing, &target),
             None => Vec::new(),
         };
         Ok(PoseModel {
@@ -157,6 +152,10 @@ impl PoseModel {
             .count();
         if on * 10 >= 9 * probes.len() {
             self.surface = Some(surface);
+            // Past a branch's end is off the part by the surface, not by samples 5 mm apart.
+            if let Some(layout) = &self.layout {
+                self.branch_ends = super::extension::branch_ends(layout, self.spacing, self.fine_target());
+            }
         }
         Ok(self)
     }
