@@ -5,6 +5,9 @@
 //! continuation tests follow flat faces and tangent planes, which a cylinder leaves within a
 //! few millimetres of the line it is entered on; here the cylinder itself is carried on.
 //!
+//! Every branch is probed at the layout's radius (its largest): a thinner branch's surface does
+//! not lie on that cylinder, so its ends are not judged.
+//!
 //! For each end of each branch the model holds probes on the cylinder carried past it (with
 //! their distance from the part's surface: only those farther than twice the judge's tolerance
 //! count) and probes on the branch's own surface over a stretch just inside the end. The scan
@@ -35,14 +38,15 @@ const MIN_FACING: f64 = 0.5;
 /// with a branch end covers less of it: at most 0.51 over 119 instances of 24 piles of tees,
 /// elbows and crosses.
 pub(crate) const MAX_CARRIED: f64 = 0.6;
-/// The fewest confirmed probes inside an end for its reading to count: about two cells of the
-/// height map around the visible half of the cylinder.
-pub(crate) const MIN_INSIDE: usize = 30;
+/// The least surface, mm², the scan must confirm inside an end for its reading to count (30
+/// probes where they lie a millimetre apart): a sliver of a branch says little of whether the
+/// cylinder past it is the branch's own.
+pub(crate) const MIN_INSIDE_AREA: f64 = 30.0;
 
 impl EndReading {
     /// Whether the branch goes on past this end.
     pub fn carried_on(&self) -> bool {
-        self.inside >= MIN_INSIDE && self.past as f64 >= MAX_CARRIED * self.inside as f64
+        self.inside as f64 * self.probe_area >= MIN_INSIDE_AREA && self.past as f64 >= MAX_CARRIED * self.inside as f64
     }
 }
 
@@ -54,6 +58,8 @@ pub(crate) struct BranchEnd {
     pub past: Vec<(Point, Vector3<f64>, f64)>,
     /// Probes on the branch's own surface over the same length inside the end.
     pub inside: Vec<(Point, Vector3<f64>)>,
+    /// The surface each probe stands for, mm².
+    pub probe_area: f64,
 }
 
 /// What the scan shows at one end of a posed branch.
@@ -63,6 +69,8 @@ pub(crate) struct EndReading {
     pub past: usize,
     /// Probes inside the end the scan confirms.
     pub inside: usize,
+    /// The surface each probe stands for, mm².
+    pub probe_area: f64,
 }
 
 /// The probes of every branch end of `layout`: the tip (past the end face, one radius long) and
@@ -78,7 +86,9 @@ pub(crate) fn branch_ends(layout: &BranchLayout, spacing: f64, surface: &IcpTarg
             .map_or(f64::INFINITY, |(_, d)| d.sqrt())
     };
     let r = layout.radius;
-    let step = spacing.min(r / 10.0).max(1e-3);
+    // About the samples' spacing, within a tenth and a fortieth of the radius: at most about
+    // 250 × 40 probes per stretch whatever the samples or the declared radius.
+    let step = spacing.clamp(r / 40.0, r / 10.0);
     let around = ((std::f64::consts::TAU * r / step).ceil() as usize).max(8);
     let along = ((r / step).ceil() as usize).max(2);
     let mut ends = Vec::new();
@@ -96,7 +106,10 @@ pub(crate) fn branch_ends(layout: &BranchLayout, spacing: f64, surface: &IcpTarg
         };
         // (inside span, past span) along the axis: the tip and the back.
         for (inside, past) in [((len - r, len), (len, len + r)), ((r, 2.0 * r), (-2.0 * r, -r))] {
-            let mut end = BranchEnd::default();
+            let mut end = BranchEnd {
+                probe_area: (std::f64::consts::TAU * r / around as f64) * (r / along as f64),
+                ..BranchEnd::default()
+            };
             for i in 0..along {
                 let f = (i as f64 + 0.5) / along as f64;
                 ring(inside.0 + f * (inside.1 - inside.0), &mut |p, n| {
@@ -141,16 +154,20 @@ pub(crate) fn read_ends(judge: &Judge, model: &PoseModel, t_scene_model: &Isomet
     let surface = model.fine_target();
     let off_part = |m: &Point| surface.search().nearest_within(&[m.x, m.y, m.z], far).is_none();
     let r = layout.radius;
+    if model.branch_ends.len() != 2 * layout.directions.len() {
+        return Vec::new(); // probes of another layout: nothing to judge by
+    }
     model
         .branch_ends
         .iter()
-        .zip(layout.directions.iter().flat_map(|u| [u, u]))
+        .zip(layout.directions.iter().flat_map(|u| [u.normalize(), u.normalize()]))
         .map(|(end, u)| {
             let on_cylinder = |m: &Point| {
-                let t = m.coords.dot(u);
+                let t = m.coords.dot(&u);
                 ((m.coords - u * t).norm() - r).abs() <= 2.0 * tol
             };
             EndReading {
+                probe_area: end.probe_area,
                 past: end
                     .past
                     .iter()

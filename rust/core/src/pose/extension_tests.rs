@@ -6,28 +6,43 @@ use super::judge::Judge;
 use super::tests::{config, top_view};
 use super::*;
 use crate::geometry::BinBox;
-use crate::mesh::parts::{elbow, tee, FittingParams, Part, TeeParams};
+use crate::mesh::parts::{cross, elbow, tee, FittingParams, Part, TeeParams};
 use crate::mesh::{sample_surface, Density, TriMesh};
 use crate::registration::ccp::BranchLayout;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::sync::OnceLock;
 
-/// The elbow prepared as binpick's `parts.elbow()` prepares it (1 mm samples, its branches).
+/// `part` prepared as binpick's built-in parts are (1 mm samples, its branches).
+fn prepared(part: Part) -> (PoseModel, TriMesh) {
+    let s = sample_surface(&part.mesh, Density::Spacing(1.0), 0).unwrap();
+    let layout = layout_of(&part);
+    let model = PoseModel::new(
+        s.points,
+        s.normals,
+        part.mesh.diameter(),
+        part.mesh.area(),
+        Some(layout),
+    )
+    .unwrap();
+    (model, part.mesh)
+}
+
 fn elbow_model() -> &'static (PoseModel, TriMesh) {
     static MODEL: OnceLock<(PoseModel, TriMesh)> = OnceLock::new();
+    MODEL.get_or_init(|| prepared(elbow(&FittingParams::default()).unwrap()))
+}
+
+/// The tee without its boss: every face of it is a cross's.
+fn plain_tee_model() -> &'static (PoseModel, TriMesh) {
+    static MODEL: OnceLock<(PoseModel, TriMesh)> = OnceLock::new();
     MODEL.get_or_init(|| {
-        let part = elbow(&FittingParams::default()).unwrap();
-        let s = sample_surface(&part.mesh, Density::Spacing(1.0), 0).unwrap();
-        let layout = layout_of(&part);
-        let model = PoseModel::new(
-            s.points,
-            s.normals,
-            part.mesh.diameter(),
-            part.mesh.area(),
-            Some(layout),
+        prepared(
+            tee(&TeeParams {
+                boss_height: 0.0,
+                ..TeeParams::default()
+            })
+            .unwrap(),
         )
-        .unwrap();
-        (model, part.mesh)
     })
 }
 
@@ -70,18 +85,13 @@ fn judged_scene(mesh: &TriMesh, pose: &Isometry3<f64>, model: &PoseModel) -> Jud
 #[test]
 fn an_elbow_read_on_the_corner_of_a_tee_is_refused_and_the_elbow_itself_is_not() {
     let (model, elbow_mesh) = elbow_model();
-    let tee_mesh = tee(&TeeParams {
-        boss_height: 0.0,
-        ..TeeParams::default()
-    })
-    .unwrap()
-    .mesh;
+    let tee_mesh = &plain_tee_model().1;
     let cfg = config(CoarseMethod::Ppf);
     for yaw in [0.3, 2.0, -1.2] {
         let pose = lying(yaw);
         // The elbow's arms lie on the tee's run (+x half) and its branch: every face of the
         // elbow is the tee's, but the run goes on past the elbow's corner.
-        let on_tee = judged_scene(&tee_mesh, &pose, model);
+        let on_tee = judged_scene(tee_mesh, &pose, model);
         let ends = read_ends(&on_tee, model, &pose);
         assert!(ends.iter().any(|e| e.carried_on()), "yaw {yaw}: {ends:?}");
         match on_tee.verdict(model, &pose, &cfg) {
@@ -97,6 +107,35 @@ fn an_elbow_read_on_the_corner_of_a_tee_is_refused_and_the_elbow_itself_is_not()
         assert!(
             alone.verdict(model, &pose, &cfg).is_ok(),
             "yaw {yaw}: the elbow itself was refused"
+        );
+    }
+}
+
+#[test]
+fn a_tee_read_on_a_cross_is_refused_and_the_tee_itself_is_not() {
+    let (model, tee_mesh) = plain_tee_model();
+    let cross_mesh = cross(&FittingParams::default()).unwrap().mesh;
+    let cfg = config(CoarseMethod::Ppf);
+    for yaw in [0.7, -2.5] {
+        let pose = lying(yaw);
+        // The tee's run and branch lie on the cross's; the cross's fourth branch goes on past
+        // the tee's junction, opposite its branch.
+        let on_cross = judged_scene(&cross_mesh, &pose, model);
+        let ends = read_ends(&on_cross, model, &pose);
+        assert!(ends.iter().any(|e| e.carried_on()), "yaw {yaw}: {ends:?}");
+        assert!(
+            on_cross.verdict(model, &pose, &cfg).is_err(),
+            "yaw {yaw}: a tee on a cross passed"
+        );
+        let alone = judged_scene(tee_mesh, &pose, model);
+        let ends = read_ends(&alone, model, &pose);
+        assert!(
+            ends.iter().all(|e| !e.carried_on() && e.past == 0),
+            "yaw {yaw}: {ends:?}"
+        );
+        assert!(
+            alone.verdict(model, &pose, &cfg).is_ok(),
+            "yaw {yaw}: the tee itself was refused"
         );
     }
 }

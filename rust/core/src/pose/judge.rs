@@ -31,7 +31,8 @@ const MAX_CONTINUED: f64 = 0.4;
 /// read on a tee's tilted run runs on over 0.35–2.5 times as many cells as confirm it; parts in
 /// the near-symmetric bench's views and piles, at most 0.25 (they meet their neighbours at an
 /// angle or a step). An elbow read on a tee's run and stem reaches 0.25 too: this test does not
-/// tell it from a part; the extension test ([`super::extension`]) does.
+/// tell it from a part; the extension test ([`super::extension`]) does where the scan shows the
+/// run going on past the elbow's corner.
 const MAX_BEYOND: f64 = 0.5;
 /// The largest share of a pose's surface that may lie beyond the bin's floor or walls or the
 /// removed support planes (more than twice the tolerance): a part rests on them, it does not

@@ -402,7 +402,11 @@ impl Region {
             for dz in -1..=1 {
                 for dy in -1..=1 {
                     for dx in -1..=1 {
-                        if let Some(i) = r.index(&[k[0] + dx, k[1] + dy, k[2] + dz]) {
+                        let next = [k[0].checked_add(dx), k[1].checked_add(dy), k[2].checked_add(dz)];
+                        if let Some(i) = match next {
+                            [Some(x), Some(y), Some(z)] => r.index(&[x, y, z]),
+                            _ => None,
+                        } {
                             r.cells[i] = true;
                         }
                     }
@@ -480,9 +484,10 @@ pub(super) fn thin(v: &[Point], n: usize) -> Vec<Point> {
 pub(super) fn plane_residual(model: &PoseModel, q: &Point, reach: f64) -> Option<f64> {
     let target = model.fine_target();
     let at = [q.x, q.y, q.z];
-    // Most points asked about lie on the surface, within a sample spacing of their nearest
-    // sample: a search that narrow finds it (nothing nearer lies outside it) at a fraction of
-    // the cost of one out to `reach`, which only the points it misses need.
+    // Most points asked about lie on the surface, within the model's sample spacing (no less
+    // than the fine surface's) of their nearest sample: a search that narrow finds it (nothing
+    // nearer lies outside it) at a fraction of the cost of one out to `reach`, which only the
+    // points it misses need.
     let near = model.spacing.min(reach);
     let (j, _) = target.search().nearest_within(&at, near * near).or_else(|| {
         (reach > near)
