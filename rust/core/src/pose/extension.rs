@@ -17,6 +17,7 @@
 //! own stretch goes on past it.
 
 use super::judge::Judge;
+use super::trust::plane_residual;
 use super::PoseModel;
 use crate::geometry::Point;
 use crate::registration::ccp::BranchLayout;
@@ -145,14 +146,13 @@ pub(crate) fn read_ends(judge: &Judge, model: &PoseModel, t_scene_model: &Isomet
         }
         let q = t_scene_model * p;
         let h = q.coords.dot(&map.up);
-        let slack = tol + map.cell() * (1.0 - c * c).sqrt() / c;
         map.top_at(&q)
-            .filter(|(top, _)| (top - h).abs() <= slack)
+            .filter(|(top, _)| (top - h).abs() <= map.slack(tol, c))
             .map(|(_, at)| to_model * at)
     };
-    let far = (2.0 * tol).powi(2);
-    let surface = model.fine_target();
-    let off_part = |m: &Point| surface.search().nearest_within(&[m.x, m.y, m.z], far).is_none();
+    // Off the part as the continuation test has it: nothing of the dense surface within twice
+    // the tolerance.
+    let off_part = |m: &Point| plane_residual(model, m, 2.0 * tol).is_none();
     let r = layout.radius;
     if model.branch_ends.len() != 2 * layout.directions.len() {
         return Vec::new(); // probes of another layout: nothing to judge by

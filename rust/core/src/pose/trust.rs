@@ -399,18 +399,16 @@ impl Region {
             cells: vec![false; dims.iter().product()],
         };
         for k in own {
-            for dz in -1..=1 {
-                for dy in -1..=1 {
-                    for dx in -1..=1 {
-                        let next = [k[0].checked_add(dx), k[1].checked_add(dy), k[2].checked_add(dz)];
-                        if let Some(i) = match next {
-                            [Some(x), Some(y), Some(z)] => r.index(&[x, y, z]),
-                            _ => None,
-                        } {
-                            r.cells[i] = true;
-                        }
-                    }
-                }
+            // The cell and its 26 neighbours.
+            let near: [Option<usize>; 27] = std::array::from_fn(|n| {
+                r.index(&[
+                    k[0] + n as i64 % 3 - 1,
+                    k[1] + n as i64 / 3 % 3 - 1,
+                    k[2] + n as i64 / 9 - 1,
+                ])
+            });
+            for i in near.into_iter().flatten() {
+                r.cells[i] = true;
             }
         }
         r
@@ -523,10 +521,8 @@ fn evidence_of(fit: &[bool], tol: f64, violated: usize, per_probe: f64) -> Featu
     }
 }
 
+/// The grid cell of `p`, its key bounded well inside i64 so that neighbours' keys cannot
+/// overflow.
 fn key(p: &Point, cell: f64) -> [i64; 3] {
-    [
-        (p.x / cell).floor() as i64,
-        (p.y / cell).floor() as i64,
-        (p.z / cell).floor() as i64,
-    ]
+    [p.x, p.y, p.z].map(|v| (v / cell).floor().clamp(-1e15, 1e15) as i64)
 }

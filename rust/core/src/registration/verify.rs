@@ -157,6 +157,14 @@ impl HeightMap {
         self.cell
     }
 
+    /// How far a cell's top may lie from a probe of surface whose normal has share `c` along
+    /// [`HeightMap::up`] and still confirm it: `tol`, widened by the cell's rise on that slope
+    /// (the top of a cell lies up to a cell × tan(slope) above the probe).
+    #[inline]
+    pub fn slack(&self, tol: f64, c: f64) -> f64 {
+        tol + self.cell * (1.0 - c * c).sqrt() / c
+    }
+
     /// Height of the scan's top surface over `p`'s cell, or `None` where nothing was scanned.
     #[inline]
     pub fn top_at(&self, p: &Point) -> Option<(f64, Point)> {
@@ -262,8 +270,7 @@ pub fn depth_evidence_with(
         e.facing += 1;
         let q = Point::from(rot * p.coords + shift);
         let h = q.coords.dot(&heights.up);
-        // The top of a cell on a slope lies up to a cell × tan(slope) above the probe.
-        let slack = tol + heights.cell * (1.0 - c * c).sqrt() / c;
+        let slack = heights.slack(tol, c);
         match heights.top_at(&q) {
             // Steep faces go unscanned for many reasons (perspective, laser shadows); only
             // surface within 45° of facing the sensor is expected to be in the scan.
