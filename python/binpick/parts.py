@@ -5,8 +5,8 @@ The fittings are closed meshes in millimetres in the frame of the paper's Fig. 6
 where the branch axes meet, x along the run, y along the side branch, z = x × y.
 
 The near-symmetric parts (:data:`NEAR_SYMMETRIC`; 35–150 mm) are centred on the origin, each with
-its feature and the proper symmetries that remain with it. Each feature changes more than 2 % of
-the surface, so that the symmetry detector (98 % agreement) does not take it for noise:
+its feature and the proper symmetries that remain with it (the symmetry detector refuses a turn
+that leaves a patch of the surface where the turned part has none, at any size these take):
 
 =================  ==========================================  ===============================
 part               feature (the default sizes)                 proper symmetries left

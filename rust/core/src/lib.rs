@@ -60,7 +60,8 @@ pub use registration::{icp, IcpConfig, IcpMethod, IcpResult, IcpTarget, RobustKe
 pub use rng::Rng;
 pub use search::{KdIndex, Neighbour};
 pub use symmetry::{
-    detect_near_symmetries, detect_symmetries, NearSymmetry, Symmetries, SymmetryConfig, NEAR_AGREEMENT,
+    detect_all_symmetries, detect_near_symmetries, detect_symmetries, NearSymmetry, Symmetries, SymmetryConfig,
+    NEAR_AGREEMENT,
 };
 pub use triangulate::{
     intersect_ray_plane, laser_plane, pixel_rays, triangulate, triangulate_into, FramePose, PointStatus, Sensor,

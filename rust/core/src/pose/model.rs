@@ -8,7 +8,7 @@ use crate::registration::ppf::{PpfConfig, PpfModel};
 use crate::registration::IcpTarget;
 use crate::search::KdIndex;
 use crate::segment::point_spacing;
-use crate::symmetry::{detect_near_symmetries, detect_symmetries, NearSymmetry, Symmetries, SymmetryConfig};
+use crate::symmetry::{detect_all_symmetries, NearSymmetry, Symmetries, SymmetryConfig};
 use crate::voxel::subsample;
 use nalgebra::Vector3;
 
@@ -73,8 +73,7 @@ impl PoseModel {
             layout.validate()?;
         }
         let spacing = point_spacing(&points, &KdIndex::new(&points));
-        let symmetries = detect_symmetries(&points, &normals, &SymmetryConfig::default())?;
-        let near_symmetries = detect_near_symmetries(&points, &normals, &symmetries, &SymmetryConfig::default())?;
+        let (symmetries, near_symmetries) = detect_all_symmetries(&points, &normals, &SymmetryConfig::default())?;
         let c = symmetries.center;
         let radius = points.iter().map(|p| (p - c).norm()).fold(0.0, f64::max);
         let (_, cov) = crate::geometry::covariance(&points);

@@ -47,79 +47,121 @@ impl NearSymmetry {
 
 /// The near-symmetries of a part from the same samples and normals as [`detect_symmetries`] and
 /// its proper group `proper`: at most a few, strongest first. A part whose surface no rotation
-/// maps at [`NEAR_AGREEMENT`] has none.
+/// maps at [`NEAR_AGREEMENT`] has none. (Detecting both at once,
+/// [`super::detect_all_symmetries`] shares the search this repeats.)
 pub fn detect_near_symmetries(
     points: &[Point],
     normals: &[Vector3<f64>],
     proper: &Symmetries,
     cfg: &SymmetryConfig,
 ) -> Result<Vec<NearSymmetry>> {
+    let unit = super::unit_normals(points, normals, cfg)?;
+    let lenient = Matcher::new(points, unit.clone(), cfg)?.detect();
+    let groups = Groups {
+        proper: proper.clone(),
+        lenient: Some(lenient),
+    };
+    near_symmetries(points, unit, &groups, cfg)
+}
+
+/// The near-symmetries given the part's groups: the rotations the lenient group holds beyond the
+/// proper one (each maps as much of the surface as a symmetry, but leaves a feature), then those
+/// of the group found at [`NEAR_AGREEMENT`].
+pub(super) fn near_symmetries(
+    points: &[Point],
+    unit: Vec<V3>,
+    groups: &Groups,
+    cfg: &SymmetryConfig,
+) -> Result<Vec<NearSymmetry>> {
+    let proper = &groups.proper;
     let near_cfg = SymmetryConfig {
         min_agreement: NEAR_AGREEMENT.min(cfg.min_agreement),
         ..*cfg
     };
-    // The same checks as detect_symmetries (it has run on these inputs already).
-    let unit: Vec<V3> = normals.iter().map(|n| n.normalize()).collect();
     let matcher = Matcher::new(points, unit, &near_cfg)?;
-    let near = matcher.detect();
-    let c = near.center;
     let mut found: Vec<NearSymmetry> = Vec::new();
-    if let (Some(a), None) = (near.continuous_axis, proper.continuous_axis) {
-        let turns: Vec<Rot> = FEATURE_TURNS_DEG.iter().map(|d| rot(&a, d.to_radians())).collect();
-        let mut broken = vec![true; points.len()];
-        let mut agreement = 1.0f64;
-        for r in &turns {
-            let fails = matcher.failures(r, &c);
-            agreement = agreement.min(1.0 - fails.iter().filter(|&&f| f).count() as f64 / points.len() as f64);
-            for (b, f) in broken.iter_mut().zip(fails) {
-                *b &= f;
+    // One representative per class modulo the proper group, the identity's class left out.
+    let mut classes: Vec<Rot> = proper.rotations.clone();
+    let mut near_axis: Option<V3> = None;
+    let broken = groups.lenient.as_ref().map(|g| (g.clone(), true));
+    let near = (matcher.detect(), false);
+    for (group, lenient) in broken.into_iter().chain(std::iter::once(near)) {
+        let c = group.center;
+        if let (Some(a), None, None) = (group.continuous_axis, proper.continuous_axis, near_axis) {
+            if let Some(n) = continuous(points, &matcher, &a, &c, cfg, lenient) {
+                near_axis = Some(a);
+                found.push(n);
             }
         }
-        if (NEAR_AGREEMENT..cfg.min_agreement).contains(&agreement) {
+        for g in group.rotations.iter() {
+            let known = classes
+                .iter()
+                .any(|k| proper.rotation_distance(k, g) < SAME_ROTATION.max(2f64.to_radians()));
+            // A turn about a continuous near axis is that axis's, not one of its own.
+            let spin = group
+                .continuous_axis
+                .filter(|_| proper.continuous_axis.is_none())
+                .or(near_axis);
+            let along_near_axis = spin.is_some_and(|a| same_line(&g.axis().map_or(a, |u| *u), &a, SAME_AXIS));
+            if known || along_near_axis {
+                continue;
+            }
+            classes.push(*g);
+            let mut fails = matcher.failures(g, &c);
+            for (f, h) in fails.iter_mut().zip(matcher.failures(&g.inverse(), &c)) {
+                *f |= h;
+            }
+            let agreement = 1.0 - fails.iter().filter(|&&f| f).count() as f64 / points.len() as f64;
+            // The closure of the near turns holds products that map much less: not near ones. A
+            // turn that maps as much as a symmetry is a near one when it leaves a feature (the
+            // proper search refused it for that), else a symmetry that search missed: not near.
+            let symmetry = agreement >= cfg.min_agreement && (!lenient && matcher.feature_free(g, &c));
+            if agreement < NEAR_AGREEMENT || symmetry {
+                continue;
+            }
+            let (axis, angle) = g.axis_angle().map_or((V3::z(), 0.0), |(u, t)| (u.into_inner(), t));
             found.push(NearSymmetry {
                 center: c,
-                axis: a.normalize(),
-                angle: None,
+                axis,
+                angle: Some(angle),
                 agreement,
-                feature: select(points, &broken),
+                feature: select(points, &fails),
             });
         }
     }
-    // One representative per class modulo the proper group, the identity's class left out.
-    let mut classes: Vec<Rot> = proper.rotations.clone();
-    for g in near.rotations.iter() {
-        let known = classes
-            .iter()
-            .any(|k| proper.rotation_distance(k, g) < SAME_ROTATION.max(2f64.to_radians()));
-        // A turn about a continuous near axis is that axis's, not one of its own.
-        let along_near_axis = near
-            .continuous_axis
-            .is_some_and(|a| proper.continuous_axis.is_none() && same_line(&g.axis().map_or(a, |u| *u), &a, SAME_AXIS));
-        if known || along_near_axis {
-            continue;
-        }
-        classes.push(*g);
-        let mut fails = matcher.failures(g, &c);
-        for (f, h) in fails.iter_mut().zip(matcher.failures(&g.inverse(), &c)) {
-            *f |= h;
-        }
-        let agreement = 1.0 - fails.iter().filter(|&&f| f).count() as f64 / points.len() as f64;
-        // The closure of the near turns holds products that map much less (or, where the
-        // proper detection rejected a turn the near one accepts, a symmetry): not near ones.
-        if !(NEAR_AGREEMENT..cfg.min_agreement).contains(&agreement) {
-            continue;
-        }
-        let (axis, angle) = g.axis_angle().map_or((V3::z(), 0.0), |(u, t)| (u.into_inner(), t));
-        found.push(NearSymmetry {
-            center: c,
-            axis,
-            angle: Some(angle),
-            agreement,
-            feature: select(points, &fails),
-        });
-    }
     found.sort_by(|x, y| y.agreement.total_cmp(&x.agreement));
     Ok(found)
+}
+
+/// The continuous near axis `a` through `c`, when its turns map at least [`NEAR_AGREEMENT`] of
+/// the surface and it is no symmetry (it maps less than one, or leaves a feature; an axis of the
+/// `lenient` group left the proper one for a feature already).
+fn continuous(
+    points: &[Point],
+    matcher: &Matcher,
+    a: &V3,
+    c: &Point,
+    cfg: &SymmetryConfig,
+    lenient: bool,
+) -> Option<NearSymmetry> {
+    let turns: Vec<Rot> = FEATURE_TURNS_DEG.iter().map(|d| rot(a, d.to_radians())).collect();
+    let mut broken = vec![true; points.len()];
+    let mut agreement = 1.0f64;
+    for r in &turns {
+        let fails = matcher.failures(r, c);
+        agreement = agreement.min(1.0 - fails.iter().filter(|&&f| f).count() as f64 / points.len() as f64);
+        for (b, f) in broken.iter_mut().zip(fails) {
+            *b &= f;
+        }
+    }
+    let near_only = lenient || agreement < cfg.min_agreement || turns.iter().any(|r| !matcher.feature_free(r, c));
+    (agreement >= NEAR_AGREEMENT && near_only).then(|| NearSymmetry {
+        center: *c,
+        axis: a.normalize(),
+        angle: None,
+        agreement,
+        feature: select(points, &broken),
+    })
 }
 
 fn select(points: &[Point], mask: &[bool]) -> Vec<Point> {

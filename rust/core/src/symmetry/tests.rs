@@ -428,3 +428,37 @@ fn a_shaft_with_a_flat_has_a_continuous_near_axis_and_a_plain_shaft_none() {
         cont.feature.len()
     );
 }
+
+#[test]
+fn a_feature_smaller_than_the_agreement_allows_still_breaks_the_symmetries_it_moves() {
+    // A 100 × 100 × 6 mm plate: a 4 × 4 × 2 mm boss near one corner of its top is 0.2 % of the
+    // surface, under the 2 % an agreement of 98 % lets pass, but a patch a scan shows plainly.
+    let plate = cuboid([50.0, 50.0, 3.0], V3::zeros());
+    let boss_centre = V3::new(40.0, 40.0, 4.0);
+    let (sym, near) = near_of(plate.clone(), 1.0);
+    assert_eq!(
+        sym.rotations.len(),
+        8,
+        "the plain plate keeps its square's group: {sym:?}"
+    );
+    assert!(near.iter().all(|n| n.agreement < 0.98), "{near:?}");
+    let bossed = merge(&[plate, cuboid([2.0, 2.0, 1.0], boss_centre)]);
+    let (sym, near) = near_of(bossed, 1.0);
+    assert!(sym.is_trivial(), "the boss breaks every turn of the square: {sym:?}");
+    // The square's seven turns are near-symmetries, each mapping all but the boss.
+    let square: Vec<&NearSymmetry> = near.iter().filter(|n| n.agreement >= 0.98).collect();
+    assert_eq!(square.len(), 7, "{near:?}");
+    for n in square {
+        let image = n.transform(0.0) * Point::from(boss_centre);
+        let at_boss = n
+            .feature
+            .iter()
+            .filter(|p| (p.coords - boss_centre).norm() < 6.0 || (*p - image).norm() < 6.0)
+            .count();
+        assert!(
+            at_boss >= 8,
+            "{at_boss} of {} feature samples at the boss",
+            n.feature.len()
+        );
+    }
+}
