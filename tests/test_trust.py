@@ -90,7 +90,9 @@ def test_a_small_feature_decides_where_the_feature_region_is_wide(flange):
         truth[:3, 3] = [400.0, 0.0, 40.0]
         res = binpick.estimate_pose(rendered_view(flange, truth, rng), flange, num_threads=1)
         assert pick_grade(flange, res.T_scene_model, truth), f"yaw {yaw}"
-        assert not res.ambiguous and res.confidence >= 0.8, (yaw, res.confidence, res.free_axis)
+        # Decided: a lead of well over one margin (0.7; each probe seen through is one observation
+        # however many points it stands for, so the margin is not the points' alone).
+        assert not res.ambiguous and res.confidence >= 0.7, (yaw, res.confidence, res.free_axis)
 
 
 def test_a_feature_too_small_for_the_agreement_still_makes_the_part_near_symmetric():

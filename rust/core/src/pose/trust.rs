@@ -45,9 +45,10 @@ pub struct TrustParams {
     /// so that one chance cluster of misfits does not decide. Default 30.
     pub min_margin: f64,
     /// ... nor by less than this many standard deviations of the lead that chance alone gives
-    /// two equally good poses: with d scan points that fit one of them and not the other (and
-    /// probes one of them puts where the sensor saw free space), each falls to either side, so
-    /// the lead (2 × the difference) spreads by 2√d. The points both poses fit or both miss —
+    /// two equally good poses: with d scan points that fit one of them and not the other, each
+    /// falls to either side, so the lead (2 × the difference) spreads by 2√d; k probes one of them
+    /// puts where the sensor saw free space spread it by √k probes' worth of points (see
+    /// [`margin_between`]). The points both poses fit or both miss —
     /// most of a feature region as wide as a flange's whole face — say nothing of which is
     /// right. Default 3.
     pub margin_sigmas: f64,
@@ -314,11 +315,16 @@ pub(super) struct Scored {
 
 /// The margin by which one candidate's feature evidence must lead another's to rule it out (see
 /// [`TrustParams::margin_sigmas`]): from the judged points that fit one and not the other and the
-/// difference of their probes seen through, `per_probe` scan points apiece.
+/// difference of their probes seen through, `per_probe` scan points apiece. The d split points
+/// spread the lead by 2√d points; a probe counts as `per_probe` points in the score but is one
+/// observation, so k probes that differ spread it by `per_probe` √k (not √(`per_probe` k): on a
+/// dense scan one probe stands for tens of points, and one probe more seen through is no
+/// stronger evidence for that).
 pub(super) fn margin_between(p: &TrustParams, a: &Scored, b: &Scored, per_probe: f64) -> f64 {
     let split = a.fits.iter().zip(&b.fits).filter(|(x, y)| x != y).count() as f64;
-    let seen = a.evidence.seen_through.abs_diff(b.evidence.seen_through) as f64 * per_probe;
-    p.min_margin.max(p.margin_sigmas * 2.0 * (split + seen).sqrt())
+    let probes = a.evidence.seen_through.abs_diff(b.evidence.seen_through) as f64;
+    p.min_margin
+        .max(p.margin_sigmas * (4.0 * split + per_probe * per_probe * probes).sqrt())
 }
 
 /// How a candidate with feature score `score` stands against the pose kept (score `kept`):

@@ -95,9 +95,12 @@ fn the_margin_grows_with_the_points_two_poses_disagree_on_not_with_those_they_sh
         let m = trust::margin_between(&p, &scored(n, 0, 0), &scored(n, 52, 0), 1.0);
         assert!((m - 6.0 * 52f64.sqrt()).abs() < 1e-9, "{n}: {m}");
     }
-    // Probes seen through count as the scan points they stand for.
+    // Probes seen through count as the scan points they stand for, each one observation: 10
+    // probes of 2 points spread the lead by 2√10, 10 probes of 40 points by 40√10.
     let m = trust::margin_between(&p, &scored(400, 0, 10), &scored(400, 52, 0), 2.0);
-    assert!((m - 6.0 * 72f64.sqrt()).abs() < 1e-9, "{m}");
+    assert!((m - 3.0 * (4.0 * 52.0 + 4.0 * 10.0f64).sqrt()).abs() < 1e-9, "{m}");
+    let m = trust::margin_between(&p, &scored(400, 0, 10), &scored(400, 52, 0), 40.0);
+    assert!((m - 3.0 * (4.0 * 52.0 + 1600.0 * 10.0f64).sqrt()).abs() < 1e-9, "{m}");
 }
 
 #[test]
