@@ -33,6 +33,23 @@ impl HeightMap {
     /// The height map of `points` with cells of `cell` mm (enlarged if the grid would exceed
     /// 4 million cells).
     pub fn new(points: &[Point], up: &Vector3<f64>, cell: f64) -> Self {
+        let mut map = HeightMap::layout(points, up, cell);
+        map.top = vec![[0.0; 3]; map.size.0 * map.size.1];
+        map.height = vec![f32::NAN; map.size.0 * map.size.1];
+        for p in points {
+            let (Some(k), h) = map.key(p) else { continue };
+            let h = h as f32;
+            if !(map.height[k] >= h) {
+                map.height[k] = h;
+                map.top[k] = [p.x as f32, p.y as f32, p.z as f32];
+            }
+        }
+        map
+    }
+
+    /// The grid of a map of `points` with cells of `cell` mm (its frame, origin, cell and size),
+    /// holding no cell yet.
+    fn layout(points: &[Point], up: &Vector3<f64>, cell: f64) -> Self {
         let up = up.normalize();
         let e1 = up
             .cross(&if up.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() })
@@ -55,62 +72,37 @@ impl HeightMap {
             cell *= 1.5;
         }
         let size = (((hi.0 - lo.0) / cell) as usize + 1, ((hi.1 - lo.1) / cell) as usize + 1);
-        let mut map = HeightMap {
+        HeightMap {
             e1,
             e2,
             up,
             cell,
             origin: lo,
             size,
-            top: vec![[0.0; 3]; size.0 * size.1],
-            height: vec![f32::NAN; size.0 * size.1],
-        };
-        for p in points {
-            let (Some(k), h) = map.key(p) else { continue };
-            let h = h as f32;
-            if !(map.height[k] >= h) {
-                map.height[k] = h;
-                map.top[k] = [p.x as f32, p.y as f32, p.z as f32];
-            }
+            top: Vec::new(),
+            height: Vec::new(),
         }
-        map
     }
 
     /// The height map with the smallest cell, from `cell` up, at which the scan covers its
     /// surfaces without holes (a laser-line scan is sparse across its lines): cells grow by 1.5×
     /// while more than a fifth of the occupied cells have empty cells on both sides along a grid
     /// axis (a line pattern; the edge of a surface has them on one side only), up to 8 × `cell`.
+    /// The cells tried are judged on which of them hold a point; only the map kept is filled.
     pub fn fitted(points: &[Point], up: &Vector3<f64>, cell: f64) -> Self {
         let mut c = cell;
         loop {
-            let map = HeightMap::new(points, up, c);
-            if map.gaps() <= 0.2 || c >= 8.0 * cell {
-                return map;
+            let grid = HeightMap::layout(points, up, c);
+            let mut occupied = vec![false; grid.size.0 * grid.size.1];
+            for p in points {
+                if let (Some(k), _) = grid.key(p) {
+                    occupied[k] = true;
+                }
+            }
+            if gaps(&occupied, grid.size) <= 0.2 || c >= 8.0 * cell {
+                return HeightMap::new(points, up, c);
             }
             c *= 1.5;
-        }
-    }
-
-    /// Fraction of the occupied cells whose two neighbours along a grid axis are both empty.
-    fn gaps(&self) -> f64 {
-        let (w, h) = self.size;
-        let empty = |k: usize| self.height[k].is_nan();
-        let (mut gapped, mut occupied) = (0usize, 0usize);
-        for a in 1..w.saturating_sub(1) {
-            for b in 1..h.saturating_sub(1) {
-                if empty(a * h + b) {
-                    continue;
-                }
-                occupied += 1;
-                let across = empty((a - 1) * h + b) && empty((a + 1) * h + b);
-                let along = empty(a * h + b - 1) && empty(a * h + b + 1);
-                gapped += (across || along) as usize;
-            }
-        }
-        if occupied == 0 {
-            0.0
-        } else {
-            gapped as f64 / occupied as f64
         }
     }
 
@@ -334,6 +326,30 @@ pub fn coarse_inlier_fraction(points: &[Point], target: &IcpTarget, t_model_scen
         })
         .count();
     n as f64 / points.len().max(1) as f64
+}
+
+/// Fraction of the occupied cells (of a `size.0` × `size.1` grid, `occupied` per cell in map
+/// order) whose two neighbours along a grid axis are both empty.
+fn gaps(occupied: &[bool], size: (usize, usize)) -> f64 {
+    let (w, h) = size;
+    let empty = |k: usize| !occupied[k];
+    let (mut gapped, mut count) = (0usize, 0usize);
+    for a in 1..w.saturating_sub(1) {
+        for b in 1..h.saturating_sub(1) {
+            if empty(a * h + b) {
+                continue;
+            }
+            count += 1;
+            let across = empty((a - 1) * h + b) && empty((a + 1) * h + b);
+            let along = empty(a * h + b - 1) && empty(a * h + b + 1);
+            gapped += (across || along) as usize;
+        }
+    }
+    if count == 0 {
+        0.0
+    } else {
+        gapped as f64 / count as f64
+    }
 }
 
 #[cfg(test)]
