@@ -31,7 +31,9 @@ of tees) for every method, each of which must raise
 and reported as n/a where the installed binpick has no such field.
 
     PYTHONPATH=python python benches/near_symmetric.py [--quick] [--views N] [--piles N]
-        [--seeds 0,1] [--part NAME] [--renderers sim,ray] [--out DIR]
+        [--seeds 0,1] [--part NAME] [--renderers sim,ray] [--sizes default,a,b] [--out DIR]
+
+``--sizes`` adds the parts at other sizes (:data:`SIZE_SETS`), labelled ``name[set]``.
 
 Writes ``OUT/near_symmetric.json`` (every scene) and ``OUT/near_symmetric.png`` (reliability
 diagram and per-part bars).
@@ -63,6 +65,52 @@ VIEW_PIXEL = 0.5
 PILE_PIXEL = 0.6
 CONFIDENCE_BINS = (0.5, 0.6, 0.7, 0.8, 0.9, 0.95)
 TARGETS = {"pick_grade_in_view": 0.98, "confident_wrong": 0.01, "confident_wrong_pile_first": 0.02}
+
+#: The parts at other sizes (``--sizes``): figures at one size per part say little of the next
+#: part. ``a`` and ``b`` change each part's proportions and its feature's share of the surface
+#: (a 100 mm plate whose cut corner is 0.3 % of it, a 40 mm flange with four holes, a 50 mm hex
+#: 20 mm long, a thick short shaft, a thin long rod).
+SIZE_SETS: dict[str, dict[str, dict[str, float]]] = {
+    "default": {},
+    "a": {
+        "keyed_shaft": dict(diameter=16.0, length=80.0, keyway_width=4.0, keyway_depth=1.5, keyway_length=25.0),
+        "cut_plate": dict(side=100.0, thickness=6.0, cut=3.5),
+        "flange": dict(
+            diameter=90.0,
+            thickness=12.0,
+            bolt_holes=8,
+            bolt_hole_diameter=9.0,
+            bolt_circle_diameter=66.0,
+            notch_width=12.0,
+            notch_depth=3.0,
+        ),
+        "notched_hex": dict(across_flats=20.0, length=50.0, notch_width=4.0, notch_depth=1.2),
+        "bossed_rod": dict(diameter=30.0, length=140.0, boss_diameter=14.0, boss_height=2.5),
+    },
+    "b": {
+        "keyed_shaft": dict(diameter=40.0, length=60.0, keyway_width=8.0, keyway_depth=3.0, keyway_length=30.0),
+        "cut_plate": dict(side=60.0, thickness=3.0, cut=4.0),
+        "flange": dict(
+            diameter=40.0,
+            thickness=6.0,
+            bolt_holes=4,
+            bolt_hole_diameter=5.0,
+            bolt_circle_diameter=28.0,
+            hole_depth=2.0,
+            notch_width=6.0,
+            notch_depth=2.0,
+        ),
+        "notched_hex": dict(across_flats=50.0, length=20.0, notch_width=8.0, notch_depth=2.0),
+        "bossed_rod": dict(diameter=12.0, length=120.0, boss_diameter=8.0, boss_height=1.5),
+    },
+}
+
+
+def sized(name: str, size_set: str) -> tuple[Any, Any, str]:
+    """The part ``name`` at the sizes of ``size_set``, its base shape, and its label in the tables."""
+    sizes = SIZE_SETS[size_set].get(name, {})
+    label = name if size_set == "default" else f"{name}[{size_set}]"
+    return parts.NEAR_SYMMETRIC[name](**sizes), parts.base_shape(name, **sizes), label
 
 
 @dataclass
@@ -294,8 +342,10 @@ def judge(scene: Scene, model, base, group=None) -> dict:
 # ------------------------------------------------------------------------------ scenes
 
 
-def make_scenes(name: str, renderers: list[str], views: int, piles: int, seeds: list[int], frames: int):
-    model = parts.NEAR_SYMMETRIC[name]()
+def make_scenes(
+    name: str, renderers: list[str], views: int, piles: int, seeds: list[int], frames: int, size_set: str = "default"
+):
+    model, _, label = sized(name, size_set)
     cell = sim.Cell()
     cx, cy = cell.bin.center
     for seed in seeds:
@@ -306,10 +356,10 @@ def make_scenes(name: str, renderers: list[str], views: int, piles: int, seeds: 
                 tag = f"s{seed}v{k}"
                 if renderer == "sim":
                     T = resting_pose(model, R, cx + rng.uniform(-40, 40), cy + rng.uniform(-30, 30), cell.bin.floor_z)
-                    yield sim_scene(name, "view", model, T[None], cell, frames, seed * 1000 + k, tag)
+                    yield sim_scene(label, "view", model, T[None], cell, frames, seed * 1000 + k, tag)
                 else:
                     yield ray_scene(
-                        name, "view", model, resting_pose(model, R, 0, 0, 0)[None], None, seed * 1000 + k, tag
+                        label, "view", model, resting_pose(model, R, 0, 0, 0)[None], None, seed * 1000 + k, tag
                     )
         for k in range(piles):
             count = int(rng.integers(8, 15))
@@ -317,9 +367,9 @@ def make_scenes(name: str, renderers: list[str], views: int, piles: int, seeds: 
             for renderer in renderers:
                 tag = f"s{seed}p{k}"
                 if renderer == "sim":
-                    yield sim_scene(name, "pile", model, poses, cell, frames, seed * 1000 + k, tag)
+                    yield sim_scene(label, "pile", model, poses, cell, frames, seed * 1000 + k, tag)
                 else:
-                    yield ray_scene(name, "pile", model, poses, cell, seed * 1000 + k, tag)
+                    yield ray_scene(label, "pile", model, poses, cell, seed * 1000 + k, tag)
 
 
 def negative_scenes(frames: int) -> list[tuple[str, np.ndarray, Optional[np.ndarray], str]]:
@@ -483,6 +533,9 @@ def main(argv: Optional[list[str]] = None) -> int:
     ap.add_argument("--seeds", default="0", help="comma-separated seeds (default 0)")
     ap.add_argument("--part", default=None, help=f"one of {', '.join(sorted(parts.NEAR_SYMMETRIC))}")
     ap.add_argument("--renderers", default="sim,ray")
+    ap.add_argument(
+        "--sizes", default="default", help=f"comma-separated size sets of the parts: {', '.join(SIZE_SETS)}"
+    )
     ap.add_argument("--frames", type=int, default=None, help="laser frames per simulated scan (default 90)")
     ap.add_argument("--out", default="bench-out")
     args = ap.parse_args(argv)
@@ -494,11 +547,16 @@ def main(argv: Optional[list[str]] = None) -> int:
     if any(n not in parts.NEAR_SYMMETRIC for n in names):
         ap.error(f"--part: one of {', '.join(sorted(parts.NEAR_SYMMETRIC))}")
     renderers = [r for r in args.renderers.split(",") if r]
+    size_sets = [z for z in args.sizes.split(",") if z]
+    if any(z not in SIZE_SETS for z in size_sets):
+        ap.error(f"--sizes: of {', '.join(SIZE_SETS)}")
     rows = []
-    for name in names:
-        model, base = parts.NEAR_SYMMETRIC[name](), parts.base_shape(name)
+    labels = []
+    for size_set, name in [(z, n) for z in size_sets for n in names]:
+        model, base, label = sized(name, size_set)
+        labels.append(label)
         group = symmetry_check(name, model)
-        for scene in make_scenes(name, renderers, views, piles, seeds, frames):
+        for scene in make_scenes(name, renderers, views, piles, seeds, frames, size_set):
             row = judge(scene, model, base, group)
             rows.append(row)
             verdict = "no pose" if not row["pose"] else ("pick-grade" if row["pick_grade"] else "WRONG")
@@ -511,7 +569,7 @@ def main(argv: Optional[list[str]] = None) -> int:
             )
     negatives = run_negatives(names, frames)
     rel = reliability(rows)
-    lines = ["## Near-symmetric parts (first pose per scene)", "", *table(rows, names), ""]
+    lines = ["## Near-symmetric parts (first pose per scene)", "", *table(rows, labels), ""]
     lines += [
         "## Reliability of confidence (all poses)",
         "",
@@ -552,7 +610,7 @@ def main(argv: Optional[list[str]] = None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     doc = {"scenes": rows, "negatives": negatives, "reliability": rel, "totals": s, "targets": TARGETS}
     (out / "near_symmetric.json").write_text(json.dumps(doc, indent=1))
-    plot(rows, names, rel, out / "near_symmetric.png")
+    plot(rows, labels, rel, out / "near_symmetric.png")
     print(f"\nwrote {out / 'near_symmetric.json'} and {out / 'near_symmetric.png'}", file=sys.stderr)
     return 0
 
