@@ -83,12 +83,11 @@ pub(super) fn near_symmetries(
     // One representative per class modulo the proper group, the identity's class left out.
     let mut classes: Vec<Rot> = proper.rotations.clone();
     let mut near_axis: Option<V3> = None;
-    let broken = groups.lenient.as_ref().map(|g| (g.clone(), true));
-    let near = (matcher.detect(), false);
-    for (group, lenient) in broken.into_iter().chain(std::iter::once(near)) {
+    let near = matcher.detect();
+    for group in groups.lenient.iter().chain(std::iter::once(&near)) {
         let c = group.center;
         if let (Some(a), None, None) = (group.continuous_axis, proper.continuous_axis, near_axis) {
-            if let Some(n) = continuous(points, &matcher, &a, &c, cfg, lenient) {
+            if let Some(n) = continuous(points, &matcher, &a, &c, cfg) {
                 near_axis = Some(a);
                 found.push(n);
             }
@@ -115,7 +114,7 @@ pub(super) fn near_symmetries(
             // The closure of the near turns holds products that map much less: not near ones. A
             // turn that maps as much as a symmetry is a near one when it leaves a feature (the
             // proper search refused it for that), else a symmetry that search missed: not near.
-            let symmetry = agreement >= cfg.min_agreement && (!lenient && matcher.feature_free(g, &c));
+            let symmetry = agreement >= cfg.min_agreement && matcher.feature_free(g, &c);
             if agreement < NEAR_AGREEMENT || symmetry {
                 continue;
             }
@@ -134,16 +133,8 @@ pub(super) fn near_symmetries(
 }
 
 /// The continuous near axis `a` through `c`, when its turns map at least [`NEAR_AGREEMENT`] of
-/// the surface and it is no symmetry (it maps less than one, or leaves a feature; an axis of the
-/// `lenient` group left the proper one for a feature already).
-fn continuous(
-    points: &[Point],
-    matcher: &Matcher,
-    a: &V3,
-    c: &Point,
-    cfg: &SymmetryConfig,
-    lenient: bool,
-) -> Option<NearSymmetry> {
+/// the surface and it is no symmetry (it maps less than one, or leaves a feature).
+fn continuous(points: &[Point], matcher: &Matcher, a: &V3, c: &Point, cfg: &SymmetryConfig) -> Option<NearSymmetry> {
     let turns: Vec<Rot> = FEATURE_TURNS_DEG.iter().map(|d| rot(a, d.to_radians())).collect();
     let mut broken = vec![true; points.len()];
     let mut agreement = 1.0f64;
@@ -154,7 +145,7 @@ fn continuous(
             *b &= f;
         }
     }
-    let near_only = lenient || agreement < cfg.min_agreement || turns.iter().any(|r| !matcher.feature_free(r, c));
+    let near_only = agreement < cfg.min_agreement || turns.iter().any(|r| !matcher.feature_free(r, c));
     (agreement >= NEAR_AGREEMENT && near_only).then(|| NearSymmetry {
         center: *c,
         axis: a.normalize(),
