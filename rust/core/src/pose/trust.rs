@@ -117,6 +117,9 @@ pub struct Trust {
     pub evidence: Option<FeatureEvidence>,
 }
 
+/// A near turn (model frame) and whether it is one of a continuous axis's.
+type Turn = (Isometry3<f64>, bool);
+
 /// A candidate pose, refined, and where it came from.
 struct Candidate {
     t_scene_model: Isometry3<f64>,
@@ -184,9 +187,13 @@ pub(super) fn assess(
         .copied()
         .collect();
     let tol0 = fine_tolerance(&sample, model, &est.t_scene_model, judge.tol, p);
-    // Many turns (a continuous near axis): a quick look on a thinned sample picks the finalists
-    // that get the full refinement and comparison.
-    let turns: Vec<(Isometry3<f64>, bool)> = if turns.len() > p.finalists {
+    // Every discrete near turn gets the full refinement and comparison. The many turns of a
+    // continuous near axis get a quick look on a thinned sample, which picks the finalists among
+    // them: with the discrete turns among them too, a thin plate's turns about its face normal
+    // (its faces map onto themselves at any angle) once took all three places from the quarter
+    // turn that was the truth.
+    let (turns, discrete): (Vec<Turn>, Vec<Turn>) = turns.into_iter().partition(|t| t.1);
+    let turns: Vec<Turn> = if turns.len() > p.finalists {
         let quick_cfg = IcpConfig {
             max_iterations: p.quick_iterations,
             ..refine.clone()
@@ -209,6 +216,7 @@ pub(super) fn assess(
         turns
     };
     let candidates: Vec<Candidate> = std::iter::once((Isometry3::identity(), false))
+        .chain(discrete)
         .chain(turns)
         .filter_map(|(turn, continuous)| {
             Some(Candidate {
