@@ -33,7 +33,8 @@ and reported as n/a where the installed binpick has no such field.
     PYTHONPATH=python python benches/near_symmetric.py [--quick] [--views N] [--piles N]
         [--seeds 0,1] [--part NAME] [--renderers sim,ray] [--sizes default,a,b] [--out DIR]
 
-``--sizes`` adds the parts at other sizes (:data:`SIZE_SETS`), labelled ``name[set]``.
+``--sizes`` picks the sets of sizes the parts are made at (:data:`SIZE_SETS`; ``default,a,b`` for
+all three), each other than the default labelled ``name[set]``.
 
 Writes ``OUT/near_symmetric.json`` (every scene) and ``OUT/near_symmetric.png`` (reliability
 diagram and per-part bars).

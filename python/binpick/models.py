@@ -334,7 +334,7 @@ class Model:
 
     @property
     def near_symmetries(self) -> list[NearSymmetry]:
-        """Rotations that map most (at least 85 %) of the surface onto itself without being
+        """Rotations that map most (at least 80 %) of the surface onto itself without being
         symmetries, strongest first, each with the model points that break it: the poses a scan
         must tell apart by the feature."""
         return [

@@ -24,8 +24,12 @@ use std::f64::consts::TAU;
 pub struct TrustParams {
     /// Turns tried about a continuous near axis (evenly spaced). Default 24 (every 15°).
     pub continuous_turns: usize,
-    /// With more turns than this, a quick look picks this many finalists. Default 3.
+    /// A continuous near axis's turns (every discrete near turn is compared in full, up to
+    /// `max_discrete`): with more than this, a quick look picks this many finalists. Default 3.
     pub finalists: usize,
+    /// Discrete near turns compared in full, at most; with more (a part whose small feature
+    /// breaks a large group), they join the quick look. Default 8.
+    pub max_discrete: usize,
     /// Scan points of the quick look's refinement, at most (its comparison uses as many as a
     /// refinement). Default 400.
     pub quick_points: usize,
@@ -63,6 +67,7 @@ impl Default for TrustParams {
         TrustParams {
             continuous_turns: 24,
             finalists: 3,
+            max_discrete: 8,
             quick_points: 400,
             quick_iterations: 6,
             refine_points: 1500,
@@ -192,7 +197,10 @@ pub(super) fn assess(
     // them: with the discrete turns among them too, a thin plate's turns about its face normal
     // (its faces map onto themselves at any angle) once took all three places from the quarter
     // turn that was the truth.
-    let (turns, discrete): (Vec<Turn>, Vec<Turn>) = turns.into_iter().partition(|t| t.1);
+    let (mut turns, mut discrete): (Vec<Turn>, Vec<Turn>) = turns.into_iter().partition(|t| t.1);
+    if discrete.len() > p.max_discrete {
+        turns.append(&mut discrete);
+    }
     let turns: Vec<Turn> = if turns.len() > p.finalists {
         let quick_cfg = IcpConfig {
             max_iterations: p.quick_iterations,

@@ -33,7 +33,12 @@ impl HeightMap {
     /// The height map of `points` with cells of `cell` mm (enlarged if the grid would exceed
     /// 4 million cells).
     pub fn new(points: &[Point], up: &Vector3<f64>, cell: f64) -> Self {
-        let mut map = HeightMap::layout(points, up, cell);
+        HeightMap::layout(points, up, cell).filled(points)
+    }
+
+    /// This grid (from [`HeightMap::layout`]) with the highest of `points` in each cell.
+    fn filled(self, points: &[Point]) -> Self {
+        let mut map = self;
         map.top = vec![[0.0; 3]; map.size.0 * map.size.1];
         map.height = vec![f32::NAN; map.size.0 * map.size.1];
         for p in points {
@@ -100,7 +105,7 @@ impl HeightMap {
                 }
             }
             if gaps(&occupied, grid.size) <= 0.2 || c >= 8.0 * cell {
-                return HeightMap::new(points, up, c);
+                return grid.filled(points);
             }
             c *= 1.5;
         }

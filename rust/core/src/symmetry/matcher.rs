@@ -98,10 +98,10 @@ impl<'a> Matcher<'a> {
     }
 
     /// The sample nearest `m` and the signed distance of `m` from its tangent plane, when that
-    /// distance is within `tol` and its normal agrees with `nr`. With `fallback`, a few further
-    /// neighbours are tried when the nearest disagrees.
+    /// distance is within `tol` and its normal agrees with `nr` (any normal for `None`). With
+    /// `fallback`, a few further neighbours are tried when the nearest disagrees.
     #[inline]
-    fn correspond(&self, m: &Point, nr: &V3, tol: f64, fallback: bool) -> Option<(usize, f64)> {
+    fn correspond(&self, m: &Point, nr: Option<&V3>, tol: f64, fallback: bool) -> Option<(usize, f64)> {
         let q = [m.x, m.y, m.z];
         let (j, _) = self
             .tree
@@ -109,7 +109,8 @@ impl<'a> Matcher<'a> {
             .or_else(|| self.tree.nearest_within(&q, self.reach2))?;
         let agrees = |j: usize| {
             let r = self.normals[j].dot(&(m - self.points[j]));
-            (nr.dot(&self.normals[j]) > MIN_NORMAL_DOT && r.abs() <= tol).then_some((j, r))
+            let facing = nr.is_none_or(|n| n.dot(&self.normals[j]) > MIN_NORMAL_DOT);
+            (facing && r.abs() <= tol).then_some((j, r))
         };
         if let Some(hit) = agrees(j) {
             return Some(hit);
@@ -132,7 +133,10 @@ impl<'a> Matcher<'a> {
         let mut fails = 0;
         for &i in &self.test {
             let m = c + r * (self.points[i] - c);
-            if self.correspond(&m, &(r * self.normals[i]), self.tol, true).is_none() {
+            if self
+                .correspond(&m, Some(&(r * self.normals[i])), self.tol, true)
+                .is_none()
+            {
                 fails += 1;
                 if fails > allowed {
                     return 0.0;
@@ -150,7 +154,7 @@ impl<'a> Matcher<'a> {
             .zip(&self.normals)
             .map(|(p, n)| {
                 let m = c + r * (p - c);
-                self.correspond(&m, &(r * n), self.tol, true).is_none()
+                self.correspond(&m, Some(&(r * n)), self.tol, true).is_none()
             })
             .collect()
     }
@@ -170,42 +174,31 @@ impl<'a> Matcher<'a> {
     /// normals are not asked, so a sample turned onto an edge or a facet of a tessellated round
     /// is never absent). The agreement alone lets a feature pass that covers less than
     /// `1 − min_agreement` of the surface — a 3 mm cut corner on a 100 mm plate is 0.3 % of it —
-    /// however plainly a scan shows it. Tested on an even subsample of at most
-    /// [`FEATURE_SAMPLES`] points (the patch size scaled to its spacing).
+    /// however plainly a scan shows it. Beyond [`FEATURE_SAMPLES`] samples every k-th is tested
+    /// (sampled surfaces come in random order) with links k^½ times longer, so the smallest
+    /// patch found grows k-fold in area.
     pub(super) fn feature_free(&self, r: &Rot, c: &Point) -> bool {
         let n = self.points.len();
         let stride = n.div_ceil(FEATURE_SAMPLES).max(1);
         let inverse = r.inverse();
-        let absent: Vec<Point> = self
+        let absent = |m: Point| self.correspond(&m, None, self.tol, true).is_none();
+        let off: Vec<Point> = self
             .points
             .iter()
             .step_by(stride)
-            .filter(|p| self.absent(&(c + r * (*p - c))) || self.absent(&(c + inverse * (*p - c))))
+            .filter(|p| absent(c + r * (*p - c)) || absent(c + inverse * (*p - c)))
             .copied()
             .collect();
         let link = 2.0 * self.spacing * (stride as f64).sqrt();
-        largest_cluster(&absent, link) < MIN_FEATURE_SAMPLES
+        !has_patch(&off, link, MIN_FEATURE_SAMPLES)
     }
 
-    /// Whether no sample near `m` (the nearest, else up to [`FALLBACK_NEIGHBOURS`] within reach)
-    /// has its tangent plane within the tolerance of `m`.
-    fn absent(&self, m: &Point) -> bool {
-        let on = |j: usize| self.normals[j].dot(&(m - self.points[j])).abs() <= self.tol;
-        let q = [m.x, m.y, m.z];
-        match self
-            .tree
-            .nearest_within(&q, self.near2)
-            .or_else(|| self.tree.nearest_within(&q, self.reach2))
-        {
-            None => true,
-            Some((j, _)) if on(j) => false,
-            Some(_) => !self
-                .kd
-                .knn(m, FALLBACK_NEIGHBOURS)
-                .iter()
-                .take_while(|nb| nb.distance_squared <= self.reach2)
-                .any(|nb| on(nb.index)),
-        }
+    /// Whether every turn by [`CONTINUOUS_ANGLES_DEG`] about the axis `a` through `c` leaves no
+    /// feature (see [`Matcher::feature_free`]).
+    pub(super) fn axis_feature_free(&self, a: &V3, c: &Point) -> bool {
+        CONTINUOUS_ANGLES_DEG
+            .iter()
+            .all(|d| self.feature_free(&rot(a, d.to_radians()), c))
     }
 
     /// Whether the rotations of `group` (and turns about its continuous axis) leave a feature:
@@ -221,11 +214,8 @@ impl<'a> Matcher<'a> {
             generators.push(*r);
             spanned = close(&generators, self.max_group()).unwrap_or_else(|| group.rotations.clone());
         }
-        let turns = group
-            .continuous_axis
-            .iter()
-            .flat_map(|a| CONTINUOUS_ANGLES_DEG.iter().map(move |d| rot(a, d.to_radians())));
-        generators.into_iter().chain(turns).any(|r| !self.feature_free(&r, &c))
+        generators.into_iter().any(|r| !self.feature_free(&r, &c))
+            || group.continuous_axis.is_some_and(|a| !self.axis_feature_free(&a, &c))
     }
 
     /// Mean over the screening subsample of `1 − (d / 2 tol)²` (0 for points beyond 2 tol or with
@@ -236,7 +226,7 @@ impl<'a> Matcher<'a> {
         let mut sum = 0.0;
         for (k, &i) in self.test[..self.screen].iter().enumerate() {
             let m = c + r * (self.points[i] - c);
-            if let Some((_, d)) = self.correspond(&m, &(r * self.normals[i]), wide, false) {
+            if let Some((_, d)) = self.correspond(&m, Some(&(r * self.normals[i])), wide, false) {
                 let e = d / wide;
                 sum += 1.0 - e * e;
             }
@@ -268,7 +258,8 @@ impl<'a> Matcher<'a> {
                 for &i in &self.test[..self.refine] {
                     let d = rm * (self.points[i] - c);
                     let m = c + d;
-                    let Some((j, res)) = self.correspond(&m, &(r * self.normals[i]), 3.0 * self.tol, false) else {
+                    let Some((j, res)) = self.correspond(&m, Some(&(r * self.normals[i])), 3.0 * self.tol, false)
+                    else {
                         continue;
                     };
                     let nj = self.normals[j];

@@ -11,13 +11,13 @@
 //!    farthest from the centre are candidates too.
 //! 2. A rotation is tested by mapping a subsample and counting the points that land within the
 //!    tolerance of the surface (the tangent plane of the nearest sample) with agreeing normals.
-//!    The group found is then checked for features: where one of its generators maps a patch of
-//!    samples off the surface (a detail too small for the count to notice), the search runs again
-//!    with every rotation held to that check as well.
 //!    A soft score on a small subsample screens candidates; survivors get their axis line
 //!    (direction and position) refined by point-to-plane least squares, then face the full test.
 //!    An n-fold axis must pass every divisor of n as well, and an axis passing four incommensurate
-//!    angles (7°, 23°, 61°, 131°) is continuous.
+//!    angles (7°, 23°, 61°, 131°) is continuous. The group found is then checked for features:
+//!    where one of its generators (or its axis's turns) maps a patch of samples off the surface —
+//!    a detail too small for the count to notice — the search runs again with every rotation held
+//!    to that check as well (a part with such a feature takes about twice as long).
 //! 3. The accepted rotations are closed into a group, which is recognised (cyclic, dihedral,
 //!    tetrahedral, octahedral, icosahedral) and rebuilt exactly from its axes, so that products
 //!    of elements are again elements to rounding — [`Symmetries::canonical`] relies on that. A
@@ -248,7 +248,8 @@ impl Symmetries {
 /// Detects the proper symmetries of a part from its surface samples (mm, model frame) and their
 /// outward normals, as given by `model::sample_surface`. The sample should be even (area-uniform)
 /// and dense enough to resolve the details that break symmetries; a few thousand points suffice
-/// for most parts, and detection then takes milliseconds to tens of milliseconds.
+/// for most parts, and detection then takes milliseconds to tens of milliseconds (about twice as
+/// long for a part whose small feature breaks a turn the count alone lets pass).
 pub fn detect_symmetries(points: &[Point], normals: &[Vector3<f64>], cfg: &SymmetryConfig) -> Result<Symmetries> {
     let unit = unit_normals(points, normals, cfg)?;
     Ok(detect_groups(points, unit, cfg)?.proper)
@@ -356,38 +357,40 @@ fn unit_normals(points: &[Point], normals: &[Vector3<f64>], cfg: &SymmetryConfig
 /// symmetry ([`Matcher::feature_free`]): about three samples across, a patch the even sampling
 /// does not leave by chance (none of the parts measured, the built-in fittings, shapes and
 /// meshes of 4k–135k samples, leaves more than 4 where the turn is a symmetry), and a feature
-/// of about 8 spacings² — 5 mm² at the default 0.8 mm samples — that a scan can show.
+/// of about 8 spacings² — 5 mm² at the built-in parts' 0.8 mm samples — that a scan can show
+/// (up to [`FEATURE_SAMPLES`] samples; coarser beyond).
 const MIN_FEATURE_SAMPLES: usize = 8;
 
 /// Samples a feature check looks at, at most (an even subsample beyond).
 const FEATURE_SAMPLES: usize = 40_000;
 
-/// Size of the largest group of `points` linked by steps of at most `link`.
-fn largest_cluster(points: &[Point], link: f64) -> usize {
-    if points.is_empty() {
-        return 0;
+/// Whether some group of at least `min` of `points`, linked by steps of at most `link`, exists.
+fn has_patch(points: &[Point], link: f64, min: usize) -> bool {
+    if points.len() < min {
+        return false;
     }
     let index = KdIndex::new(points);
-    let mut label = vec![usize::MAX; points.len()];
-    let mut largest = 0;
+    let mut seen = vec![false; points.len()];
     for start in 0..points.len() {
-        if label[start] != usize::MAX {
+        if seen[start] {
             continue;
         }
-        label[start] = start;
+        seen[start] = true;
         let (mut stack, mut size) = (vec![start], 0);
         while let Some(i) = stack.pop() {
             size += 1;
+            if size >= min {
+                return true;
+            }
             for nb in index.within(&points[i], link) {
-                if label[nb.index] == usize::MAX {
-                    label[nb.index] = start;
+                if !seen[nb.index] {
+                    seen[nb.index] = true;
                     stack.push(nb.index);
                 }
             }
         }
-        largest = largest.max(size);
     }
-    largest
+    false
 }
 
 /// Rotation by `angle` about `axis` (any length but zero).

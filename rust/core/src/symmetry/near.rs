@@ -3,16 +3,18 @@
 //! boss stands proud of the run), and the surface regions that break each one — the feature a
 //! scan must show to tell the poses apart.
 //!
-//! They are found as the symmetry group of the same sample at a lower agreement
-//! ([`NEAR_AGREEMENT`]): its elements (and a continuous axis) that the proper group lacks are the
-//! near-symmetries, one per class modulo the proper group.
+//! They are the rotations (and a continuous axis) that the proper group lacks, one per class
+//! modulo it, of two groups: the one found at the symmetry's agreement before a small feature
+//! took some of its turns out of the proper group, and the one found at a lower agreement
+//! ([`NEAR_AGREEMENT`]).
 
 use super::matcher::Matcher;
 use super::*;
 
 /// A rotation is a near-symmetry when it maps at least this fraction of the surface onto itself
-/// (and less than a symmetry's [`SymmetryConfig::min_agreement`]). A flange's turn by one bolt
-/// pitch maps about 84 % of it when one locating hole breaks the pattern: 0.8 keeps it.
+/// and is no symmetry (it maps less than [`SymmetryConfig::min_agreement`], or leaves a feature).
+/// A flange's turn by one bolt pitch maps about 84 % of it when one locating hole breaks the
+/// pattern: 0.8 keeps it.
 pub const NEAR_AGREEMENT: f64 = 0.8;
 /// Turns of a continuous near axis whose failures intersect to its feature, degrees.
 const FEATURE_TURNS_DEG: [f64; 3] = [61.0, 131.0, 180.0];
@@ -21,8 +23,8 @@ const FEATURE_TURNS_DEG: [f64; 3] = [61.0, 131.0, 180.0];
 /// continuous family of them about one axis.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NearSymmetry {
-    /// The point the axis passes through, model frame, mm (the centre of the near group: with
-    /// a feature off-centre it is not the surface centroid).
+    /// The point the axis passes through, model frame, mm (the centre of the group it came from:
+    /// with a feature off-centre it is not the surface centroid).
     pub center: Point,
     /// Unit axis of the rotation, model frame.
     pub axis: Vector3<f64>,
@@ -145,7 +147,7 @@ fn continuous(points: &[Point], matcher: &Matcher, a: &V3, c: &Point, cfg: &Symm
             *b &= f;
         }
     }
-    let near_only = agreement < cfg.min_agreement || turns.iter().any(|r| !matcher.feature_free(r, c));
+    let near_only = agreement < cfg.min_agreement || !matcher.axis_feature_free(a, c);
     (agreement >= NEAR_AGREEMENT && near_only).then(|| NearSymmetry {
         center: *c,
         axis: a.normalize(),

@@ -462,3 +462,23 @@ fn a_feature_smaller_than_the_agreement_allows_still_breaks_the_symmetries_it_mo
         );
     }
 }
+
+#[test]
+fn detecting_both_at_once_gives_what_the_two_detections_give() {
+    let plate = merge(&[
+        cuboid([50.0, 50.0, 3.0], V3::zeros()),
+        cuboid([2.0, 2.0, 1.0], V3::new(40.0, 40.0, 4.0)),
+    ]);
+    let keyed = merge(&[prism(48, 10.0, 40.0), cuboid([1.5, 2.0, 30.0], V3::new(10.5, 0.0, 0.0))]);
+    for mesh in [plate, keyed] {
+        let mesh = TriMesh::new(mesh.0, mesh.1).unwrap();
+        let s = sample_surface(&mesh, Density::Spacing(1.0), 3).unwrap();
+        let cfg = SymmetryConfig::default();
+        let (sym, near) = detect_all_symmetries(&s.points, &s.normals, &cfg).unwrap();
+        let alone = detect_symmetries(&s.points, &s.normals, &cfg).unwrap();
+        assert_eq!(sym, alone);
+        let apart = detect_near_symmetries(&s.points, &s.normals, &alone, &cfg).unwrap();
+        assert!(!near.is_empty());
+        assert_eq!(near, apart);
+    }
+}
