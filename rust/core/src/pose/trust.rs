@@ -125,6 +125,10 @@ pub struct Trust {
 /// A near turn (model frame) and whether it is one of a continuous axis's.
 type Turn = (Isometry3<f64>, bool);
 
+/// Steps between two turns about a continuous near axis at which the best candidate is tried
+/// turned (every 2.5° for 24 turns; up to half the gap either way).
+const FINE_TURNS: usize = 6;
+
 /// A candidate pose, refined, and where it came from.
 struct Candidate {
     t_scene_model: Isometry3<f64>,
@@ -192,6 +196,7 @@ pub(super) fn assess(
         .copied()
         .collect();
     let tol0 = fine_tolerance(&sample, model, &est.t_scene_model, judge.tol, p);
+    let glance = thin(&judged, p.refine_points);
     // Every discrete near turn gets the full refinement and comparison. The many turns of a
     // continuous near axis get a quick look on a thinned sample, which picks the finalists among
     // them: with the discrete turns among them too, a thin plate's turns about its face normal
@@ -209,7 +214,6 @@ pub(super) fn assess(
         // Each turn is scored by how many judged points it fits, on as many as a refinement
         // uses: a flange's notch is a few dozen of them, and among 400 it was left to chance.
         let few = thin(&sample, p.quick_points);
-        let glance = thin(&judged, p.refine_points);
         let mut quick: Vec<(usize, (Isometry3<f64>, bool))> = turns
             .into_iter()
             .filter_map(|(turn, continuous)| {
@@ -242,23 +246,49 @@ pub(super) fn assess(
     }
     let tol = fine_tolerance(&sample, model, &candidates[0].t_scene_model, judge.tol, p);
     let per_probe = local.len() as f64 / e0.seen.max(1) as f64;
-    let scored: Vec<Scored> = candidates
-        .iter()
-        .map(|c| {
-            let e = judge.evidence(model, &c.t_scene_model);
-            let judged_ok = judge.check(&e, model, &c.t_scene_model, cfg).is_ok();
-            let fits = fit_flags(&judged, model, &c.t_scene_model, tol);
-            Scored {
-                evidence: evidence_of(&fits, tol, e.violated, per_probe),
-                judged_ok,
-                fits,
+    let score_of = |t: &Isometry3<f64>| {
+        let e = judge.evidence(model, t);
+        let fits = fit_flags(&judged, model, t, tol);
+        Scored {
+            evidence: evidence_of(&fits, tol, e.violated, per_probe),
+            judged_ok: judge.check(&e, model, t, cfg).is_ok(),
+            fits,
+        }
+    };
+    let mut candidates = candidates;
+    let mut scored: Vec<Scored> = candidates.iter().map(|c| score_of(&c.t_scene_model)).collect();
+    let pick = |scored: &[Scored]| {
+        (0..scored.len())
+            .filter(|&i| scored[i].judged_ok || i == 0)
+            .max_by(|&a, &b| scored[a].evidence.score.total_cmp(&scored[b].evidence.score))
+            .unwrap_or(0)
+    };
+    let mut best = pick(&scored);
+    // About a continuous near axis the turns lie 15° apart, and a small feature (a 3 mm slot in
+    // a 50 mm disc) pulls the refinement too weakly to bring the nearest turn all the way onto
+    // it: the best candidate is turned by finer steps either way, and the turn that fits more of
+    // the glance is refined and compared too.
+    if let Some(axis) = model.near_symmetries.iter().find(|n| n.angle.is_none()) {
+        let around = candidates[best].t_scene_model;
+        let glanced = |t: &Isometry3<f64>| fit_flags(&glance, model, t, tol).into_iter().filter(|&f| f).count();
+        let step = TAU / (FINE_TURNS * p.continuous_turns.max(2)) as f64;
+        let finer = (1..FINE_TURNS / 2 + 1)
+            .flat_map(|k| [k as f64, -(k as f64)])
+            .map(|k| around * axis.transform(k * step))
+            .map(|t| (glanced(&t), t))
+            .max_by_key(|g| g.0);
+        if let Some((_, t)) = finer.filter(|g| g.0 > glanced(&around)) {
+            if let Ok(r) = icp(&sample, model.fine_target(), &t.inverse(), &refine) {
+                let t = r.t_target_source.inverse();
+                candidates.push(Candidate {
+                    t_scene_model: t,
+                    continuous: true,
+                });
+                scored.push(score_of(&t));
+                best = pick(&scored);
             }
-        })
-        .collect();
-    let best = (0..candidates.len())
-        .filter(|&i| scored[i].judged_ok || i == 0)
-        .max_by(|&a, &b| scored[a].evidence.score.total_cmp(&scored[b].evidence.score))
-        .unwrap_or(0);
+        }
+    }
     let top = &scored[best];
     let kept = candidates[best].t_scene_model;
     let mut alternatives: Vec<Alternative> = Vec::new();
