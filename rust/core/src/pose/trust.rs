@@ -214,7 +214,7 @@ pub(super) fn assess(
         // Each turn is scored by how many judged points it fits, on as many as a refinement
         // uses: a flange's notch is a few dozen of them, and among 400 it was left to chance.
         let few = thin(&sample, p.quick_points);
-        let mut quick: Vec<(usize, (Isometry3<f64>, bool))> = turns
+        let mut quick: Vec<(usize, Turn)> = turns
             .into_iter()
             .filter_map(|(turn, continuous)| {
                 let t = polish(&turn, &few, &quick_cfg)?;

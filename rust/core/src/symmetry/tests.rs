@@ -362,6 +362,16 @@ fn bad_input_is_rejected() {
     assert_eq!(none.transforms(0.1).len(), 1);
 }
 
+/// How many of the feature samples of `n` lie within `radius` of `centre` or of its image
+/// under the turn.
+fn samples_at(n: &NearSymmetry, centre: V3, radius: f64) -> usize {
+    let image = n.transform(0.0) * Point::from(centre);
+    n.feature
+        .iter()
+        .filter(|p| (p.coords - centre).norm() < radius || (*p - image).norm() < radius)
+        .count()
+}
+
 /// Near-symmetries of `mesh` (sampled every `spacing` mm), with its proper group.
 fn near_of(mesh: Mesh, spacing: f64) -> (Symmetries, Vec<NearSymmetry>) {
     let mesh = TriMesh::new(mesh.0, mesh.1).unwrap();
@@ -389,12 +399,7 @@ fn a_block_with_a_boss_has_its_three_half_turns_as_near_symmetries_broken_at_the
         assert!([V3::x(), V3::y(), V3::z()].iter().any(|a| n.axis.dot(a).abs() > 0.999));
         assert!(n.agreement >= NEAR_AGREEMENT && n.agreement < 0.98, "{}", n.agreement);
         // The feature is the boss and the place it maps to: near the boss or its image.
-        let image = n.transform(0.0) * Point::from(boss_centre);
-        let near_boss = n
-            .feature
-            .iter()
-            .filter(|p| (p.coords - boss_centre).norm() < 9.0 || (*p - image).norm() < 9.0)
-            .count();
+        let near_boss = samples_at(n, boss_centre, 9.0);
         assert!(
             near_boss as f64 > 0.9 * n.feature.len() as f64,
             "{near_boss} of {}",
@@ -449,12 +454,7 @@ fn a_feature_smaller_than_the_agreement_allows_still_breaks_the_symmetries_it_mo
     let square: Vec<&NearSymmetry> = near.iter().filter(|n| n.agreement >= 0.98).collect();
     assert_eq!(square.len(), 7, "{near:?}");
     for n in square {
-        let image = n.transform(0.0) * Point::from(boss_centre);
-        let at_boss = n
-            .feature
-            .iter()
-            .filter(|p| (p.coords - boss_centre).norm() < 6.0 || (*p - image).norm() < 6.0)
-            .count();
+        let at_boss = samples_at(n, boss_centre, 6.0);
         assert!(
             at_boss >= 8,
             "{at_boss} of {} feature samples at the boss",
