@@ -170,7 +170,8 @@ impl<'a> Matcher<'a> {
 
     /// Whether `r` about `c` leaves no feature: no patch of [`MIN_FEATURE_SAMPLES`] samples
     /// (linked within two spacings) that `r` or its inverse maps where the part has no surface
-    /// (no sample among the nearest within reach whose tangent plane passes within the tolerance;
+    /// (no sample among the nearest within reach whose tangent plane passes within
+    /// [`FEATURE_TOLERANCE`] of the tolerance;
     /// normals are not asked, so a sample turned onto an edge or a facet of a tessellated round
     /// is never absent). The agreement alone lets a feature pass that covers less than
     /// `1 − min_agreement` of the surface — a 3 mm cut corner on a 100 mm plate is 0.3 % of it —
@@ -180,17 +181,23 @@ impl<'a> Matcher<'a> {
     pub(super) fn feature_free(&self, r: &Rot, c: &Point) -> bool {
         let n = self.points.len();
         let stride = n.div_ceil(FEATURE_SAMPLES).max(1);
-        let inverse = r.inverse();
-        let absent = |m: Point| self.correspond(&m, None, self.tol, true).is_none();
         let off: Vec<Point> = self
             .points
             .iter()
             .step_by(stride)
-            .filter(|p| absent(c + r * (*p - c)) || absent(c + inverse * (*p - c)))
+            .filter(|p| self.absent(r, c, p))
             .copied()
             .collect();
         let link = 2.0 * self.spacing * (stride as f64).sqrt();
         !has_patch(&off, link, MIN_FEATURE_SAMPLES)
+    }
+
+    /// Whether `r` about `c`, or its inverse, maps `p` where the part has no surface within
+    /// [`FEATURE_TOLERANCE`] of the tolerance (the test of [`Matcher::feature_free`]).
+    pub(super) fn absent(&self, r: &Rot, c: &Point, p: &Point) -> bool {
+        let tol = FEATURE_TOLERANCE * self.tol;
+        let gone = |m: Point| self.correspond(&m, None, tol, true).is_none();
+        gone(c + r * (p - c)) || gone(c + r.inverse() * (p - c))
     }
 
     /// Whether every turn by [`CONTINUOUS_ANGLES_DEG`] about the axis `a` through `c` leaves no

@@ -120,6 +120,13 @@ pub(super) fn near_symmetries(
             if agreement < NEAR_AGREEMENT || symmetry {
                 continue;
             }
+            if agreement >= cfg.min_agreement {
+                // Near only for its feature, which may lie within the tolerance the agreement
+                // counts at (it is sought at a finer one): the feature is what that check saw.
+                for (f, p) in fails.iter_mut().zip(points) {
+                    *f |= matcher.absent(g, &c, p);
+                }
+            }
             let (axis, angle) = g.axis_angle().map_or((V3::z(), 0.0), |(u, t)| (u.into_inner(), t));
             found.push(NearSymmetry {
                 center: c,
@@ -148,6 +155,12 @@ fn continuous(points: &[Point], matcher: &Matcher, a: &V3, c: &Point, cfg: &Symm
         }
     }
     let near_only = agreement < cfg.min_agreement || !matcher.axis_feature_free(a, c);
+    if agreement >= cfg.min_agreement && near_only {
+        // As for a discrete turn: the feature is what the finer check saw.
+        for (b, p) in broken.iter_mut().zip(points) {
+            *b = *b || turns.iter().all(|r| matcher.absent(r, c, p));
+        }
+    }
     (agreement >= NEAR_AGREEMENT && near_only).then(|| NearSymmetry {
         center: *c,
         axis: a.normalize(),

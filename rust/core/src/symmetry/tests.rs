@@ -13,14 +13,21 @@ fn cuboid(half: [f64; 3], offset: V3) -> Mesh {
 
 /// A right prism over a regular `sides`-gon with a vertex on +x, axis z, centred at the origin.
 fn prism(sides: usize, radius: f64, half_height: f64) -> Mesh {
+    let polygon: Vec<(f64, f64)> = (0..sides)
+        .map(|k| TAU * k as f64 / sides as f64)
+        .map(|a| (radius * a.cos(), radius * a.sin()))
+        .collect();
+    prism_over(&polygon, half_height)
+}
+
+/// A right prism over a convex counter-clockwise `polygon` around the origin, axis z, centred
+/// at the origin.
+fn prism_over(polygon: &[(f64, f64)], half_height: f64) -> Mesh {
     let mut v = vec![Point::new(0.0, 0.0, -half_height), Point::new(0.0, 0.0, half_height)];
     for z in [-half_height, half_height] {
-        for k in 0..sides {
-            let a = TAU * k as f64 / sides as f64;
-            v.push(Point::new(radius * a.cos(), radius * a.sin(), z));
-        }
+        v.extend(polygon.iter().map(|&(x, y)| Point::new(x, y, z)));
     }
-    let n = sides as u32;
+    let n = polygon.len() as u32;
     let (b, t) = (|k: u32| 2 + k % n, |k: u32| 2 + n + k % n);
     let mut f = Vec::new();
     for k in 0..n {
@@ -461,6 +468,42 @@ fn a_feature_smaller_than_the_agreement_allows_still_breaks_the_symmetries_it_mo
             n.feature.len()
         );
     }
+}
+
+#[test]
+fn a_flat_half_as_deep_as_the_tolerance_allows_twice_over_still_breaks_the_half_turn() {
+    // A 60 mm shaft of radius 6 mm with a flat 1 mm deep along its whole length (a D-shaft),
+    // sampled every 0.8 mm (a tolerance of about 0.65 mm). Its only symmetry is the half turn
+    // about the flat's normal (x). A half turn about the shaft's axis, about a centre the flat
+    // displaced by 0.2 mm, puts the flat about 0.6 mm from the round side and passed at the full
+    // tolerance; the turns about the axis are near-symmetries, broken along the flat.
+    let polygon: Vec<(f64, f64)> = (0..120)
+        .map(|k| TAU * k as f64 / 120.0)
+        .map(|a| ((6.0 * a.cos()).min(5.0), 6.0 * a.sin()))
+        .fold(Vec::new(), |mut p: Vec<(f64, f64)>, q| {
+            if p.last().is_none_or(|l| (l.0 - q.0).abs() + (l.1 - q.1).abs() > 1e-9) {
+                p.push(q);
+            }
+            p
+        });
+    let (sym, near) = near_of(prism_over(&polygon, 30.0), 0.8);
+    assert_eq!(sym.rotations.len(), 2, "{sym:?}");
+    let flip = sym.rotations[1];
+    assert!(
+        (flip.angle() - PI).abs() < 1e-6 && flip.axis().unwrap().x.abs() > 0.999,
+        "{flip:?}"
+    );
+    let turn = near
+        .iter()
+        .filter(|n| n.angle.is_some_and(|a| a > 0.5 * PI) && n.axis.z.abs() > 0.999)
+        .max_by(|a, b| a.agreement.total_cmp(&b.agreement))
+        .expect("a turn about the axis is a near-symmetry");
+    let on_flat = turn.feature.iter().filter(|p| p.x.abs() > 4.5).count();
+    assert!(
+        on_flat >= 8 && on_flat * 2 >= turn.feature.len(),
+        "{on_flat} of {} feature samples on the flat or its image",
+        turn.feature.len()
+    );
 }
 
 #[test]
