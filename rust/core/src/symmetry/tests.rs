@@ -471,7 +471,7 @@ fn a_feature_smaller_than_the_agreement_allows_still_breaks_the_symmetries_it_mo
 }
 
 #[test]
-fn a_flat_half_as_deep_as_the_tolerance_allows_twice_over_still_breaks_the_half_turn() {
+fn a_flat_that_its_own_displaced_centre_halves_still_breaks_the_half_turn_about_the_axis() {
     // A 60 mm shaft of radius 6 mm with a flat 1 mm deep along its whole length (a D-shaft),
     // sampled every 0.8 mm (a tolerance of about 0.65 mm). Its only symmetry is the half turn
     // about the flat's normal (x). A half turn about the shaft's axis, about a centre the flat
