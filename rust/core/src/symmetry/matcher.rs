@@ -160,12 +160,22 @@ impl<'a> Matcher<'a> {
     }
 
     fn passes(&self, r: &Rot, c: &Point) -> bool {
-        self.accepts(r, c, self.agreement(r, c))
+        self.passes_as(r, c, false)
+    }
+
+    /// [`Matcher::passes`] for a discrete turn, or (`continuous`) one of a continuous axis's.
+    fn passes_as(&self, r: &Rot, c: &Point, continuous: bool) -> bool {
+        self.accepts_as(r, c, self.agreement(r, c), continuous)
     }
 
     /// Whether `r` about `c`, mapping `agreement` of the test subsample, is a symmetry.
     fn accepts(&self, r: &Rot, c: &Point, agreement: f64) -> bool {
-        agreement >= self.min_agreement && (!self.strict || self.feature_free(r, c))
+        self.accepts_as(r, c, agreement, false)
+    }
+
+    /// [`Matcher::accepts`] for a discrete turn, or (`continuous`) one of a continuous axis's.
+    fn accepts_as(&self, r: &Rot, c: &Point, agreement: f64, continuous: bool) -> bool {
+        agreement >= self.min_agreement && (!self.strict || self.feature_free_as(r, c, continuous))
     }
 
     /// Whether `r` about `c` leaves no feature: no patch of [`MIN_FEATURE_SAMPLES`] samples
@@ -179,13 +189,19 @@ impl<'a> Matcher<'a> {
     /// (sampled surfaces come in random order) with links k^½ times longer, so the smallest
     /// patch found grows k-fold in area.
     pub(super) fn feature_free(&self, r: &Rot, c: &Point) -> bool {
+        self.feature_free_as(r, c, false)
+    }
+
+    /// [`Matcher::feature_free`] for a discrete turn, or (`continuous`) one of a continuous
+    /// axis's (see [`feature_share`]).
+    fn feature_free_as(&self, r: &Rot, c: &Point, continuous: bool) -> bool {
         let n = self.points.len();
         let stride = n.div_ceil(FEATURE_SAMPLES).max(1);
         let off: Vec<Point> = self
             .points
             .iter()
             .step_by(stride)
-            .filter(|p| self.absent(r, c, p))
+            .filter(|p| self.absent(r, c, p, continuous))
             .copied()
             .collect();
         let link = 2.0 * self.spacing * (stride as f64).sqrt();
@@ -193,9 +209,10 @@ impl<'a> Matcher<'a> {
     }
 
     /// Whether `r` about `c`, or its inverse, maps `p` where the part has no surface within
-    /// [`FEATURE_TOLERANCE`] of the tolerance (the test of [`Matcher::feature_free`]).
-    pub(super) fn absent(&self, r: &Rot, c: &Point, p: &Point) -> bool {
-        let tol = FEATURE_TOLERANCE * self.tol;
+    /// [`feature_share`] of the tolerance (the test of [`Matcher::feature_free`]; `continuous`
+    /// for a turn of a continuous axis).
+    pub(super) fn absent(&self, r: &Rot, c: &Point, p: &Point, continuous: bool) -> bool {
+        let tol = feature_share(continuous) * self.tol;
         let gone = |m: Point| self.correspond(&m, None, tol, true).is_none();
         gone(c + r * (p - c)) || gone(c + r.inverse() * (p - c))
     }
@@ -205,7 +222,7 @@ impl<'a> Matcher<'a> {
     pub(super) fn axis_feature_free(&self, a: &V3, c: &Point) -> bool {
         CONTINUOUS_ANGLES_DEG
             .iter()
-            .all(|d| self.feature_free(&rot(a, d.to_radians()), c))
+            .all(|d| self.feature_free_as(&rot(a, d.to_radians()), c, true))
     }
 
     /// Whether the rotations of `group` (and turns about its continuous axis) leave a feature:
@@ -308,8 +325,8 @@ impl<'a> Matcher<'a> {
         // Largest first: small turns barely move a compact part, so they only count together.
         let continuous: Vec<f64> = CONTINUOUS_ANGLES_DEG.iter().rev().map(|d| d.to_radians()).collect();
         let soft = |a: &V3, c: &Point, angle: f64| self.soft_score(&rot(a, angle), c, SCREEN_MIN);
-        let mut trials: Vec<(f64, Vec<f64>)> = (2..=self.max_order)
-            .map(|n| (soft(axis, point, TAU / n as f64), vec![TAU / n as f64]))
+        let mut trials: Vec<(f64, Vec<f64>, bool)> = (2..=self.max_order)
+            .map(|n| (soft(axis, point, TAU / n as f64), vec![TAU / n as f64], false))
             .collect();
         let mut all_continuous = f64::INFINITY;
         for &angle in &continuous {
@@ -318,27 +335,29 @@ impl<'a> Matcher<'a> {
                 break;
             }
         }
-        trials.push((all_continuous, continuous[..2].to_vec()));
+        trials.push((all_continuous, continuous[..2].to_vec(), true));
         trials.retain(|t| t.0 >= SCREEN_MIN);
         // The best scores first; among near-equal ones the larger angle pins the axis better.
         trials.sort_by(|x, y| (y.0 + 0.02 * y.1[0]).total_cmp(&(x.0 + 0.02 * x.1[0])));
-        let (mut a, mut c) = trials.iter().take(3).find_map(|(_, angles)| {
+        let (mut a, mut c) = trials.iter().take(3).find_map(|(_, angles, continuous)| {
             let (a, c) = self.refine(axis, point, angles);
-            self.passes(&rot(&a, angles[0]), &c).then_some((a, c))
+            self.passes_as(&rot(&a, angles[0]), &c, *continuous).then_some((a, c))
         })?;
         if known.iter().any(|f| same_line(&f.axis, &a, SAME_AXIS)) {
             return None;
         }
         // The soft score rejects most wrong angles in a fraction of the cost of the full test.
-        let holds = |a: &V3, c: &Point, angle: f64| soft(a, c, angle) >= SCREEN_MIN && self.passes(&rot(a, angle), c);
-        let (order, angles) = if continuous.iter().all(|&angle| holds(&a, &c, angle)) {
+        let holds = |a: &V3, c: &Point, angle: f64, cont: bool| {
+            soft(a, c, angle) >= SCREEN_MIN && self.passes_as(&rot(a, angle), c, cont)
+        };
+        let (order, angles) = if continuous.iter().all(|&angle| holds(&a, &c, angle, true)) {
             (0, continuous.clone())
         } else {
             let mut passing: Vec<usize> = (2..=self.max_order)
-                .filter(|&n| holds(&a, &c, TAU / n as f64))
+                .filter(|&n| holds(&a, &c, TAU / n as f64, false))
                 .collect();
             let l = passing.iter().fold(1, |l, &n| lcm(l, n));
-            if l > self.max_order && l <= 4 * self.max_order && holds(&a, &c, TAU / l as f64) {
+            if l > self.max_order && l <= 4 * self.max_order && holds(&a, &c, TAU / l as f64, false) {
                 passing.push(l);
             }
             // The powers of a true 2π/n turn are symmetries too, so every divisor of n must pass;
@@ -357,7 +376,7 @@ impl<'a> Matcher<'a> {
         // A last refinement on every angle that holds, kept when it still passes.
         let (a2, c2) = self.refine(&a, &c, &angles);
         let mut agreement = self.agreement(&rot(&a2, angles[0]), &c2);
-        if self.accepts(&rot(&a2, angles[0]), &c2, agreement) {
+        if self.accepts_as(&rot(&a2, angles[0]), &c2, agreement, order == 0) {
             (a, c) = (a2, c2);
         } else {
             agreement = self.agreement(&rot(&a, angles[0]), &c);
@@ -641,7 +660,7 @@ impl<'a> Matcher<'a> {
             rotations.push(rot(&u, PI));
         }
         let check = |c: &Point| {
-            self.passes(&rot(&a, CONTINUOUS_ANGLES_DEG[3].to_radians()), c)
+            self.passes_as(&rot(&a, CONTINUOUS_ANGLES_DEG[3].to_radians()), c, true)
                 && rotations.iter().skip(1).all(|r| self.passes(r, c))
         };
         let mut center = self.center_of(&lines);

@@ -361,7 +361,8 @@ fn unit_normals(points: &[Point], normals: &[Vector3<f64>], cfg: &SymmetryConfig
 /// (up to [`FEATURE_SAMPLES`] samples; coarser beyond).
 const MIN_FEATURE_SAMPLES: usize = 8;
 
-/// A feature check asks for surface within this share of the tolerance. A turn about a centre
+/// A discrete turn's feature check asks for surface within this share of the tolerance (see
+/// [`feature_share`] for a continuous axis's turns). A turn about a centre
 /// that the feature itself displaced (the surface centroid, and the axis line refined onto the
 /// surface) shows the feature at about half its depth either way: on a 60 mm D-shaft at the
 /// default samples (tolerance 0.51 mm) the half turn about the axis moved the 1 mm flat to
@@ -370,6 +371,22 @@ const MIN_FEATURE_SAMPLES: usize = 8;
 /// built-in shapes and fittings, the reference CAD parts, a 24-tooth gear, a box, a turned
 /// candlestick, a 16-sided cylinder).
 const FEATURE_TOLERANCE: f64 = 0.5;
+
+/// The share of the tolerance a feature check asks surface within: [`FEATURE_TOLERANCE`] for a
+/// discrete turn, the whole of it for a turn of a continuous axis. Such a turn maps the facets of
+/// a tessellated round between each other's vertices, up to their sagitta, which a finer check
+/// would take for a feature: a 12-sided cylinder 30 mm across (sagitta 0.51 mm, tolerance
+/// 0.53 mm) lost its axis at half the tolerance, and a 10-sided one came back with an
+/// inconsistent group. A discrete turn of a regularly tessellated round maps the tessellation
+/// onto itself, and the reference CAD parts' irregular ones left nothing off at half the
+/// tolerance either.
+fn feature_share(continuous: bool) -> f64 {
+    if continuous {
+        1.0
+    } else {
+        FEATURE_TOLERANCE
+    }
+}
 
 /// Samples a feature check looks at, at most (an even subsample beyond).
 const FEATURE_SAMPLES: usize = 40_000;

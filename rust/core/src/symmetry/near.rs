@@ -124,7 +124,7 @@ pub(super) fn near_symmetries(
                 // Near only for its feature, which may lie within the tolerance the agreement
                 // counts at (it is sought at a finer one): the feature is what that check saw.
                 for (f, p) in fails.iter_mut().zip(points) {
-                    *f |= matcher.absent(g, &c, p);
+                    *f |= matcher.absent(g, &c, p, false);
                 }
             }
             let (axis, angle) = g.axis_angle().map_or((V3::z(), 0.0), |(u, t)| (u.into_inner(), t));
@@ -158,7 +158,7 @@ fn continuous(points: &[Point], matcher: &Matcher, a: &V3, c: &Point, cfg: &Symm
     if agreement >= cfg.min_agreement && near_only {
         // As for a discrete turn: the feature is what the finer check saw.
         for (b, p) in broken.iter_mut().zip(points) {
-            *b = *b || turns.iter().all(|r| matcher.absent(r, c, p));
+            *b = *b || turns.iter().all(|r| matcher.absent(r, c, p, true));
         }
     }
     (agreement >= NEAR_AGREEMENT && near_only).then(|| NearSymmetry {

@@ -507,6 +507,17 @@ fn a_flat_that_its_own_displaced_centre_halves_still_breaks_the_half_turn_about_
 }
 
 #[test]
+fn a_coarsely_tessellated_round_keeps_its_continuous_axis() {
+    // A 12-sided cylinder 30 mm across: its facets lie up to 0.51 mm inside the circle, within
+    // the tolerance (about 0.53 mm at these samples) but not within half of it. A turn about the
+    // axis maps facets between each other's vertices; it is still the round it stands for.
+    let (sym, near) = near_of(prism(12, 15.0, 25.0), 0.66);
+    assert!(sym.continuous_axis.is_some_and(|a| a.z.abs() > 0.999), "{sym:?}");
+    assert_eq!(sym.rotations.len(), 2, "{sym:?}");
+    assert!(near.iter().all(|n| n.angle.is_some()), "{near:?}");
+}
+
+#[test]
 fn detecting_both_at_once_gives_what_the_two_detections_give() {
     let plate = merge(&[
         cuboid([50.0, 50.0, 3.0], V3::zeros()),
