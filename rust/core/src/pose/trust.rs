@@ -227,7 +227,7 @@ pub(super) fn assess(
     } else {
         turns
     };
-    let candidates: Vec<Candidate> = std::iter::once((Isometry3::identity(), false))
+    let mut candidates: Vec<Candidate> = std::iter::once((Isometry3::identity(), false))
         .chain(discrete)
         .chain(turns)
         .filter_map(|(turn, continuous)| {
@@ -255,7 +255,6 @@ pub(super) fn assess(
             fits,
         }
     };
-    let mut candidates = candidates;
     let mut scored: Vec<Scored> = candidates.iter().map(|c| score_of(&c.t_scene_model)).collect();
     let pick = |scored: &[Scored]| {
         (0..scored.len())

@@ -94,15 +94,15 @@ pub(super) fn near_symmetries(
                 found.push(n);
             }
         }
+        // A turn about a continuous near axis is that axis's, not one of its own.
+        let spin = group
+            .continuous_axis
+            .filter(|_| proper.continuous_axis.is_none())
+            .or(near_axis);
         for g in group.rotations.iter() {
             let known = classes
                 .iter()
                 .any(|k| proper.rotation_distance(k, g) < SAME_ROTATION.max(2f64.to_radians()));
-            // A turn about a continuous near axis is that axis's, not one of its own.
-            let spin = group
-                .continuous_axis
-                .filter(|_| proper.continuous_axis.is_none())
-                .or(near_axis);
             let along_near_axis = spin.is_some_and(|a| same_line(&g.axis().map_or(a, |u| *u), &a, SAME_AXIS));
             if known || along_near_axis {
                 continue;
