@@ -13,7 +13,7 @@
 //! | `rng`, `parallel`, `cancel` | the seeded [`Rng`]; thread-count control ([`with_threads`]); cooperative cancellation ([`CancelFlag`], [`cancel_scope`]) |
 //! | `geometry` | [`Point`] and its checks, cloud statistics, rigid transforms, the one [`Plane`], [`BinBox`], the one Kabsch, THE camera model ([`Camera`], [`RayTable`]) |
 //! | `search` | nearest-neighbour structures: [`KdIndex`], the bounded correspondence tree, the coarse nearest field |
-//! | `voxel`, `normals` | voxel grids and even subsampling; normal estimation |
+//! | `voxel`, `normals`, `noise` | voxel grids and even subsampling; normal estimation; the sensor's depth noise read from a scan ([`scan_noise`]) |
 //! | `mesh` | [`TriMesh`], file readers and writers, surface sampling, SDF modelling, the built-in [`parts`] |
 //! | `triangulate` | the measuring chain: laser planes, ray–plane intersection, scans to base-frame points |
 //! | `segment` | scan spacing, bin cropping, support-plane removal, top-object segmentation (Table 2) |
@@ -29,6 +29,7 @@ mod cancel;
 mod error;
 mod geometry;
 mod mesh;
+mod noise;
 mod normals;
 mod parallel;
 mod pose;
@@ -48,6 +49,7 @@ pub use geometry::{centroid, isometry_from_matrix, transform_points, BinBox, Cam
 pub use mesh::io::{read_mesh, read_ply, write_ply, PlyData};
 pub use mesh::parts::{self, Part};
 pub use mesh::{sample_surface, unit_scale, Density, SurfaceSamples, TriMesh};
+pub use noise::scan_noise;
 pub use normals::{estimate_normals, Orientation};
 pub use parallel::with_threads;
 pub use pose::{
