@@ -22,7 +22,7 @@ from .camera import RenderedCamera, SimCamera
 from .cell import Bin, Camera, Cell, Laser, Lighting, SensorNoise, look_down, rot_y
 from .dataset import GLOSSY_PART_SPECULAR, SimulatedScan, contact_sheet, simulate_scan, write_scan
 from .pile import Pile, PushReport, SettleReport, convex_decomposition, max_interpenetration
-from .render import BIN_ID, NO_SURFACE, TABLE_ID, View, World, render_checkerboard
+from .render import BIN_ID, NO_SURFACE, TABLE_ID, Surfaces, View, World, render_checkerboard
 from .twin import SIM_ARM, SimulatedCell, TwinWorld, sim_arm, sim_gripper, sim_limits, simulated_cell
 
 __all__ = [
@@ -45,6 +45,7 @@ __all__ = [
     "PushReport",
     "SettleReport",
     "SimulatedScan",
+    "Surfaces",
     "TABLE_ID",
     "TwinWorld",
     "View",
