@@ -166,6 +166,23 @@ def test_projector_shadow_falls_behind_the_box_away_from_the_projector(box_world
     assert (none.valid == np.isfinite(none.true_depth)).all()
 
 
+def test_lateral_noise_frays_edges_by_sigma_pixels(box_world):
+    # Box top and floor square to the axis: lateral noise alone changes a depth only where a pixel
+    # reads across the box's outline. Across a straight edge the pixel k + ½ pixels from it does so
+    # when its displacement δ ~ N(0, σ_L²) exceeds that: 2·Σ_k P(δ > k + ½) per outline pixel.
+    K = CameraIntrinsics.pinhole(160, 120, 400.0, 400.0, 79.5, 59.5)
+    sigma = 0.8
+    frame = render_depth(
+        box_world, _camera(replace(DepthNoise.ideal(), lateral_sigma_px=sigma), look_down(0.0, 0.0, 700.0), K), seed=5
+    )
+    moved = np.abs(frame.depth - frame.true_depth) > 1.0
+    assert not (moved & ~_edges(frame.true_depth, 10.0, 4)).any()
+    assert np.isin(np.round(frame.depth[moved]), [620.0, 700.0]).all()  # read from the other surface
+    outline = 4 * 2 * BOX_HALF * K.fx / (700.0 - BOX_HEIGHT)
+    expected = 2 * sum(0.5 * math.erfc((k + 0.5) / sigma / math.sqrt(2)) for k in range(10))
+    assert moved.sum() / outline == pytest.approx(expected, rel=0.2)
+
+
 @pytest.mark.parametrize("preset", ["kinect", "tof"])
 def test_flying_pixels_only_along_depth_edges(box_world, preset):
     noise = getattr(DepthNoise, preset)()
@@ -207,6 +224,17 @@ def test_multipath_lengthens_range_in_concave_corners_only():
     tof = replace(DepthNoise.ideal(), multipath_bias=preset.multipath_bias, multipath_radius=preset.multipath_radius)
     tof_frame = render_depth(world, _camera(tof, T, K))
     assert 3.0 < np.mean(tof_frame.depth[corner] - tof_frame.true_depth[corner]) < 15.0  # several mm
+
+
+def test_multipath_ignores_a_surface_far_in_front():
+    # A plate hovering 200 mm above a floor hides part of it: beside its silhouette the floor's
+    # hemisphere projects onto the plate, which stands far in front, not around the point.
+    world = _plate_world(np.eye(4), 2000.0)
+    _plate(world, translation(-1000.0, 0.0, 200.0), 1000.0, BOX_ID)
+    noise = replace(DepthNoise.ideal(), multipath_bias=30.0, multipath_radius=40.0)
+    frame = render_depth(world, _camera(noise, look_down(0.0, 0.0, 600.0)))
+    assert (frame.ids == FLOOR_ID).sum() > 1000 and (frame.ids == BOX_ID).sum() > 1000
+    assert np.max(np.abs(frame.depth - frame.true_depth)) == 0.0
 
 
 def test_ideal_reproduces_the_renderer(box_world):
