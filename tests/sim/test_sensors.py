@@ -10,8 +10,10 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from hypothesis import given
 
 import binpick
+from _properties import PROPERTY, finite, outcome, reals, variations, vectors
 from binpick import errors, sim
 from binpick.camera import CameraIntrinsics
 from binpick.sim import DepthCamera, DepthNoise, render_depth
@@ -324,3 +326,52 @@ def test_presets_follow_their_published_numbers():
 def test_bad_arguments_name_themselves(build, error, name):
     with pytest.raises(error, match=name):
         build()
+
+
+#: The Kinect preset's fields, the valid side of the property below.
+KINECT_FIELDS = {f: getattr(DepthNoise.kinect(), f) for f in DepthNoise.__dataclass_fields__}
+TINY = CameraIntrinsics.pinhole(32, 24, 40.0, 40.0, 15.5, 11.5)
+
+
+@PROPERTY
+@given(
+    kw=variations(
+        KINECT_FIELDS,
+        dict(
+            axial_sigma_0=reals(-1, 5),
+            axial_sigma_1=reals(-5, 5),
+            axial_sigma_2=reals(-1, 5),
+            axial_sigma_grazing=reals(-1, 1),
+            axial_grazing_exponent=reals(-5, 5),
+            lateral_sigma_px=reals(-1, 3),
+            lateral_sigma_grazing_px=reals(-1, 1),
+            baseline=reals(-10, 300),
+            disparity_step_px=reals(-1, 1),
+            max_incidence=reals(-1, 2),
+            edge_jump=reals(-1, 50),
+            flying_pixel_rate=reals(-1, 2),
+            multipath_bias=reals(-1, 50),
+            multipath_radius=reals(-1, 100),
+        ),
+    ),
+    target=vectors(3, -200, 200),
+    distance=reals(-100, 3000),
+    tilt_deg=reals(-10, 100),
+)
+def test_property_depth_noise_and_camera(box_world, kw, target, distance, tilt_deg):
+    """Any noise model and placement ends in a frame or an InvalidInputError naming the argument;
+    a frame's measured points are finite, its holes NaN, its shapes the camera's."""
+    noise = outcome(lambda: DepthNoise(**kw), "DepthNoise")
+    if noise is None:
+        return
+    assert (noise.axial_sigma([300.0, 1000.0, 3000.0], [0.0, 0.5, noise.max_incidence]) >= 0).all()
+    camera = outcome(
+        lambda: DepthCamera(TINY, noise).looking_at(target, distance=distance, tilt_deg=tilt_deg), "looking_at"
+    )
+    if camera is None:
+        return
+    frame = render_depth(box_world, camera, seed=3)
+    assert frame.points.shape == (24, 32, 3) and frame.ids.shape == (24, 32)
+    valid = frame.valid
+    assert finite(frame.points[valid]) and finite(frame.points_base[valid])
+    assert np.isnan(frame.points[~valid]).all()
