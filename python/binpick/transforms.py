@@ -23,6 +23,7 @@ __all__ = [
     "rot_y",
     "rotation_angle_deg",
     "look_down",
+    "looking_at",
     "pose_error",
     "laser_sweep",
 ]
@@ -84,6 +85,33 @@ def look_down(x: float, y: float, z: float) -> np.ndarray:
     x, y, z = _xyz(x, y, z)
     T[:3, :3] = np.diag([1.0, -1.0, -1.0])
     T[:3, 3] = (x, y, z)
+    return T
+
+
+#: Steepest tilt :func:`looking_at` takes: beyond it the camera looks nearly level, where the image's
+#: x axis (base +x made square to the optical axis) loses its direction.
+MAX_LOOK_TILT = math.radians(85.0)
+
+
+def looking_at(
+    target: Any, *, distance: float, tilt: float = 0.0, azimuth: float = 0.0, roll: float = 0.0
+) -> np.ndarray:
+    """``T_base_camera`` of a camera ``distance`` mm from ``target`` (base frame, mm) with its
+    optical axis (+z) through it, tilted ``tilt`` from looking straight down towards ``azimuth``
+    (the camera stands on that side of the target: 0 = on its +x side, π/2 = on its +y side) and
+    rolled ``roll`` about its optical axis (radians). Before the roll the image's x axis is base
+    +x made square to the optical axis, as when looking straight down (:func:`look_down`)."""
+    t = as_vector(target, "target", 3)
+    distance = number(distance, "distance", 1e-6, 1e9, unit="mm")
+    tilt = number(tilt, "tilt", 0.0, MAX_LOOK_TILT, unit="rad")
+    azimuth, roll = number(azimuth, "azimuth", unit="rad"), number(roll, "roll", unit="rad")
+    toward = np.array([math.cos(azimuth), math.sin(azimuth), 0.0])
+    z = -math.cos(tilt) * np.array([0.0, 0.0, 1.0]) - math.sin(tilt) * toward
+    x = np.array([1.0, 0.0, 0.0]) - z[0] * z
+    x /= np.linalg.norm(x)
+    T = np.eye(4)
+    T[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1) @ rotation_about([0.0, 0.0, 1.0], roll)
+    T[:3, 3] = t - z * distance
     return T
 
 

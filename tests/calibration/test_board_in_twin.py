@@ -10,10 +10,10 @@ import pytest
 
 from binpick import parts
 from binpick.calibration import find_checkerboard
-from binpick.calibration.capture import _looking_at
 from binpick.sim import BIN_ID, Cell, RenderedCamera
 from binpick.sim.camera import _BoardLayer
 from binpick.sim.render import World
+from binpick.transforms import looking_at
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +42,7 @@ def test_board_is_seen_and_hidden_behind_the_bin_where_the_bin_is_nearer(cameras
     layout = with_board.layout
     # From above the bin's far side, looking steeply across its wall at the board.
     target = layout.board.center + np.array([0.0, 40.0, 0.0])
-    T_bc = _looking_at(target, math.radians(90.0), math.radians(42.0), 560.0, 0.0)
+    T_bc = looking_at(target, distance=560.0, tilt=math.radians(42.0), azimuth=math.radians(90.0))
     T = T_bc @ np.linalg.inv(layout.T_flange_camera)
     img, plain = _grab(with_board, T), _grab(without, T)
     view = World.of_pile(with_board.pile).view(layout, T)
@@ -54,6 +54,6 @@ def test_board_is_seen_and_hidden_behind_the_bin_where_the_bin_is_nearer(cameras
     assert np.array_equal(img[~layer.mask], plain[~layer.mask])
     assert not np.array_equal(img[layer.mask], plain[layer.mask])
     looking_down = _grab(
-        with_board, _looking_at(layout.board.center, 0.0, 0.0, 600.0, 0.0) @ np.linalg.inv(layout.T_flange_camera)
+        with_board, looking_at(layout.board.center, distance=600.0) @ np.linalg.inv(layout.T_flange_camera)
     )
     assert find_checkerboard(looking_down, layout.board.pattern) is not None

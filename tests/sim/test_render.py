@@ -135,3 +135,23 @@ def test_bad_render_input_is_rejected():
         w.add_instance(0, np.eye(4), 0)  # duplicate id
     with pytest.raises(binpick.InvalidInputError):
         w.set_pose(0, np.diag([2.0, 1, 1, 1]))  # not rigid
+
+
+def test_surfaces_from_a_fixed_pose_match_the_cells_view():
+    # The same camera at the same pose, once through a cell (flange and hand-eye), once alone.
+    tee = binpick.parts.tee(resolution=1.5)
+    w = sim.World()
+    w.add_bin(sim.Bin())
+    w.add_parts(tee, [3], binpick.transforms.translation(400.0, 0.0, 13.0)[None])
+    cell = sim.Cell(camera=CAM, board=None)
+    view = w.view(cell)
+    seen = w.surfaces(CAM, cell.T_base_camera)
+    np.testing.assert_array_equal(seen.depth, view.depth)
+    np.testing.assert_array_equal(seen.ids, view.ids)
+    np.testing.assert_array_equal(seen.normals, view.normals)
+    np.testing.assert_array_equal(seen.T_base_camera, view.T_base_camera)
+    assert (seen.ids == 3).sum() > 50
+    with pytest.raises(binpick.errors.InvalidInputError, match="T_base_camera"):
+        w.surfaces(CAM, np.eye(3))
+    with pytest.raises(binpick.errors.InvalidInputError, match="camera"):
+        w.surfaces(cell, cell.T_base_camera)

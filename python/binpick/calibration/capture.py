@@ -24,7 +24,7 @@ import numpy as np
 from .._validate import as_transform, as_vector, check_transform, instance_of, positive
 from ..devices import safety
 from ..errors import CalibrationError, FileWriteError, InvalidInputError, SafetyError
-from ..transforms import inverse, rotation_about
+from ..transforms import inverse, looking_at
 from .camera import _pattern
 
 __all__ = ["MANIFEST_VERSION", "Station", "CalibrationPlan", "calibration_plan", "capture"]
@@ -135,21 +135,6 @@ class CalibrationPlan:
                     )
 
 
-def _looking_at(target: np.ndarray, azimuth: float, tilt: float, distance: float, roll: float) -> np.ndarray:
-    """``T_base_camera`` of a camera ``distance`` from ``target``, tilted ``tilt`` from looking
-    straight down towards ``azimuth`` and rolled ``roll`` about its optical axis (radians)."""
-    toward = np.array([math.cos(azimuth), math.sin(azimuth), 0.0])
-    z = -np.cos(tilt) * np.array([0.0, 0.0, 1.0]) - np.sin(tilt) * toward
-    # Before the roll the image's x axis is base +x made square to the optical axis (tilts stay
-    # below 45°, so the two are never parallel), as when looking straight down (look_down).
-    x = np.array([1.0, 0.0, 0.0]) - z[0] * z
-    x /= np.linalg.norm(x)
-    T = np.eye(4)
-    T[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1) @ rotation_about([0.0, 0.0, 1.0], roll)
-    T[:3, 3] = target - z * distance
-    return T
-
-
 def calibration_plan(
     board_center: Sequence[float],
     *,
@@ -175,7 +160,9 @@ def calibration_plan(
     for kind, views in (("board", _BOARD_VIEWS), ("laser", _LASER_VIEWS)):
         for i, (az, tilt, dist, roll, *shift) in enumerate(views):
             target = centre + np.array([*(shift or (0.0, 0.0)), 0.0])
-            T_bc = _looking_at(target, math.radians(az), math.radians(tilt), dist, math.radians(roll))
+            T_bc = looking_at(
+                target, distance=dist, tilt=math.radians(tilt), azimuth=math.radians(az), roll=math.radians(roll)
+            )
             stations.append(Station(f"{kind}{i:02d}", T_bc @ X_inv, angles if kind == "laser" else ()))
     return CalibrationPlan(tuple(stations), pattern=tuple(pattern), square=square, park_angle=park_angle)
 

@@ -4,6 +4,8 @@ and the digital twin (:class:`SimulatedCell`): the pick loop on emulated devices
 
 * :mod:`~binpick.sim.cell` — the layout: camera, laser, lighting, noise, bin, scan pose
 * :mod:`~binpick.sim.pile`, :mod:`~binpick.sim.render` — physics piles and the renderer
+* :mod:`~binpick.sim.sensors` — depth cameras (structured light, Kinect-like, time of flight) at fixed
+  poses, their published noise models, and :func:`render_depth`
 * :mod:`~binpick.sim.dataset` — simulated scans written to disk
 * :mod:`~binpick.sim.camera` — virtual cameras for the pick loop
 * :mod:`~binpick.sim.twin` — :class:`TwinWorld` (the twin's pile and emulators), :class:`SimulatedCell`, its arm
@@ -22,7 +24,8 @@ from .camera import RenderedCamera, SimCamera
 from .cell import Bin, Camera, Cell, Laser, Lighting, SensorNoise, look_down, rot_y
 from .dataset import GLOSSY_PART_SPECULAR, SimulatedScan, contact_sheet, simulate_scan, write_scan
 from .pile import Pile, PushReport, SettleReport, convex_decomposition, max_interpenetration
-from .render import BIN_ID, NO_SURFACE, TABLE_ID, View, World, render_checkerboard
+from .render import BIN_ID, NO_SURFACE, TABLE_ID, Surfaces, View, World, render_checkerboard
+from .sensors import DepthCamera, DepthFrame, DepthNoise, render_depth
 from .twin import SIM_ARM, SimulatedCell, TwinWorld, sim_arm, sim_gripper, sim_limits, simulated_cell
 
 __all__ = [
@@ -31,6 +34,9 @@ __all__ = [
     "Bin",
     "Camera",
     "Cell",
+    "DepthCamera",
+    "DepthFrame",
+    "DepthNoise",
     "Laser",
     "Lighting",
     "NO_SURFACE",
@@ -45,6 +51,7 @@ __all__ = [
     "PushReport",
     "SettleReport",
     "SimulatedScan",
+    "Surfaces",
     "TABLE_ID",
     "TwinWorld",
     "View",
@@ -54,6 +61,7 @@ __all__ = [
     "look_down",
     "max_interpenetration",
     "render_checkerboard",
+    "render_depth",
     "rot_y",
     "sim_limits",
     "simulate_scan",

@@ -2,9 +2,10 @@
 
 ``World`` holds the meshes and their poses in the base frame; ``World.view(cell)`` casts the
 camera's rays once for the cell's robot pose and returns a :class:`View`, whose
-:meth:`View.frame` lights the laser line for a motor angle. Depth and instance-id images are the
-ground truth; instance ids are the pile's part ids (≥ 0), −2 for the bin, −3 for the table,
-−1 where nothing is hit.
+:meth:`View.frame` lights the laser line for a motor angle; ``World.surfaces(camera,
+T_base_camera)`` casts any camera's rays from a fixed pose (the depth cameras of
+:mod:`binpick.sim.sensors`). Depth and instance-id images are the ground truth; instance ids
+are the pile's part ids (≥ 0), −2 for the bin, −3 for the table, −1 where nothing is hit.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from ..errors import InvalidInputError
 from ..models import Model
 from .cell import Bin, Cell, Laser, Lighting, SensorNoise
 
-__all__ = ["World", "View", "render_checkerboard", "BIN_ID", "TABLE_ID", "NO_SURFACE"]
+__all__ = ["World", "Surfaces", "View", "render_checkerboard", "BIN_ID", "TABLE_ID", "NO_SURFACE"]
 
 #: Range of instance ids (the core's 32-bit signed ids).
 ID_RANGE = (-(2**31), 2**31 - 1)
@@ -163,16 +164,24 @@ class World:
         T_bf = cell.T_base_flange if T_base_flange is None else as_transform(T_base_flange, "T_base_flange")
         T_bc = T_bf @ cell.T_flange_camera
         raw = self._scene.view(camera_args(cell.camera), T_bc, cell.lighting._args(), thread_count(num_threads))
-        return View(raw, cell, T_bf)
+        return View(raw, cell, T_bf, T_bc)
+
+    def surfaces(self, camera: CameraIntrinsics, T_base_camera: Any, *, num_threads: int = 0) -> Surfaces:
+        """Casts the rays of ``camera`` posed at ``T_base_camera``: the surfaces a fixed camera (a
+        depth camera, a projector) sees, without a cell, a laser or a robot."""
+        args = camera_args(camera)
+        T_bc = as_transform(T_base_camera, "T_base_camera")
+        return Surfaces(self._scene.view(args, T_bc, Lighting()._args(), thread_count(num_threads)), camera, T_bc)
 
 
-class View:
-    """The geometry the camera sees from one robot pose; frames are lit from it per laser angle."""
+class Surfaces:
+    """What a camera sees from one pose: per pixel the first surface's point, normal and instance
+    id (the ground truth of every simulated sensor)."""
 
-    def __init__(self, raw: Any, cell: Cell, T_base_flange: np.ndarray) -> None:
+    def __init__(self, raw: Any, camera: CameraIntrinsics, T_base_camera: np.ndarray) -> None:
         self._raw = raw
-        self.cell = cell
-        self.T_base_flange = T_base_flange
+        self.camera = camera
+        self.T_base_camera = T_base_camera
 
     @property
     def depth(self) -> np.ndarray:
@@ -193,6 +202,15 @@ class View:
     def normals(self) -> np.ndarray:
         """(H, W, 3) float32 camera-facing unit normals in the camera frame."""
         return self._raw.normals()
+
+
+class View(Surfaces):
+    """The geometry the cell's camera sees from one robot pose; frames are lit from it per laser angle."""
+
+    def __init__(self, raw: Any, cell: Cell, T_base_flange: np.ndarray, T_base_camera: np.ndarray) -> None:
+        super().__init__(raw, cell.camera, T_base_camera)
+        self.cell = cell
+        self.T_base_flange = T_base_flange
 
     def frame(
         self, angle: float, *, seed: int = 0, laser: Optional[Laser] = None, noise: Optional[SensorNoise] = None
