@@ -75,7 +75,7 @@ def _ascii_value(value, kind: str, name: str) -> str:
     return str(int(value))
 
 
-def pcl_write(path, fields, width, height=1, encoding="binary", version="0.7", comments=()):
+def pcl_write(path, fields, width, height=1, encoding="binary", version="0.7", comments=(), viewpoint="0 0 0 1 0 0 0"):
     """Writes a PCD file as PCL does. ``fields``: (name, TYPE, SIZE, values of shape (N, COUNT))."""
     n = width * height
     head = ["# .PCD v0.7 - Point Cloud Data file format", *comments, f"VERSION {version}"]
@@ -85,7 +85,7 @@ def pcl_write(path, fields, width, height=1, encoding="binary", version="0.7", c
     head.append("COUNT " + " ".join(str(len(f[3][0])) for f in fields))
     head += [f"WIDTH {width}", f"HEIGHT {height}"]
     if version not in ("0.6", ".6"):
-        head.append("VIEWPOINT 0 0 0 1 0 0 0")
+        head.append(f"VIEWPOINT {viewpoint}")
     head += [f"POINTS {n}", f"DATA {encoding}"]
     body = b""
     if encoding == "ascii":
@@ -204,6 +204,42 @@ def test_an_organized_cloud_with_holes_and_extra_fields_reads_back(tmp_path, enc
     scene = read_scene(path)
     assert scene.dropped == int(holes.sum()) > 0
     assert np.array_equal(scene.points, pts[~holes].astype(np.float64))  # row-major order kept
+
+
+def test_the_viewpoint_is_read_where_the_file_states_it(tmp_path):
+    rng = np.random.default_rng(3)
+    pts = rng.uniform(-200, 200, (50, 3)).astype(np.float32)
+    # PCL's default viewpoint says nothing of an unorganized cloud (any tool writes it) ...
+    assert read_scene(pcl_write(tmp_path / "a.pcd", _xyz_fields(pts), 50)).viewpoint is None
+    # ... but an organized one is a camera's image in the camera's frame: the sensor is at the origin.
+    _, _, fields = _organized(rng)
+    organized = read_scene(pcl_write(tmp_path / "o.pcd", fields, 24, 16))
+    assert organized.viewpoint is not None and not organized.viewpoint.any()
+    # A stated viewpoint is read (and scaled with the file's unit); damaged ones are refused.
+    moved = pcl_write(
+        tmp_path / "v.pcd", _xyz_fields(pts), 50, viewpoint="0.1 -0.2 0.7 1 0 0 0", comments=["# unit: m"]
+    )
+    assert np.allclose(read_scene(moved).viewpoint, [100.0, -200.0, 700.0])
+    for bad in ("0 0 1 1 0 0", "0 0 nan 1 0 0 0", "a b c 1 0 0 0"):
+        path = pcl_write(tmp_path / "bad.pcd", _xyz_fields(pts), 50, viewpoint=bad)
+        with pytest.raises(MeshFileError, match="VIEWPOINT"):
+            read_scene(path)
+    # An organized NPY array is a camera's image too; a flat one says nothing.
+    np.save(tmp_path / "o.npy", rng.uniform(1, 2, (4, 5, 3)))
+    np.save(tmp_path / "f.npy", rng.uniform(1, 2, (20, 3)))
+    assert not read_scene(tmp_path / "o.npy").viewpoint.any()
+    assert read_scene(tmp_path / "f.npy").viewpoint is None
+
+
+@pytest.mark.parametrize("ext", ("pcd", "xyz"))
+def test_write_scene_keeps_the_viewpoint(tmp_path, ext):
+    pts = np.random.default_rng(4).uniform(-300, 300, (40, 3))
+    back = read_scene(write_scene(tmp_path / f"s.{ext}", pts, viewpoint=(400.0, -20.5, 650.25)))
+    assert np.allclose(back.viewpoint, [400.0, -20.5, 650.25])
+    assert read_scene(write_scene(tmp_path / f"n.{ext}", pts)).viewpoint is None
+    (tmp_path / "bad.xyz").write_text("# viewpoint: 1 2 inf\n1 2 3\n")
+    with pytest.raises(MeshFileError, match="viewpoint"):
+        read_scene(tmp_path / "bad.xyz")
 
 
 @pytest.mark.parametrize("encoding", ENCODINGS)

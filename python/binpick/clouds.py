@@ -17,7 +17,11 @@ Formats read:
   further columns ignored, blank lines and lines starting with ``#`` or ``//`` skipped.
 
 A file may say its length unit in a comment (``# unit: m`` in XYZ or PCD, ``comment unit: m`` in
-PLY); its points are then converted to millimetres. A file that says nothing is taken as mm
+PLY); its points are then converted to millimetres. Where the file says where the sensor was
+(:attr:`SceneCloud.viewpoint`, the ``viewpoint`` of :func:`binpick.estimate_pose`): PCD's VIEWPOINT
+when it is not PCL's default (the origin, unturned), and for an organized cloud (a camera's image,
+in the camera's frame) the default too; the origin for an organized NPY array; a ``viewpoint: x y z``
+comment in XYZ, PLY or PCD (as :func:`write_scene` writes it). A file that says nothing is taken as mm
 unless the caller says otherwise. Points with a NaN or infinite coordinate (the holes of an
 organized cloud) are dropped (PLY excepted, above) and counted in :attr:`SceneCloud.dropped`.
 
@@ -37,7 +41,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ._validate import MAX_UNSIGNED, as_float_array, as_points, choice, count, unit_scale
+from ._validate import MAX_UNSIGNED, as_float_array, as_points, as_vector, choice, count, unit_scale
 from .errors import (
     FileWriteError,
     InvalidInputError,
@@ -73,6 +77,9 @@ MAX_TEXT_BYTES = 4 << 30
 _LZF_MAX_RATIO = 132
 
 _UNIT_COMMENT = re.compile(rb"^\s*(?:#|//|comment)\s*units?\s*[:=]?\s*([A-Za-z]+)\s*$", re.IGNORECASE)
+_VIEWPOINT_COMMENT = re.compile(
+    rb"^\s*(?:#|//|comment)\s*viewpoint\s*[:=]?\s*(\S+)[\s,]+(\S+)[\s,]+(\S+)\s*$", re.IGNORECASE
+)
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,19 +91,23 @@ class SceneCloud:
         format: ``"ply"``, ``"pcd"``, ``"npy"`` or ``"xyz"``.
         file_unit: the length unit the file declares (as written), or None when it declares none.
         dropped: points left out for a NaN or infinite coordinate (an organized cloud's holes).
+        viewpoint: (3,) the sensor's position in the scene's frame, mm, where the file says it (see
+            the module notes), else None.
     """
 
     points: np.ndarray
     format: str
     file_unit: Optional[str] = None
     dropped: int = 0
+    viewpoint: Optional[np.ndarray] = None
 
     def __len__(self) -> int:
         return len(self.points)
 
     def __repr__(self) -> str:
         unit = f", file unit {self.file_unit}" if self.file_unit else ""
-        return f"SceneCloud({len(self)} points from {self.format}{unit}, {self.dropped} non-finite dropped)"
+        seen = "" if self.viewpoint is None else f", viewpoint {np.round(self.viewpoint, 1).tolist()}"
+        return f"SceneCloud({len(self)} points from {self.format}{unit}{seen}, {self.dropped} non-finite dropped)"
 
 
 def read_scene(path: str | os.PathLike[str], *, unit: Optional[str] = None) -> SceneCloud:
@@ -110,9 +121,11 @@ def read_scene(path: str | os.PathLike[str], *, unit: Optional[str] = None) -> S
     name = os.fspath(path)
     scale = None if unit is None else unit_scale(unit)
     kind = _format_of(name)
-    pts, declared = _READERS[kind](name)
+    pts, declared, viewpoint = _READERS[kind](name)
     if scale is None:
         scale = 1.0 if declared is None else _declared_scale(name, declared)
+    if viewpoint is not None:
+        viewpoint = np.asarray(viewpoint, dtype=np.float64) * scale
     pts = as_float_array(pts, name)
     finite = np.isfinite(pts).all(axis=1)
     dropped = int(len(pts) - np.count_nonzero(finite))
@@ -120,12 +133,16 @@ def read_scene(path: str | os.PathLike[str], *, unit: Optional[str] = None) -> S
         pts = pts[finite]
     if scale != 1.0:
         pts = pts * scale
-    return SceneCloud(points=np.ascontiguousarray(pts), format=kind, file_unit=declared, dropped=dropped)
+    return SceneCloud(
+        points=np.ascontiguousarray(pts), format=kind, file_unit=declared, dropped=dropped, viewpoint=viewpoint
+    )
 
 
-def write_scene(path: str | os.PathLike[str], points: Any) -> Path:
+def write_scene(path: str | os.PathLike[str], points: Any, *, viewpoint: Any = None) -> Path:
     """Writes (N, 3) points in mm as PLY (binary), PCD (binary), NPY or XYZ by ``path``'s extension;
-    PCD and XYZ say ``unit: mm`` in a comment. Returns the path."""
+    PCD and XYZ say ``unit: mm`` in a comment, and the sensor's position ``viewpoint`` (mm, the
+    scene's frame) when given: PCD in its VIEWPOINT, XYZ in a ``# viewpoint:`` comment (PLY and NPY
+    cannot hold it). Returns the path."""
     from .models import write_ply
 
     target = Path(path)
@@ -133,32 +150,38 @@ def write_scene(path: str | os.PathLike[str], points: Any) -> Path:
     if kind is None:
         raise InvalidInputError(f"path: {target} has no scene extension; end it in {', '.join(sorted(SCENE_FORMATS))}")
     pts = as_points(points, "points", min_points=0)
+    vp = None if viewpoint is None else as_vector(viewpoint, "viewpoint")
     if kind == "ply":
         write_ply(target, pts)
         return target
     if kind == "pcd":
-        return write_pcd(target, pts)
+        return write_pcd(target, pts, viewpoint=vp)
     try:
         if kind == "npy":
             np.save(target, pts, allow_pickle=False)
         else:
             with open(target, "w", encoding="ascii") as f:
                 f.write("# unit: mm\n")
+                if vp is not None:
+                    f.write(f"# viewpoint: {float(vp[0])!r} {float(vp[1])!r} {float(vp[2])!r}\n")
                 np.savetxt(f, pts, fmt="%.6f")
     except OSError as exc:
         raise FileWriteError(f"{target}: cannot write the scene ({exc.strerror or exc})") from None
     return target
 
 
-def write_pcd(path: str | os.PathLike[str], points: Any, *, encoding: str = "binary") -> Path:
+def write_pcd(path: str | os.PathLike[str], points: Any, *, encoding: str = "binary", viewpoint: Any = None) -> Path:
     """Writes (N, 3) points in mm as a PCD v0.7 file PCL reads (fields x y z, float32, unorganized),
-    DATA ``binary`` or ``ascii``, with a ``# unit: mm`` comment. Returns the path."""
+    DATA ``binary`` or ``ascii``, with a ``# unit: mm`` comment and the sensor's position
+    ``viewpoint`` (mm) in VIEWPOINT when given (PCL's default, the origin, otherwise). Returns the path."""
     pts = as_points(points, "points", min_points=0).astype(np.float32)
     encoding = choice(encoding, "encoding", ("binary", "ascii"))
+    vp = np.zeros(3) if viewpoint is None else as_vector(viewpoint, "viewpoint")
     n = len(pts)
     header = (
         "# .PCD v0.7 - Point Cloud Data file format\n# unit: mm\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\n"
-        f"TYPE F F F\nCOUNT 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\nDATA {encoding}\n"
+        f"TYPE F F F\nCOUNT 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT {float(vp[0])!r} {float(vp[1])!r} {float(vp[2])!r} 1 0 0 0\n"
+        f"POINTS {n}\nDATA {encoding}\n"
     )
     target = Path(path)
     try:
@@ -223,6 +246,24 @@ def _unit_in(lines: list[bytes]) -> Optional[str]:
     return None
 
 
+def _viewpoint_in(path: str, lines: list[bytes]) -> Optional[np.ndarray]:
+    """The sensor position a ``viewpoint: x y z`` comment among ``lines`` states, or None."""
+    for line in lines:
+        m = _VIEWPOINT_COMMENT.match(line)
+        if m:
+            try:
+                vp = np.array([float(v) for v in m.groups()])
+            except ValueError:
+                vp = np.array([np.nan])
+            if not np.isfinite(vp).all():
+                raise MeshFileError(
+                    f"{path}: the viewpoint comment {line.decode('ascii', 'replace')[:60]!r} is not three finite "
+                    "numbers; fix it or remove it"
+                )
+            return vp
+    return None
+
+
 def _read_bytes(path: str, limit: Optional[int] = None) -> bytes:
     try:
         size = os.path.getsize(path)
@@ -239,17 +280,18 @@ def _read_bytes(path: str, limit: Optional[int] = None) -> bytes:
 # --------------------------------------------------------------------------- PLY, NPY, XYZ
 
 
-def _read_ply_scene(path: str) -> tuple[np.ndarray, Optional[str]]:
+def _read_ply_scene(path: str) -> tuple[np.ndarray, Optional[str], Optional[np.ndarray]]:
     from .models import read_ply
 
     with open(path, "rb") as f:
         head = f.read(MAX_PCD_HEADER)
     end = head.find(b"end_header")
     lines = head[: end if end >= 0 else len(head)].splitlines()
-    return read_ply(path)[0], _unit_in([ln for ln in lines if ln.strip().lower().startswith(b"comment")])
+    comments = [ln for ln in lines if ln.strip().lower().startswith(b"comment")]
+    return read_ply(path)[0], _unit_in(comments), _viewpoint_in(path, comments)
 
 
-def _read_npy(path: str) -> tuple[np.ndarray, Optional[str]]:
+def _read_npy(path: str) -> tuple[np.ndarray, Optional[str], Optional[np.ndarray]]:
     try:
         # Memory-mapped: numpy checks the header's shape against the file's size before any copy.
         arr = np.load(path, mmap_mode="r", allow_pickle=False)
@@ -266,10 +308,11 @@ def _read_npy(path: str) -> tuple[np.ndarray, Optional[str]]:
         raise MeshFileError(
             f"{path}: array of shape {arr.shape}; a scene is (N, 3) points or an organized (H, W, 3) cloud, in mm"
         )
-    return np.asarray(arr, dtype=np.float64).reshape(-1, 3), None
+    # An organized array is a camera's image: its points are in the camera's frame.
+    return np.asarray(arr, dtype=np.float64).reshape(-1, 3), None, np.zeros(3) if arr.ndim == 3 else None
 
 
-def _read_xyz(path: str) -> tuple[np.ndarray, Optional[str]]:
+def _read_xyz(path: str) -> tuple[np.ndarray, Optional[str], Optional[np.ndarray]]:
     data = _read_bytes(path, MAX_TEXT_BYTES)
     rows, comments = [], []
     for k, raw in enumerate(data.splitlines(), start=1):
@@ -293,7 +336,7 @@ def _read_xyz(path: str) -> tuple[np.ndarray, Optional[str]]:
             f"{path}: point {bad} ({b' '.join(rows[bad]).decode('ascii', 'replace')[:60]!r}) is not three numbers; "
             "fix or remove that line"
         ) from None
-    return pts, _unit_in(comments)
+    return pts, _unit_in(comments), _viewpoint_in(path, comments)
 
 
 def _all_numbers(tokens: list[bytes]) -> bool:
@@ -325,6 +368,7 @@ class _PcdHeader:
     data: str
     start: int  # offset of the first data byte
     unit: Optional[str]
+    viewpoint: Optional[np.ndarray]  # where the header says the sensor was (module notes), else None
 
     @property
     def record(self) -> int:
@@ -399,12 +443,33 @@ def _pcd_header(path: str, data: bytes) -> _PcdHeader:
     points = _single_int(bad, "POINTS", values["POINTS"]) if "POINTS" in values else width * height
     if points != width * height:
         raise MeshFileError(f"{bad}: POINTS {points} is not WIDTH × HEIGHT = {width} × {height}; the header is damaged")
-    if "VIEWPOINT" in values and len(values["VIEWPOINT"]) != 7:
-        raise MeshFileError(f"{bad}: VIEWPOINT has {len(values['VIEWPOINT'])} numbers; it takes tx ty tz qw qx qy qz")
+    viewpoint = _pcd_viewpoint(bad, values.get("VIEWPOINT"), height > 1)
+    if viewpoint is None:
+        viewpoint = _viewpoint_in(path, comments)
     encoding = values["DATA"]
     if len(encoding) != 1 or encoding[0] not in ("ascii", "binary", "binary_compressed"):
         raise MeshFileError(f"{bad}: DATA {' '.join(encoding)[:30]!r}; PCD data is ascii, binary or binary_compressed")
-    return _PcdHeader(fields, tuple(dtypes), counts, points, encoding[0], pos, _unit_in(comments))
+    return _PcdHeader(fields, tuple(dtypes), counts, points, encoding[0], pos, _unit_in(comments), viewpoint)
+
+
+def _pcd_viewpoint(where: str, row: Optional[list[str]], organized: bool) -> Optional[np.ndarray]:
+    """The sensor position of a VIEWPOINT row (tx ty tz qw qx qy qz): its translation where it is
+    not PCL's default (the origin, unturned), or for an organized cloud (a camera's image in the
+    camera's frame) the default too; None otherwise."""
+    if row is None:
+        return np.zeros(3) if organized else None
+    if len(row) != 7:
+        raise MeshFileError(f"{where}: VIEWPOINT has {len(row)} numbers; it takes tx ty tz qw qx qy qz")
+    try:
+        v = np.array([float(x) for x in row])
+    except ValueError:
+        v = np.array([np.nan])
+    if not np.isfinite(v).all():
+        raise MeshFileError(
+            f"{where}: VIEWPOINT {' '.join(row)[:60]!r} is not seven finite numbers; the header is damaged"
+        )
+    default = not v[:3].any() and abs(abs(v[3]) - 1.0) < 1e-9 and not v[4:].any()
+    return None if default and not organized else v[:3]
 
 
 def _header_int(where: str, key: str, text: str, low: int, high: int) -> int:
@@ -419,12 +484,12 @@ def _single_int(where: str, key: str, row: list[str]) -> int:
     return int(row[0])
 
 
-def _read_pcd(path: str) -> tuple[np.ndarray, Optional[str]]:
+def _read_pcd(path: str) -> tuple[np.ndarray, Optional[str], Optional[np.ndarray]]:
     data = _read_bytes(path)
     h = _pcd_header(path, data)
     body = memoryview(data)[h.start :]
     read = {"ascii": _pcd_ascii, "binary": _pcd_binary, "binary_compressed": _pcd_compressed}[h.data]
-    return read(path, h, body), h.unit
+    return read(path, h, body), h.unit, h.viewpoint
 
 
 def _pcd_ascii(path: str, h: _PcdHeader, body: memoryview) -> np.ndarray:
