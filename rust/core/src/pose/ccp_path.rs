@@ -13,7 +13,7 @@ use crate::geometry::{centroid, check_count, covariance, principal_axes, Point};
 use crate::normals::{normal_at, Orientation};
 use crate::registration::ccp::ccp;
 use crate::registration::verify::{coarse_inlier_fraction, depth_evidence, inlier_stats, HeightMap};
-use crate::registration::{icp, IcpConfig, RobustKernel};
+use crate::registration::{icp, Convergence, IcpConfig, RobustKernel};
 use crate::search::KdIndex;
 use crate::segment::{scan_spacing, segment_top, SegmentConfig};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
@@ -117,14 +117,27 @@ pub struct CheckIcpParams {
 
 impl Default for CheckIcpParams {
     fn default() -> Self {
+        let c = Convergence::CHECK;
         CheckIcpParams {
             reach_ratio: 0.25,
             kernel_ratio: 0.1,
             min_tolerances: 3.0,
-            iterations: 12,
+            iterations: c.iterations,
             quick_iterations: 6,
-            rotation_tolerance: 1e-4,
-            translation_tolerance: 1e-2,
+            rotation_tolerance: c.rotation,
+            translation_tolerance: c.translation,
+        }
+    }
+}
+
+impl CheckIcpParams {
+    /// When the checks' ICP stops (stage two and the half turns; the quick checks stop after
+    /// `quick_iterations`).
+    pub fn convergence(&self) -> Convergence {
+        Convergence {
+            iterations: self.iterations,
+            rotation: self.rotation_tolerance,
+            translation: self.translation_tolerance,
         }
     }
 }
@@ -144,11 +157,23 @@ pub struct FineIcpParams {
 
 impl Default for FineIcpParams {
     fn default() -> Self {
+        let c = Convergence::FINE;
         FineIcpParams {
             reach_tolerances: 3.0,
-            iterations: 60,
-            rotation_tolerance: 1e-5,
-            translation_tolerance: 1e-3,
+            iterations: c.iterations,
+            rotation_tolerance: c.rotation,
+            translation_tolerance: c.translation,
+        }
+    }
+}
+
+impl FineIcpParams {
+    /// When the refinement stops.
+    pub fn convergence(&self) -> Convergence {
+        Convergence {
+            iterations: self.iterations,
+            rotation: self.rotation_tolerance,
+            translation: self.translation_tolerance,
         }
     }
 }
@@ -265,12 +290,7 @@ fn fit_region(
     }
     let (_, t_model_scene0, coarse) = best;
     let fine = &cfg.ccp_path.fine_icp;
-    let fine_cfg = IcpConfig::robust_plane(
-        fine.reach_tolerances * checks.tol,
-        fine.iterations,
-        fine.rotation_tolerance,
-        fine.translation_tolerance,
-    );
+    let fine_cfg = IcpConfig::robust_plane(fine.reach_tolerances * checks.tol, fine.convergence());
     let refined = icp(object, model.fine_target(), &t_model_scene0, &fine_cfg)?;
     laps.lap("icp");
     let t_model_scene = refined.t_target_source;
@@ -385,9 +405,7 @@ impl<'a> Checks<'a> {
             approximate: true,
             ..IcpConfig::robust_plane(
                 (c.reach_ratio * model.diameter).max(c.min_tolerances * tol),
-                c.iterations,
-                c.rotation_tolerance,
-                c.translation_tolerance,
+                c.convergence(),
             )
         };
         let quick = IcpConfig {

@@ -14,7 +14,7 @@ use crate::geometry::Point;
 use crate::normals::{normals_at, Orientation};
 use crate::registration::ppf::{DetectConfig, Hypothesis, PpfModel};
 use crate::registration::verify::{depth_evidence, Evidence};
-use crate::registration::{icp, IcpConfig};
+use crate::registration::{icp, Convergence, IcpConfig};
 use crate::search::KdIndex;
 use crate::voxel::subsample;
 use nalgebra::Isometry3;
@@ -78,7 +78,7 @@ impl DetectionScene {
         // The nearest field answers these steps where it is the screen's (see `SCREEN_REACH`).
         let quick = IcpConfig {
             approximate: model.screens_on_field(),
-            ..IcpConfig::robust_plane(SCREEN_REACH * step, 8, 1e-3, 5e-2)
+            ..IcpConfig::robust_plane(SCREEN_REACH * step, Convergence::SCREEN)
         };
         let r = icp(&local, model.target(), &start.inverse(), &quick).ok()?;
         let t_scene_model = r.t_target_source.inverse();
@@ -108,7 +108,7 @@ impl DetectionScene {
         if local.len() < 12 {
             return None;
         }
-        let fine = IcpConfig::robust_plane((3.0 * self.judge.tol).max(0.5 * step), 20, 1e-6, 1e-4);
+        let fine = IcpConfig::robust_plane((3.0 * self.judge.tol).max(0.5 * step), Convergence::POLISH);
         let r = icp(&local, model.target(), &j.t_scene_model.inverse(), &fine).ok()?;
         let t_scene_model = r.t_target_source.inverse();
         let evidence = self.judge.evidence(model, &t_scene_model);

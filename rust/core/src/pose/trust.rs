@@ -14,7 +14,7 @@ use super::fit::{plane_residuals, robust_sigma};
 use super::judge::Judge;
 use super::{PoseConfig, PoseEstimate, PoseModel};
 use crate::geometry::Point;
-use crate::registration::{icp, IcpConfig};
+use crate::registration::{icp, Convergence, IcpConfig};
 use crate::symmetry::NearSymmetry;
 use nalgebra::{Isometry3, Vector3};
 use std::f64::consts::TAU;
@@ -71,7 +71,7 @@ impl Default for TrustParams {
             quick_points: 400,
             quick_iterations: 6,
             refine_points: 1500,
-            iterations: 15,
+            iterations: Convergence::ALTERNATIVE.iterations,
             noise_sigmas: 4.0,
             min_fine_tolerance: 0.3,
             min_margin: 30.0,
@@ -180,7 +180,13 @@ pub(super) fn assess(
     }
     let turns = region.turns.clone();
     let sample = thin(&local, p.refine_points);
-    let refine = IcpConfig::robust_plane(3.0 * judge.tol, p.iterations, 1e-5, 1e-3);
+    let refine = IcpConfig::robust_plane(
+        3.0 * judge.tol,
+        Convergence {
+            iterations: p.iterations,
+            ..Convergence::ALTERNATIVE
+        },
+    );
     let polish = |turn: &Isometry3<f64>, pts: &[Point], cfg: &IcpConfig| {
         let start = est.t_scene_model * turn;
         icp(pts, model.fine_target(), &start.inverse(), cfg)

@@ -18,7 +18,7 @@ use super::judge::Judge;
 use super::trust::{thin, Alternative, FeatureEvidence};
 use super::{PoseConfig, PoseModel};
 use crate::geometry::Point;
-use crate::registration::{icp, IcpConfig};
+use crate::registration::{icp, Convergence, IcpConfig};
 use nalgebra::{Isometry3, Matrix3, Translation3, Unit, UnitQuaternion, Vector3};
 
 /// The turn about the weakest axis is probed when the claimed points constrain it less than this
@@ -41,8 +41,6 @@ const BIN_HALVINGS: usize = 4;
 pub(super) const BIN_SLACK: f64 = 0.005;
 /// Claimed points each turn is refined on, at most.
 const REFINE_POINTS: usize = 300;
-/// ICP iterations of each turn's refinement.
-const ITERATIONS: usize = 12;
 /// Claimed points and ICP iterations of the quick look that drops, before the full
 /// refinement, a move that falls back onto the pose or onto a known alternative.
 const QUICK_POINTS: usize = 150;
@@ -190,7 +188,7 @@ pub(super) fn unseen_turns(
     let e0 = judge.evidence(model, t_scene_model);
     let seen_through_ok =
         e0.violated + SEEN_THROUGH_MARGIN.max((SEEN_THROUGH_SHARE * (e0.seen + e0.violated) as f64).round() as usize);
-    let refine = IcpConfig::robust_plane(3.0 * tol, ITERATIONS, 1e-5, 1e-3);
+    let refine = IcpConfig::robust_plane(3.0 * tol, Convergence::UNSEEN_TURN);
     let trust = &cfg.trust;
     let same = |a: &Isometry3<f64>, b: &Isometry3<f64>| {
         let (r, d) = model.symmetries.pose_error(a, b);
