@@ -6,177 +6,19 @@
 //! of the object's points. Their tunables are [`CcpPathParams`].
 
 use super::judge::Judge;
+use super::model::PoseModel;
 use super::scene::scene_indices;
-use super::{CoarseMethod, Laps, PoseConfig, PoseEstimate, PoseModel, Timings};
+use super::types::{CcpPathParams, CoarseMethod, Laps, PoseConfig, PoseEstimate, Timings};
 use crate::error::{Error, Result};
 use crate::geometry::{centroid, check_count, covariance, principal_axes, Point};
 use crate::normals::{normal_at, Orientation};
 use crate::registration::ccp::ccp;
 use crate::registration::verify::{coarse_inlier_fraction, depth_evidence, inlier_stats, HeightMap};
-use crate::registration::{icp, Convergence, IcpConfig, RobustKernel};
+use crate::registration::{icp, IcpConfig, RobustKernel};
 use crate::search::KdIndex;
 use crate::segment::{scan_spacing, segment_top, SegmentConfig};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::PI;
-
-/// Tunables of the CCP and centroid path; the defaults are those the paper's tables were
-/// measured with.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CcpPathParams {
-    /// Regions tried, top first, before the path gives up. Default 8.
-    pub max_regions: usize,
-    /// Object points the coarse checks judge a pose by (the probe; fewer than about 100 cannot
-    /// tell a wrong reading of a partial view from the right one). Default 150.
-    pub probe_points: usize,
-    /// Model points the coarse checks' depth test probes. Default 100.
-    pub model_probes: usize,
-    /// Object points the candidates that survive the quick check converge on. Default 160.
-    pub sample_points: usize,
-    /// Model points (about) the stage-two depth test probes. Default 4000.
-    pub fine_model_probes: usize,
-    /// Readings the cheap first tier of scoring (a third of the probe) passes on to the second
-    /// (the whole probe). Default 32.
-    pub second_tier: usize,
-    /// Distinct rotations, best-prescored first, that get the stage-one ICP check. Default 8.
-    pub stage_one: usize,
-    /// Stage-one leaders that converge in stage two. Default 3.
-    pub stage_two: usize,
-    /// A stage-one result converges in stage two only when it scores at least this fraction
-    /// of the leader's. Default 0.7.
-    pub stage_two_ratio: f64,
-    /// Tolerance of the coarse checks, as a fraction of the part's diameter (at least twice the
-    /// inlier distance). Default 0.08.
-    pub coarse_tolerance_ratio: f64,
-    /// Readings whose rotations differ by less than this, rad, and whose translations differ by
-    /// less than [`CcpPathParams::same_reading_shift`] are scored once. Default 5° (0.0873).
-    pub same_reading_angle: f64,
-    /// Translation part of the same-reading test, as a fraction of the diameter. Default 0.05.
-    pub same_reading_shift: f64,
-    /// Of the readings whose rotations lie within this angle, rad, only the best-ranked gets
-    /// the ICP checks. Default 15° (0.262).
-    pub cluster_angle: f64,
-    /// CCP: the best-ranked readings whose quarter and half turns about the model's axes join
-    /// the ICP checks (views of a part on its side are ambiguous up to such a turn). Default 2.
-    pub turned_readings: usize,
-    /// CCP: a half turn of the winner whose quick score is below this fraction of the winner's
-    /// is not converged. Default 0.8.
-    pub half_turn_drop: f64,
-    /// CCP: a half turn replaces the winner only when it scores this much more. Default 0.01.
-    pub half_turn_margin: f64,
-    /// ICP of the coarse checks.
-    pub check_icp: CheckIcpParams,
-    /// ICP of the final refinement.
-    pub fine_icp: FineIcpParams,
-}
-
-impl Default for CcpPathParams {
-    fn default() -> Self {
-        CcpPathParams {
-            max_regions: 8,
-            probe_points: 150,
-            model_probes: 100,
-            sample_points: 160,
-            fine_model_probes: 4000,
-            second_tier: 32,
-            stage_one: 8,
-            stage_two: 3,
-            stage_two_ratio: 0.7,
-            coarse_tolerance_ratio: 0.08,
-            same_reading_angle: 5f64.to_radians(),
-            same_reading_shift: 0.05,
-            cluster_angle: 15f64.to_radians(),
-            turned_readings: 2,
-            half_turn_drop: 0.8,
-            half_turn_margin: 0.01,
-            check_icp: CheckIcpParams::default(),
-            fine_icp: FineIcpParams::default(),
-        }
-    }
-}
-
-/// The short point-to-plane ICP of the coarse checks (Tukey kernel, approximate search).
-#[derive(Debug, Clone, PartialEq)]
-pub struct CheckIcpParams {
-    /// Correspondence distance as a fraction of the diameter (at least `min_tolerances` inlier
-    /// distances). Default 0.25.
-    pub reach_ratio: f64,
-    /// Tukey kernel width as a fraction of the diameter (at least `min_tolerances` inlier
-    /// distances). Default 0.1.
-    pub kernel_ratio: f64,
-    /// Lower bound of the distance and the kernel, in inlier distances. Default 3.
-    pub min_tolerances: f64,
-    /// Iterations in stage two and for the half turns. Default 12.
-    pub iterations: usize,
-    /// Iterations of the quick checks (stage one, the half turns' first look). Default 6.
-    pub quick_iterations: usize,
-    /// Stops once an update rotates less than this, rad. Default 1e-4.
-    pub rotation_tolerance: f64,
-    /// ... and moves less than this, mm. Default 1e-2.
-    pub translation_tolerance: f64,
-}
-
-impl Default for CheckIcpParams {
-    fn default() -> Self {
-        let c = Convergence::CHECK;
-        CheckIcpParams {
-            reach_ratio: 0.25,
-            kernel_ratio: 0.1,
-            min_tolerances: 3.0,
-            iterations: c.iterations,
-            quick_iterations: 6,
-            rotation_tolerance: c.rotation,
-            translation_tolerance: c.translation,
-        }
-    }
-}
-
-impl CheckIcpParams {
-    /// When the checks' ICP stops (stage two and the half turns; the quick checks stop after
-    /// `quick_iterations`).
-    pub fn convergence(&self) -> Convergence {
-        Convergence {
-            iterations: self.iterations,
-            rotation: self.rotation_tolerance,
-            translation: self.translation_tolerance,
-        }
-    }
-}
-
-/// The final point-to-plane refinement on all of the object's points.
-#[derive(Debug, Clone, PartialEq)]
-pub struct FineIcpParams {
-    /// Correspondence distance and Tukey width, in inlier distances. Default 3.
-    pub reach_tolerances: f64,
-    /// Most iterations. Default 60.
-    pub iterations: usize,
-    /// Stops once an update rotates less than this, rad (default 1e-5, about 0.0006°) ...
-    pub rotation_tolerance: f64,
-    /// ... and moves less than this, mm (default 1e-3): far below what the scan can resolve.
-    pub translation_tolerance: f64,
-}
-
-impl Default for FineIcpParams {
-    fn default() -> Self {
-        let c = Convergence::FINE;
-        FineIcpParams {
-            reach_tolerances: 3.0,
-            iterations: c.iterations,
-            rotation_tolerance: c.rotation,
-            translation_tolerance: c.translation,
-        }
-    }
-}
-
-impl FineIcpParams {
-    /// When the refinement stops.
-    pub fn convergence(&self) -> Convergence {
-        Convergence {
-            iterations: self.iterations,
-            rotation: self.rotation_tolerance,
-            translation: self.translation_tolerance,
-        }
-    }
-}
 
 /// The scan's sampling: spacing along and across the scan lines, mm.
 #[derive(Clone, Copy)]

@@ -15,8 +15,8 @@
 //! flush face is common in a pile; the outline test weighs those.
 
 use super::judge::{share, Judge, JUDGE_PROBES};
-use super::trust::plane_residual;
-use super::PoseModel;
+use super::model::PoseModel;
+use super::surface::plane_residual;
 use crate::geometry::Point;
 use nalgebra::{Isometry3, Vector3};
 use std::collections::{HashMap, VecDeque};

@@ -5,9 +5,9 @@
 
 use super::continuation::continuation;
 use super::extension::{read_ends, MAX_CARRIED};
+use super::model::{near_turns, PoseModel};
 use super::outline::outline;
-use super::trust::near_turns;
-use super::{PoseConfig, PoseModel};
+use super::types::PoseConfig;
 use crate::error::{Error, Result};
 use crate::geometry::{BinBox, Plane, Point};
 use crate::registration::ppf::PpfConfig;

@@ -19,6 +19,7 @@ mod outline;
 mod outline_tests;
 mod ppf_path;
 mod scene;
+mod surface;
 #[cfg(test)]
 mod tests;
 mod trust;
@@ -29,11 +30,11 @@ mod unseen_turns;
 #[cfg(test)]
 mod unseen_turns_tests;
 
-pub use ccp_path::{CcpPathParams, CheckIcpParams, FineIcpParams};
-pub use fit::FitQuality;
 pub use model::PoseModel;
-pub use trust::{Alternative, FeatureEvidence, TrustParams};
-pub use types::{stage_totals, CoarseMethod, PoseConfig, PoseEstimate, Timings};
+pub use types::{
+    stage_totals, Alternative, CcpPathParams, CheckIcpParams, CoarseMethod, FeatureEvidence, FineIcpParams, FitQuality,
+    PoseConfig, PoseEstimate, Timings, TrustParams,
+};
 
 use crate::error::{Error, Result};
 use crate::geometry::Point;
@@ -43,37 +44,13 @@ use ppf_path::detect;
 use scene::{check_scene, remove_bin, DetectionScene};
 use std::time::Instant;
 
-/// Stage timings: each lap is the time since the previous one.
-struct Laps<'a> {
-    clock: Instant,
-    timings: &'a mut Timings,
-}
-
-impl<'a> Laps<'a> {
-    fn new(timings: &'a mut Timings) -> Self {
-        Laps {
-            clock: Instant::now(),
-            timings,
-        }
-    }
-
-    fn lap(&mut self, name: &'static str) {
-        self.timings.push((name, self.clock.elapsed().as_secs_f64() * 1e3));
-        self.clock = Instant::now();
-    }
-}
-
 /// Estimates the pose of the top pickable object of `scene` (N×3, mm) against `model`: exactly
 /// the first of [`estimate_poses`] for the same configuration (the search does not depend on
-/// how many instances are asked for, up to [`SEARCH_INSTANCES`]).
+/// how many instances are asked for, up to [`SEARCH_INSTANCES`](types::SEARCH_INSTANCES)).
 pub fn estimate_pose(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstimate> {
     let mut all = estimate_poses(scene, model, cfg)?;
     Ok(all.swap_remove(0))
 }
-
-/// The search (hypotheses voted, poses polished) is sized for at least this many instances by
-/// default ([`PoseConfig::search_instances`]), so that asking for fewer only truncates the answer.
-pub const SEARCH_INSTANCES: usize = 5;
 
 /// Estimates up to `cfg.max_instances` instances, most pickable first. CCP and the centroid
 /// baseline find the top object only; PPF finds every instance it can confirm.
@@ -147,7 +124,7 @@ fn trusted(
     cfg: &PoseConfig,
 ) -> Result<Vec<PoseEstimate>> {
     let region = trust::Region::new(model, judge, &cfg.trust);
-    let mut misfit: Option<fit::FitQuality> = None;
+    let mut misfit: Option<FitQuality> = None;
     let kept: Vec<PoseEstimate> = found
         .into_iter()
         .filter_map(|mut e| {

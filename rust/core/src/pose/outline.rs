@@ -10,7 +10,7 @@
 //! walls) do not count: a thin part lying on the floor meets the floor at its edges.
 
 use super::judge::{share, Judge};
-use super::PoseModel;
+use super::model::PoseModel;
 use crate::geometry::Point;
 use nalgebra::{Isometry3, Vector3};
 

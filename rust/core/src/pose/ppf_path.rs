@@ -7,8 +7,9 @@
 //! ICP), and an even subsample at the PPF step (voting).
 
 use super::judge::Judge;
+use super::model::{PoseModel, SCREEN_REACH};
 use super::scene::{scene_indices, DetectionScene};
-use super::{CoarseMethod, Laps, PoseConfig, PoseEstimate, PoseModel, Timings};
+use super::types::{CoarseMethod, Laps, PoseConfig, PoseEstimate, Timings};
 use crate::error::{Error, Result};
 use crate::geometry::Point;
 use crate::normals::{normals_at, Orientation};
@@ -19,16 +20,6 @@ use crate::search::KdIndex;
 use crate::voxel::subsample;
 use nalgebra::Isometry3;
 use rayon::prelude::*;
-
-/// The screen's correspondence reach in PPF steps. For a model without a branch layout its ICP
-/// steps take their correspondences from the model's approximate nearest field
-/// ([`crate::search::field::NearestField`], built out to this reach when the PPF table is
-/// installed): a hypothesis a few degrees off needs wide exact searches, which took about a sixth
-/// of a view's time (5.5–8.9 ms of the median of 40 single views of the near-symmetric bench;
-/// 1.5–2.1 ms on the field). A model with a layout keeps the exact search: its field is the
-/// coarse checks' (1/64 of the diameter), which answered a pile of tees differently and was not
-/// measured for the screen.
-pub(super) const SCREEN_REACH: f64 = 1.5;
 
 /// A refined, judged hypothesis.
 #[derive(Debug, Clone)]

@@ -2,7 +2,8 @@
 //! detection (which holds the one judge every pose passes, [`super::judge::Judge`]).
 
 use super::judge::{voxel_size, Judge};
-use super::{PoseConfig, PoseModel};
+use super::model::PoseModel;
+use super::types::PoseConfig;
 use crate::error::{Error, Result};
 use crate::geometry::{check_finite, Plane, Point};
 use crate::registration::ppf::PpfModel;

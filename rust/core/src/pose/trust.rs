@@ -10,101 +10,14 @@
 //! the feature, a hole or a cut corner — leaves points beyond the scan's noise; the judge's depth
 //! test adds the surface a pose predicts where the sensor saw free space.
 
-use super::fit::{plane_residuals, robust_sigma};
 use super::judge::Judge;
-use super::{PoseConfig, PoseEstimate, PoseModel};
+use super::model::{turns_of, PoseModel, Turn};
+use super::surface::{plane_residual, plane_residuals, robust_sigma, thin};
+use super::types::{Alternative, FeatureEvidence, PoseConfig, PoseEstimate, TrustParams};
 use crate::geometry::Point;
 use crate::registration::{icp, Convergence, IcpConfig};
-use crate::symmetry::NearSymmetry;
 use nalgebra::{Isometry3, Vector3};
 use std::f64::consts::TAU;
-
-/// Tunables of the disambiguation and the confidence.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TrustParams {
-    /// Turns tried about a continuous near axis (evenly spaced). Default 24 (every 15°).
-    pub continuous_turns: usize,
-    /// A continuous near axis's turns (every discrete near turn is compared in full, up to
-    /// `max_discrete`): with more than this, a quick look picks this many finalists. Default 3.
-    pub finalists: usize,
-    /// Discrete near turns compared in full, at most; with more (a part whose small feature
-    /// breaks a large group), they join the quick look. Default 8.
-    pub max_discrete: usize,
-    /// Scan points of the quick look's refinement, at most (its comparison uses as many as a
-    /// refinement). Default 400.
-    pub quick_points: usize,
-    /// ICP iterations of the quick look. Default 6.
-    pub quick_iterations: usize,
-    /// Scan points each alternative is refined on, and the quick look compares on, at most.
-    /// Default 1500.
-    pub refine_points: usize,
-    /// ICP iterations of each alternative's refinement. Default 15.
-    pub iterations: usize,
-    /// Fine tolerance in standard deviations of the scan's noise about the pose. Default 4.
-    pub noise_sigmas: f64,
-    /// Smallest fine tolerance, mm. Default 0.3.
-    pub min_fine_tolerance: f64,
-    /// An alternative whose evidence trails the best by less than this many scan points cannot
-    /// be ruled out: twice the 15 points beyond 4σ at which the bench calls a feature in view,
-    /// so that one chance cluster of misfits does not decide. Default 30.
-    pub min_margin: f64,
-    /// ... nor by less than this many standard deviations of the lead that chance alone gives
-    /// two equally good poses: with d scan points that fit one of them and not the other, each
-    /// falls to either side, so the lead (2 × the difference) spreads by 2√d; k probes one of them
-    /// puts where the sensor saw free space spread it by √k probes' worth of points (see
-    /// [`margin_between`]). The points both poses fit or both miss —
-    /// most of a feature region as wide as a flange's whole face — say nothing of which is
-    /// right. Default 3.
-    pub margin_sigmas: f64,
-    /// Poses closer than this rotation (rad, default 5°) ...
-    pub pick_rotation: f64,
-    /// ... and this translation (mm, default 3) are one pose (pick-grade of each other).
-    pub pick_translation: f64,
-}
-
-impl Default for TrustParams {
-    fn default() -> Self {
-        TrustParams {
-            continuous_turns: 24,
-            finalists: 3,
-            max_discrete: 8,
-            quick_points: 400,
-            quick_iterations: 6,
-            refine_points: 1500,
-            iterations: Convergence::ALTERNATIVE.iterations,
-            noise_sigmas: 4.0,
-            min_fine_tolerance: 0.3,
-            min_margin: 30.0,
-            margin_sigmas: 3.0,
-            pick_rotation: 5f64.to_radians(),
-            pick_translation: 3.0,
-        }
-    }
-}
-
-/// What the scan says about one pose in the feature regions.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct FeatureEvidence {
-    /// Scan points in the feature regions within the fine tolerance of the posed model.
-    pub fits: usize,
-    /// Scan points in the feature regions farther than the fine tolerance from it.
-    pub misfits: usize,
-    /// Probe points of the posed model (judge's depth test) where the sensor saw free space.
-    pub seen_through: usize,
-    /// The fine tolerance, mm.
-    pub tolerance: f64,
-    /// fits − misfits − seen-through (in scan points): higher is better supported.
-    pub score: f64,
-}
-
-/// A distinct pose the scan cannot rule out.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Alternative {
-    /// Model → scene.
-    pub t_scene_model: Isometry3<f64>,
-    /// Its evidence.
-    pub evidence: FeatureEvidence,
-}
 
 /// The verdict of [`assess`] on one pose.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -121,9 +34,6 @@ pub struct Trust {
     /// The evidence of the pose kept (`None` for a part without near-symmetries).
     pub evidence: Option<FeatureEvidence>,
 }
-
-/// A near turn (model frame) and whether it is one of a continuous axis's.
-type Turn = (Isometry3<f64>, bool);
 
 /// Steps between two turns about a continuous near axis at which the best candidate is tried
 /// turned (every 2.5° for 24 turns; up to half the gap either way).
@@ -496,23 +406,6 @@ impl Region {
     }
 }
 
-/// The turns (model frame; `true` for a continuous axis's) of one near-symmetry: its half turn,
-/// or [`TrustParams::continuous_turns`] even turns about a continuous axis.
-fn turns_of(n: &NearSymmetry, p: &TrustParams) -> Vec<(Isometry3<f64>, bool)> {
-    match n.angle {
-        Some(_) => vec![(n.transform(0.0), false)],
-        None => {
-            let k = p.continuous_turns.max(2);
-            (1..k).map(|i| (n.transform(TAU * i as f64 / k as f64), true)).collect()
-        }
-    }
-}
-
-/// The turns of every near-symmetry of `model` (see [`turns_of`]).
-pub(super) fn near_turns(model: &PoseModel, p: &TrustParams) -> Vec<(Isometry3<f64>, bool)> {
-    model.near_symmetries.iter().flat_map(|n| turns_of(n, p)).collect()
-}
-
 /// The fine tolerance: `noise_sigmas` robust standard deviations of the point-to-plane residuals
 /// of `local` about the pose (at least `min_fine_tolerance`, at most the judge's tolerance).
 fn fine_tolerance(
@@ -527,33 +420,6 @@ fn fine_tolerance(
         Some(sigma) => (p.noise_sigmas * sigma).clamp(p.min_fine_tolerance.min(tol), tol),
         None => tol,
     }
-}
-
-/// Every k-th point of `v`, so that at most about `n` remain.
-pub(super) fn thin(v: &[Point], n: usize) -> Vec<Point> {
-    v.iter().step_by(v.len().div_ceil(n.max(1)).max(1)).copied().collect()
-}
-
-/// Distance of a model-frame point from the tangent plane of its nearest dense model point,
-/// when that point lies within `reach`.
-pub(super) fn plane_residual(model: &PoseModel, q: &Point, reach: f64) -> Option<f64> {
-    let target = model.fine_target();
-    let at = [q.x, q.y, q.z];
-    // Most points asked about lie on the surface, within the model's sample spacing (no less
-    // than the fine surface's) of their nearest sample: a search that narrow finds it (nothing
-    // nearer lies outside it) at a fraction of the cost of one out to `reach`, which only the
-    // points it misses need.
-    let near = model.spacing.min(reach);
-    let (j, _) = target.search().nearest_within(&at, near * near).or_else(|| {
-        (reach > near)
-            .then(|| target.search().nearest_within(&at, reach * reach))
-            .flatten()
-    })?;
-    let n = target.normals().map(|n| n[j]);
-    Some(match n {
-        Some(n) => n.dot(&(q - target.points()[j])),
-        None => (q - target.points()[j]).norm(),
-    })
 }
 
 /// Whether each of `judged` lies within `tol` of the posed model's surface.

@@ -58,7 +58,7 @@ fn the_ppf_table_brings_the_screens_nearest_field_out_to_its_reach() {
         .target()
         .field()
         .expect("a model without a layout gets the screen's field");
-    let reach = super::ppf_path::SCREEN_REACH * model.ppf.as_ref().unwrap().step();
+    let reach = super::model::SCREEN_REACH * model.ppf.as_ref().unwrap().step();
     let cell_diagonal = 3f64.sqrt() * model.diameter / super::model::SCREEN_FIELD_CELLS;
     // Over the middle of the top face (z = 10), just inside the reach: the field answers with a
     // point of the face no farther than the nearest one plus the field's error.

@@ -13,10 +13,11 @@
 //! is refused; a slide of a long shaft a few millimetres into the floor, which the judge's
 //! tolerance would let pass, is no alternative either.
 
-use super::fit::{eigen_ascending, plane_residuals, thinned_sigma, FREE_RATIO};
+use super::fit::{thinned_sigma, FREE_RATIO};
 use super::judge::Judge;
-use super::trust::{thin, Alternative, FeatureEvidence};
-use super::{PoseConfig, PoseModel};
+use super::model::PoseModel;
+use super::surface::{eigen_ascending, plane_residuals, thin};
+use super::types::{Alternative, FeatureEvidence, PoseConfig};
 use crate::geometry::Point;
 use crate::registration::{icp, Convergence, IcpConfig};
 use nalgebra::{Isometry3, Matrix3, Translation3, Unit, UnitQuaternion, Vector3};

@@ -56,7 +56,7 @@ fn seen_from_above(
 }
 
 /// The truth and the unseen turns of `pose` (default: the truth).
-fn turns_of(covered: bool, pose: Option<Isometry3<f64>>) -> (Isometry3<f64>, Vec<trust::Alternative>) {
+fn turns_of(covered: bool, pose: Option<Isometry3<f64>>) -> (Isometry3<f64>, Vec<Alternative>) {
     let (model, _) = elbow_model();
     let cfg = config(CoarseMethod::Ppf);
     let (truth, scene_pts) = scene(covered);
@@ -217,9 +217,9 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
         let (r, d) = model.symmetries.pose_error(t, &truth);
         r < 5f64.to_radians() && d < 3.0
     };
-    let alternative = trust::Alternative {
+    let alternative = Alternative {
         t_scene_model: wrong,
-        evidence: trust::FeatureEvidence::default(),
+        evidence: FeatureEvidence::default(),
     };
     let own = unseen_turns(
         &claimed,
