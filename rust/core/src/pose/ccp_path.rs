@@ -7,7 +7,7 @@
 
 use super::judge::Judge;
 use super::model::PoseModel;
-use super::scene::scene_indices;
+use super::scene::{scene_indices, Context};
 use super::types::{CcpPathParams, CoarseMethod, Laps, PoseConfig, PoseEstimate, Timings};
 use crate::error::{Error, Result};
 use crate::geometry::{centroid, check_count, covariance, principal_axes, Point};
@@ -36,16 +36,13 @@ type Tried = (f64, Isometry3<f64>, Isometry3<f64>);
 /// Table 2 with one addition: a region that no pose explains (a bin rim, a sliver of a part
 /// deep below others) is set aside and the next top region tried.
 pub(super) fn run(
-    scene: &[Point],
-    pts: &[Point],
-    model: &PoseModel,
-    cfg: &PoseConfig,
+    ctx: &Context<'_>,
     method: CoarseMethod,
     judge: &Judge,
     timings: &mut Timings,
 ) -> Result<PoseEstimate> {
+    let (pts, up) = (ctx.pts, ctx.up);
     let mut laps = Laps::new(timings);
-    let up = cfg.up.normalize();
     let index = KdIndex::new(pts);
     let spacing = scan_spacing(pts, &index);
     let sampling = Sampling {
@@ -61,17 +58,17 @@ pub(super) fn run(
         *memo[i].get_or_insert_with(|| normal_at(&pts[i], pts, &index, k, Orientation::TowardDirection(up), &mut found))
     };
     laps.lap("normals");
-    let seg_cfg = segment_config(model, cfg, sampling, up);
+    let seg_cfg = segment_config(ctx, sampling);
     let mut excluded = vec![false; pts.len()];
     let mut last_failure: Option<Error> = None;
-    for _ in 0..cfg.ccp_path.max_regions {
+    for _ in 0..ctx.cfg.ccp_path.max_regions {
         let region = match segment_top(pts, Some(&mut normal_of), &index, &seg_cfg, Some(&excluded)) {
             Ok(r) => r,
             Err(e) => return Err(last_failure.unwrap_or(e)),
         };
         let object: Vec<Point> = region.iter().map(|&i| pts[i]).collect();
         laps.lap("segmentation");
-        match fit_region(scene, pts, &object, model, cfg, method, sampling, judge, &mut laps) {
+        match fit_region(ctx, &object, method, sampling, judge, &mut laps) {
             Err(Error::NoObjectFound { reason }) => {
                 for &i in &region {
                     excluded[i] = true;
@@ -96,35 +93,33 @@ fn normals_k(pts: &[Point], s: Sampling) -> Result<usize> {
 }
 
 /// Table 2's parameters, defaults derived from the scan's sampling and the model's size.
-fn segment_config(model: &PoseModel, cfg: &PoseConfig, s: Sampling, up: Vector3<f64>) -> SegmentConfig {
+fn segment_config(ctx: &Context<'_>, s: Sampling) -> SegmentConfig {
+    let (model, cfg) = (ctx.model, ctx.cfg);
     let visible_points = (0.5 * model.area / (s.along * s.across)).max(1.0);
     SegmentConfig {
         d_star: cfg.d_star.unwrap_or((3.0 * s.along).max(1.6 * s.across)),
         min_points: cfg.min_points.unwrap_or(((0.1 * visible_points) as usize).max(15)),
         max_normal_angle: cfg.max_normal_angle,
         max_extent: 1.1 * model.diameter,
-        up,
+        up: ctx.up,
     }
 }
 
 /// The pose of one segmented region: coarse readings → coarse checks → refinement →
 /// verification; `NoObjectFound` when the region is not the part.
-#[allow(clippy::too_many_arguments)]
 fn fit_region(
-    scene: &[Point],
-    pts: &[Point],
+    ctx: &Context<'_>,
     object: &[Point],
-    model: &PoseModel,
-    cfg: &PoseConfig,
     method: CoarseMethod,
     sampling: Sampling,
     judge: &Judge,
     laps: &mut Laps<'_>,
 ) -> Result<PoseEstimate> {
+    let (model, cfg) = (ctx.model, ctx.cfg);
     reject_flat_region(object, model)?;
-    let candidates = coarse_readings(object, model, cfg, method)?;
+    let candidates = coarse_readings(object, ctx, method)?;
     laps.lap("coarse");
-    let checks = Checks::new(scene, object, model, cfg, sampling);
+    let checks = Checks::new(ctx, object, sampling);
     let ranked = checks.rank(&candidates, method);
     let mut best = checks.converge(&ranked)?;
     if method == CoarseMethod::Ccp {
@@ -141,7 +136,7 @@ fn fit_region(
     // The one judge every method passes: a pose the scan sees through, that shows too little of
     // itself or that lies through the bin is no pose, and the next region is tried.
     let (t_scene_model, evidence) = judge.verdict(model, &t_scene_model, cfg)?;
-    let indices = scene_indices(pts, model, &t_scene_model, checks.tol);
+    let indices = scene_indices(ctx.pts, model, &t_scene_model, checks.tol);
     laps.lap("verification");
     Ok(PoseEstimate {
         t_scene_model: model.symmetries.canonical(&t_scene_model),
@@ -183,16 +178,12 @@ fn reject_flat_region(object: &[Point], model: &PoseModel) -> Result<()> {
 }
 
 /// Coarse pose readings, model → scene: CCP's, or the centroid baseline's one.
-fn coarse_readings(
-    object: &[Point],
-    model: &PoseModel,
-    cfg: &PoseConfig,
-    method: CoarseMethod,
-) -> Result<Vec<Isometry3<f64>>> {
+fn coarse_readings(object: &[Point], ctx: &Context<'_>, method: CoarseMethod) -> Result<Vec<Isometry3<f64>>> {
+    let model = ctx.model;
     match (method, &model.layout) {
         (CoarseMethod::Ccp, Some(layout)) => {
             let (points, normals) = (model.target.points(), model.target.normals().unwrap_or(&[]));
-            Ok(ccp(object, layout, points, normals, Some(cfg.up.normalize()), &cfg.ccp)?.candidates)
+            Ok(ccp(object, layout, points, normals, Some(ctx.up), &ctx.cfg.ccp)?.candidates)
         }
         (CoarseMethod::Ccp, None) => Err(Error::invalid(
             "model",
@@ -225,7 +216,8 @@ struct Checks<'a> {
 }
 
 impl<'a> Checks<'a> {
-    fn new(scene: &[Point], object: &[Point], model: &'a PoseModel, cfg: &'a PoseConfig, s: Sampling) -> Self {
+    fn new(ctx: &Context<'a>, object: &[Point], s: Sampling) -> Self {
+        let (model, cfg) = (ctx.model, ctx.cfg);
         let p = &cfg.ccp_path;
         let tol = cfg
             .inlier_distance
@@ -257,7 +249,7 @@ impl<'a> Checks<'a> {
         Checks {
             model,
             params: p,
-            heights: HeightMap::new(scene, &cfg.up.normalize(), (1.5 * s.across).max(0.5)),
+            heights: HeightMap::new(ctx.scene, &ctx.up, (1.5 * s.across).max(0.5)),
             probe,
             sample,
             tol,

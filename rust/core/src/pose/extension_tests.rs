@@ -79,7 +79,7 @@ fn judged_scene(mesh: &TriMesh, pose: &Isometry3<f64>, model: &PoseModel) -> Jud
         min: Point::new(280.0, -120.0, 0.0),
         max: Point::new(520.0, 120.0, 100.0),
     });
-    Judge::new(&pts, &pts, Vec::new(), model, &cfg)
+    tests::judge_of(&pts, &pts, Vec::new(), model, &cfg)
 }
 
 /// `model` posed on `larger` lying at each of `yaws` is refused by the extension test (and the

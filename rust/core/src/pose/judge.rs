@@ -7,6 +7,7 @@ use super::continuation::continuation;
 use super::extension::{read_ends, MAX_CARRIED};
 use super::model::{near_turns, PoseModel};
 use super::outline::outline;
+use super::scene::Context;
 use super::types::PoseConfig;
 use crate::error::{Error, Result};
 use crate::geometry::{BinBox, Plane, Point};
@@ -94,24 +95,18 @@ pub(super) fn voxel_size(step: f64) -> f64 {
 }
 
 impl Judge {
-    /// The judge of `scene_all` for `model`: `removed` are the support planes bin removal took
-    /// out (unused with a bin box), `remaining` the points it kept.
-    pub fn new(
-        scene_all: &[Point],
-        remaining: &[Point],
-        removed: Vec<Plane>,
-        model: &PoseModel,
-        cfg: &PoseConfig,
-    ) -> Self {
-        let step = judge_step(model);
+    /// The judge of the context's whole scene for its model: `removed` are the support planes bin
+    /// removal took out (unused with a bin box), `remaining` the points it kept.
+    pub fn new(ctx: &Context<'_>, remaining: &[Point], removed: Vec<Plane>) -> Self {
+        let step = judge_step(ctx.model);
         let tol = tolerance(step);
-        let up = cfg.up.normalize();
-        let supports = match &cfg.bin {
+        let up = ctx.up;
+        let supports = match &ctx.cfg.bin {
             Some(bin) => bin_walls(bin),
             None => floors_below(remaining, removed, &up, tol),
         };
         Judge {
-            heights: HeightMap::fitted(scene_all, &up, (0.5 * voxel_size(step)).max(1.0)),
+            heights: HeightMap::fitted(ctx.scene, &up, (0.5 * voxel_size(step)).max(1.0)),
             tol,
             supports,
         }

@@ -41,7 +41,8 @@ use crate::geometry::Point;
 use ccp_path::run;
 use judge::Judge;
 use ppf_path::detect;
-use scene::{check_scene, remove_bin, DetectionScene};
+use ppf_path::DetectionScene;
+use scene::{check_scene, remove_bin, Context};
 use std::time::Instant;
 
 /// Estimates the pose of the top pickable object of `scene` (N×3, mm) against `model`: exactly
@@ -69,7 +70,7 @@ fn resolve_method(method: CoarseMethod, model: &PoseModel) -> CoarseMethod {
 }
 
 fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<PoseEstimate>> {
-    check_scene(scene, model, cfg)?;
+    let up = check_scene(scene, model, cfg)?;
     let method = resolve_method(cfg.method, model);
     // Bin removal: PPF removes support planes itself, on its voxel grid.
     let clock = Instant::now();
@@ -82,21 +83,29 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
     let mut timings = vec![("bin_removal", clock.elapsed().as_secs_f64() * 1e3)];
     crate::cancel::check()?;
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
+    let ctx = Context {
+        scene,
+        kept: &kept,
+        pts: &pts,
+        model,
+        cfg,
+        up,
+    };
     let (found, judge) = match method {
         CoarseMethod::Ccp | CoarseMethod::Centroid => {
-            let judge = Judge::new(scene, &pts, removed, model, cfg);
-            let e = run(scene, &pts, model, cfg, method, &judge, &mut timings)?;
+            let judge = Judge::new(&ctx, &pts, removed);
+            let e = run(&ctx, method, &judge, &mut timings)?;
             (vec![reindex(e, &kept)], judge)
         }
         CoarseMethod::Ppf => {
-            let (found, prepared) = detect_instances(scene, &pts, &kept, model, cfg, &mut timings)?;
+            let (found, prepared) = detect_instances(&ctx, &mut timings)?;
             (found, prepared.judge)
         }
-        CoarseMethod::Auto => auto(scene, &pts, &kept, model, cfg, &mut timings)?,
+        CoarseMethod::Auto => auto(&ctx, &mut timings)?,
     };
     let clock = Instant::now();
     crate::cancel::check()?;
-    let found = trusted(found, scene, &pts, model, &judge, cfg)?;
+    let found = trusted(found, &ctx, &judge)?;
     timings.push(("trust", clock.elapsed().as_secs_f64() * 1e3));
     crate::cancel::check()?;
     Ok(found
@@ -114,15 +123,9 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
 /// slides the view leaves open are alternatives too (see [`unseen_turns`]).
 /// A pose whose points lie further off the model than [`fit::MAX_RATIO`] noise floors is not
 /// reported; `NoObjectFound` when no pose is left.
-/// `pts` are the points left after bin removal (the comparison runs on them).
-fn trusted(
-    found: Vec<PoseEstimate>,
-    scene: &[Point],
-    pts: &[Point],
-    model: &PoseModel,
-    judge: &Judge,
-    cfg: &PoseConfig,
-) -> Result<Vec<PoseEstimate>> {
+/// The context's points, those left after bin removal, are what the comparison runs on.
+fn trusted(found: Vec<PoseEstimate>, ctx: &Context<'_>, judge: &Judge) -> Result<Vec<PoseEstimate>> {
+    let (scene, pts, model, cfg) = (ctx.scene, ctx.pts, ctx.model, ctx.cfg);
     let region = trust::Region::new(model, judge, &cfg.trust);
     let mut misfit: Option<FitQuality> = None;
     let kept: Vec<PoseEstimate> = found
@@ -198,22 +201,15 @@ fn reindex(mut e: PoseEstimate, kept: &[usize]) -> PoseEstimate {
 }
 
 /// PPF's instances with scene indices, and its prepared scene.
-fn detect_instances(
-    scene: &[Point],
-    pts: &[Point],
-    kept: &[usize],
-    model: &PoseModel,
-    cfg: &PoseConfig,
-    timings: &mut Timings,
-) -> Result<(Vec<PoseEstimate>, DetectionScene)> {
-    let ppf = model.ppf.as_ref().ok_or_else(|| {
+fn detect_instances(ctx: &Context<'_>, timings: &mut Timings) -> Result<(Vec<PoseEstimate>, DetectionScene)> {
+    let ppf = ctx.model.ppf.as_ref().ok_or_else(|| {
         Error::invalid(
             "model",
             "PPF needs the model's feature table; prepare the model with PPF (binpick builds it on first use)",
         )
     })?;
-    let (found, prepared) = detect(scene, pts, model, ppf, cfg, timings)?;
-    Ok((found.into_iter().map(|e| reindex(e, kept)).collect(), prepared))
+    let (found, prepared) = detect(ctx, ppf, timings)?;
+    Ok((found.into_iter().map(|e| reindex(e, ctx.kept)).collect(), prepared))
 }
 
 /// Regions CCP tries when it runs beside PPF's instances (auto with a branch layout): the top
@@ -224,22 +220,15 @@ pub const AUTO_CCP_REGIONS: usize = 1;
 
 /// Auto with a branch layout: PPF over the pile and CCP on the top object (the next objects
 /// down too when PPF finds nothing); the verified winner leads.
-fn auto(
-    scene: &[Point],
-    pts: &[Point],
-    kept: &[usize],
-    model: &PoseModel,
-    cfg: &PoseConfig,
-    timings: &mut Timings,
-) -> Result<(Vec<PoseEstimate>, Judge)> {
-    let detected = detect_instances(scene, pts, kept, model, cfg, timings);
+fn auto(ctx: &Context<'_>, timings: &mut Timings) -> Result<(Vec<PoseEstimate>, Judge)> {
+    let detected = detect_instances(ctx, timings);
     let clock = Instant::now();
-    let (ccp_kept, removed) = if cfg.bin.is_some() {
-        (kept.to_vec(), Vec::new())
+    let (ccp_kept, removed) = if ctx.cfg.bin.is_some() {
+        (ctx.kept.to_vec(), Vec::new())
     } else {
-        remove_bin(scene, model, cfg, true)?
+        remove_bin(ctx.scene, ctx.model, ctx.cfg, true)?
     };
-    let ccp_pts: Vec<Point> = ccp_kept.iter().map(|&i| scene[i]).collect();
+    let ccp_pts: Vec<Point> = ccp_kept.iter().map(|&i| ctx.scene[i]).collect();
     // One judge for both paths: PPF's, when it prepared the scene; CCP's own only without it.
     let mut own: Option<Judge> = None;
     timings.push(("ccp_bin_removal", clock.elapsed().as_secs_f64() * 1e3));
@@ -247,28 +236,25 @@ fn auto(
     let by_ccp = {
         let judge = match &detected {
             Ok((_, prepared)) => &prepared.judge,
-            Err(_) => own.get_or_insert_with(|| Judge::new(scene, &ccp_pts, removed, model, cfg)),
+            Err(_) => own.get_or_insert_with(|| Judge::new(ctx, &ccp_pts, removed)),
         };
         // Beside PPF's instances CCP reads the top object only; alone it goes on down the pile.
-        let mut ccp_cfg = cfg.clone();
+        let mut ccp_cfg = ctx.cfg.clone();
         if detected.is_ok() {
             ccp_cfg.ccp_path.max_regions = ccp_cfg.ccp_path.max_regions.min(AUTO_CCP_REGIONS);
         }
-        run(
-            scene,
-            &ccp_pts,
-            model,
-            &ccp_cfg,
-            CoarseMethod::Ccp,
-            judge,
-            &mut ccp_timings,
-        )
-        .map(|e| reindex(e, &ccp_kept))
+        let ccp_ctx = Context {
+            kept: &ccp_kept,
+            pts: &ccp_pts,
+            cfg: &ccp_cfg,
+            ..*ctx
+        };
+        run(&ccp_ctx, CoarseMethod::Ccp, judge, &mut ccp_timings).map(|e| reindex(e, &ccp_kept))
     };
     timings.extend(ccp_timings.into_iter().map(|(name, ms)| (ccp_stage(name), ms)));
     match (detected, by_ccp) {
         (Ok((found, prepared)), Ok(c)) => {
-            let found = arbitrate(found, c, &prepared, model, cfg.max_instances);
+            let found = arbitrate(found, c, &prepared, ctx.model, ctx.cfg.max_instances);
             Ok((found, prepared.judge))
         }
         (Ok((found, prepared)), Err(_)) => Ok((found, prepared.judge)),

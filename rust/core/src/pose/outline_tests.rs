@@ -56,7 +56,7 @@ fn judge_of(scene: &[Point], model: &PoseModel) -> Judge {
         min: Point::new(300.0, -100.0, 0.0),
         max: Point::new(500.0, 100.0, 80.0),
     });
-    Judge::new(scene, scene, Vec::new(), model, &cfg)
+    tests::judge_of(scene, scene, Vec::new(), model, &cfg)
 }
 
 fn on_floor(x: f64, y: f64) -> Isometry3<f64> {

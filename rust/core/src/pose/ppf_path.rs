@@ -6,9 +6,9 @@
 //! height map and the reported indices), a voxel grid at a third of the PPF step (normals and
 //! ICP), and an even subsample at the PPF step (voting).
 
-use super::judge::Judge;
+use super::judge::{voxel_size, Judge};
 use super::model::{PoseModel, SCREEN_REACH};
-use super::scene::{scene_indices, DetectionScene};
+use super::scene::{scene_indices, Context};
 use super::types::{CoarseMethod, Laps, PoseConfig, PoseEstimate, Timings};
 use crate::error::{Error, Result};
 use crate::geometry::Point;
@@ -17,9 +17,51 @@ use crate::registration::ppf::{DetectConfig, Hypothesis, PpfModel};
 use crate::registration::verify::{depth_evidence, Evidence};
 use crate::registration::{icp, Convergence, IcpConfig};
 use crate::search::KdIndex;
-use crate::voxel::subsample;
-use nalgebra::Isometry3;
+use crate::segment::remove_support_planes;
+use crate::voxel::{subsample, voxel_downsample};
+use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
+
+/// The scene prepared for detection and judging.
+pub(crate) struct DetectionScene {
+    /// Voxel-grid points (mean of each voxel) and their KD-tree.
+    pub fine: Vec<Point>,
+    pub fine_index: KdIndex,
+    /// The judge every pose passes.
+    pub judge: Judge,
+}
+
+impl DetectionScene {
+    /// Voxel grid and normals of the context's points (the scene without the bin) for `ppf`, and
+    /// the judge of the whole scene. Without a bin box, support planes wider than the part are
+    /// removed from the voxel grid.
+    pub fn new(ctx: &Context<'_>, ppf: &PpfModel) -> Result<Self> {
+        let step = ppf.step();
+        let voxel = voxel_size(step);
+        let mut fine = voxel_downsample(ctx.pts, None, voxel)?.points;
+        let mut removed = Vec::new();
+        if ctx.cfg.bin.is_none() && fine.len() >= 50 {
+            let (keep, planes) = remove_support_planes(&fine, ctx.model.diameter, (0.5 * voxel).max(1.0), 1);
+            fine = keep.iter().map(|&i| fine[i]).collect();
+            removed = planes;
+        }
+        if fine.len() < 10 {
+            return Err(Error::NoObjectFound {
+                reason: format!(
+                    "only {} occupied {voxel:.1} mm voxels remain after removing the bin; the bin is empty",
+                    fine.len()
+                ),
+            });
+        }
+        let fine_index = KdIndex::new(&fine);
+        let judge = Judge::new(ctx, &fine, removed);
+        Ok(DetectionScene {
+            fine,
+            fine_index,
+            judge,
+        })
+    }
+}
 
 /// A refined, judged hypothesis.
 #[derive(Debug, Clone)]
@@ -146,17 +188,15 @@ fn search_instances(cfg: &PoseConfig) -> usize {
 /// All instances found by PPF, most pickable first (at most `cfg.max_instances`), and the
 /// prepared scene (for judging other methods' poses on the same terms).
 pub(super) fn detect(
-    scene_all: &[Point],
-    points: &[Point],
-    model: &PoseModel,
+    ctx: &Context<'_>,
     ppf: &PpfModel,
-    cfg: &PoseConfig,
     timings: &mut Timings,
 ) -> Result<(Vec<PoseEstimate>, DetectionScene)> {
+    let (model, cfg) = (ctx.model, ctx.cfg);
     let mut laps = Laps::new(timings);
-    let scene = DetectionScene::new(scene_all, points, model, ppf, cfg)?;
+    let scene = DetectionScene::new(ctx, ppf)?;
     laps.lap("voxels");
-    let hypotheses = vote(&scene, model, ppf, cfg, &mut laps)?;
+    let hypotheses = vote(&scene, ctx, ppf, &mut laps)?;
     let judged = screen_and_polish(&scene, model, ppf.step(), &hypotheses, cfg, &mut laps);
     let instances = one_pose_per_instance(judged, &scene, model, cfg);
     if instances.is_empty() {
@@ -168,24 +208,19 @@ pub(super) fn detect(
             ),
         });
     }
-    let out = estimates(instances, points, model, cfg, scene.judge.tol);
+    let out = estimates(instances, ctx, scene.judge.tol);
     laps.lap("verification");
     Ok((out, scene))
 }
 
 /// Pose hypotheses from the votes of the voxel grid's even subsample at the PPF step.
-fn vote(
-    scene: &DetectionScene,
-    model: &PoseModel,
-    ppf: &PpfModel,
-    cfg: &PoseConfig,
-    laps: &mut Laps<'_>,
-) -> Result<Vec<Hypothesis>> {
+fn vote(scene: &DetectionScene, ctx: &Context<'_>, ppf: &PpfModel, laps: &mut Laps<'_>) -> Result<Vec<Hypothesis>> {
+    let cfg = ctx.cfg;
     let keep = subsample(&scene.fine, ppf.step());
     let sparse: Vec<Point> = keep.iter().map(|&i| scene.fine[i]).collect();
     let orientation = match cfg.viewpoint {
         Some(v) => Orientation::TowardPoint(v),
-        None => Orientation::TowardDirection(cfg.up.normalize()),
+        None => Orientation::TowardDirection(ctx.up),
     };
     // Only the voting samples need normals (ICP uses the model's).
     let sparse_normals = normals_at(&sparse, &scene.fine, &scene.fine_index, 10, orientation);
@@ -197,7 +232,7 @@ fn vote(
     };
     let votes = ppf.vote(&sparse, &sparse_normals, &sparse_index, &detect_cfg);
     laps.lap("voting");
-    let hypotheses = ppf.cluster(&votes, &model.symmetries, &detect_cfg);
+    let hypotheses = ppf.cluster(&votes, &ctx.model.symmetries, &detect_cfg);
     laps.lap("clustering");
     if hypotheses.is_empty() {
         return Err(Error::NoObjectFound {
@@ -280,17 +315,12 @@ fn one_pose_per_instance(
     instances
 }
 
-/// The most pickable instances as estimates, with the indices of `points` on each.
-fn estimates(
-    instances: Vec<Judged>,
-    points: &[Point],
-    model: &PoseModel,
-    cfg: &PoseConfig,
-    tol: f64,
-) -> Vec<PoseEstimate> {
-    rank(instances, model, cfg)
+/// The most pickable instances as estimates, with the indices of the context's points on each.
+fn estimates(instances: Vec<Judged>, ctx: &Context<'_>, tol: f64) -> Vec<PoseEstimate> {
+    let (points, model) = (ctx.pts, ctx.model);
+    rank(instances, model, &ctx.up)
         .into_iter()
-        .take(cfg.max_instances.max(1))
+        .take(ctx.cfg.max_instances.max(1))
         .map(|(j, pick)| {
             let t_scene_model = model.symmetries.canonical(&j.t_scene_model);
             PoseEstimate {
@@ -322,10 +352,9 @@ const COVERED: f64 = 0.1;
 /// Pickability in [0, 1]: height among the instances (half), the confirmed share of the facing
 /// surface (a third) and freedom from parts on top (a sixth). Returns the instances with their
 /// pickability, uncovered instances first (a covered part is not picked while an uncovered one
-/// lies free), then most pickable first.
-fn rank(instances: Vec<Judged>, model: &PoseModel, cfg: &PoseConfig) -> Vec<(Judged, f64)> {
-    let up = cfg.up.normalize();
-    let heights: Vec<f64> = instances.iter().map(|j| j.center(model).coords.dot(&up)).collect();
+/// lies free), then most pickable first. `up` is the unit direction toward the sensor.
+fn rank(instances: Vec<Judged>, model: &PoseModel, up: &Vector3<f64>) -> Vec<(Judged, f64)> {
+    let heights: Vec<f64> = instances.iter().map(|j| j.center(model).coords.dot(up)).collect();
     let (lo, hi) = heights
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));

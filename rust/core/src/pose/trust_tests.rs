@@ -115,7 +115,7 @@ fn the_feature_region_holds_the_points_within_a_cell_of_every_feature_image() {
     let (model, mesh) = bossed_block();
     let cfg = config(CoarseMethod::Ppf);
     let scene = top_view(mesh, &posed(0.3, false), 0);
-    let judge = judge::Judge::new(&scene, &scene, Vec::new(), model, &cfg);
+    let judge = tests::judge_of(&scene, &scene, Vec::new(), model, &cfg);
     let region = trust::Region::new(model, &judge, &cfg.trust);
     let cell = region.cell();
     let key = |q: &Point| [q.x, q.y, q.z].map(|v| (v / cell).floor() as i64);
@@ -161,7 +161,7 @@ fn a_boss_in_view_decides_the_pose_and_a_flipped_start_is_corrected() {
         // Started from each near-symmetric turn of the truth, the trust stage turns it back.
         let (kept, planes) = scene::remove_bin(&scene, model, &cfg, true).unwrap();
         let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
-        let judge = judge::Judge::new(&scene, &pts, planes, model, &cfg);
+        let judge = tests::judge_of(&scene, &pts, planes, model, &cfg);
         for n in &model.near_symmetries {
             let wrong = PoseEstimate {
                 t_scene_model: truth * n.transform(0.0),
@@ -263,7 +263,7 @@ fn a_notch_in_view_turns_a_disc_back_from_any_turn_about_its_axis() {
     }
     let (kept, planes) = scene::remove_bin(&scene, model, &cfg, true).unwrap();
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
-    let judge = judge::Judge::new(&scene, &pts, planes, model, &cfg);
+    let judge = tests::judge_of(&scene, &pts, planes, model, &cfg);
     let region = trust::Region::new(model, &judge, &cfg.trust);
     let est = estimate_pose(&scene, model, &cfg).unwrap();
     for deg in [62.0f64, 133.0, 208.0, 289.0, 22.0, 173.0, 251.0, 328.0] {

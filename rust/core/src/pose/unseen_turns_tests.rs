@@ -62,7 +62,7 @@ fn turns_of(covered: bool, pose: Option<Isometry3<f64>>) -> (Isometry3<f64>, Vec
     let (truth, scene_pts) = scene(covered);
     let (kept, planes) = scene::remove_bin(&scene_pts, model, &cfg, true).unwrap();
     let pts: Vec<Point> = kept.iter().map(|&i| scene_pts[i]).collect();
-    let judge = judge::Judge::new(&scene_pts, &pts, planes, model, &cfg);
+    let judge = tests::judge_of(&scene_pts, &pts, planes, model, &cfg);
     let pose = pose.unwrap_or(truth);
     assert!(judge.verdict(model, &pose, &cfg).is_ok(), "the pose passes the judge");
     let claimed: Vec<Point> = scene::scene_indices(&scene_pts, model, &pose, judge.tol)
@@ -191,7 +191,7 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
     let (kept, planes) = scene::remove_bin(&scene_pts, model, &cfg, true).unwrap();
     assert_eq!(planes.len(), 1, "the floor is the support");
     let pts: Vec<Point> = kept.iter().map(|&i| scene_pts[i]).collect();
-    let judge = judge::Judge::new(&scene_pts, &pts, planes, model, &cfg);
+    let judge = tests::judge_of(&scene_pts, &pts, planes, model, &cfg);
     let near = model
         .near_symmetries
         .iter()
