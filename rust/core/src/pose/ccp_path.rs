@@ -135,7 +135,7 @@ fn fit_region(
     let t_scene_model = t_model_scene.inverse();
     // The one judge every method passes: a pose the scan sees through, that shows too little of
     // itself or that lies through the bin is no pose, and the next region is tried.
-    let (t_scene_model, evidence) = judge.verdict(model, &t_scene_model, cfg)?;
+    let (t_scene_model, evidence) = judge.verdict(model, &t_scene_model)?;
     let indices = scene_indices(ctx.pts, model, &t_scene_model, checks.tol);
     laps.lap("verification");
     Ok(PoseEstimate {

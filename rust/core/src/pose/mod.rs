@@ -7,16 +7,9 @@
 //! otherwise the pipeline answers `NoObjectFound` rather than a guess.
 
 mod ccp_path;
-mod continuation;
-mod extension;
-#[cfg(test)]
-mod extension_tests;
 mod fit;
 mod judge;
 mod model;
-mod outline;
-#[cfg(test)]
-mod outline_tests;
 mod ppf_path;
 mod scene;
 mod surface;
@@ -134,7 +127,7 @@ fn trusted(found: Vec<PoseEstimate>, ctx: &Context<'_>, judge: &Judge) -> Result
             let (t, kept) = trust::assess(&e, pts, model, judge, cfg, &region);
             if kept != e.t_scene_model {
                 e.t_scene_model = model.symmetries.canonical(&kept);
-                let idx = scene::scene_indices(scene, model, &e.t_scene_model, judge.tol);
+                let idx = scene::scene_indices(scene, model, &e.t_scene_model, judge.depth.tol);
                 e.indices = idx;
             }
             // The part's own points: those on the floor or a wall fit a face resting on it
@@ -143,9 +136,9 @@ fn trusted(found: Vec<PoseEstimate>, ctx: &Context<'_>, judge: &Judge) -> Result
                 .indices
                 .iter()
                 .map(|&i| scene[i])
-                .filter(|p| judge.off_supports(p))
+                .filter(|p| judge.depth.off_supports(p))
                 .collect();
-            e.fit = fit::fit_quality(&claimed, model, &e.t_scene_model, judge.tol);
+            e.fit = fit::fit_quality(&claimed, model, &e.t_scene_model, judge.depth.tol);
             if let Some(f) = e.fit.filter(|f| !f.acceptable()) {
                 misfit.get_or_insert(f);
                 return None;
@@ -284,8 +277,8 @@ fn arbitrate(
     model: &PoseModel,
     max_instances: usize,
 ) -> Vec<PoseEstimate> {
-    let e = prepared.judge.evidence(model, &c.t_scene_model);
-    let first = prepared.judge.evidence(model, &found[0].t_scene_model);
+    let e = prepared.judge.depth.evidence(model, &c.t_scene_model);
+    let first = prepared.judge.depth.evidence(model, &found[0].t_scene_model);
     if e.quality() > first.quality() {
         c.visible_fraction = Some(e.visible_fraction());
         c.occluded_fraction = Some(e.occluded_fraction());

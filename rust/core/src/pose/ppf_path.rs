@@ -6,7 +6,7 @@
 //! height map and the reported indices), a voxel grid at a third of the PPF step (normals and
 //! ICP), and an even subsample at the PPF step (voting).
 
-use super::judge::{voxel_size, Judge};
+use super::judge::{probe_step, voxel_size, Judge};
 use super::model::{PoseModel, SCREEN_REACH};
 use super::scene::{scene_indices, Context};
 use super::types::{CoarseMethod, Laps, PoseConfig, PoseEstimate, Timings};
@@ -117,10 +117,10 @@ impl DetectionScene {
         let t_scene_model = r.t_target_source.inverse();
         let evidence = depth_evidence(
             model.target(),
-            &self.judge.heights,
+            &self.judge.depth.heights,
             &t_scene_model,
-            Judge::probe_step(model, 300),
-            self.judge.tol,
+            probe_step(model, 300),
+            self.judge.depth.tol,
             false,
         );
         Some(Judged {
@@ -141,11 +141,11 @@ impl DetectionScene {
         if local.len() < 12 {
             return None;
         }
-        let fine = IcpConfig::robust_plane((3.0 * self.judge.tol).max(0.5 * step), Convergence::POLISH);
+        let fine = IcpConfig::robust_plane((3.0 * self.judge.depth.tol).max(0.5 * step), Convergence::POLISH);
         let r = icp(&local, model.target(), &j.t_scene_model.inverse(), &fine).ok()?;
         let t_scene_model = r.t_target_source.inverse();
-        let evidence = self.judge.evidence(model, &t_scene_model);
-        let tol2 = self.judge.tol * self.judge.tol;
+        let evidence = self.judge.depth.evidence(model, &t_scene_model);
+        let tol2 = self.judge.depth.tol * self.judge.depth.tol;
         let mut sq = 0.0;
         // Every voxel point in reach, not the thinned ICP sample: supports are compared as sets.
         let support: Vec<usize> = self
@@ -198,7 +198,7 @@ pub(super) fn detect(
     laps.lap("voxels");
     let hypotheses = vote(&scene, ctx, ppf, &mut laps)?;
     let judged = screen_and_polish(&scene, model, ppf.step(), &hypotheses, cfg, &mut laps);
-    let instances = one_pose_per_instance(judged, &scene, model, cfg);
+    let instances = one_pose_per_instance(judged, &scene, model);
     if instances.is_empty() {
         return Err(Error::NoObjectFound {
             reason: format!(
@@ -208,7 +208,7 @@ pub(super) fn detect(
             ),
         });
     }
-    let out = estimates(instances, ctx, scene.judge.tol);
+    let out = estimates(instances, ctx, scene.judge.depth.tol);
     laps.lap("verification");
     Ok((out, scene))
 }
@@ -282,12 +282,7 @@ fn screen_and_polish(
 /// the scan (discounted for violations and for surface over cells without data) claims its
 /// points first, and a pose whose points are mostly claimed already is the same instance (or
 /// a ghost made of its points).
-fn one_pose_per_instance(
-    mut judged: Vec<Judged>,
-    scene: &DetectionScene,
-    model: &PoseModel,
-    cfg: &PoseConfig,
-) -> Vec<Judged> {
+fn one_pose_per_instance(mut judged: Vec<Judged>, scene: &DetectionScene, model: &PoseModel) -> Vec<Judged> {
     let claim = |j: &Judged| j.support.len() as f64 * (j.evidence.coverage() * j.evidence.supported_fraction()).powi(2);
     judged.sort_by(|a, b| claim(b).total_cmp(&claim(a)));
     let mut owner = vec![false; scene.fine.len()];
@@ -299,7 +294,7 @@ fn one_pose_per_instance(
         if j.support.len() < 12 || shared as f64 > 0.3 * j.support.len() as f64 {
             continue;
         }
-        let Ok((t_scene_model, evidence)) = scene.judge.accept(j.evidence, model, &j.t_scene_model, cfg) else {
+        let Ok((t_scene_model, evidence)) = scene.judge.accept(j.evidence, model, &j.t_scene_model) else {
             continue;
         };
         let j = Judged {

@@ -219,8 +219,8 @@ fn arbitration_keeps_the_better_verified_pose() {
     let (kept, _) = remove_bin(&scene, model, &cfg, false).unwrap();
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
     let prepared = DetectionScene::new(&context(&scene, &pts, model, &cfg), model.ppf.as_ref().unwrap()).unwrap();
-    let q_ccp = prepared.judge.evidence(model, &by_ccp.t_scene_model).quality();
-    let q_ppf = prepared.judge.evidence(model, &by_ppf.t_scene_model).quality();
+    let q_ccp = prepared.judge.depth.evidence(model, &by_ccp.t_scene_model).quality();
+    let q_ppf = prepared.judge.depth.evidence(model, &by_ppf.t_scene_model).quality();
     let (winner, want) = if q_ccp > q_ppf {
         (&by_ccp, CoarseMethod::Ccp)
     } else {
@@ -331,10 +331,10 @@ fn the_judge_refuses_a_pose_through_the_floor_and_accepts_the_truth() {
     let (kept, removed) = remove_bin(&scene, model, &cfg, true).unwrap();
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
     let judge = judge_of(&scene, &pts, removed, model, &cfg);
-    assert!(!judge.supports.is_empty(), "the floor is a support");
-    assert!(judge.verdict(model, &truth, &cfg).is_ok());
+    assert!(!judge.depth.supports.is_empty(), "the floor is a support");
+    assert!(judge.verdict(model, &truth).is_ok());
     let sunk = Translation3::new(0.0, 0.0, -0.5 * model.thickness) * truth;
-    match judge.verdict(model, &sunk, &cfg) {
+    match judge.verdict(model, &sunk) {
         Err(Error::NoObjectFound { reason }) => assert!(reason.contains("floor"), "{reason}"),
         other => panic!("a pose half through the floor passed: {other:?}"),
     }
@@ -370,15 +370,15 @@ fn the_judge_refuses_a_pose_whose_surface_the_sensor_saw_through_in_a_patch() {
         judge_of(scene, &pts, removed, model, &cfg)
     };
     let judge = judge_of(&scene);
-    let e = judge.evidence(model, &truth);
+    let e = judge.depth.evidence(model, &truth);
     assert!(e.coverage() >= cfg.min_coverage, "the rest of the tests pass: {e:?}");
-    match judge.verdict(model, &truth, &cfg) {
+    match judge.verdict(model, &truth) {
         Err(Error::NoObjectFound { reason }) => assert!(reason.contains("saw through a patch"), "{reason}"),
         other => panic!("a branch standing where the scan shows the floor passed: {other:?}"),
     }
     let mut whole = full.clone();
     whole.extend(scene.iter().filter(|p| p.z == floor_z));
-    assert!(judge_of(&whole).verdict(model, &truth, &cfg).is_ok());
+    assert!(judge_of(&whole).verdict(model, &truth).is_ok());
 }
 
 /// A flat plate above the tee, off to its side: the top object, and not the part.

@@ -64,10 +64,10 @@ pub(super) fn assess(
     region: &Region,
 ) -> (Trust, Isometry3<f64>) {
     let p = &cfg.trust;
-    let e0 = judge.evidence(model, &est.t_scene_model);
+    let e0 = judge.depth.evidence(model, &est.t_scene_model);
     let base = base_confidence(e0.coverage(), cfg.min_coverage);
     let center = est.t_scene_model * model.symmetries.center;
-    let reach = model.radius + 2.0 * judge.tol;
+    let reach = model.radius + 2.0 * judge.depth.tol;
     // One pass over the points beats building a tree for the few poses assessed.
     let local: Vec<Point> = if model.near_symmetries.is_empty() {
         Vec::new()
@@ -77,7 +77,7 @@ pub(super) fn assess(
             .filter(|p| (*p - center).norm_squared() <= reach * reach)
             // Points on the floor or a wall lie in the plane of the part's faces that rest on
             // it and would confirm material wherever a pose puts it: only the part's own count.
-            .filter(|p| judge.off_supports(p))
+            .filter(|p| judge.depth.off_supports(p))
             .copied()
             .collect()
     };
@@ -91,7 +91,7 @@ pub(super) fn assess(
     let turns = region.turns.clone();
     let sample = thin(&local, p.refine_points);
     let refine = IcpConfig::robust_plane(
-        3.0 * judge.tol,
+        3.0 * judge.depth.tol,
         Convergence {
             iterations: p.iterations,
             ..Convergence::ALTERNATIVE
@@ -111,7 +111,7 @@ pub(super) fn assess(
         .filter(|l| region.contains(&(to_model * *l)))
         .copied()
         .collect();
-    let tol0 = fine_tolerance(&sample, model, &est.t_scene_model, judge.tol, p);
+    let tol0 = fine_tolerance(&sample, model, &est.t_scene_model, judge.depth.tol, p);
     let glance = thin(&judged, p.refine_points);
     // Every discrete near turn gets the full refinement and comparison. The many turns of a
     // continuous near axis get a quick look on a thinned sample, which picks the finalists among
@@ -160,14 +160,14 @@ pub(super) fn assess(
         };
         return (trust, est.t_scene_model);
     }
-    let tol = fine_tolerance(&sample, model, &candidates[0].t_scene_model, judge.tol, p);
+    let tol = fine_tolerance(&sample, model, &candidates[0].t_scene_model, judge.depth.tol, p);
     let per_probe = local.len() as f64 / e0.seen.max(1) as f64;
     let score_of = |t: &Isometry3<f64>| {
-        let e = judge.evidence(model, t);
+        let e = judge.depth.evidence(model, t);
         let fits = fit_flags(&judged, model, t, tol);
         Scored {
             evidence: evidence_of(&fits, tol, e.violated, per_probe),
-            judged_ok: judge.check(&e, model, t, cfg).is_ok(),
+            judged_ok: judge.check(&e, model, t).is_ok(),
             fits,
         }
     };
@@ -235,7 +235,7 @@ pub(super) fn assess(
     let base = if best == 0 {
         base
     } else {
-        base_confidence(judge.evidence(model, &kept).coverage(), cfg.min_coverage)
+        base_confidence(judge.depth.evidence(model, &kept).coverage(), cfg.min_coverage)
     };
     let confidence = if alternatives.is_empty() {
         // How far the best leads the runner-up, in margins: 1 margin halves the confidence, each
@@ -328,7 +328,7 @@ impl Region {
             }
             turns.extend(own);
         }
-        let mut cell = (2.0 * model.spacing).max(judge.tol).max(1e-3);
+        let mut cell = (2.0 * model.spacing).max(judge.depth.tol).max(1e-3);
         // A dense grid over the region's keys grown by one cell: the region lies in the part's
         // box, a few thousand cells for the parts measured, and the comparison asks about every
         // judged point. Cells grow where a large part would need more than MAX_REGION_CELLS.

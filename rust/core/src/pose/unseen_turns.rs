@@ -156,7 +156,7 @@ pub(super) fn unseen_turns(
     noise_floor: Option<f64>,
     known: &[Alternative],
 ) -> Vec<Alternative> {
-    let tol = judge.tol;
+    let tol = judge.depth.tol;
     let sample = thin(claimed, REFINE_POINTS);
     let q = on_model(&sample, model, t_scene_model, tol);
     if q.len() < 30 {
@@ -186,7 +186,7 @@ pub(super) fn unseen_turns(
         return Vec::new();
     };
     let sigma_ok = (SIGMA_SLACK * sigma0).max(FREE_RATIO * noise_floor.unwrap_or(0.0));
-    let e0 = judge.evidence(model, t_scene_model);
+    let e0 = judge.depth.evidence(model, t_scene_model);
     let seen_through_ok =
         e0.violated + SEEN_THROUGH_MARGIN.max((SEEN_THROUGH_SHARE * (e0.seen + e0.violated) as f64).round() as usize);
     let refine = IcpConfig::robust_plane(3.0 * tol, Convergence::UNSEEN_TURN);
@@ -209,7 +209,7 @@ pub(super) fn unseen_turns(
             .ok()
             .map(|r| r.t_target_source.inverse())
     };
-    let through0 = judge.through_supports(model, t_scene_model);
+    let through0 = judge.depth.through_supports(model, t_scene_model);
     let mut found: Vec<Alternative> = Vec::new();
     for probe in moves {
         if crate::cancel::requested() {
@@ -227,7 +227,7 @@ pub(super) fn unseen_turns(
             continue;
         };
         let mut t = r.t_target_source.inverse();
-        if judge.through_supports(model, &t) > through0 + BIN_SLACK {
+        if judge.depth.through_supports(model, &t) > through0 + BIN_SLACK {
             // Deeper into the bin: halve the move back towards the pose, keeping the largest
             // share of it that goes no deeper than the pose.
             let (mut clear, mut through) = (0.0, 1.0);
@@ -235,7 +235,7 @@ pub(super) fn unseen_turns(
             for _ in 0..BIN_HALVINGS {
                 let mid = 0.5 * (clear + through);
                 match refined(&probe.scaled(mid)) {
-                    Some(m) if judge.through_supports(model, &m) <= through0 + BIN_SLACK => {
+                    Some(m) if judge.depth.through_supports(model, &m) <= through0 + BIN_SLACK => {
                         clear = mid;
                         last_clear = Some(m);
                     }
@@ -255,8 +255,8 @@ pub(super) fn unseen_turns(
         if turned.angle() >= trust.pick_rotation && turned.axis().is_some_and(|a| trusts_axis(&a)) {
             continue;
         }
-        let e = judge.evidence(model, &t);
-        if e.violated > seen_through_ok || judge.check(&e, model, &t, cfg).is_err() {
+        let e = judge.depth.evidence(model, &t);
+        if e.violated > seen_through_ok || judge.check(&e, model, &t).is_err() {
             continue;
         }
         let (kept, sigma) = kept_and_sigma(claimed, model, &t, tol);

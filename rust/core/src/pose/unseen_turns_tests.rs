@@ -64,8 +64,8 @@ fn turns_of(covered: bool, pose: Option<Isometry3<f64>>) -> (Isometry3<f64>, Vec
     let pts: Vec<Point> = kept.iter().map(|&i| scene_pts[i]).collect();
     let judge = tests::judge_of(&scene_pts, &pts, planes, model, &cfg);
     let pose = pose.unwrap_or(truth);
-    assert!(judge.verdict(model, &pose, &cfg).is_ok(), "the pose passes the judge");
-    let claimed: Vec<Point> = scene::scene_indices(&scene_pts, model, &pose, judge.tol)
+    assert!(judge.verdict(model, &pose).is_ok(), "the pose passes the judge");
+    let claimed: Vec<Point> = scene::scene_indices(&scene_pts, model, &pose, judge.depth.tol)
         .into_iter()
         .map(|i| scene_pts[i])
         .collect();
@@ -146,7 +146,7 @@ fn a_cylinder_patch_turns_about_and_slides_along_its_axis_and_a_corner_does_neit
 fn a_pose_off_the_surface_by_more_than_the_noise_loses_confidence() {
     let (model, _) = elbow_model();
     let (truth, scene_pts) = scene(false);
-    let tol = judge::tolerance(judge::judge_step(model));
+    let tol = judge::depth::tolerance(judge::depth::judge_step(model));
     let claimed = |t: &Isometry3<f64>| -> Vec<Point> {
         scene::scene_indices(&scene_pts, model, t, tol)
             .into_iter()
@@ -204,12 +204,9 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
     let wrong = truth * up;
     let flipped = wrong * near.transform(0.0);
     for pose in [&truth, &wrong, &flipped] {
-        assert!(
-            judge.verdict(model, pose, &cfg).is_ok(),
-            "the scan does not refute {pose:?}"
-        );
+        assert!(judge.verdict(model, pose).is_ok(), "the scan does not refute {pose:?}");
     }
-    let claimed: Vec<Point> = scene::scene_indices(&scene_pts, model, &flipped, judge.tol)
+    let claimed: Vec<Point> = scene::scene_indices(&scene_pts, model, &flipped, judge.depth.tol)
         .into_iter()
         .map(|i| scene_pts[i])
         .collect();
@@ -253,7 +250,8 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
     );
     for a in &all {
         // none deeper in the floor than the pose read
-        let deeper = judge.through_supports(model, &a.t_scene_model) - judge.through_supports(model, &flipped);
+        let deeper =
+            judge.depth.through_supports(model, &a.t_scene_model) - judge.depth.through_supports(model, &flipped);
         assert!(deeper <= BIN_SLACK, "{deeper}");
     }
 }

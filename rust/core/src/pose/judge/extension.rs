@@ -16,10 +16,10 @@
 //! part). An end whose carried-on cylinder the scan confirms nearly as widely as the branch's
 //! own stretch goes on past it.
 
-use super::judge::Judge;
-use super::model::PoseModel;
-use super::surface::plane_residual;
+use super::depth::DepthTest;
 use crate::geometry::Point;
+use crate::pose::model::PoseModel;
+use crate::pose::surface::plane_residual;
 use nalgebra::{Isometry3, Vector3};
 
 /// The least share of a normal along the sensor's direction for a probe to be judged: within 60°
@@ -64,9 +64,9 @@ pub(crate) struct EndReading {
 /// end counts when the scan point that tops its cell lies on the carried-on cylinder and off the
 /// part (the map's cells are coarser than the probes: a cell straddling the end face is topped
 /// by the part itself).
-pub(crate) fn read_ends(judge: &Judge, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> Vec<EndReading> {
-    let map = &judge.heights;
-    let tol = judge.tol;
+pub(crate) fn read_ends(depth: &DepthTest, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> Vec<EndReading> {
+    let map = &depth.heights;
+    let tol = depth.tol;
     let Some(layout) = &model.layout else {
         return Vec::new();
     };
