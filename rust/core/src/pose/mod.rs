@@ -7,7 +7,6 @@
 //! otherwise the pipeline answers `NoObjectFound` rather than a guess.
 
 mod ccp_path;
-mod fit;
 mod judge;
 mod model;
 mod ppf_path;
@@ -16,12 +15,7 @@ mod surface;
 #[cfg(test)]
 mod tests;
 mod trust;
-#[cfg(test)]
-mod trust_tests;
 mod types;
-mod unseen_turns;
-#[cfg(test)]
-mod unseen_turns_tests;
 
 pub use model::PoseModel;
 pub use types::{
@@ -37,6 +31,7 @@ use ppf_path::detect;
 use ppf_path::DetectionScene;
 use scene::{check_scene, remove_bin, Context};
 use std::time::Instant;
+use trust::trusted;
 
 /// Estimates the pose of the top pickable object of `scene` (N×3, mm) against `model`: exactly
 /// the first of [`estimate_poses`] for the same configuration (the search does not depend on
@@ -108,83 +103,6 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
             ..e
         })
         .collect())
-}
-
-/// Every estimate with its trust (see [`trust`]): a pose the scan shows to be a near-symmetric
-/// alternative of the truth is replaced by the one it supports; the confidence also carries
-/// the fit of the pose's points against the scan's own noise (see [`fit`]), and the turns and
-/// slides the view leaves open are alternatives too (see [`unseen_turns`]).
-/// A pose whose points lie further off the model than [`fit::MAX_RATIO`] noise floors is not
-/// reported; `NoObjectFound` when no pose is left.
-/// The context's points, those left after bin removal, are what the comparison runs on.
-fn trusted(found: Vec<PoseEstimate>, ctx: &Context<'_>, judge: &Judge) -> Result<Vec<PoseEstimate>> {
-    let (scene, pts, model, cfg) = (ctx.scene, ctx.pts, ctx.model, ctx.cfg);
-    let region = trust::Region::new(model, judge, &cfg.trust);
-    let mut misfit: Option<FitQuality> = None;
-    let kept: Vec<PoseEstimate> = found
-        .into_iter()
-        .filter_map(|mut e| {
-            let (t, kept) = trust::assess(&e, pts, model, judge, cfg, &region);
-            if kept != e.t_scene_model {
-                e.t_scene_model = model.symmetries.canonical(&kept);
-                let idx = scene::scene_indices(scene, model, &e.t_scene_model, judge.depth.tol);
-                e.indices = idx;
-            }
-            // The part's own points: those on the floor or a wall fit a face resting on it
-            // whatever the pose (and a wall is not where the part's noise is read).
-            let claimed: Vec<Point> = e
-                .indices
-                .iter()
-                .map(|&i| scene[i])
-                .filter(|p| judge.depth.off_supports(p))
-                .collect();
-            e.fit = fit::fit_quality(&claimed, model, &e.t_scene_model, judge.depth.tol);
-            if let Some(f) = e.fit.filter(|f| !f.acceptable()) {
-                misfit.get_or_insert(f);
-                return None;
-            }
-            e.confidence = t.confidence * e.fit.map_or(1.0, |f| f.factor);
-            e.ambiguous = t.ambiguous;
-            e.alternatives = t.alternatives;
-            // A free axis already says the turn is unknown.
-            let noise = e.fit.map(|f| f.noise_floor);
-            let unseen = match t.free_axis {
-                None => unseen_turns::unseen_turns_of_all(
-                    &claimed,
-                    model,
-                    &e.t_scene_model,
-                    &e.alternatives,
-                    judge,
-                    cfg,
-                    noise,
-                ),
-                Some(_) => Vec::new(),
-            };
-            if !unseen.is_empty() {
-                // As with near-symmetric alternatives: each one the scan cannot rule out is as
-                // likely as the pose.
-                e.confidence /= (1 + unseen.len()) as f64;
-                e.ambiguous = true;
-                e.alternatives.extend(unseen);
-            }
-            e.free_axis = t.free_axis;
-            e.feature_evidence = t.evidence;
-            Some(e)
-        })
-        .collect();
-    match misfit {
-        Some(f) if kept.is_empty() => Err(Error::NoObjectFound {
-            reason: format!(
-                "the pose's points lie {:.1} noise floors off the model (residual σ {:.2} mm, scan noise {:.2} mm; \
-                 at most {:.1}): not this part, or a part unlike its CAD model",
-                f.ratio,
-                f.residual_sigma,
-                f.noise_floor,
-                fit::MAX_RATIO
-            ),
-        }),
-        _ => Ok(kept),
-    }
 }
 
 /// Indices of the points a method saw (`kept` of the scene) become scene indices.

@@ -9,12 +9,25 @@
 //! puts the feature where the scan shows the base shape — or the base shape where the scan shows
 //! the feature, a hole or a cut corner — leaves points beyond the scan's noise; the judge's depth
 //! test adds the surface a pose predicts where the sensor saw free space.
+//!
+//! [`trusted`] gives every verified pose its trust: [`assess`] here, then the fit of its points
+//! against the scan's own noise ([`fit`]) and the turns and slides the view leaves open
+//! ([`unseen_turns`]), the children of this module.
 
-use super::judge::Judge;
-use super::model::{turns_of, PoseModel, Turn};
-use super::surface::{plane_residual, plane_residuals, robust_sigma, thin};
-use super::types::{Alternative, FeatureEvidence, PoseConfig, PoseEstimate, TrustParams};
+mod fit;
+#[cfg(test)]
+mod tests;
+mod unseen_turns;
+#[cfg(test)]
+mod unseen_turns_tests;
+
+use crate::error::{Error, Result};
 use crate::geometry::Point;
+use crate::pose::judge::Judge;
+use crate::pose::model::{turns_of, PoseModel, Turn};
+use crate::pose::scene::{scene_indices, Context};
+use crate::pose::surface::{plane_residual, plane_residuals, robust_sigma, thin};
+use crate::pose::types::{Alternative, FeatureEvidence, FitQuality, PoseEstimate, TrustParams};
 use crate::registration::{icp, Convergence, IcpConfig};
 use nalgebra::{Isometry3, Vector3};
 use std::f64::consts::TAU;
@@ -45,6 +58,83 @@ struct Candidate {
     continuous: bool,
 }
 
+/// Every estimate with its trust (see [`assess`]): a pose the scan shows to be a near-symmetric
+/// alternative of the truth is replaced by the one it supports; the confidence also carries
+/// the fit of the pose's points against the scan's own noise (see [`fit`]), and the turns and
+/// slides the view leaves open are alternatives too (see [`unseen_turns`]).
+/// A pose whose points lie further off the model than [`fit::MAX_RATIO`] noise floors is not
+/// reported; `NoObjectFound` when no pose is left.
+/// The context's points, those left after bin removal, are what the comparison runs on.
+pub(super) fn trusted(found: Vec<PoseEstimate>, ctx: &Context<'_>, judge: &Judge) -> Result<Vec<PoseEstimate>> {
+    let (scene, pts, model, p) = (ctx.scene, ctx.pts, ctx.model, &ctx.cfg.trust);
+    let region = Region::new(model, judge, p);
+    let mut misfit: Option<FitQuality> = None;
+    let kept: Vec<PoseEstimate> = found
+        .into_iter()
+        .filter_map(|mut e| {
+            let (t, kept) = assess(&e, pts, model, judge, p, &region);
+            if kept != e.t_scene_model {
+                e.t_scene_model = model.symmetries.canonical(&kept);
+                let idx = scene_indices(scene, model, &e.t_scene_model, judge.depth.tol);
+                e.indices = idx;
+            }
+            // The part's own points: those on the floor or a wall fit a face resting on it
+            // whatever the pose (and a wall is not where the part's noise is read).
+            let claimed: Vec<Point> = e
+                .indices
+                .iter()
+                .map(|&i| scene[i])
+                .filter(|p| judge.depth.off_supports(p))
+                .collect();
+            e.fit = fit::fit_quality(&claimed, model, &e.t_scene_model, judge.depth.tol);
+            if let Some(f) = e.fit.filter(|f| !f.acceptable()) {
+                misfit.get_or_insert(f);
+                return None;
+            }
+            e.confidence = t.confidence * e.fit.map_or(1.0, |f| f.factor);
+            e.ambiguous = t.ambiguous;
+            e.alternatives = t.alternatives;
+            // A free axis already says the turn is unknown.
+            let noise = e.fit.map(|f| f.noise_floor);
+            let unseen = match t.free_axis {
+                None => unseen_turns::unseen_turns_of_all(
+                    &claimed,
+                    model,
+                    &e.t_scene_model,
+                    &e.alternatives,
+                    judge,
+                    p,
+                    noise,
+                ),
+                Some(_) => Vec::new(),
+            };
+            if !unseen.is_empty() {
+                // As with near-symmetric alternatives: each one the scan cannot rule out is as
+                // likely as the pose.
+                e.confidence /= (1 + unseen.len()) as f64;
+                e.ambiguous = true;
+                e.alternatives.extend(unseen);
+            }
+            e.free_axis = t.free_axis;
+            e.feature_evidence = t.evidence;
+            Some(e)
+        })
+        .collect();
+    match misfit {
+        Some(f) if kept.is_empty() => Err(Error::NoObjectFound {
+            reason: format!(
+                "the pose's points lie {:.1} noise floors off the model (residual σ {:.2} mm, scan noise {:.2} mm; \
+                 at most {:.1}): not this part, or a part unlike its CAD model",
+                f.ratio,
+                f.residual_sigma,
+                f.noise_floor,
+                fit::MAX_RATIO
+            ),
+        }),
+        _ => Ok(kept),
+    }
+}
+
 /// Confidence from the judge alone: how much of the surface the scan can judge confirms the
 /// pose (0.6 at the acceptance threshold, 0.99 at 95 % and above).
 fn base_confidence(coverage: f64, min_coverage: f64) -> f64 {
@@ -60,12 +150,11 @@ pub(super) fn assess(
     points: &[Point],
     model: &PoseModel,
     judge: &Judge,
-    cfg: &PoseConfig,
+    p: &TrustParams,
     region: &Region,
 ) -> (Trust, Isometry3<f64>) {
-    let p = &cfg.trust;
     let e0 = judge.depth.evidence(model, &est.t_scene_model);
-    let base = base_confidence(e0.coverage(), cfg.min_coverage);
+    let base = base_confidence(e0.coverage(), judge.min_coverage);
     let center = est.t_scene_model * model.symmetries.center;
     let reach = model.radius + 2.0 * judge.depth.tol;
     // One pass over the points beats building a tree for the few poses assessed.
@@ -235,7 +324,7 @@ pub(super) fn assess(
     let base = if best == 0 {
         base
     } else {
-        base_confidence(judge.depth.evidence(model, &kept).coverage(), cfg.min_coverage)
+        base_confidence(judge.depth.evidence(model, &kept).coverage(), judge.min_coverage)
     };
     let confidence = if alternatives.is_empty() {
         // How far the best leads the runner-up, in margins: 1 margin halves the confidence, each

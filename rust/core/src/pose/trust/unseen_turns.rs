@@ -14,11 +14,11 @@
 //! tolerance would let pass, is no alternative either.
 
 use super::fit::{thinned_sigma, FREE_RATIO};
-use super::judge::Judge;
-use super::model::PoseModel;
-use super::surface::{eigen_ascending, plane_residuals, thin};
-use super::types::{Alternative, FeatureEvidence, PoseConfig};
 use crate::geometry::Point;
+use crate::pose::judge::Judge;
+use crate::pose::model::PoseModel;
+use crate::pose::surface::{eigen_ascending, plane_residuals, thin};
+use crate::pose::types::{Alternative, FeatureEvidence, TrustParams};
 use crate::registration::{icp, Convergence, IcpConfig};
 use nalgebra::{Isometry3, Matrix3, Translation3, Unit, UnitQuaternion, Vector3};
 
@@ -152,7 +152,7 @@ pub(super) fn unseen_turns(
     model: &PoseModel,
     t_scene_model: &Isometry3<f64>,
     judge: &Judge,
-    cfg: &PoseConfig,
+    trust: &TrustParams,
     noise_floor: Option<f64>,
     known: &[Alternative],
 ) -> Vec<Alternative> {
@@ -190,7 +190,6 @@ pub(super) fn unseen_turns(
     let seen_through_ok =
         e0.violated + SEEN_THROUGH_MARGIN.max((SEEN_THROUGH_SHARE * (e0.seen + e0.violated) as f64).round() as usize);
     let refine = IcpConfig::robust_plane(3.0 * tol, Convergence::UNSEEN_TURN);
-    let trust = &cfg.trust;
     let same = |a: &Isometry3<f64>, b: &Isometry3<f64>| {
         let (r, d) = model.symmetries.pose_error(a, b);
         r < trust.pick_rotation && d < trust.pick_translation
@@ -291,10 +290,10 @@ pub(super) fn unseen_turns_of_all(
     t_scene_model: &Isometry3<f64>,
     alternatives: &[Alternative],
     judge: &Judge,
-    cfg: &PoseConfig,
+    trust: &TrustParams,
     noise_floor: Option<f64>,
 ) -> Vec<Alternative> {
-    let mut unseen = unseen_turns(claimed, model, t_scene_model, judge, cfg, noise_floor, alternatives);
+    let mut unseen = unseen_turns(claimed, model, t_scene_model, judge, trust, noise_floor, alternatives);
     let mut known = alternatives.to_vec();
     known.extend(unseen.iter().cloned());
     // Only the poses of the known alternatives are compared.
@@ -303,7 +302,7 @@ pub(super) fn unseen_turns_of_all(
         evidence: FeatureEvidence::default(),
     });
     for a in alternatives {
-        let more = unseen_turns(claimed, model, &a.t_scene_model, judge, cfg, noise_floor, &known);
+        let more = unseen_turns(claimed, model, &a.t_scene_model, judge, trust, noise_floor, &known);
         known.extend(more.iter().cloned());
         unseen.extend(more);
     }

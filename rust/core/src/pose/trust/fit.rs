@@ -10,10 +10,10 @@
 //! are several times the noise is a wrong pose (or a part unlike its CAD model): its confidence
 //! falls with the ratio.
 
-use super::model::PoseModel;
-use super::surface::{eigen_ascending, median, plane_residuals, robust_sigma, thin};
-use super::types::FitQuality;
 use crate::geometry::Point;
+use crate::pose::model::PoseModel;
+use crate::pose::surface::{eigen_ascending, median, plane_residuals, robust_sigma, thin};
+use crate::pose::types::FitQuality;
 use crate::search::KdIndex;
 use nalgebra::{Isometry3, Matrix3, Vector3};
 

@@ -1,11 +1,11 @@
 //! Moves the scan cannot see: an elbow whose one leg lies under a slab can be turned about the
 //! other (seen) leg's axis without the scan telling; with both legs in view, it cannot.
 
-use super::tests::{config, tee_model, top_view};
 use super::unseen_turns::{unseen_turns, unseen_turns_of_all, weak_axis, weak_slide, BIN_SLACK};
-use super::*;
 use crate::mesh::parts::{elbow, FittingParams};
 use crate::mesh::{sample_surface, test_box, Density, TriMesh};
+use crate::pose::tests::{self, config, tee_model, top_view};
+use crate::pose::*;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::sync::OnceLock;
 
@@ -69,7 +69,10 @@ fn turns_of(covered: bool, pose: Option<Isometry3<f64>>) -> (Isometry3<f64>, Vec
         .into_iter()
         .map(|i| scene_pts[i])
         .collect();
-    (truth, unseen_turns(&claimed, model, &pose, &judge, &cfg, None, &[]))
+    (
+        truth,
+        unseen_turns(&claimed, model, &pose, &judge, &cfg.trust, None, &[]),
+    )
 }
 
 #[test]
@@ -153,13 +156,13 @@ fn a_pose_off_the_surface_by_more_than_the_noise_loses_confidence() {
             .map(|i| scene_pts[i])
             .collect()
     };
-    let right = fit::fit_quality(&claimed(&truth), model, &truth, tol).unwrap();
+    let right = super::fit::fit_quality(&claimed(&truth), model, &truth, tol).unwrap();
     assert!(right.factor == 1.0 && right.ratio < 1.5, "{right:?}");
     assert!(right.residual_sigma < 0.13 && right.noise_floor < 0.15, "{right:?}");
     // Turned 8° about the vertical: the legs still lie within the tolerance of most points.
     let yaw = UnitQuaternion::from_scaled_axis(Vector3::z() * 8f64.to_radians());
     let wrong = Isometry3::from_parts(truth.translation, yaw * truth.rotation);
-    let off = fit::fit_quality(&claimed(&wrong), model, &wrong, tol).unwrap();
+    let off = super::fit::fit_quality(&claimed(&wrong), model, &wrong, tol).unwrap();
     assert!(off.ratio > 3.0 && off.factor < 0.75, "{off:?}");
 }
 
@@ -223,7 +226,7 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
         model,
         &flipped,
         &judge,
-        &cfg,
+        &cfg.trust,
         None,
         std::slice::from_ref(&alternative),
     );
@@ -237,7 +240,7 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
         &flipped,
         std::slice::from_ref(&alternative),
         &judge,
-        &cfg,
+        &cfg.trust,
         None,
     );
     assert!(
