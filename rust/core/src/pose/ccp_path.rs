@@ -138,25 +138,15 @@ fn fit_region(
     let (t_scene_model, evidence) = judge.verdict(model, &t_scene_model)?;
     let indices = scene_indices(ctx.pts, model, &t_scene_model, checks.tol);
     laps.lap("verification");
-    Ok(PoseEstimate {
-        t_scene_model: model.symmetries.canonical(&t_scene_model),
-        t_scene_model_coarse: coarse,
-        score,
-        rmse,
-        indices,
-        timings: Vec::new(),
-        iterations: refined.iterations,
+    Ok(PoseEstimate::verified(
         method,
-        visible_fraction: Some(evidence.visible_fraction()),
-        occluded_fraction: Some(evidence.occluded_fraction()),
-        pickability: None,
-        confidence: 0.0,
-        ambiguous: false,
-        alternatives: Vec::new(),
-        free_axis: None,
-        feature_evidence: None,
-        fit: None,
-    })
+        model.symmetries.canonical(&t_scene_model),
+        coarse,
+        &evidence,
+        (score, rmse),
+        refined.iterations,
+        indices,
+    ))
 }
 
 /// A flat region wider than the part (a bin rim, a wall left in the scan) is not the part.

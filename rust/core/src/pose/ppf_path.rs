@@ -318,24 +318,19 @@ fn estimates(instances: Vec<Judged>, ctx: &Context<'_>, tol: f64) -> Vec<PoseEst
         .take(ctx.cfg.max_instances.max(1))
         .map(|(j, pick)| {
             let t_scene_model = model.symmetries.canonical(&j.t_scene_model);
+            let indices = scene_indices(points, model, &t_scene_model, tol);
+            let score = j.evidence.coverage();
             PoseEstimate {
-                indices: scene_indices(points, model, &t_scene_model, tol),
-                t_scene_model,
-                t_scene_model_coarse: j.coarse,
-                score: j.evidence.coverage(),
-                rmse: j.rmse,
-                timings: Vec::new(),
-                iterations: j.iterations,
-                method: CoarseMethod::Ppf,
-                visible_fraction: Some(j.evidence.visible_fraction()),
-                occluded_fraction: Some(j.evidence.occluded_fraction()),
                 pickability: Some(pick),
-                confidence: 0.0,
-                ambiguous: false,
-                alternatives: Vec::new(),
-                free_axis: None,
-                feature_evidence: None,
-                fit: None,
+                ..PoseEstimate::verified(
+                    CoarseMethod::Ppf,
+                    t_scene_model,
+                    j.coarse,
+                    &j.evidence,
+                    (score, j.rmse),
+                    j.iterations,
+                    indices,
+                )
             }
         })
         .collect()

@@ -7,6 +7,7 @@ use crate::error::{Error, Result};
 use crate::geometry::{BinBox, Point};
 use crate::registration::ccp::CcpConfig;
 use crate::registration::ppf::DetectConfig;
+use crate::registration::verify::Evidence;
 use crate::registration::Convergence;
 use nalgebra::{Isometry3, Vector3};
 use std::time::Instant;
@@ -475,6 +476,42 @@ pub struct PoseEstimate {
     /// How well the pose's points lie on the posed model against the scan's own noise (`None`
     /// where too few points judge it); its factor is part of `confidence`.
     pub fit: Option<FitQuality>,
+}
+
+impl PoseEstimate {
+    /// A pose `method` found and the judge passed with depth evidence `e`, before ranking and
+    /// trust: `(score, rmse)` as the method measures its fit, the ICP `iterations` that refined
+    /// it, the `indices` of the points on it. It is unranked (`pickability` None); its confidence,
+    /// alternatives and fit are the trust stage's to fill in, its timings the pipeline's.
+    pub(crate) fn verified(
+        method: CoarseMethod,
+        t_scene_model: Isometry3<f64>,
+        t_scene_model_coarse: Isometry3<f64>,
+        e: &Evidence,
+        (score, rmse): (f64, f64),
+        iterations: usize,
+        indices: Vec<usize>,
+    ) -> Self {
+        PoseEstimate {
+            t_scene_model,
+            t_scene_model_coarse,
+            score,
+            rmse,
+            indices,
+            timings: Vec::new(),
+            iterations,
+            method,
+            visible_fraction: Some(e.visible_fraction()),
+            occluded_fraction: Some(e.occluded_fraction()),
+            pickability: None,
+            confidence: 0.0,
+            ambiguous: false,
+            alternatives: Vec::new(),
+            free_axis: None,
+            feature_evidence: None,
+            fit: None,
+        }
+    }
 }
 
 /// What the scan says about one pose in the feature regions.

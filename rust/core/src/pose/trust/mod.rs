@@ -48,6 +48,16 @@ pub struct Trust {
     pub evidence: Option<FeatureEvidence>,
 }
 
+impl Trust {
+    /// The trust of a pose no alternative was compared with: the judge's `confidence` alone.
+    fn undecided(confidence: f64) -> Self {
+        Trust {
+            confidence,
+            ..Trust::default()
+        }
+    }
+}
+
 /// Steps between two turns about a continuous near axis at which the best candidate is tried
 /// turned (every 2.5° for 24 turns; up to half the gap either way).
 const FINE_TURNS: usize = 6;
@@ -171,11 +181,7 @@ pub(super) fn assess(
             .collect()
     };
     if local.len() < 12 {
-        let trust = Trust {
-            confidence: base,
-            ..Trust::default()
-        };
-        return (trust, est.t_scene_model);
+        return (Trust::undecided(base), est.t_scene_model);
     }
     let turns = region.turns.clone();
     let sample = thin(&local, p.refine_points);
@@ -243,11 +249,7 @@ pub(super) fn assess(
         })
         .collect();
     if candidates.is_empty() {
-        let trust = Trust {
-            confidence: base,
-            ..Trust::default()
-        };
-        return (trust, est.t_scene_model);
+        return (Trust::undecided(base), est.t_scene_model);
     }
     let tol = fine_tolerance(&sample, model, &candidates[0].t_scene_model, judge.depth.tol, p);
     let per_probe = local.len() as f64 / e0.seen.max(1) as f64;
