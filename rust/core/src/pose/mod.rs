@@ -5,9 +5,28 @@
 //! giving `T_model_scene`; the result reports its inverse `T_scene_model` (model → scene). A
 //! result is returned only when enough of the object's points lie on the posed model;
 //! otherwise the pipeline answers `NoObjectFound` rather than a guess.
+//!
+//! # The room
+//!
+//! Floors, each importing only those below it (`layout_tests` checks that no module imports one
+//! that imports it, and each floor only the floors below):
+//!
+//! | floor | module | what it holds |
+//! |---|---|---|
+//! | 5 | this file | [`estimate_poses`]: input checks, bin removal, the method run (`dispatch`), CCP beside PPF and the arbitration between them (`auto`) |
+//! | 4 | [`ccp_path`] | the paper's path: top-object segmentation, CCP or the centroid baseline, coarse checks, ICP |
+//! | 4 | [`ppf_path`] | point-pair-feature detection of every instance, its prepared scene ([`DetectionScene`]), ranking by pickability |
+//! | 4 | [`trust`] | how sure each pose is ([`trust::trusted`]): near-symmetric alternatives, the fit against the scan's noise ([`trust`]`/fit.rs`), the turns the view leaves open (`unseen_turns.rs`) |
+//! | 3 | [`judge`] | the one [`Judge`] every method's pose passes, owning its thresholds; its checks as children: `depth`, `outline`, `continuation`, `extension` |
+//! | 2 | [`scene`] | input checks, bin removal, the [`Context`] of one call every stage reads |
+//! | 2 | [`surface`] | point-to-plane residuals against the dense model, robust σ, thinning |
+//! | 1 | [`model`] | [`PoseModel`], the probes past its branch ends, its near-symmetric turns |
+//! | 0 | [`types`] | plain data: [`PoseConfig`], [`PoseEstimate`], every params struct and result type |
 
 mod ccp_path;
 mod judge;
+#[cfg(test)]
+mod layout_tests;
 mod model;
 mod ppf_path;
 mod scene;
@@ -27,8 +46,7 @@ use crate::error::{Error, Result};
 use crate::geometry::Point;
 use ccp_path::run;
 use judge::Judge;
-use ppf_path::detect;
-use ppf_path::DetectionScene;
+use ppf_path::{detect, DetectionScene};
 use scene::{check_scene, remove_bin, Context};
 use std::time::Instant;
 use trust::trusted;

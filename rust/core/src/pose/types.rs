@@ -91,7 +91,7 @@ impl CoarseMethod {
 /// default ([`PoseConfig::search_instances`]), so that asking for fewer only truncates the answer.
 pub const SEARCH_INSTANCES: usize = 5;
 
-/// Parameters of [`estimate_pose`]; `None` fields take defaults derived from the scan's point
+/// Parameters of [`estimate_pose`](super::estimate_pose); `None` fields take defaults derived from the scan's point
 /// spacing and the model's size.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PoseConfig {
@@ -128,7 +128,7 @@ pub struct PoseConfig {
     /// The sensor's position in the scene frame, mm, when known (orients the scan's normals;
     /// otherwise they face `up`).
     pub viewpoint: Option<Point>,
-    /// Instances returned by [`estimate_poses`].
+    /// Instances returned by [`estimate_poses`](super::estimate_poses).
     pub max_instances: usize,
     /// Instances the PPF search is sized for (hypotheses refined, poses polished) when more than
     /// `max_instances`: asking for fewer instances of the same search only truncates the answer.

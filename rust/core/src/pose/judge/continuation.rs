@@ -1,5 +1,5 @@
 //! Where a posed part's surface is confirmed, the scan's surface must not run on past the part in
-//! the same surface. The outline test ([`super::outline`]) looks at the edges of faces turned
+//! the same surface. The outline test ([`mod@super::outline`]) looks at the edges of faces turned
 //! toward the sensor; a tilted piece of a larger shape slips past it — a plate read on the run of
 //! a tee standing at 60°, a short rod along a longer one at 45°. Here the scan is followed from
 //! every cell of the height map where it confirms the posed part (within the tolerance of the

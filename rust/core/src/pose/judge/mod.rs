@@ -6,7 +6,7 @@
 //! - [`depth`]: the depth test itself — what the scan confirms of a posed surface, the patches of
 //!   it the sensor saw through, the share of it through a support — through which the other
 //!   checks read the scan;
-//! - [`outline`], [`continuation`], [`extension`]: a pose that fits a piece of a larger shape is
+//! - [`mod@outline`], [`mod@continuation`], [`extension`]: a pose that fits a piece of a larger shape is
 //!   refused where the scan's surface goes on past the edges of its sensor-facing faces, runs on
 //!   in the tangent planes of its confirmed surface, or carries a declared branch's cylinder on
 //!   past its end.
@@ -49,7 +49,7 @@ const MIN_SEEN: usize = 12;
 /// plate touching a neighbour edge to edge at one height, past one side of four (a quarter).
 const MAX_CONTINUED: f64 = 0.4;
 /// Of the cells confirming a pose, the most (as a share) that the scan's surface may run on
-/// past the part in the tangent planes of its confirmed surface (see [`continuation`]). A plate
+/// past the part in the tangent planes of its confirmed surface (see [`continuation()`]). A plate
 /// read on a tee's tilted run runs on over 0.35–2.5 times as many cells as confirm it; parts in
 /// the near-symmetric bench's views and piles, at most 0.25 (they meet their neighbours at an
 /// angle or a step). An elbow read on a tee's run and stem reaches 0.25 too: this test does not
