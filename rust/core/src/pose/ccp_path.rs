@@ -127,7 +127,7 @@ fn fit_region(
     }
     let (_, t_model_scene0, coarse) = best;
     let fine = &cfg.ccp_path.fine_icp;
-    let fine_cfg = IcpConfig::robust_plane(fine.reach_tolerances * checks.tol, fine.convergence());
+    let fine_cfg = IcpConfig::robust_plane(fine.reach_tolerances * checks.tol, fine.convergence);
     let refined = icp(object, model.fine_target(), &t_model_scene0, &fine_cfg)?;
     laps.lap("icp");
     let t_model_scene = refined.t_target_source;
@@ -229,7 +229,7 @@ impl<'a> Checks<'a> {
             approximate: true,
             ..IcpConfig::robust_plane(
                 (c.reach_ratio * model.diameter).max(c.min_tolerances * tol),
-                c.convergence(),
+                c.convergence,
             )
         };
         let quick = IcpConfig {

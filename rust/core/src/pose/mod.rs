@@ -16,7 +16,7 @@
 //! | 5 | this file | [`estimate_poses`]: input checks, bin removal, the method run (`dispatch`), CCP beside PPF and the arbitration between them (`auto`) |
 //! | 4 | [`ccp_path`] | the paper's path: top-object segmentation, CCP or the centroid baseline, coarse checks, ICP |
 //! | 4 | [`ppf_path`] | point-pair-feature detection of every instance, its prepared scene ([`DetectionScene`]), ranking by pickability |
-//! | 4 | [`trust`] | how sure each pose is ([`trust::trusted`]): near-symmetric alternatives, the fit against the scan's noise ([`trust`]`/fit.rs`), the turns the view leaves open (`unseen_turns.rs`) |
+//! | 4 | [`trust`] | how sure each pose is ([`trust::trusted`]): near-symmetric alternatives weighed (`assess`), the fit against the scan's own noise (`fit`), the turns and slides the view leaves open (`unseen_turns`) |
 //! | 3 | [`judge`] | the one [`Judge`] every method's pose passes, owning its thresholds; its checks as children: `depth`, `outline`, `continuation`, `extension` |
 //! | 2 | [`scene`] | input checks, bin removal, the [`Context`] of one call every stage reads |
 //! | 2 | [`surface`] | point-to-plane residuals against the dense model, robust σ, thinning |

@@ -297,39 +297,21 @@ pub struct CheckIcpParams {
     pub kernel_ratio: f64,
     /// Lower bound of the distance and the kernel, in inlier distances. Default 3.
     pub min_tolerances: f64,
-    /// Iterations in stage two and for the half turns. Default 12.
-    pub iterations: usize,
+    /// When the ICP of stage two and of the half turns stops. Default [`Convergence::CHECK`]:
+    /// 12 iterations, or an update under 1e-4 rad and 1e-2 mm.
+    pub convergence: Convergence,
     /// Iterations of the quick checks (stage one, the half turns' first look). Default 6.
     pub quick_iterations: usize,
-    /// Stops once an update rotates less than this, rad. Default 1e-4.
-    pub rotation_tolerance: f64,
-    /// ... and moves less than this, mm. Default 1e-2.
-    pub translation_tolerance: f64,
 }
 
 impl Default for CheckIcpParams {
     fn default() -> Self {
-        let c = Convergence::CHECK;
         CheckIcpParams {
             reach_ratio: 0.25,
             kernel_ratio: 0.1,
             min_tolerances: 3.0,
-            iterations: c.iterations,
+            convergence: Convergence::CHECK,
             quick_iterations: 6,
-            rotation_tolerance: c.rotation,
-            translation_tolerance: c.translation,
-        }
-    }
-}
-
-impl CheckIcpParams {
-    /// When the checks' ICP stops (stage two and the half turns; the quick checks stop after
-    /// `quick_iterations`).
-    pub fn convergence(&self) -> Convergence {
-        Convergence {
-            iterations: self.iterations,
-            rotation: self.rotation_tolerance,
-            translation: self.translation_tolerance,
         }
     }
 }
@@ -339,33 +321,16 @@ impl CheckIcpParams {
 pub struct FineIcpParams {
     /// Correspondence distance and Tukey width, in inlier distances. Default 3.
     pub reach_tolerances: f64,
-    /// Most iterations. Default 60.
-    pub iterations: usize,
-    /// Stops once an update rotates less than this, rad (default 1e-5, about 0.0006°) ...
-    pub rotation_tolerance: f64,
-    /// ... and moves less than this, mm (default 1e-3): far below what the scan can resolve.
-    pub translation_tolerance: f64,
+    /// When the refinement stops. Default [`Convergence::FINE`]: 60 iterations, or an update
+    /// under 1e-5 rad (about 0.0006°) and 1e-3 mm, far below what the scan can resolve.
+    pub convergence: Convergence,
 }
 
 impl Default for FineIcpParams {
     fn default() -> Self {
-        let c = Convergence::FINE;
         FineIcpParams {
             reach_tolerances: 3.0,
-            iterations: c.iterations,
-            rotation_tolerance: c.rotation,
-            translation_tolerance: c.translation,
-        }
-    }
-}
-
-impl FineIcpParams {
-    /// When the refinement stops.
-    pub fn convergence(&self) -> Convergence {
-        Convergence {
-            iterations: self.iterations,
-            rotation: self.rotation_tolerance,
-            translation: self.translation_tolerance,
+            convergence: Convergence::FINE,
         }
     }
 }
