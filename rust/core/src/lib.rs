@@ -58,7 +58,7 @@ pub use pose::{
 };
 pub use registration::ccp::{ccp, BranchLayout, CcpConfig, CcpResult};
 pub use registration::ppf::{DetectConfig, PpfConfig, PpfModel};
-pub use registration::{icp, IcpConfig, IcpMethod, IcpResult, IcpTarget, RobustKernel};
+pub use registration::{icp, Convergence, IcpConfig, IcpMethod, IcpResult, IcpTarget, RobustKernel};
 pub use rng::Rng;
 pub use search::{KdIndex, Neighbour};
 pub use symmetry::{

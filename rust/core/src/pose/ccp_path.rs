@@ -6,8 +6,9 @@
 //! of the object's points. Their tunables are [`CcpPathParams`].
 
 use super::judge::Judge;
-use super::scene::scene_indices;
-use super::{CoarseMethod, Laps, PoseConfig, PoseEstimate, PoseModel, Timings};
+use super::model::PoseModel;
+use super::scene::{scene_indices, Context};
+use super::types::{CcpPathParams, CoarseMethod, Laps, PoseConfig, PoseEstimate, Timings};
 use crate::error::{Error, Result};
 use crate::geometry::{centroid, check_count, covariance, principal_axes, Point};
 use crate::normals::{normal_at, Orientation};
@@ -18,140 +19,6 @@ use crate::search::KdIndex;
 use crate::segment::{scan_spacing, segment_top, SegmentConfig};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::PI;
-
-/// Tunables of the CCP and centroid path; the defaults are those the paper's tables were
-/// measured with.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CcpPathParams {
-    /// Regions tried, top first, before the path gives up. Default 8.
-    pub max_regions: usize,
-    /// Object points the coarse checks judge a pose by (the probe; fewer than about 100 cannot
-    /// tell a wrong reading of a partial view from the right one). Default 150.
-    pub probe_points: usize,
-    /// Model points the coarse checks' depth test probes. Default 100.
-    pub model_probes: usize,
-    /// Object points the candidates that survive the quick check converge on. Default 160.
-    pub sample_points: usize,
-    /// Model points (about) the stage-two depth test probes. Default 4000.
-    pub fine_model_probes: usize,
-    /// Readings the cheap first tier of scoring (a third of the probe) passes on to the second
-    /// (the whole probe). Default 32.
-    pub second_tier: usize,
-    /// Distinct rotations, best-prescored first, that get the stage-one ICP check. Default 8.
-    pub stage_one: usize,
-    /// Stage-one leaders that converge in stage two. Default 3.
-    pub stage_two: usize,
-    /// A stage-one result converges in stage two only when it scores at least this fraction
-    /// of the leader's. Default 0.7.
-    pub stage_two_ratio: f64,
-    /// Tolerance of the coarse checks, as a fraction of the part's diameter (at least twice the
-    /// inlier distance). Default 0.08.
-    pub coarse_tolerance_ratio: f64,
-    /// Readings whose rotations differ by less than this, rad, and whose translations differ by
-    /// less than [`CcpPathParams::same_reading_shift`] are scored once. Default 5° (0.0873).
-    pub same_reading_angle: f64,
-    /// Translation part of the same-reading test, as a fraction of the diameter. Default 0.05.
-    pub same_reading_shift: f64,
-    /// Of the readings whose rotations lie within this angle, rad, only the best-ranked gets
-    /// the ICP checks. Default 15° (0.262).
-    pub cluster_angle: f64,
-    /// CCP: the best-ranked readings whose quarter and half turns about the model's axes join
-    /// the ICP checks (views of a part on its side are ambiguous up to such a turn). Default 2.
-    pub turned_readings: usize,
-    /// CCP: a half turn of the winner whose quick score is below this fraction of the winner's
-    /// is not converged. Default 0.8.
-    pub half_turn_drop: f64,
-    /// CCP: a half turn replaces the winner only when it scores this much more. Default 0.01.
-    pub half_turn_margin: f64,
-    /// ICP of the coarse checks.
-    pub check_icp: CheckIcpParams,
-    /// ICP of the final refinement.
-    pub fine_icp: FineIcpParams,
-}
-
-impl Default for CcpPathParams {
-    fn default() -> Self {
-        CcpPathParams {
-            max_regions: 8,
-            probe_points: 150,
-            model_probes: 100,
-            sample_points: 160,
-            fine_model_probes: 4000,
-            second_tier: 32,
-            stage_one: 8,
-            stage_two: 3,
-            stage_two_ratio: 0.7,
-            coarse_tolerance_ratio: 0.08,
-            same_reading_angle: 5f64.to_radians(),
-            same_reading_shift: 0.05,
-            cluster_angle: 15f64.to_radians(),
-            turned_readings: 2,
-            half_turn_drop: 0.8,
-            half_turn_margin: 0.01,
-            check_icp: CheckIcpParams::default(),
-            fine_icp: FineIcpParams::default(),
-        }
-    }
-}
-
-/// The short point-to-plane ICP of the coarse checks (Tukey kernel, approximate search).
-#[derive(Debug, Clone, PartialEq)]
-pub struct CheckIcpParams {
-    /// Correspondence distance as a fraction of the diameter (at least `min_tolerances` inlier
-    /// distances). Default 0.25.
-    pub reach_ratio: f64,
-    /// Tukey kernel width as a fraction of the diameter (at least `min_tolerances` inlier
-    /// distances). Default 0.1.
-    pub kernel_ratio: f64,
-    /// Lower bound of the distance and the kernel, in inlier distances. Default 3.
-    pub min_tolerances: f64,
-    /// Iterations in stage two and for the half turns. Default 12.
-    pub iterations: usize,
-    /// Iterations of the quick checks (stage one, the half turns' first look). Default 6.
-    pub quick_iterations: usize,
-    /// Stops once an update rotates less than this, rad. Default 1e-4.
-    pub rotation_tolerance: f64,
-    /// ... and moves less than this, mm. Default 1e-2.
-    pub translation_tolerance: f64,
-}
-
-impl Default for CheckIcpParams {
-    fn default() -> Self {
-        CheckIcpParams {
-            reach_ratio: 0.25,
-            kernel_ratio: 0.1,
-            min_tolerances: 3.0,
-            iterations: 12,
-            quick_iterations: 6,
-            rotation_tolerance: 1e-4,
-            translation_tolerance: 1e-2,
-        }
-    }
-}
-
-/// The final point-to-plane refinement on all of the object's points.
-#[derive(Debug, Clone, PartialEq)]
-pub struct FineIcpParams {
-    /// Correspondence distance and Tukey width, in inlier distances. Default 3.
-    pub reach_tolerances: f64,
-    /// Most iterations. Default 60.
-    pub iterations: usize,
-    /// Stops once an update rotates less than this, rad (default 1e-5, about 0.0006°) ...
-    pub rotation_tolerance: f64,
-    /// ... and moves less than this, mm (default 1e-3): far below what the scan can resolve.
-    pub translation_tolerance: f64,
-}
-
-impl Default for FineIcpParams {
-    fn default() -> Self {
-        FineIcpParams {
-            reach_tolerances: 3.0,
-            iterations: 60,
-            rotation_tolerance: 1e-5,
-            translation_tolerance: 1e-3,
-        }
-    }
-}
 
 /// The scan's sampling: spacing along and across the scan lines, mm.
 #[derive(Clone, Copy)]
@@ -169,16 +36,13 @@ type Tried = (f64, Isometry3<f64>, Isometry3<f64>);
 /// Table 2 with one addition: a region that no pose explains (a bin rim, a sliver of a part
 /// deep below others) is set aside and the next top region tried.
 pub(super) fn run(
-    scene: &[Point],
-    pts: &[Point],
-    model: &PoseModel,
-    cfg: &PoseConfig,
+    ctx: &Context<'_>,
     method: CoarseMethod,
     judge: &Judge,
     timings: &mut Timings,
 ) -> Result<PoseEstimate> {
+    let (pts, up) = (ctx.pts, ctx.up);
     let mut laps = Laps::new(timings);
-    let up = cfg.up.normalize();
     let index = KdIndex::new(pts);
     let spacing = scan_spacing(pts, &index);
     let sampling = Sampling {
@@ -194,17 +58,17 @@ pub(super) fn run(
         *memo[i].get_or_insert_with(|| normal_at(&pts[i], pts, &index, k, Orientation::TowardDirection(up), &mut found))
     };
     laps.lap("normals");
-    let seg_cfg = segment_config(model, cfg, sampling, up);
+    let seg_cfg = segment_config(ctx, sampling);
     let mut excluded = vec![false; pts.len()];
     let mut last_failure: Option<Error> = None;
-    for _ in 0..cfg.ccp_path.max_regions {
+    for _ in 0..ctx.cfg.ccp_path.max_regions {
         let region = match segment_top(pts, Some(&mut normal_of), &index, &seg_cfg, Some(&excluded)) {
             Ok(r) => r,
             Err(e) => return Err(last_failure.unwrap_or(e)),
         };
         let object: Vec<Point> = region.iter().map(|&i| pts[i]).collect();
         laps.lap("segmentation");
-        match fit_region(scene, pts, &object, model, cfg, method, sampling, judge, &mut laps) {
+        match fit_region(ctx, &object, method, sampling, judge, &mut laps) {
             Err(Error::NoObjectFound { reason }) => {
                 for &i in &region {
                     excluded[i] = true;
@@ -229,35 +93,33 @@ fn normals_k(pts: &[Point], s: Sampling) -> Result<usize> {
 }
 
 /// Table 2's parameters, defaults derived from the scan's sampling and the model's size.
-fn segment_config(model: &PoseModel, cfg: &PoseConfig, s: Sampling, up: Vector3<f64>) -> SegmentConfig {
+fn segment_config(ctx: &Context<'_>, s: Sampling) -> SegmentConfig {
+    let (model, cfg) = (ctx.model, ctx.cfg);
     let visible_points = (0.5 * model.area / (s.along * s.across)).max(1.0);
     SegmentConfig {
         d_star: cfg.d_star.unwrap_or((3.0 * s.along).max(1.6 * s.across)),
         min_points: cfg.min_points.unwrap_or(((0.1 * visible_points) as usize).max(15)),
         max_normal_angle: cfg.max_normal_angle,
         max_extent: 1.1 * model.diameter,
-        up,
+        up: ctx.up,
     }
 }
 
 /// The pose of one segmented region: coarse readings → coarse checks → refinement →
 /// verification; `NoObjectFound` when the region is not the part.
-#[allow(clippy::too_many_arguments)]
 fn fit_region(
-    scene: &[Point],
-    pts: &[Point],
+    ctx: &Context<'_>,
     object: &[Point],
-    model: &PoseModel,
-    cfg: &PoseConfig,
     method: CoarseMethod,
     sampling: Sampling,
     judge: &Judge,
     laps: &mut Laps<'_>,
 ) -> Result<PoseEstimate> {
+    let (model, cfg) = (ctx.model, ctx.cfg);
     reject_flat_region(object, model)?;
-    let candidates = coarse_readings(object, model, cfg, method)?;
+    let candidates = coarse_readings(object, ctx, method)?;
     laps.lap("coarse");
-    let checks = Checks::new(scene, object, model, cfg, sampling);
+    let checks = Checks::new(ctx, object, sampling);
     let ranked = checks.rank(&candidates, method);
     let mut best = checks.converge(&ranked)?;
     if method == CoarseMethod::Ccp {
@@ -265,12 +127,7 @@ fn fit_region(
     }
     let (_, t_model_scene0, coarse) = best;
     let fine = &cfg.ccp_path.fine_icp;
-    let fine_cfg = IcpConfig::robust_plane(
-        fine.reach_tolerances * checks.tol,
-        fine.iterations,
-        fine.rotation_tolerance,
-        fine.translation_tolerance,
-    );
+    let fine_cfg = IcpConfig::robust_plane(fine.reach_tolerances * checks.tol, fine.convergence);
     let refined = icp(object, model.fine_target(), &t_model_scene0, &fine_cfg)?;
     laps.lap("icp");
     let t_model_scene = refined.t_target_source;
@@ -278,28 +135,18 @@ fn fit_region(
     let t_scene_model = t_model_scene.inverse();
     // The one judge every method passes: a pose the scan sees through, that shows too little of
     // itself or that lies through the bin is no pose, and the next region is tried.
-    let (t_scene_model, evidence) = judge.verdict(model, &t_scene_model, cfg)?;
-    let indices = scene_indices(pts, model, &t_scene_model, checks.tol);
+    let (t_scene_model, evidence) = judge.verdict(model, &t_scene_model)?;
+    let indices = scene_indices(ctx.pts, model, &t_scene_model, checks.tol);
     laps.lap("verification");
-    Ok(PoseEstimate {
-        t_scene_model: model.symmetries.canonical(&t_scene_model),
-        t_scene_model_coarse: coarse,
-        score,
-        rmse,
-        indices,
-        timings: Vec::new(),
-        iterations: refined.iterations,
+    Ok(PoseEstimate::verified(
         method,
-        visible_fraction: Some(evidence.visible_fraction()),
-        occluded_fraction: Some(evidence.occluded_fraction()),
-        pickability: None,
-        confidence: 0.0,
-        ambiguous: false,
-        alternatives: Vec::new(),
-        free_axis: None,
-        feature_evidence: None,
-        fit: None,
-    })
+        model.symmetries.canonical(&t_scene_model),
+        coarse,
+        &evidence,
+        (score, rmse),
+        refined.iterations,
+        indices,
+    ))
 }
 
 /// A flat region wider than the part (a bin rim, a wall left in the scan) is not the part.
@@ -321,16 +168,12 @@ fn reject_flat_region(object: &[Point], model: &PoseModel) -> Result<()> {
 }
 
 /// Coarse pose readings, model → scene: CCP's, or the centroid baseline's one.
-fn coarse_readings(
-    object: &[Point],
-    model: &PoseModel,
-    cfg: &PoseConfig,
-    method: CoarseMethod,
-) -> Result<Vec<Isometry3<f64>>> {
+fn coarse_readings(object: &[Point], ctx: &Context<'_>, method: CoarseMethod) -> Result<Vec<Isometry3<f64>>> {
+    let model = ctx.model;
     match (method, &model.layout) {
         (CoarseMethod::Ccp, Some(layout)) => {
             let (points, normals) = (model.target.points(), model.target.normals().unwrap_or(&[]));
-            Ok(ccp(object, layout, points, normals, Some(cfg.up.normalize()), &cfg.ccp)?.candidates)
+            Ok(ccp(object, layout, points, normals, Some(ctx.up), &ctx.cfg.ccp)?.candidates)
         }
         (CoarseMethod::Ccp, None) => Err(Error::invalid(
             "model",
@@ -363,7 +206,8 @@ struct Checks<'a> {
 }
 
 impl<'a> Checks<'a> {
-    fn new(scene: &[Point], object: &[Point], model: &'a PoseModel, cfg: &'a PoseConfig, s: Sampling) -> Self {
+    fn new(ctx: &Context<'a>, object: &[Point], s: Sampling) -> Self {
+        let (model, cfg) = (ctx.model, ctx.cfg);
         let p = &cfg.ccp_path;
         let tol = cfg
             .inlier_distance
@@ -385,9 +229,7 @@ impl<'a> Checks<'a> {
             approximate: true,
             ..IcpConfig::robust_plane(
                 (c.reach_ratio * model.diameter).max(c.min_tolerances * tol),
-                c.iterations,
-                c.rotation_tolerance,
-                c.translation_tolerance,
+                c.convergence,
             )
         };
         let quick = IcpConfig {
@@ -397,7 +239,7 @@ impl<'a> Checks<'a> {
         Checks {
             model,
             params: p,
-            heights: HeightMap::new(scene, &cfg.up.normalize(), (1.5 * s.across).max(0.5)),
+            heights: HeightMap::new(ctx.scene, &ctx.up, (1.5 * s.across).max(0.5)),
             probe,
             sample,
             tol,

@@ -5,75 +5,59 @@
 //! giving `T_model_scene`; the result reports its inverse `T_scene_model` (model → scene). A
 //! result is returned only when enough of the object's points lie on the posed model;
 //! otherwise the pipeline answers `NoObjectFound` rather than a guess.
+//!
+//! # The room
+//!
+//! Floors, each importing only those below it (`layout_tests` checks that no module imports one
+//! that imports it, and each floor only the floors below):
+//!
+//! | floor | module | what it holds |
+//! |---|---|---|
+//! | 5 | this file | [`estimate_poses`]: input checks, bin removal, the method run (`dispatch`), CCP beside PPF and the arbitration between them (`auto`) |
+//! | 4 | [`ccp_path`] | the paper's path: top-object segmentation, CCP or the centroid baseline, coarse checks, ICP |
+//! | 4 | [`ppf_path`] | point-pair-feature detection of every instance, its prepared scene ([`DetectionScene`]), ranking by pickability |
+//! | 4 | [`trust`] | how sure each pose is ([`trust::trusted`]): near-symmetric alternatives weighed (`assess`), the fit against the scan's own noise (`fit`), the turns and slides the view leaves open (`unseen_turns`) |
+//! | 3 | [`judge`] | the one [`Judge`] every method's pose passes, owning its thresholds; its checks as children: `depth`, `outline`, `continuation`, `extension` |
+//! | 2 | [`scene`] | input checks, bin removal, the [`Context`] of one call every stage reads |
+//! | 2 | [`surface`] | point-to-plane residuals against the dense model, robust σ, thinning |
+//! | 1 | [`model`] | [`PoseModel`], the probes past its branch ends, its near-symmetric turns |
+//! | 0 | [`types`] | plain data: [`PoseConfig`], [`PoseEstimate`], every params struct and result type |
 
 mod ccp_path;
-mod continuation;
-mod extension;
-#[cfg(test)]
-mod extension_tests;
-mod fit;
 mod judge;
-mod model;
-mod outline;
 #[cfg(test)]
-mod outline_tests;
+mod layout_tests;
+mod model;
 mod ppf_path;
 mod scene;
+mod surface;
 #[cfg(test)]
 mod tests;
 mod trust;
-#[cfg(test)]
-mod trust_tests;
 mod types;
-mod unseen_turns;
-#[cfg(test)]
-mod unseen_turns_tests;
 
-pub use ccp_path::{CcpPathParams, CheckIcpParams, FineIcpParams};
-pub use fit::FitQuality;
 pub use model::PoseModel;
-pub use trust::{Alternative, FeatureEvidence, TrustParams};
-pub use types::{stage_totals, CoarseMethod, PoseConfig, PoseEstimate, Timings};
+pub use types::{
+    stage_totals, Alternative, CcpPathParams, CheckIcpParams, CoarseMethod, FeatureEvidence, FineIcpParams, FitQuality,
+    PoseConfig, PoseEstimate, Timings, TrustParams,
+};
 
 use crate::error::{Error, Result};
 use crate::geometry::Point;
 use ccp_path::run;
 use judge::Judge;
-use ppf_path::detect;
-use scene::{check_scene, remove_bin, DetectionScene};
+use ppf_path::{detect, DetectionScene};
+use scene::{check_scene, remove_bin, Context};
 use std::time::Instant;
-
-/// Stage timings: each lap is the time since the previous one.
-struct Laps<'a> {
-    clock: Instant,
-    timings: &'a mut Timings,
-}
-
-impl<'a> Laps<'a> {
-    fn new(timings: &'a mut Timings) -> Self {
-        Laps {
-            clock: Instant::now(),
-            timings,
-        }
-    }
-
-    fn lap(&mut self, name: &'static str) {
-        self.timings.push((name, self.clock.elapsed().as_secs_f64() * 1e3));
-        self.clock = Instant::now();
-    }
-}
+use trust::trusted;
 
 /// Estimates the pose of the top pickable object of `scene` (N×3, mm) against `model`: exactly
 /// the first of [`estimate_poses`] for the same configuration (the search does not depend on
-/// how many instances are asked for, up to [`SEARCH_INSTANCES`]).
+/// how many instances are asked for, up to [`SEARCH_INSTANCES`](types::SEARCH_INSTANCES)).
 pub fn estimate_pose(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<PoseEstimate> {
     let mut all = estimate_poses(scene, model, cfg)?;
     Ok(all.swap_remove(0))
 }
-
-/// The search (hypotheses voted, poses polished) is sized for at least this many instances by
-/// default ([`PoseConfig::search_instances`]), so that asking for fewer only truncates the answer.
-pub const SEARCH_INSTANCES: usize = 5;
 
 /// Estimates up to `cfg.max_instances` instances, most pickable first. CCP and the centroid
 /// baseline find the top object only; PPF finds every instance it can confirm.
@@ -92,7 +76,7 @@ fn resolve_method(method: CoarseMethod, model: &PoseModel) -> CoarseMethod {
 }
 
 fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<PoseEstimate>> {
-    check_scene(scene, model, cfg)?;
+    let up = check_scene(scene, model, cfg)?;
     let method = resolve_method(cfg.method, model);
     // Bin removal: PPF removes support planes itself, on its voxel grid.
     let clock = Instant::now();
@@ -105,21 +89,29 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
     let mut timings = vec![("bin_removal", clock.elapsed().as_secs_f64() * 1e3)];
     crate::cancel::check()?;
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
+    let ctx = Context {
+        scene,
+        kept: &kept,
+        pts: &pts,
+        model,
+        cfg,
+        up,
+    };
     let (found, judge) = match method {
         CoarseMethod::Ccp | CoarseMethod::Centroid => {
-            let judge = Judge::new(scene, &pts, removed, model, cfg);
-            let e = run(scene, &pts, model, cfg, method, &judge, &mut timings)?;
+            let judge = Judge::new(&ctx, &pts, removed);
+            let e = run(&ctx, method, &judge, &mut timings)?;
             (vec![reindex(e, &kept)], judge)
         }
         CoarseMethod::Ppf => {
-            let (found, prepared) = detect_instances(scene, &pts, &kept, model, cfg, &mut timings)?;
+            let (found, prepared) = detect_instances(&ctx, &mut timings)?;
             (found, prepared.judge)
         }
-        CoarseMethod::Auto => auto(scene, &pts, &kept, model, cfg, &mut timings)?,
+        CoarseMethod::Auto => auto(&ctx, &mut timings)?,
     };
     let clock = Instant::now();
     crate::cancel::check()?;
-    let found = trusted(found, scene, &pts, model, &judge, cfg)?;
+    let found = trusted(found, &ctx, &judge)?;
     timings.push(("trust", clock.elapsed().as_secs_f64() * 1e3));
     crate::cancel::check()?;
     Ok(found
@@ -131,89 +123,6 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
         .collect())
 }
 
-/// Every estimate with its trust (see [`trust`]): a pose the scan shows to be a near-symmetric
-/// alternative of the truth is replaced by the one it supports; the confidence also carries
-/// the fit of the pose's points against the scan's own noise (see [`fit`]), and the turns and
-/// slides the view leaves open are alternatives too (see [`unseen_turns`]).
-/// A pose whose points lie further off the model than [`fit::MAX_RATIO`] noise floors is not
-/// reported; `NoObjectFound` when no pose is left.
-/// `pts` are the points left after bin removal (the comparison runs on them).
-fn trusted(
-    found: Vec<PoseEstimate>,
-    scene: &[Point],
-    pts: &[Point],
-    model: &PoseModel,
-    judge: &Judge,
-    cfg: &PoseConfig,
-) -> Result<Vec<PoseEstimate>> {
-    let region = trust::Region::new(model, judge, &cfg.trust);
-    let mut misfit: Option<fit::FitQuality> = None;
-    let kept: Vec<PoseEstimate> = found
-        .into_iter()
-        .filter_map(|mut e| {
-            let (t, kept) = trust::assess(&e, pts, model, judge, cfg, &region);
-            if kept != e.t_scene_model {
-                e.t_scene_model = model.symmetries.canonical(&kept);
-                let idx = scene::scene_indices(scene, model, &e.t_scene_model, judge.tol);
-                e.indices = idx;
-            }
-            // The part's own points: those on the floor or a wall fit a face resting on it
-            // whatever the pose (and a wall is not where the part's noise is read).
-            let claimed: Vec<Point> = e
-                .indices
-                .iter()
-                .map(|&i| scene[i])
-                .filter(|p| judge.off_supports(p))
-                .collect();
-            e.fit = fit::fit_quality(&claimed, model, &e.t_scene_model, judge.tol);
-            if let Some(f) = e.fit.filter(|f| !f.acceptable()) {
-                misfit.get_or_insert(f);
-                return None;
-            }
-            e.confidence = t.confidence * e.fit.map_or(1.0, |f| f.factor);
-            e.ambiguous = t.ambiguous;
-            e.alternatives = t.alternatives;
-            // A free axis already says the turn is unknown.
-            let noise = e.fit.map(|f| f.noise_floor);
-            let unseen = match t.free_axis {
-                None => unseen_turns::unseen_turns_of_all(
-                    &claimed,
-                    model,
-                    &e.t_scene_model,
-                    &e.alternatives,
-                    judge,
-                    cfg,
-                    noise,
-                ),
-                Some(_) => Vec::new(),
-            };
-            if !unseen.is_empty() {
-                // As with near-symmetric alternatives: each one the scan cannot rule out is as
-                // likely as the pose.
-                e.confidence /= (1 + unseen.len()) as f64;
-                e.ambiguous = true;
-                e.alternatives.extend(unseen);
-            }
-            e.free_axis = t.free_axis;
-            e.feature_evidence = t.evidence;
-            Some(e)
-        })
-        .collect();
-    match misfit {
-        Some(f) if kept.is_empty() => Err(Error::NoObjectFound {
-            reason: format!(
-                "the pose's points lie {:.1} noise floors off the model (residual σ {:.2} mm, scan noise {:.2} mm; \
-                 at most {:.1}): not this part, or a part unlike its CAD model",
-                f.ratio,
-                f.residual_sigma,
-                f.noise_floor,
-                fit::MAX_RATIO
-            ),
-        }),
-        _ => Ok(kept),
-    }
-}
-
 /// Indices of the points a method saw (`kept` of the scene) become scene indices.
 fn reindex(mut e: PoseEstimate, kept: &[usize]) -> PoseEstimate {
     e.indices = e.indices.iter().map(|&i| kept[i]).collect();
@@ -221,22 +130,15 @@ fn reindex(mut e: PoseEstimate, kept: &[usize]) -> PoseEstimate {
 }
 
 /// PPF's instances with scene indices, and its prepared scene.
-fn detect_instances(
-    scene: &[Point],
-    pts: &[Point],
-    kept: &[usize],
-    model: &PoseModel,
-    cfg: &PoseConfig,
-    timings: &mut Timings,
-) -> Result<(Vec<PoseEstimate>, DetectionScene)> {
-    let ppf = model.ppf.as_ref().ok_or_else(|| {
+fn detect_instances(ctx: &Context<'_>, timings: &mut Timings) -> Result<(Vec<PoseEstimate>, DetectionScene)> {
+    let ppf = ctx.model.ppf.as_ref().ok_or_else(|| {
         Error::invalid(
             "model",
             "PPF needs the model's feature table; prepare the model with PPF (binpick builds it on first use)",
         )
     })?;
-    let (found, prepared) = detect(scene, pts, model, ppf, cfg, timings)?;
-    Ok((found.into_iter().map(|e| reindex(e, kept)).collect(), prepared))
+    let (found, prepared) = detect(ctx, ppf, timings)?;
+    Ok((found.into_iter().map(|e| reindex(e, ctx.kept)).collect(), prepared))
 }
 
 /// Regions CCP tries when it runs beside PPF's instances (auto with a branch layout): the top
@@ -247,22 +149,15 @@ pub const AUTO_CCP_REGIONS: usize = 1;
 
 /// Auto with a branch layout: PPF over the pile and CCP on the top object (the next objects
 /// down too when PPF finds nothing); the verified winner leads.
-fn auto(
-    scene: &[Point],
-    pts: &[Point],
-    kept: &[usize],
-    model: &PoseModel,
-    cfg: &PoseConfig,
-    timings: &mut Timings,
-) -> Result<(Vec<PoseEstimate>, Judge)> {
-    let detected = detect_instances(scene, pts, kept, model, cfg, timings);
+fn auto(ctx: &Context<'_>, timings: &mut Timings) -> Result<(Vec<PoseEstimate>, Judge)> {
+    let detected = detect_instances(ctx, timings);
     let clock = Instant::now();
-    let (ccp_kept, removed) = if cfg.bin.is_some() {
-        (kept.to_vec(), Vec::new())
+    let (ccp_kept, removed) = if ctx.cfg.bin.is_some() {
+        (ctx.kept.to_vec(), Vec::new())
     } else {
-        remove_bin(scene, model, cfg, true)?
+        remove_bin(ctx.scene, ctx.model, ctx.cfg, true)?
     };
-    let ccp_pts: Vec<Point> = ccp_kept.iter().map(|&i| scene[i]).collect();
+    let ccp_pts: Vec<Point> = ccp_kept.iter().map(|&i| ctx.scene[i]).collect();
     // One judge for both paths: PPF's, when it prepared the scene; CCP's own only without it.
     let mut own: Option<Judge> = None;
     timings.push(("ccp_bin_removal", clock.elapsed().as_secs_f64() * 1e3));
@@ -270,28 +165,25 @@ fn auto(
     let by_ccp = {
         let judge = match &detected {
             Ok((_, prepared)) => &prepared.judge,
-            Err(_) => own.get_or_insert_with(|| Judge::new(scene, &ccp_pts, removed, model, cfg)),
+            Err(_) => own.get_or_insert_with(|| Judge::new(ctx, &ccp_pts, removed)),
         };
         // Beside PPF's instances CCP reads the top object only; alone it goes on down the pile.
-        let mut ccp_cfg = cfg.clone();
+        let mut ccp_cfg = ctx.cfg.clone();
         if detected.is_ok() {
             ccp_cfg.ccp_path.max_regions = ccp_cfg.ccp_path.max_regions.min(AUTO_CCP_REGIONS);
         }
-        run(
-            scene,
-            &ccp_pts,
-            model,
-            &ccp_cfg,
-            CoarseMethod::Ccp,
-            judge,
-            &mut ccp_timings,
-        )
-        .map(|e| reindex(e, &ccp_kept))
+        let ccp_ctx = Context {
+            kept: &ccp_kept,
+            pts: &ccp_pts,
+            cfg: &ccp_cfg,
+            ..*ctx
+        };
+        run(&ccp_ctx, CoarseMethod::Ccp, judge, &mut ccp_timings).map(|e| reindex(e, &ccp_kept))
     };
     timings.extend(ccp_timings.into_iter().map(|(name, ms)| (ccp_stage(name), ms)));
     match (detected, by_ccp) {
         (Ok((found, prepared)), Ok(c)) => {
-            let found = arbitrate(found, c, &prepared, model, cfg.max_instances);
+            let found = arbitrate(found, c, &prepared, ctx.model, ctx.cfg.max_instances);
             Ok((found, prepared.judge))
         }
         (Ok((found, prepared)), Err(_)) => Ok((found, prepared.judge)),
@@ -321,8 +213,8 @@ fn arbitrate(
     model: &PoseModel,
     max_instances: usize,
 ) -> Vec<PoseEstimate> {
-    let e = prepared.judge.evidence(model, &c.t_scene_model);
-    let first = prepared.judge.evidence(model, &found[0].t_scene_model);
+    let e = prepared.judge.depth.evidence(model, &c.t_scene_model);
+    let first = prepared.judge.depth.evidence(model, &found[0].t_scene_model);
     if e.quality() > first.quality() {
         c.visible_fraction = Some(e.visible_fraction());
         c.occluded_fraction = Some(e.occluded_fraction());

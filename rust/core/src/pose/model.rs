@@ -1,5 +1,8 @@
-//! [`PoseModel`]: a part prepared for pose estimation.
+//! [`PoseModel`]: a part prepared for pose estimation, and what the stages derive from the part
+//! alone: the probes on and past its branch ends ([`BranchEnd`]) and the turns of its
+//! near-symmetries ([`near_turns`]). A leaf: of the pose room it imports only the plain data types.
 
+use super::types::TrustParams;
 use crate::error::{Error, Result};
 use crate::geometry::Point;
 use crate::mesh::{sample_surface, Density, TriMesh};
@@ -10,7 +13,8 @@ use crate::search::KdIndex;
 use crate::segment::point_spacing;
 use crate::symmetry::{detect_all_symmetries, NearSymmetry, Symmetries, SymmetryConfig};
 use crate::voxel::subsample;
-use nalgebra::Vector3;
+use nalgebra::{Isometry3, Vector3};
+use std::f64::consts::TAU;
 
 /// The coarse checks' nearest field: cells of 1/64 of the part's diameter (coarser cells let
 /// wrong readings of Table 3's case 6 win), over its box grown by 0.35 × the diameter (farther
@@ -25,6 +29,15 @@ const FIELD_MARGIN: f64 = 0.35;
 /// polish after it is exact. With cells of 1/64 a confident right pose of a keyed shaft in the
 /// near-symmetric bench came back ambiguous.
 pub(super) const SCREEN_FIELD_CELLS: f64 = 256.0;
+/// The screen's correspondence reach in PPF steps. For a model without a branch layout its ICP
+/// steps take their correspondences from the model's approximate nearest field
+/// ([`crate::search::field::NearestField`], built out to this reach when the PPF table is
+/// installed): a hypothesis a few degrees off needs wide exact searches, which took about a sixth
+/// of a view's time (5.5–8.9 ms of the median of 40 single views of the near-symmetric bench;
+/// 1.5–2.1 ms on the field). A model with a layout keeps the exact search: its field is the
+/// coarse checks' (1/64 of the diameter), which answered a pile of tees differently and was not
+/// measured for the screen.
+pub(super) const SCREEN_REACH: f64 = 1.5;
 
 /// A model prepared for pose estimation: dense points with normals and their search structure,
 /// its symmetries and (once built) its point-pair-feature table.
@@ -52,8 +65,8 @@ pub struct PoseModel {
     /// The mesh surface sampled densely, when the samples are much sparser than that: the final
     /// refinement and its verification run against it.
     pub surface: Option<IcpTarget>,
-    /// With a branch layout: probes on and past each end of each branch (see [`super::extension`]).
-    pub(crate) branch_ends: Vec<super::extension::BranchEnd>,
+    /// With a branch layout: probes on and past each end of each branch (see [`BranchEnd`]).
+    pub(crate) branch_ends: Vec<BranchEnd>,
 }
 
 impl PoseModel {
@@ -94,7 +107,7 @@ impl PoseModel {
             target = target.with_field(diameter / FIELD_CELLS, FIELD_MARGIN * diameter);
         }
         let branch_ends = match &layout {
-            Some(layout) => super::extension::branch_ends(layout, spacing, &target),
+            Some(layout) => branch_ends(layout, spacing, &target),
             None => Vec::new(),
         };
         Ok(PoseModel {
@@ -153,7 +166,7 @@ impl PoseModel {
             self.surface = Some(surface);
             // Past a branch's end is off the part by the surface, not by samples 5 mm apart.
             if let Some(layout) = &self.layout {
-                self.branch_ends = super::extension::branch_ends(layout, self.spacing, self.fine_target());
+                self.branch_ends = branch_ends(layout, self.spacing, self.fine_target());
             }
         }
         Ok(self)
@@ -179,7 +192,7 @@ impl PoseModel {
     /// reaching as far as the screen's correspondences at the table's step.
     fn install_ppf(&mut self, ppf: PpfModel) {
         if self.screens_on_field() {
-            let reach = super::ppf_path::SCREEN_REACH * ppf.step();
+            let reach = SCREEN_REACH * ppf.step();
             self.target.set_field(self.diameter / SCREEN_FIELD_CELLS, reach);
         }
         self.ppf = Some(ppf);
@@ -203,4 +216,89 @@ impl PoseModel {
         self.install_ppf(ppf);
         Ok(())
     }
+}
+
+/// Probes on and past one end of one branch (model frame): what the judge's extension test
+/// reads the scan at.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct BranchEnd {
+    /// Probes on the branch's cylinder carried past the end, with their outward normals and
+    /// their distance from the part's surface, mm.
+    pub past: Vec<(Point, Vector3<f64>, f64)>,
+    /// Probes on the branch's own surface over the same length inside the end.
+    pub inside: Vec<(Point, Vector3<f64>)>,
+    /// The surface each probe stands for, mm².
+    pub probe_area: f64,
+}
+
+/// The probes of every branch end of `layout`: the tip (past the end face, one radius long) and
+/// the back (through the junction, from one radius behind it to two, inside from one to two
+/// radii out), on a grid of about `spacing` mm (at most a tenth of the radius), each past probe
+/// with its distance from `surface` (the part's densest surface: its mesh's samples where the
+/// model's own are sparse).
+fn branch_ends(layout: &BranchLayout, spacing: f64, surface: &IcpTarget) -> Vec<BranchEnd> {
+    let distance = |p: &Point| {
+        surface
+            .search()
+            .nearest_within(&[p.x, p.y, p.z], f64::INFINITY)
+            .map_or(f64::INFINITY, |(_, d)| d.sqrt())
+    };
+    let r = layout.radius;
+    // About the samples' spacing, within a tenth and a fortieth of the radius: at most about
+    // 250 × 40 probes per stretch whatever the samples or the declared radius.
+    let step = spacing.clamp(r / 40.0, r / 10.0);
+    let around = ((std::f64::consts::TAU * r / step).ceil() as usize).max(8);
+    let along = ((r / step).ceil() as usize).max(2);
+    let mut ends = Vec::new();
+    for (u, &len) in layout.directions.iter().zip(&layout.lengths) {
+        let u = u.normalize();
+        let a = if u.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+        let e1 = u.cross(&a).normalize();
+        let e2 = u.cross(&e1);
+        let ring = |t: f64, out: &mut dyn FnMut(Point, Vector3<f64>)| {
+            for k in 0..around {
+                let phi = std::f64::consts::TAU * k as f64 / around as f64;
+                let n = e1 * phi.cos() + e2 * phi.sin();
+                out(Point::from(u * t + n * r), n);
+            }
+        };
+        // (inside span, past span) along the axis: the tip and the back.
+        for (inside, past) in [((len - r, len), (len, len + r)), ((r, 2.0 * r), (-2.0 * r, -r))] {
+            let mut end = BranchEnd {
+                probe_area: (std::f64::consts::TAU * r / around as f64) * (r / along as f64),
+                ..BranchEnd::default()
+            };
+            for i in 0..along {
+                let f = (i as f64 + 0.5) / along as f64;
+                ring(inside.0 + f * (inside.1 - inside.0), &mut |p, n| {
+                    end.inside.push((p, n))
+                });
+                ring(past.0 + f * (past.1 - past.0), &mut |p, n| {
+                    end.past.push((p, n, distance(&p)))
+                });
+            }
+            ends.push(end);
+        }
+    }
+    ends
+}
+
+/// A near turn (model frame) and whether it is one of a continuous axis's.
+pub(super) type Turn = (Isometry3<f64>, bool);
+
+/// The turns (model frame; `true` for a continuous axis's) of one near-symmetry: its half turn,
+/// or [`TrustParams::continuous_turns`] even turns about a continuous axis.
+pub(super) fn turns_of(n: &NearSymmetry, p: &TrustParams) -> Vec<Turn> {
+    match n.angle {
+        Some(_) => vec![(n.transform(0.0), false)],
+        None => {
+            let k = p.continuous_turns.max(2);
+            (1..k).map(|i| (n.transform(TAU * i as f64 / k as f64), true)).collect()
+        }
+    }
+}
+
+/// The turns of every near-symmetry of `model` (see [`turns_of`]).
+pub(super) fn near_turns(model: &PoseModel, p: &TrustParams) -> Vec<Turn> {
+    model.near_symmetries.iter().flat_map(|n| turns_of(n, p)).collect()
 }

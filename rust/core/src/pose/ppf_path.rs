@@ -6,29 +6,62 @@
 //! height map and the reported indices), a voxel grid at a third of the PPF step (normals and
 //! ICP), and an even subsample at the PPF step (voting).
 
-use super::judge::Judge;
-use super::scene::{scene_indices, DetectionScene};
-use super::{CoarseMethod, Laps, PoseConfig, PoseEstimate, PoseModel, Timings};
+use super::judge::{probe_step, voxel_size, Judge};
+use super::model::{PoseModel, SCREEN_REACH};
+use super::scene::{scene_indices, Context};
+use super::types::{CoarseMethod, Laps, PoseConfig, PoseEstimate, Timings};
 use crate::error::{Error, Result};
 use crate::geometry::Point;
 use crate::normals::{normals_at, Orientation};
 use crate::registration::ppf::{DetectConfig, Hypothesis, PpfModel};
 use crate::registration::verify::{depth_evidence, Evidence};
-use crate::registration::{icp, IcpConfig};
+use crate::registration::{icp, Convergence, IcpConfig};
 use crate::search::KdIndex;
-use crate::voxel::subsample;
-use nalgebra::Isometry3;
+use crate::segment::remove_support_planes;
+use crate::voxel::{subsample, voxel_downsample};
+use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
 
-/// The screen's correspondence reach in PPF steps. For a model without a branch layout its ICP
-/// steps take their correspondences from the model's approximate nearest field
-/// ([`crate::search::field::NearestField`], built out to this reach when the PPF table is
-/// installed): a hypothesis a few degrees off needs wide exact searches, which took about a sixth
-/// of a view's time (5.5–8.9 ms of the median of 40 single views of the near-symmetric bench;
-/// 1.5–2.1 ms on the field). A model with a layout keeps the exact search: its field is the
-/// coarse checks' (1/64 of the diameter), which answered a pile of tees differently and was not
-/// measured for the screen.
-pub(super) const SCREEN_REACH: f64 = 1.5;
+/// The scene prepared for detection and judging.
+pub(crate) struct DetectionScene {
+    /// Voxel-grid points (mean of each voxel) and their KD-tree.
+    pub fine: Vec<Point>,
+    pub fine_index: KdIndex,
+    /// The judge every pose passes.
+    pub judge: Judge,
+}
+
+impl DetectionScene {
+    /// Voxel grid and normals of the context's points (the scene without the bin) for `ppf`, and
+    /// the judge of the whole scene. Without a bin box, support planes wider than the part are
+    /// removed from the voxel grid.
+    pub fn new(ctx: &Context<'_>, ppf: &PpfModel) -> Result<Self> {
+        let step = ppf.step();
+        let voxel = voxel_size(step);
+        let mut fine = voxel_downsample(ctx.pts, None, voxel)?.points;
+        let mut removed = Vec::new();
+        if ctx.cfg.bin.is_none() && fine.len() >= 50 {
+            let (keep, planes) = remove_support_planes(&fine, ctx.model.diameter, (0.5 * voxel).max(1.0), 1);
+            fine = keep.iter().map(|&i| fine[i]).collect();
+            removed = planes;
+        }
+        if fine.len() < 10 {
+            return Err(Error::NoObjectFound {
+                reason: format!(
+                    "only {} occupied {voxel:.1} mm voxels remain after removing the bin; the bin is empty",
+                    fine.len()
+                ),
+            });
+        }
+        let fine_index = KdIndex::new(&fine);
+        let judge = Judge::new(ctx, &fine, removed);
+        Ok(DetectionScene {
+            fine,
+            fine_index,
+            judge,
+        })
+    }
+}
 
 /// A refined, judged hypothesis.
 #[derive(Debug, Clone)]
@@ -78,16 +111,16 @@ impl DetectionScene {
         // The nearest field answers these steps where it is the screen's (see `SCREEN_REACH`).
         let quick = IcpConfig {
             approximate: model.screens_on_field(),
-            ..IcpConfig::robust_plane(SCREEN_REACH * step, 8, 1e-3, 5e-2)
+            ..IcpConfig::robust_plane(SCREEN_REACH * step, Convergence::SCREEN)
         };
         let r = icp(&local, model.target(), &start.inverse(), &quick).ok()?;
         let t_scene_model = r.t_target_source.inverse();
         let evidence = depth_evidence(
             model.target(),
-            &self.judge.heights,
+            &self.judge.depth.heights,
             &t_scene_model,
-            Judge::probe_step(model, 300),
-            self.judge.tol,
+            probe_step(model, 300),
+            self.judge.depth.tol,
             false,
         );
         Some(Judged {
@@ -108,11 +141,11 @@ impl DetectionScene {
         if local.len() < 12 {
             return None;
         }
-        let fine = IcpConfig::robust_plane((3.0 * self.judge.tol).max(0.5 * step), 20, 1e-6, 1e-4);
+        let fine = IcpConfig::robust_plane((3.0 * self.judge.depth.tol).max(0.5 * step), Convergence::POLISH);
         let r = icp(&local, model.target(), &j.t_scene_model.inverse(), &fine).ok()?;
         let t_scene_model = r.t_target_source.inverse();
-        let evidence = self.judge.evidence(model, &t_scene_model);
-        let tol2 = self.judge.tol * self.judge.tol;
+        let evidence = self.judge.depth.evidence(model, &t_scene_model);
+        let tol2 = self.judge.depth.tol * self.judge.depth.tol;
         let mut sq = 0.0;
         // Every voxel point in reach, not the thinned ICP sample: supports are compared as sets.
         let support: Vec<usize> = self
@@ -155,19 +188,17 @@ fn search_instances(cfg: &PoseConfig) -> usize {
 /// All instances found by PPF, most pickable first (at most `cfg.max_instances`), and the
 /// prepared scene (for judging other methods' poses on the same terms).
 pub(super) fn detect(
-    scene_all: &[Point],
-    points: &[Point],
-    model: &PoseModel,
+    ctx: &Context<'_>,
     ppf: &PpfModel,
-    cfg: &PoseConfig,
     timings: &mut Timings,
 ) -> Result<(Vec<PoseEstimate>, DetectionScene)> {
+    let (model, cfg) = (ctx.model, ctx.cfg);
     let mut laps = Laps::new(timings);
-    let scene = DetectionScene::new(scene_all, points, model, ppf, cfg)?;
+    let scene = DetectionScene::new(ctx, ppf)?;
     laps.lap("voxels");
-    let hypotheses = vote(&scene, model, ppf, cfg, &mut laps)?;
+    let hypotheses = vote(&scene, ctx, ppf, &mut laps)?;
     let judged = screen_and_polish(&scene, model, ppf.step(), &hypotheses, cfg, &mut laps);
-    let instances = one_pose_per_instance(judged, &scene, model, cfg);
+    let instances = one_pose_per_instance(judged, &scene, model);
     if instances.is_empty() {
         return Err(Error::NoObjectFound {
             reason: format!(
@@ -177,24 +208,19 @@ pub(super) fn detect(
             ),
         });
     }
-    let out = estimates(instances, points, model, cfg, scene.judge.tol);
+    let out = estimates(instances, ctx, scene.judge.depth.tol);
     laps.lap("verification");
     Ok((out, scene))
 }
 
 /// Pose hypotheses from the votes of the voxel grid's even subsample at the PPF step.
-fn vote(
-    scene: &DetectionScene,
-    model: &PoseModel,
-    ppf: &PpfModel,
-    cfg: &PoseConfig,
-    laps: &mut Laps<'_>,
-) -> Result<Vec<Hypothesis>> {
+fn vote(scene: &DetectionScene, ctx: &Context<'_>, ppf: &PpfModel, laps: &mut Laps<'_>) -> Result<Vec<Hypothesis>> {
+    let cfg = ctx.cfg;
     let keep = subsample(&scene.fine, ppf.step());
     let sparse: Vec<Point> = keep.iter().map(|&i| scene.fine[i]).collect();
     let orientation = match cfg.viewpoint {
         Some(v) => Orientation::TowardPoint(v),
-        None => Orientation::TowardDirection(cfg.up.normalize()),
+        None => Orientation::TowardDirection(ctx.up),
     };
     // Only the voting samples need normals (ICP uses the model's).
     let sparse_normals = normals_at(&sparse, &scene.fine, &scene.fine_index, 10, orientation);
@@ -206,7 +232,7 @@ fn vote(
     };
     let votes = ppf.vote(&sparse, &sparse_normals, &sparse_index, &detect_cfg);
     laps.lap("voting");
-    let hypotheses = ppf.cluster(&votes, &model.symmetries, &detect_cfg);
+    let hypotheses = ppf.cluster(&votes, &ctx.model.symmetries, &detect_cfg);
     laps.lap("clustering");
     if hypotheses.is_empty() {
         return Err(Error::NoObjectFound {
@@ -256,12 +282,7 @@ fn screen_and_polish(
 /// the scan (discounted for violations and for surface over cells without data) claims its
 /// points first, and a pose whose points are mostly claimed already is the same instance (or
 /// a ghost made of its points).
-fn one_pose_per_instance(
-    mut judged: Vec<Judged>,
-    scene: &DetectionScene,
-    model: &PoseModel,
-    cfg: &PoseConfig,
-) -> Vec<Judged> {
+fn one_pose_per_instance(mut judged: Vec<Judged>, scene: &DetectionScene, model: &PoseModel) -> Vec<Judged> {
     let claim = |j: &Judged| j.support.len() as f64 * (j.evidence.coverage() * j.evidence.supported_fraction()).powi(2);
     judged.sort_by(|a, b| claim(b).total_cmp(&claim(a)));
     let mut owner = vec![false; scene.fine.len()];
@@ -273,7 +294,7 @@ fn one_pose_per_instance(
         if j.support.len() < 12 || shared as f64 > 0.3 * j.support.len() as f64 {
             continue;
         }
-        let Ok((t_scene_model, evidence)) = scene.judge.accept(j.evidence, model, &j.t_scene_model, cfg) else {
+        let Ok((t_scene_model, evidence)) = scene.judge.accept(j.evidence, model, &j.t_scene_model) else {
             continue;
         };
         let j = Judged {
@@ -289,37 +310,27 @@ fn one_pose_per_instance(
     instances
 }
 
-/// The most pickable instances as estimates, with the indices of `points` on each.
-fn estimates(
-    instances: Vec<Judged>,
-    points: &[Point],
-    model: &PoseModel,
-    cfg: &PoseConfig,
-    tol: f64,
-) -> Vec<PoseEstimate> {
-    rank(instances, model, cfg)
+/// The most pickable instances as estimates, with the indices of the context's points on each.
+fn estimates(instances: Vec<Judged>, ctx: &Context<'_>, tol: f64) -> Vec<PoseEstimate> {
+    let (points, model) = (ctx.pts, ctx.model);
+    rank(instances, model, &ctx.up)
         .into_iter()
-        .take(cfg.max_instances.max(1))
+        .take(ctx.cfg.max_instances.max(1))
         .map(|(j, pick)| {
             let t_scene_model = model.symmetries.canonical(&j.t_scene_model);
+            let indices = scene_indices(points, model, &t_scene_model, tol);
+            let score = j.evidence.coverage();
             PoseEstimate {
-                indices: scene_indices(points, model, &t_scene_model, tol),
-                t_scene_model,
-                t_scene_model_coarse: j.coarse,
-                score: j.evidence.coverage(),
-                rmse: j.rmse,
-                timings: Vec::new(),
-                iterations: j.iterations,
-                method: CoarseMethod::Ppf,
-                visible_fraction: Some(j.evidence.visible_fraction()),
-                occluded_fraction: Some(j.evidence.occluded_fraction()),
                 pickability: Some(pick),
-                confidence: 0.0,
-                ambiguous: false,
-                alternatives: Vec::new(),
-                free_axis: None,
-                feature_evidence: None,
-                fit: None,
+                ..PoseEstimate::verified(
+                    CoarseMethod::Ppf,
+                    t_scene_model,
+                    j.coarse,
+                    &j.evidence,
+                    (score, j.rmse),
+                    j.iterations,
+                    indices,
+                )
             }
         })
         .collect()
@@ -331,10 +342,9 @@ const COVERED: f64 = 0.1;
 /// Pickability in [0, 1]: height among the instances (half), the confirmed share of the facing
 /// surface (a third) and freedom from parts on top (a sixth). Returns the instances with their
 /// pickability, uncovered instances first (a covered part is not picked while an uncovered one
-/// lies free), then most pickable first.
-fn rank(instances: Vec<Judged>, model: &PoseModel, cfg: &PoseConfig) -> Vec<(Judged, f64)> {
-    let up = cfg.up.normalize();
-    let heights: Vec<f64> = instances.iter().map(|j| j.center(model).coords.dot(&up)).collect();
+/// lies free), then most pickable first. `up` is the unit direction toward the sensor.
+fn rank(instances: Vec<Judged>, model: &PoseModel, up: &Vector3<f64>) -> Vec<(Judged, f64)> {
+    let heights: Vec<f64> = instances.iter().map(|j| j.center(model).coords.dot(up)).collect();
     let (lo, hi) = heights
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| (l.min(v), h.max(v)));

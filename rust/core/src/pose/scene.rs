@@ -1,16 +1,35 @@
-//! The scene side of every method: input checks, bin removal, and the scene prepared for
-//! detection (which holds the one judge every pose passes, [`super::judge::Judge`]).
+//! The scene side of every method: input checks, bin removal, the [`Context`] of one call that
+//! every stage reads, and the scan points a pose explains. A leaf: of the pose room it imports
+//! only the model and the plain data types.
 
-use super::judge::{voxel_size, Judge};
-use super::{PoseConfig, PoseModel};
+use super::model::PoseModel;
+use super::types::PoseConfig;
 use crate::error::{Error, Result};
 use crate::geometry::{check_finite, Plane, Point};
-use crate::registration::ppf::PpfModel;
 use crate::search::KdIndex;
 use crate::segment::{could_hold_support_plane, crop_to_bin, point_spacing, remove_support_planes};
-use crate::voxel::voxel_downsample;
 use nalgebra::{Isometry3, Vector3};
 
+/// One call's inputs as every stage reads them: the scan, the points bin removal kept, the
+/// model, the configuration and the direction toward the sensor that [`check_scene`] checked.
+#[derive(Clone, Copy)]
+pub(super) struct Context<'a> {
+    /// The whole scan (N×3, mm): the judge's height map is built on all of it.
+    pub scene: &'a [Point],
+    /// Scene indices of the points the methods search (those bin removal kept) ...
+    pub kept: &'a [usize],
+    /// ... and those points.
+    pub pts: &'a [Point],
+    /// The part.
+    pub model: &'a PoseModel,
+    /// The configuration.
+    pub cfg: &'a PoseConfig,
+    /// Unit direction toward the sensor: `cfg.up` as [`check_scene`] checked and normalised it.
+    pub up: Vector3<f64>,
+}
+
+/// Checks the scene against the model and the configuration's `up`; returns `up` normalised,
+/// the direction every stage reads.
 pub(super) fn check_scene(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vector3<f64>> {
     check_finite("scene", scene)?;
     if scene.len() < 10 {
@@ -66,53 +85,6 @@ pub(super) fn remove_bin(
         });
     }
     Ok((kept, removed))
-}
-
-/// The scene prepared for detection and judging.
-pub(crate) struct DetectionScene {
-    /// Voxel-grid points (mean of each voxel) and their KD-tree.
-    pub fine: Vec<Point>,
-    pub fine_index: KdIndex,
-    /// The judge every pose passes.
-    pub judge: Judge,
-}
-
-impl DetectionScene {
-    /// Voxel grid and normals of `points` (the scene without the bin) for `ppf`, and the judge
-    /// of the whole scene. Without a bin box, support planes wider than the part are removed
-    /// from the voxel grid.
-    pub fn new(
-        scene_all: &[Point],
-        points: &[Point],
-        model: &PoseModel,
-        ppf: &PpfModel,
-        cfg: &PoseConfig,
-    ) -> Result<Self> {
-        let step = ppf.step();
-        let voxel = voxel_size(step);
-        let mut fine = voxel_downsample(points, None, voxel)?.points;
-        let mut removed = Vec::new();
-        if cfg.bin.is_none() && fine.len() >= 50 {
-            let (keep, planes) = remove_support_planes(&fine, model.diameter, (0.5 * voxel).max(1.0), 1);
-            fine = keep.iter().map(|&i| fine[i]).collect();
-            removed = planes;
-        }
-        if fine.len() < 10 {
-            return Err(Error::NoObjectFound {
-                reason: format!(
-                    "only {} occupied {voxel:.1} mm voxels remain after removing the bin; the bin is empty",
-                    fine.len()
-                ),
-            });
-        }
-        let fine_index = KdIndex::new(&fine);
-        let judge = Judge::new(scene_all, &fine, removed, model, cfg);
-        Ok(DetectionScene {
-            fine,
-            fine_index,
-            judge,
-        })
-    }
 }
 
 /// Indices of `points` within `tol` of the posed model.

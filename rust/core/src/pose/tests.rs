@@ -2,9 +2,11 @@
 //! posed at seeded random transforms, must be recovered by CCP and by PPF; scenes without the
 //! part must give `NoObjectFound`.
 
-use super::scene::{remove_bin, DetectionScene};
+use super::judge::Judge;
+use super::ppf_path::DetectionScene;
+use super::scene::{remove_bin, Context};
 use super::*;
-use crate::geometry::{transform_points, BinBox};
+use crate::geometry::{transform_points, BinBox, Plane};
 use crate::mesh::parts::{tee, TeeParams};
 use crate::mesh::{sample_surface, Density};
 use crate::registration::ccp::BranchLayout;
@@ -61,6 +63,36 @@ pub(super) fn top_view(mesh: &crate::mesh::TriMesh, t_scene_model: &Isometry3<f6
     let mut pts: Vec<Point> = top.into_values().collect();
     pts.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
     pts
+}
+
+/// The context of a call with `cfg` on `scene` whose bin removal kept `pts` (without their
+/// indices: the judge and the detection scene read none).
+pub(super) fn context<'a>(
+    scene: &'a [Point],
+    pts: &'a [Point],
+    model: &'a PoseModel,
+    cfg: &'a PoseConfig,
+) -> Context<'a> {
+    Context {
+        scene,
+        kept: &[],
+        pts,
+        model,
+        cfg,
+        up: cfg.up.normalize(),
+    }
+}
+
+/// The judge a call with `cfg` builds on `scene`, whose bin removal kept `remaining` and took out
+/// the support planes `removed`.
+pub(super) fn judge_of(
+    scene: &[Point],
+    remaining: &[Point],
+    removed: Vec<Plane>,
+    model: &PoseModel,
+    cfg: &PoseConfig,
+) -> Judge {
+    Judge::new(&context(scene, remaining, model, cfg), remaining, removed)
 }
 
 pub(super) fn config(method: CoarseMethod) -> PoseConfig {
@@ -186,9 +218,9 @@ fn arbitration_keeps_the_better_verified_pose() {
     let cfg = config(CoarseMethod::Auto);
     let (kept, _) = remove_bin(&scene, model, &cfg, false).unwrap();
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
-    let prepared = DetectionScene::new(&scene, &pts, model, model.ppf.as_ref().unwrap(), &cfg).unwrap();
-    let q_ccp = prepared.judge.evidence(model, &by_ccp.t_scene_model).quality();
-    let q_ppf = prepared.judge.evidence(model, &by_ppf.t_scene_model).quality();
+    let prepared = DetectionScene::new(&context(&scene, &pts, model, &cfg), model.ppf.as_ref().unwrap()).unwrap();
+    let q_ccp = prepared.judge.depth.evidence(model, &by_ccp.t_scene_model).quality();
+    let q_ppf = prepared.judge.depth.evidence(model, &by_ppf.t_scene_model).quality();
     let (winner, want) = if q_ccp > q_ppf {
         (&by_ccp, CoarseMethod::Ccp)
     } else {
@@ -298,11 +330,11 @@ fn the_judge_refuses_a_pose_through_the_floor_and_accepts_the_truth() {
     let cfg = config(CoarseMethod::Ppf);
     let (kept, removed) = remove_bin(&scene, model, &cfg, true).unwrap();
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
-    let judge = super::judge::Judge::new(&scene, &pts, removed, model, &cfg);
-    assert!(!judge.supports.is_empty(), "the floor is a support");
-    assert!(judge.verdict(model, &truth, &cfg).is_ok());
+    let judge = judge_of(&scene, &pts, removed, model, &cfg);
+    assert!(!judge.depth.supports.is_empty(), "the floor is a support");
+    assert!(judge.verdict(model, &truth).is_ok());
     let sunk = Translation3::new(0.0, 0.0, -0.5 * model.thickness) * truth;
-    match judge.verdict(model, &sunk, &cfg) {
+    match judge.verdict(model, &sunk) {
         Err(Error::NoObjectFound { reason }) => assert!(reason.contains("floor"), "{reason}"),
         other => panic!("a pose half through the floor passed: {other:?}"),
     }
@@ -335,18 +367,18 @@ fn the_judge_refuses_a_pose_whose_surface_the_sensor_saw_through_in_a_patch() {
     let judge_of = |scene: &[Point]| {
         let (kept, removed) = remove_bin(scene, model, &cfg, true).unwrap();
         let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
-        super::judge::Judge::new(scene, &pts, removed, model, &cfg)
+        judge_of(scene, &pts, removed, model, &cfg)
     };
     let judge = judge_of(&scene);
-    let e = judge.evidence(model, &truth);
+    let e = judge.depth.evidence(model, &truth);
     assert!(e.coverage() >= cfg.min_coverage, "the rest of the tests pass: {e:?}");
-    match judge.verdict(model, &truth, &cfg) {
+    match judge.verdict(model, &truth) {
         Err(Error::NoObjectFound { reason }) => assert!(reason.contains("saw through a patch"), "{reason}"),
         other => panic!("a branch standing where the scan shows the floor passed: {other:?}"),
     }
     let mut whole = full.clone();
     whole.extend(scene.iter().filter(|p| p.z == floor_z));
-    assert!(judge_of(&whole).verdict(model, &truth, &cfg).is_ok());
+    assert!(judge_of(&whole).verdict(model, &truth).is_ok());
 }
 
 /// A flat plate above the tee, off to its side: the top object, and not the part.

@@ -1,14 +1,16 @@
-//! The pose pipeline's configuration and results: [`CoarseMethod`], [`PoseConfig`], [`PoseEstimate`],
-//! [`Timings`].
+//! The pose pipeline's plain data: its configuration ([`CoarseMethod`], [`PoseConfig`] and the
+//! tunables of each stage, [`CcpPathParams`], [`TrustParams`]), its results ([`PoseEstimate`]
+//! with its [`Alternative`]s, [`FeatureEvidence`] and [`FitQuality`]) and its [`Timings`].
+//! The bottom floor of the pose room: it imports nothing of it.
 
-use super::ccp_path::CcpPathParams;
-use super::fit::FitQuality;
-use super::trust::{Alternative, FeatureEvidence, TrustParams};
 use crate::error::{Error, Result};
 use crate::geometry::{BinBox, Point};
 use crate::registration::ccp::CcpConfig;
 use crate::registration::ppf::DetectConfig;
+use crate::registration::verify::Evidence;
+use crate::registration::Convergence;
 use nalgebra::{Isometry3, Vector3};
+use std::time::Instant;
 
 /// Milliseconds per stage, in order; a stage that runs more than once (CCP's, once per region
 /// it tries) has an entry per run.
@@ -24,6 +26,26 @@ pub fn stage_totals(timings: &[(&'static str, f64)]) -> Timings {
         }
     }
     totals
+}
+
+/// Stage timings: each lap is the time since the previous one.
+pub(super) struct Laps<'a> {
+    clock: Instant,
+    timings: &'a mut Timings,
+}
+
+impl<'a> Laps<'a> {
+    pub(super) fn new(timings: &'a mut Timings) -> Self {
+        Laps {
+            clock: Instant::now(),
+            timings,
+        }
+    }
+
+    pub(super) fn lap(&mut self, name: &'static str) {
+        self.timings.push((name, self.clock.elapsed().as_secs_f64() * 1e3));
+        self.clock = Instant::now();
+    }
 }
 
 /// How the coarse pose is found.
@@ -65,7 +87,11 @@ impl CoarseMethod {
     }
 }
 
-/// Parameters of [`estimate_pose`]; `None` fields take defaults derived from the scan's point
+/// The search (hypotheses voted, poses polished) is sized for at least this many instances by
+/// default ([`PoseConfig::search_instances`]), so that asking for fewer only truncates the answer.
+pub const SEARCH_INSTANCES: usize = 5;
+
+/// Parameters of [`estimate_pose`](super::estimate_pose); `None` fields take defaults derived from the scan's point
 /// spacing and the model's size.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PoseConfig {
@@ -102,11 +128,11 @@ pub struct PoseConfig {
     /// The sensor's position in the scene frame, mm, when known (orients the scan's normals;
     /// otherwise they face `up`).
     pub viewpoint: Option<Point>,
-    /// Instances returned by [`estimate_poses`].
+    /// Instances returned by [`estimate_poses`](super::estimate_poses).
     pub max_instances: usize,
     /// Instances the PPF search is sized for (hypotheses refined, poses polished) when more than
     /// `max_instances`: asking for fewer instances of the same search only truncates the answer.
-    /// Default [`super::SEARCH_INSTANCES`].
+    /// Default [`SEARCH_INSTANCES`].
     pub search_instances: usize,
     /// Worker threads; 0 = all cores.
     pub num_threads: usize,
@@ -130,7 +156,7 @@ impl Default for PoseConfig {
             trust: TrustParams::default(),
             viewpoint: None,
             max_instances: 1,
-            search_instances: super::SEARCH_INSTANCES,
+            search_instances: SEARCH_INSTANCES,
             num_threads: 0,
         }
     }
@@ -185,6 +211,193 @@ impl PoseConfig {
     }
 }
 
+/// Tunables of the CCP and centroid path; the defaults are those the paper's tables were
+/// measured with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CcpPathParams {
+    /// Regions tried, top first, before the path gives up. Default 8.
+    pub max_regions: usize,
+    /// Object points the coarse checks judge a pose by (the probe; fewer than about 100 cannot
+    /// tell a wrong reading of a partial view from the right one). Default 150.
+    pub probe_points: usize,
+    /// Model points the coarse checks' depth test probes. Default 100.
+    pub model_probes: usize,
+    /// Object points the candidates that survive the quick check converge on. Default 160.
+    pub sample_points: usize,
+    /// Model points (about) the stage-two depth test probes. Default 4000.
+    pub fine_model_probes: usize,
+    /// Readings the cheap first tier of scoring (a third of the probe) passes on to the second
+    /// (the whole probe). Default 32.
+    pub second_tier: usize,
+    /// Distinct rotations, best-prescored first, that get the stage-one ICP check. Default 8.
+    pub stage_one: usize,
+    /// Stage-one leaders that converge in stage two. Default 3.
+    pub stage_two: usize,
+    /// A stage-one result converges in stage two only when it scores at least this fraction
+    /// of the leader's. Default 0.7.
+    pub stage_two_ratio: f64,
+    /// Tolerance of the coarse checks, as a fraction of the part's diameter (at least twice the
+    /// inlier distance). Default 0.08.
+    pub coarse_tolerance_ratio: f64,
+    /// Readings whose rotations differ by less than this, rad, and whose translations differ by
+    /// less than [`CcpPathParams::same_reading_shift`] are scored once. Default 5° (0.0873).
+    pub same_reading_angle: f64,
+    /// Translation part of the same-reading test, as a fraction of the diameter. Default 0.05.
+    pub same_reading_shift: f64,
+    /// Of the readings whose rotations lie within this angle, rad, only the best-ranked gets
+    /// the ICP checks. Default 15° (0.262).
+    pub cluster_angle: f64,
+    /// CCP: the best-ranked readings whose quarter and half turns about the model's axes join
+    /// the ICP checks (views of a part on its side are ambiguous up to such a turn). Default 2.
+    pub turned_readings: usize,
+    /// CCP: a half turn of the winner whose quick score is below this fraction of the winner's
+    /// is not converged. Default 0.8.
+    pub half_turn_drop: f64,
+    /// CCP: a half turn replaces the winner only when it scores this much more. Default 0.01.
+    pub half_turn_margin: f64,
+    /// ICP of the coarse checks.
+    pub check_icp: CheckIcpParams,
+    /// ICP of the final refinement.
+    pub fine_icp: FineIcpParams,
+}
+
+impl Default for CcpPathParams {
+    fn default() -> Self {
+        CcpPathParams {
+            max_regions: 8,
+            probe_points: 150,
+            model_probes: 100,
+            sample_points: 160,
+            fine_model_probes: 4000,
+            second_tier: 32,
+            stage_one: 8,
+            stage_two: 3,
+            stage_two_ratio: 0.7,
+            coarse_tolerance_ratio: 0.08,
+            same_reading_angle: 5f64.to_radians(),
+            same_reading_shift: 0.05,
+            cluster_angle: 15f64.to_radians(),
+            turned_readings: 2,
+            half_turn_drop: 0.8,
+            half_turn_margin: 0.01,
+            check_icp: CheckIcpParams::default(),
+            fine_icp: FineIcpParams::default(),
+        }
+    }
+}
+
+/// The short point-to-plane ICP of the coarse checks (Tukey kernel, approximate search).
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckIcpParams {
+    /// Correspondence distance as a fraction of the diameter (at least `min_tolerances` inlier
+    /// distances). Default 0.25.
+    pub reach_ratio: f64,
+    /// Tukey kernel width as a fraction of the diameter (at least `min_tolerances` inlier
+    /// distances). Default 0.1.
+    pub kernel_ratio: f64,
+    /// Lower bound of the distance and the kernel, in inlier distances. Default 3.
+    pub min_tolerances: f64,
+    /// When the ICP of stage two and of the half turns stops. Default [`Convergence::CHECK`]:
+    /// 12 iterations, or an update under 1e-4 rad and 1e-2 mm.
+    pub convergence: Convergence,
+    /// Iterations of the quick checks (stage one, the half turns' first look). Default 6.
+    pub quick_iterations: usize,
+}
+
+impl Default for CheckIcpParams {
+    fn default() -> Self {
+        CheckIcpParams {
+            reach_ratio: 0.25,
+            kernel_ratio: 0.1,
+            min_tolerances: 3.0,
+            convergence: Convergence::CHECK,
+            quick_iterations: 6,
+        }
+    }
+}
+
+/// The final point-to-plane refinement on all of the object's points.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FineIcpParams {
+    /// Correspondence distance and Tukey width, in inlier distances. Default 3.
+    pub reach_tolerances: f64,
+    /// When the refinement stops. Default [`Convergence::FINE`]: 60 iterations, or an update
+    /// under 1e-5 rad (about 0.0006°) and 1e-3 mm, far below what the scan can resolve.
+    pub convergence: Convergence,
+}
+
+impl Default for FineIcpParams {
+    fn default() -> Self {
+        FineIcpParams {
+            reach_tolerances: 3.0,
+            convergence: Convergence::FINE,
+        }
+    }
+}
+
+/// Tunables of the disambiguation and the confidence.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrustParams {
+    /// Turns tried about a continuous near axis (evenly spaced). Default 24 (every 15°).
+    pub continuous_turns: usize,
+    /// A continuous near axis's turns (every discrete near turn is compared in full, up to
+    /// `max_discrete`): with more than this, a quick look picks this many finalists. Default 3.
+    pub finalists: usize,
+    /// Discrete near turns compared in full, at most; with more (a part whose small feature
+    /// breaks a large group), they join the quick look. Default 8.
+    pub max_discrete: usize,
+    /// Scan points of the quick look's refinement, at most (its comparison uses as many as a
+    /// refinement). Default 400.
+    pub quick_points: usize,
+    /// ICP iterations of the quick look. Default 6.
+    pub quick_iterations: usize,
+    /// Scan points each alternative is refined on, and the quick look compares on, at most.
+    /// Default 1500.
+    pub refine_points: usize,
+    /// ICP iterations of each alternative's refinement. Default 15.
+    pub iterations: usize,
+    /// Fine tolerance in standard deviations of the scan's noise about the pose. Default 4.
+    pub noise_sigmas: f64,
+    /// Smallest fine tolerance, mm. Default 0.3.
+    pub min_fine_tolerance: f64,
+    /// An alternative whose evidence trails the best by less than this many scan points cannot
+    /// be ruled out: twice the 15 points beyond 4σ at which the bench calls a feature in view,
+    /// so that one chance cluster of misfits does not decide. Default 30.
+    pub min_margin: f64,
+    /// ... nor by less than this many standard deviations of the lead that chance alone gives
+    /// two equally good poses: with d scan points that fit one of them and not the other, each
+    /// falls to either side, so the lead (2 × the difference) spreads by 2√d; k probes one of them
+    /// puts where the sensor saw free space spread it by √k probes' worth of points (see the
+    /// trust stage's `margin_between`). The points both poses fit or both miss —
+    /// most of a feature region as wide as a flange's whole face — say nothing of which is
+    /// right. Default 3.
+    pub margin_sigmas: f64,
+    /// Poses closer than this rotation (rad, default 5°) ...
+    pub pick_rotation: f64,
+    /// ... and this translation (mm, default 3) are one pose (pick-grade of each other).
+    pub pick_translation: f64,
+}
+
+impl Default for TrustParams {
+    fn default() -> Self {
+        TrustParams {
+            continuous_turns: 24,
+            finalists: 3,
+            max_discrete: 8,
+            quick_points: 400,
+            quick_iterations: 6,
+            refine_points: 1500,
+            iterations: Convergence::ALTERNATIVE.iterations,
+            noise_sigmas: 4.0,
+            min_fine_tolerance: 0.3,
+            min_margin: 30.0,
+            margin_sigmas: 3.0,
+            pick_rotation: 5f64.to_radians(),
+            pick_translation: 3.0,
+        }
+    }
+}
+
 /// A verified pose.
 #[derive(Debug, Clone)]
 pub struct PoseEstimate {
@@ -228,6 +441,80 @@ pub struct PoseEstimate {
     /// How well the pose's points lie on the posed model against the scan's own noise (`None`
     /// where too few points judge it); its factor is part of `confidence`.
     pub fit: Option<FitQuality>,
+}
+
+impl PoseEstimate {
+    /// A pose `method` found and the judge passed with depth evidence `e`, before ranking and
+    /// trust: `(score, rmse)` as the method measures its fit, the ICP `iterations` that refined
+    /// it, the `indices` of the points on it. It is unranked (`pickability` None); its confidence,
+    /// alternatives and fit are the trust stage's to fill in, its timings the pipeline's.
+    pub(crate) fn verified(
+        method: CoarseMethod,
+        t_scene_model: Isometry3<f64>,
+        t_scene_model_coarse: Isometry3<f64>,
+        e: &Evidence,
+        (score, rmse): (f64, f64),
+        iterations: usize,
+        indices: Vec<usize>,
+    ) -> Self {
+        PoseEstimate {
+            t_scene_model,
+            t_scene_model_coarse,
+            score,
+            rmse,
+            indices,
+            timings: Vec::new(),
+            iterations,
+            method,
+            visible_fraction: Some(e.visible_fraction()),
+            occluded_fraction: Some(e.occluded_fraction()),
+            pickability: None,
+            confidence: 0.0,
+            ambiguous: false,
+            alternatives: Vec::new(),
+            free_axis: None,
+            feature_evidence: None,
+            fit: None,
+        }
+    }
+}
+
+/// What the scan says about one pose in the feature regions.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FeatureEvidence {
+    /// Scan points in the feature regions within the fine tolerance of the posed model.
+    pub fits: usize,
+    /// Scan points in the feature regions farther than the fine tolerance from it.
+    pub misfits: usize,
+    /// Probe points of the posed model (judge's depth test) where the sensor saw free space.
+    pub seen_through: usize,
+    /// The fine tolerance, mm.
+    pub tolerance: f64,
+    /// fits − misfits − seen-through (in scan points): higher is better supported.
+    pub score: f64,
+}
+
+/// A distinct pose the scan cannot rule out.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Alternative {
+    /// Model → scene.
+    pub t_scene_model: Isometry3<f64>,
+    /// Its evidence.
+    pub evidence: FeatureEvidence,
+}
+
+/// How well a pose's points lie on the posed model, against the scan's own noise.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitQuality {
+    /// Robust standard deviation of the point-to-plane residuals of the pose's points about the
+    /// posed model's dense surface, mm.
+    pub residual_sigma: f64,
+    /// The scan's noise where the part lies (see the module notes), mm.
+    pub noise_floor: f64,
+    /// `residual_sigma / noise_floor`.
+    pub ratio: f64,
+    /// The factor the confidence is multiplied by, in (0, 1].
+    pub factor: f64,
 }
 
 #[cfg(test)]

@@ -146,23 +146,69 @@ impl Default for IcpConfig {
     }
 }
 
+/// When an ICP run stops: after `iterations`, or once an update rotates less than `rotation`
+/// (rad) and moves less than `translation` (mm). The named settings are those the pose pipeline
+/// runs, so that no two call sites can swap their numbers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Convergence {
+    /// Upper bound on iterations.
+    pub iterations: usize,
+    /// Stop when an update rotates less than this, rad ...
+    pub rotation: f64,
+    /// ... and moves less than this, mm.
+    pub translation: f64,
+}
+
+impl Convergence {
+    /// The PPF screen: a few loose steps that bring a hypothesis near enough to be judged cheaply.
+    pub const SCREEN: Convergence = Convergence {
+        iterations: 8,
+        rotation: 1e-3,
+        translation: 5e-2,
+    };
+    /// A screened PPF hypothesis converged on its whole neighbourhood.
+    pub const POLISH: Convergence = Convergence {
+        iterations: 20,
+        rotation: 1e-6,
+        translation: 1e-4,
+    };
+    /// The coarse checks of the CCP path (stage two and the half turns): short, loose.
+    pub const CHECK: Convergence = Convergence {
+        iterations: 12,
+        rotation: 1e-4,
+        translation: 1e-2,
+    };
+    /// A near-symmetric alternative refined on the scan points of the pose it turns.
+    pub const ALTERNATIVE: Convergence = Convergence {
+        iterations: 15,
+        rotation: 1e-5,
+        translation: 1e-3,
+    };
+    /// A turn or slide the view leaves open, refined on the points the pose claims.
+    pub const UNSEEN_TURN: Convergence = Convergence {
+        iterations: 12,
+        rotation: 1e-5,
+        translation: 1e-3,
+    };
+    /// The CCP path's final refinement on all of the object's points: stops far below what the
+    /// scan can resolve (about 0.0006° and 1 µm).
+    pub const FINE: Convergence = Convergence {
+        iterations: 60,
+        rotation: 1e-5,
+        translation: 1e-3,
+    };
+}
+
 impl IcpConfig {
     /// Point-to-plane with a Tukey kernel as wide as the correspondence distance `reach` (mm):
-    /// the robust refinement the pose pipelines run, stopping after `max_iterations` or once an
-    /// update rotates less than `rotation_tolerance` (rad) and moves less than
-    /// `translation_tolerance` (mm).
-    pub fn robust_plane(
-        reach: f64,
-        max_iterations: usize,
-        rotation_tolerance: f64,
-        translation_tolerance: f64,
-    ) -> Self {
+    /// the robust refinement the pose pipelines run, stopping as `convergence` says.
+    pub fn robust_plane(reach: f64, convergence: Convergence) -> Self {
         IcpConfig {
             method: IcpMethod::PointToPlane,
             max_correspondence_distance: reach,
-            max_iterations,
-            rotation_tolerance,
-            translation_tolerance,
+            max_iterations: convergence.iterations,
+            rotation_tolerance: convergence.rotation,
+            translation_tolerance: convergence.translation,
             kernel: RobustKernel::Tukey(reach),
             ..Default::default()
         }

@@ -6,5 +6,5 @@ pub mod icp;
 pub mod ppf;
 pub mod verify;
 
-pub use config::{IcpConfig, IcpMethod, RobustKernel};
+pub use config::{Convergence, IcpConfig, IcpMethod, RobustKernel};
 pub use icp::{icp, IcpResult, IcpTarget};

@@ -9,102 +9,28 @@
 //! puts the feature where the scan shows the base shape — or the base shape where the scan shows
 //! the feature, a hole or a cut corner — leaves points beyond the scan's noise; the judge's depth
 //! test adds the surface a pose predicts where the sensor saw free space.
+//!
+//! [`trusted`] gives every verified pose its trust: [`assess`] here, then the fit of its points
+//! against the scan's own noise ([`fit`]) and the turns and slides the view leaves open
+//! ([`unseen_turns`]), the children of this module.
 
-use super::fit::{plane_residuals, robust_sigma};
-use super::judge::Judge;
-use super::{PoseConfig, PoseEstimate, PoseModel};
+mod fit;
+#[cfg(test)]
+mod tests;
+mod unseen_turns;
+#[cfg(test)]
+mod unseen_turns_tests;
+
+use crate::error::{Error, Result};
 use crate::geometry::Point;
-use crate::registration::{icp, IcpConfig};
-use crate::symmetry::NearSymmetry;
+use crate::pose::judge::Judge;
+use crate::pose::model::{turns_of, PoseModel, Turn};
+use crate::pose::scene::{scene_indices, Context};
+use crate::pose::surface::{plane_residual, plane_residuals, robust_sigma, thin};
+use crate::pose::types::{Alternative, FeatureEvidence, FitQuality, PoseEstimate, TrustParams};
+use crate::registration::{icp, Convergence, IcpConfig};
 use nalgebra::{Isometry3, Vector3};
 use std::f64::consts::TAU;
-
-/// Tunables of the disambiguation and the confidence.
-#[derive(Debug, Clone, PartialEq)]
-pub struct TrustParams {
-    /// Turns tried about a continuous near axis (evenly spaced). Default 24 (every 15°).
-    pub continuous_turns: usize,
-    /// A continuous near axis's turns (every discrete near turn is compared in full, up to
-    /// `max_discrete`): with more than this, a quick look picks this many finalists. Default 3.
-    pub finalists: usize,
-    /// Discrete near turns compared in full, at most; with more (a part whose small feature
-    /// breaks a large group), they join the quick look. Default 8.
-    pub max_discrete: usize,
-    /// Scan points of the quick look's refinement, at most (its comparison uses as many as a
-    /// refinement). Default 400.
-    pub quick_points: usize,
-    /// ICP iterations of the quick look. Default 6.
-    pub quick_iterations: usize,
-    /// Scan points each alternative is refined on, and the quick look compares on, at most.
-    /// Default 1500.
-    pub refine_points: usize,
-    /// ICP iterations of each alternative's refinement. Default 15.
-    pub iterations: usize,
-    /// Fine tolerance in standard deviations of the scan's noise about the pose. Default 4.
-    pub noise_sigmas: f64,
-    /// Smallest fine tolerance, mm. Default 0.3.
-    pub min_fine_tolerance: f64,
-    /// An alternative whose evidence trails the best by less than this many scan points cannot
-    /// be ruled out: twice the 15 points beyond 4σ at which the bench calls a feature in view,
-    /// so that one chance cluster of misfits does not decide. Default 30.
-    pub min_margin: f64,
-    /// ... nor by less than this many standard deviations of the lead that chance alone gives
-    /// two equally good poses: with d scan points that fit one of them and not the other, each
-    /// falls to either side, so the lead (2 × the difference) spreads by 2√d; k probes one of them
-    /// puts where the sensor saw free space spread it by √k probes' worth of points (see
-    /// [`margin_between`]). The points both poses fit or both miss —
-    /// most of a feature region as wide as a flange's whole face — say nothing of which is
-    /// right. Default 3.
-    pub margin_sigmas: f64,
-    /// Poses closer than this rotation (rad, default 5°) ...
-    pub pick_rotation: f64,
-    /// ... and this translation (mm, default 3) are one pose (pick-grade of each other).
-    pub pick_translation: f64,
-}
-
-impl Default for TrustParams {
-    fn default() -> Self {
-        TrustParams {
-            continuous_turns: 24,
-            finalists: 3,
-            max_discrete: 8,
-            quick_points: 400,
-            quick_iterations: 6,
-            refine_points: 1500,
-            iterations: 15,
-            noise_sigmas: 4.0,
-            min_fine_tolerance: 0.3,
-            min_margin: 30.0,
-            margin_sigmas: 3.0,
-            pick_rotation: 5f64.to_radians(),
-            pick_translation: 3.0,
-        }
-    }
-}
-
-/// What the scan says about one pose in the feature regions.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct FeatureEvidence {
-    /// Scan points in the feature regions within the fine tolerance of the posed model.
-    pub fits: usize,
-    /// Scan points in the feature regions farther than the fine tolerance from it.
-    pub misfits: usize,
-    /// Probe points of the posed model (judge's depth test) where the sensor saw free space.
-    pub seen_through: usize,
-    /// The fine tolerance, mm.
-    pub tolerance: f64,
-    /// fits − misfits − seen-through (in scan points): higher is better supported.
-    pub score: f64,
-}
-
-/// A distinct pose the scan cannot rule out.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Alternative {
-    /// Model → scene.
-    pub t_scene_model: Isometry3<f64>,
-    /// Its evidence.
-    pub evidence: FeatureEvidence,
-}
 
 /// The verdict of [`assess`] on one pose.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -122,8 +48,15 @@ pub struct Trust {
     pub evidence: Option<FeatureEvidence>,
 }
 
-/// A near turn (model frame) and whether it is one of a continuous axis's.
-type Turn = (Isometry3<f64>, bool);
+impl Trust {
+    /// The trust of a pose no alternative was compared with: the judge's `confidence` alone.
+    fn undecided(confidence: f64) -> Self {
+        Trust {
+            confidence,
+            ..Trust::default()
+        }
+    }
+}
 
 /// Steps between two turns about a continuous near axis at which the best candidate is tried
 /// turned (every 2.5° for 24 turns; up to half the gap either way).
@@ -133,6 +66,83 @@ const FINE_TURNS: usize = 6;
 struct Candidate {
     t_scene_model: Isometry3<f64>,
     continuous: bool,
+}
+
+/// Every estimate with its trust (see [`assess`]): a pose the scan shows to be a near-symmetric
+/// alternative of the truth is replaced by the one it supports; the confidence also carries
+/// the fit of the pose's points against the scan's own noise (see [`fit`]), and the turns and
+/// slides the view leaves open are alternatives too (see [`unseen_turns`]).
+/// A pose whose points lie further off the model than [`fit::MAX_RATIO`] noise floors is not
+/// reported; `NoObjectFound` when no pose is left.
+/// The context's points, those left after bin removal, are what the comparison runs on.
+pub(super) fn trusted(found: Vec<PoseEstimate>, ctx: &Context<'_>, judge: &Judge) -> Result<Vec<PoseEstimate>> {
+    let (scene, pts, model, p) = (ctx.scene, ctx.pts, ctx.model, &ctx.cfg.trust);
+    let region = Region::new(model, judge, p);
+    let mut misfit: Option<FitQuality> = None;
+    let kept: Vec<PoseEstimate> = found
+        .into_iter()
+        .filter_map(|mut e| {
+            let (t, kept) = assess(&e, pts, model, judge, p, &region);
+            if kept != e.t_scene_model {
+                e.t_scene_model = model.symmetries.canonical(&kept);
+                let idx = scene_indices(scene, model, &e.t_scene_model, judge.depth.tol);
+                e.indices = idx;
+            }
+            // The part's own points: those on the floor or a wall fit a face resting on it
+            // whatever the pose (and a wall is not where the part's noise is read).
+            let claimed: Vec<Point> = e
+                .indices
+                .iter()
+                .map(|&i| scene[i])
+                .filter(|p| judge.depth.off_supports(p))
+                .collect();
+            e.fit = fit::fit_quality(&claimed, model, &e.t_scene_model, judge.depth.tol);
+            if let Some(f) = e.fit.filter(|f| !f.acceptable()) {
+                misfit.get_or_insert(f);
+                return None;
+            }
+            e.confidence = t.confidence * e.fit.map_or(1.0, |f| f.factor);
+            e.ambiguous = t.ambiguous;
+            e.alternatives = t.alternatives;
+            // A free axis already says the turn is unknown.
+            let noise = e.fit.map(|f| f.noise_floor);
+            let unseen = match t.free_axis {
+                None => unseen_turns::unseen_turns_of_all(
+                    &claimed,
+                    model,
+                    &e.t_scene_model,
+                    &e.alternatives,
+                    judge,
+                    p,
+                    noise,
+                ),
+                Some(_) => Vec::new(),
+            };
+            if !unseen.is_empty() {
+                // As with near-symmetric alternatives: each one the scan cannot rule out is as
+                // likely as the pose.
+                e.confidence /= (1 + unseen.len()) as f64;
+                e.ambiguous = true;
+                e.alternatives.extend(unseen);
+            }
+            e.free_axis = t.free_axis;
+            e.feature_evidence = t.evidence;
+            Some(e)
+        })
+        .collect();
+    match misfit {
+        Some(f) if kept.is_empty() => Err(Error::NoObjectFound {
+            reason: format!(
+                "the pose's points lie {:.1} noise floors off the model (residual σ {:.2} mm, scan noise {:.2} mm; \
+                 at most {:.1}): not this part, or a part unlike its CAD model",
+                f.ratio,
+                f.residual_sigma,
+                f.noise_floor,
+                fit::MAX_RATIO
+            ),
+        }),
+        _ => Ok(kept),
+    }
 }
 
 /// Confidence from the judge alone: how much of the surface the scan can judge confirms the
@@ -150,14 +160,13 @@ pub(super) fn assess(
     points: &[Point],
     model: &PoseModel,
     judge: &Judge,
-    cfg: &PoseConfig,
+    p: &TrustParams,
     region: &Region,
 ) -> (Trust, Isometry3<f64>) {
-    let p = &cfg.trust;
-    let e0 = judge.evidence(model, &est.t_scene_model);
-    let base = base_confidence(e0.coverage(), cfg.min_coverage);
+    let e0 = judge.depth.evidence(model, &est.t_scene_model);
+    let base = base_confidence(e0.coverage(), judge.min_coverage);
     let center = est.t_scene_model * model.symmetries.center;
-    let reach = model.radius + 2.0 * judge.tol;
+    let reach = model.radius + 2.0 * judge.depth.tol;
     // One pass over the points beats building a tree for the few poses assessed.
     let local: Vec<Point> = if model.near_symmetries.is_empty() {
         Vec::new()
@@ -167,20 +176,22 @@ pub(super) fn assess(
             .filter(|p| (*p - center).norm_squared() <= reach * reach)
             // Points on the floor or a wall lie in the plane of the part's faces that rest on
             // it and would confirm material wherever a pose puts it: only the part's own count.
-            .filter(|p| judge.off_supports(p))
+            .filter(|p| judge.depth.off_supports(p))
             .copied()
             .collect()
     };
     if local.len() < 12 {
-        let trust = Trust {
-            confidence: base,
-            ..Trust::default()
-        };
-        return (trust, est.t_scene_model);
+        return (Trust::undecided(base), est.t_scene_model);
     }
     let turns = region.turns.clone();
     let sample = thin(&local, p.refine_points);
-    let refine = IcpConfig::robust_plane(3.0 * judge.tol, p.iterations, 1e-5, 1e-3);
+    let refine = IcpConfig::robust_plane(
+        3.0 * judge.depth.tol,
+        Convergence {
+            iterations: p.iterations,
+            ..Convergence::ALTERNATIVE
+        },
+    );
     let polish = |turn: &Isometry3<f64>, pts: &[Point], cfg: &IcpConfig| {
         let start = est.t_scene_model * turn;
         icp(pts, model.fine_target(), &start.inverse(), cfg)
@@ -195,7 +206,7 @@ pub(super) fn assess(
         .filter(|l| region.contains(&(to_model * *l)))
         .copied()
         .collect();
-    let tol0 = fine_tolerance(&sample, model, &est.t_scene_model, judge.tol, p);
+    let tol0 = fine_tolerance(&sample, model, &est.t_scene_model, judge.depth.tol, p);
     let glance = thin(&judged, p.refine_points);
     // Every discrete near turn gets the full refinement and comparison. The many turns of a
     // continuous near axis get a quick look on a thinned sample, which picks the finalists among
@@ -238,20 +249,16 @@ pub(super) fn assess(
         })
         .collect();
     if candidates.is_empty() {
-        let trust = Trust {
-            confidence: base,
-            ..Trust::default()
-        };
-        return (trust, est.t_scene_model);
+        return (Trust::undecided(base), est.t_scene_model);
     }
-    let tol = fine_tolerance(&sample, model, &candidates[0].t_scene_model, judge.tol, p);
+    let tol = fine_tolerance(&sample, model, &candidates[0].t_scene_model, judge.depth.tol, p);
     let per_probe = local.len() as f64 / e0.seen.max(1) as f64;
     let score_of = |t: &Isometry3<f64>| {
-        let e = judge.evidence(model, t);
+        let e = judge.depth.evidence(model, t);
         let fits = fit_flags(&judged, model, t, tol);
         Scored {
             evidence: evidence_of(&fits, tol, e.violated, per_probe),
-            judged_ok: judge.check(&e, model, t, cfg).is_ok(),
+            judged_ok: judge.check(&e, model, t).is_ok(),
             fits,
         }
     };
@@ -319,7 +326,7 @@ pub(super) fn assess(
     let base = if best == 0 {
         base
     } else {
-        base_confidence(judge.evidence(model, &kept).coverage(), cfg.min_coverage)
+        base_confidence(judge.depth.evidence(model, &kept).coverage(), judge.min_coverage)
     };
     let confidence = if alternatives.is_empty() {
         // How far the best leads the runner-up, in margins: 1 margin halves the confidence, each
@@ -412,7 +419,7 @@ impl Region {
             }
             turns.extend(own);
         }
-        let mut cell = (2.0 * model.spacing).max(judge.tol).max(1e-3);
+        let mut cell = (2.0 * model.spacing).max(judge.depth.tol).max(1e-3);
         // A dense grid over the region's keys grown by one cell: the region lies in the part's
         // box, a few thousand cells for the parts measured, and the comparison asks about every
         // judged point. Cells grow where a large part would need more than MAX_REGION_CELLS.
@@ -490,23 +497,6 @@ impl Region {
     }
 }
 
-/// The turns (model frame; `true` for a continuous axis's) of one near-symmetry: its half turn,
-/// or [`TrustParams::continuous_turns`] even turns about a continuous axis.
-fn turns_of(n: &NearSymmetry, p: &TrustParams) -> Vec<(Isometry3<f64>, bool)> {
-    match n.angle {
-        Some(_) => vec![(n.transform(0.0), false)],
-        None => {
-            let k = p.continuous_turns.max(2);
-            (1..k).map(|i| (n.transform(TAU * i as f64 / k as f64), true)).collect()
-        }
-    }
-}
-
-/// The turns of every near-symmetry of `model` (see [`turns_of`]).
-pub(super) fn near_turns(model: &PoseModel, p: &TrustParams) -> Vec<(Isometry3<f64>, bool)> {
-    model.near_symmetries.iter().flat_map(|n| turns_of(n, p)).collect()
-}
-
 /// The fine tolerance: `noise_sigmas` robust standard deviations of the point-to-plane residuals
 /// of `local` about the pose (at least `min_fine_tolerance`, at most the judge's tolerance).
 fn fine_tolerance(
@@ -521,33 +511,6 @@ fn fine_tolerance(
         Some(sigma) => (p.noise_sigmas * sigma).clamp(p.min_fine_tolerance.min(tol), tol),
         None => tol,
     }
-}
-
-/// Every k-th point of `v`, so that at most about `n` remain.
-pub(super) fn thin(v: &[Point], n: usize) -> Vec<Point> {
-    v.iter().step_by(v.len().div_ceil(n.max(1)).max(1)).copied().collect()
-}
-
-/// Distance of a model-frame point from the tangent plane of its nearest dense model point,
-/// when that point lies within `reach`.
-pub(super) fn plane_residual(model: &PoseModel, q: &Point, reach: f64) -> Option<f64> {
-    let target = model.fine_target();
-    let at = [q.x, q.y, q.z];
-    // Most points asked about lie on the surface, within the model's sample spacing (no less
-    // than the fine surface's) of their nearest sample: a search that narrow finds it (nothing
-    // nearer lies outside it) at a fraction of the cost of one out to `reach`, which only the
-    // points it misses need.
-    let near = model.spacing.min(reach);
-    let (j, _) = target.search().nearest_within(&at, near * near).or_else(|| {
-        (reach > near)
-            .then(|| target.search().nearest_within(&at, reach * reach))
-            .flatten()
-    })?;
-    let n = target.normals().map(|n| n[j]);
-    Some(match n {
-        Some(n) => n.dot(&(q - target.points()[j])),
-        None => (q - target.points()[j]).norm(),
-    })
 }
 
 /// Whether each of `judged` lies within `tol` of the posed model's surface.

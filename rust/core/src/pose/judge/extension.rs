@@ -16,12 +16,10 @@
 //! part). An end whose carried-on cylinder the scan confirms nearly as widely as the branch's
 //! own stretch goes on past it.
 
-use super::judge::Judge;
-use super::trust::plane_residual;
-use super::PoseModel;
+use super::depth::DepthTest;
 use crate::geometry::Point;
-use crate::registration::ccp::BranchLayout;
-use crate::registration::IcpTarget;
+use crate::pose::model::PoseModel;
+use crate::pose::surface::plane_residual;
 use nalgebra::{Isometry3, Vector3};
 
 /// The least share of a normal along the sensor's direction for a probe to be judged: within 60°
@@ -51,18 +49,6 @@ impl EndReading {
     }
 }
 
-/// Probes on and past one end of one branch (model frame).
-#[derive(Debug, Clone, Default)]
-pub(crate) struct BranchEnd {
-    /// Probes on the branch's cylinder carried past the end, with their outward normals and
-    /// their distance from the part's surface, mm.
-    pub past: Vec<(Point, Vector3<f64>, f64)>,
-    /// Probes on the branch's own surface over the same length inside the end.
-    pub inside: Vec<(Point, Vector3<f64>)>,
-    /// The surface each probe stands for, mm².
-    pub probe_area: f64,
-}
-
 /// What the scan shows at one end of a posed branch.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub(crate) struct EndReading {
@@ -74,65 +60,13 @@ pub(crate) struct EndReading {
     pub probe_area: f64,
 }
 
-/// The probes of every branch end of `layout`: the tip (past the end face, one radius long) and
-/// the back (through the junction, from one radius behind it to two, inside from one to two
-/// radii out), on a grid of about `spacing` mm (at most a tenth of the radius), each past probe
-/// with its distance from `surface` (the part's densest surface: its mesh's samples where the
-/// model's own are sparse).
-pub(crate) fn branch_ends(layout: &BranchLayout, spacing: f64, surface: &IcpTarget) -> Vec<BranchEnd> {
-    let distance = |p: &Point| {
-        surface
-            .search()
-            .nearest_within(&[p.x, p.y, p.z], f64::INFINITY)
-            .map_or(f64::INFINITY, |(_, d)| d.sqrt())
-    };
-    let r = layout.radius;
-    // About the samples' spacing, within a tenth and a fortieth of the radius: at most about
-    // 250 × 40 probes per stretch whatever the samples or the declared radius.
-    let step = spacing.clamp(r / 40.0, r / 10.0);
-    let around = ((std::f64::consts::TAU * r / step).ceil() as usize).max(8);
-    let along = ((r / step).ceil() as usize).max(2);
-    let mut ends = Vec::new();
-    for (u, &len) in layout.directions.iter().zip(&layout.lengths) {
-        let u = u.normalize();
-        let a = if u.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
-        let e1 = u.cross(&a).normalize();
-        let e2 = u.cross(&e1);
-        let ring = |t: f64, out: &mut dyn FnMut(Point, Vector3<f64>)| {
-            for k in 0..around {
-                let phi = std::f64::consts::TAU * k as f64 / around as f64;
-                let n = e1 * phi.cos() + e2 * phi.sin();
-                out(Point::from(u * t + n * r), n);
-            }
-        };
-        // (inside span, past span) along the axis: the tip and the back.
-        for (inside, past) in [((len - r, len), (len, len + r)), ((r, 2.0 * r), (-2.0 * r, -r))] {
-            let mut end = BranchEnd {
-                probe_area: (std::f64::consts::TAU * r / around as f64) * (r / along as f64),
-                ..BranchEnd::default()
-            };
-            for i in 0..along {
-                let f = (i as f64 + 0.5) / along as f64;
-                ring(inside.0 + f * (inside.1 - inside.0), &mut |p, n| {
-                    end.inside.push((p, n))
-                });
-                ring(past.0 + f * (past.1 - past.0), &mut |p, n| {
-                    end.past.push((p, n, distance(&p)))
-                });
-            }
-            ends.push(end);
-        }
-    }
-    ends
-}
-
 /// What the scan shows at every branch end of `model` posed at `t_scene_model`. A probe past an
 /// end counts when the scan point that tops its cell lies on the carried-on cylinder and off the
 /// part (the map's cells are coarser than the probes: a cell straddling the end face is topped
 /// by the part itself).
-pub(crate) fn read_ends(judge: &Judge, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> Vec<EndReading> {
-    let map = &judge.heights;
-    let tol = judge.tol;
+pub(crate) fn read_ends(depth: &DepthTest, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> Vec<EndReading> {
+    let map = &depth.heights;
+    let tol = depth.tol;
     let Some(layout) = &model.layout else {
         return Vec::new();
     };

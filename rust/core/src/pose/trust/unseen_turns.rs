@@ -13,12 +13,13 @@
 //! is refused; a slide of a long shaft a few millimetres into the floor, which the judge's
 //! tolerance would let pass, is no alternative either.
 
-use super::fit::{eigen_ascending, plane_residuals, thinned_sigma, FREE_RATIO};
-use super::judge::Judge;
-use super::trust::{thin, Alternative, FeatureEvidence};
-use super::{PoseConfig, PoseModel};
+use super::fit::{thinned_sigma, FREE_RATIO};
 use crate::geometry::Point;
-use crate::registration::{icp, IcpConfig};
+use crate::pose::judge::Judge;
+use crate::pose::model::PoseModel;
+use crate::pose::surface::{eigen_ascending, plane_residuals, thin};
+use crate::pose::types::{Alternative, FeatureEvidence, TrustParams};
+use crate::registration::{icp, Convergence, IcpConfig};
 use nalgebra::{Isometry3, Matrix3, Translation3, Unit, UnitQuaternion, Vector3};
 
 /// The turn about the weakest axis is probed when the claimed points constrain it less than this
@@ -41,8 +42,6 @@ const BIN_HALVINGS: usize = 4;
 pub(super) const BIN_SLACK: f64 = 0.005;
 /// Claimed points each turn is refined on, at most.
 const REFINE_POINTS: usize = 300;
-/// ICP iterations of each turn's refinement.
-const ITERATIONS: usize = 12;
 /// Claimed points and ICP iterations of the quick look that drops, before the full
 /// refinement, a move that falls back onto the pose or onto a known alternative.
 const QUICK_POINTS: usize = 150;
@@ -153,11 +152,11 @@ pub(super) fn unseen_turns(
     model: &PoseModel,
     t_scene_model: &Isometry3<f64>,
     judge: &Judge,
-    cfg: &PoseConfig,
+    trust: &TrustParams,
     noise_floor: Option<f64>,
     known: &[Alternative],
 ) -> Vec<Alternative> {
-    let tol = judge.tol;
+    let tol = judge.depth.tol;
     let sample = thin(claimed, REFINE_POINTS);
     let q = on_model(&sample, model, t_scene_model, tol);
     if q.len() < 30 {
@@ -187,11 +186,10 @@ pub(super) fn unseen_turns(
         return Vec::new();
     };
     let sigma_ok = (SIGMA_SLACK * sigma0).max(FREE_RATIO * noise_floor.unwrap_or(0.0));
-    let e0 = judge.evidence(model, t_scene_model);
+    let e0 = judge.depth.evidence(model, t_scene_model);
     let seen_through_ok =
         e0.violated + SEEN_THROUGH_MARGIN.max((SEEN_THROUGH_SHARE * (e0.seen + e0.violated) as f64).round() as usize);
-    let refine = IcpConfig::robust_plane(3.0 * tol, ITERATIONS, 1e-5, 1e-3);
-    let trust = &cfg.trust;
+    let refine = IcpConfig::robust_plane(3.0 * tol, Convergence::UNSEEN_TURN);
     let same = |a: &Isometry3<f64>, b: &Isometry3<f64>| {
         let (r, d) = model.symmetries.pose_error(a, b);
         r < trust.pick_rotation && d < trust.pick_translation
@@ -210,7 +208,7 @@ pub(super) fn unseen_turns(
             .ok()
             .map(|r| r.t_target_source.inverse())
     };
-    let through0 = judge.through_supports(model, t_scene_model);
+    let through0 = judge.depth.through_supports(model, t_scene_model);
     let mut found: Vec<Alternative> = Vec::new();
     for probe in moves {
         if crate::cancel::requested() {
@@ -228,7 +226,7 @@ pub(super) fn unseen_turns(
             continue;
         };
         let mut t = r.t_target_source.inverse();
-        if judge.through_supports(model, &t) > through0 + BIN_SLACK {
+        if judge.depth.through_supports(model, &t) > through0 + BIN_SLACK {
             // Deeper into the bin: halve the move back towards the pose, keeping the largest
             // share of it that goes no deeper than the pose.
             let (mut clear, mut through) = (0.0, 1.0);
@@ -236,7 +234,7 @@ pub(super) fn unseen_turns(
             for _ in 0..BIN_HALVINGS {
                 let mid = 0.5 * (clear + through);
                 match refined(&probe.scaled(mid)) {
-                    Some(m) if judge.through_supports(model, &m) <= through0 + BIN_SLACK => {
+                    Some(m) if judge.depth.through_supports(model, &m) <= through0 + BIN_SLACK => {
                         clear = mid;
                         last_clear = Some(m);
                     }
@@ -256,8 +254,8 @@ pub(super) fn unseen_turns(
         if turned.angle() >= trust.pick_rotation && turned.axis().is_some_and(|a| trusts_axis(&a)) {
             continue;
         }
-        let e = judge.evidence(model, &t);
-        if e.violated > seen_through_ok || judge.check(&e, model, &t, cfg).is_err() {
+        let e = judge.depth.evidence(model, &t);
+        if e.violated > seen_through_ok || judge.check(&e, model, &t).is_err() {
             continue;
         }
         let (kept, sigma) = kept_and_sigma(claimed, model, &t, tol);
@@ -292,10 +290,10 @@ pub(super) fn unseen_turns_of_all(
     t_scene_model: &Isometry3<f64>,
     alternatives: &[Alternative],
     judge: &Judge,
-    cfg: &PoseConfig,
+    trust: &TrustParams,
     noise_floor: Option<f64>,
 ) -> Vec<Alternative> {
-    let mut unseen = unseen_turns(claimed, model, t_scene_model, judge, cfg, noise_floor, alternatives);
+    let mut unseen = unseen_turns(claimed, model, t_scene_model, judge, trust, noise_floor, alternatives);
     let mut known = alternatives.to_vec();
     known.extend(unseen.iter().cloned());
     // Only the poses of the known alternatives are compared.
@@ -304,7 +302,7 @@ pub(super) fn unseen_turns_of_all(
         evidence: FeatureEvidence::default(),
     });
     for a in alternatives {
-        let more = unseen_turns(claimed, model, &a.t_scene_model, judge, cfg, noise_floor, &known);
+        let more = unseen_turns(claimed, model, &a.t_scene_model, judge, trust, noise_floor, &known);
         known.extend(more.iter().cloned());
         unseen.extend(more);
     }

@@ -9,9 +9,9 @@
 //! outward and the scan's top there compared with it. Support surfaces (the bin's floor and
 //! walls) do not count: a thin part lying on the floor meets the floor at its edges.
 
-use super::judge::{share, Judge};
-use super::PoseModel;
+use super::depth::{share, DepthTest};
 use crate::geometry::Point;
+use crate::pose::model::PoseModel;
 use nalgebra::{Isometry3, Vector3};
 
 /// The smallest share of a normal along the sensor's direction for an outline cell to count
@@ -67,8 +67,8 @@ impl Footprint {
 }
 
 /// The outline test of `model` at `t_scene_model` against the judge's scan.
-pub(crate) fn outline(judge: &Judge, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> Outline {
-    let map = &judge.heights;
+pub(crate) fn outline(depth: &DepthTest, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> Outline {
+    let map = &depth.heights;
     let (e1, e2) = map.axes();
     let up = map.up;
     let target = model.target();
@@ -121,9 +121,9 @@ pub(crate) fn outline(judge: &Judge, model: &PoseModel, t_scene_model: &Isometry
             fp.top[k] = Some((x.q, x.n, x.h));
         }
     }
-    let tol = judge.tol;
+    let tol = depth.tol;
     let on_support = |p: &Point| {
-        judge
+        depth
             .supports
             .iter()
             .any(|s| (s.normal.dot(&p.coords) - s.offset).abs() < 2.0 * tol)

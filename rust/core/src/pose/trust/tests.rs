@@ -3,9 +3,9 @@
 //! ambiguous — the truth among the alternatives — where the boss faces away from the sensor; a
 //! disc whose only asymmetry is a notch in its rim is turned back from any turn about its axis.
 
-use super::tests::{config, top_view};
-use super::*;
 use crate::mesh::{sample_surface, test_box, Density, TriMesh};
+use crate::pose::tests::{self, config, top_view};
+use crate::pose::*;
 use crate::registration::ppf::PpfConfig;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::PI;
@@ -58,8 +58,8 @@ fn the_ppf_table_brings_the_screens_nearest_field_out_to_its_reach() {
         .target()
         .field()
         .expect("a model without a layout gets the screen's field");
-    let reach = super::ppf_path::SCREEN_REACH * model.ppf.as_ref().unwrap().step();
-    let cell_diagonal = 3f64.sqrt() * model.diameter / super::model::SCREEN_FIELD_CELLS;
+    let reach = crate::pose::model::SCREEN_REACH * model.ppf.as_ref().unwrap().step();
+    let cell_diagonal = 3f64.sqrt() * model.diameter / crate::pose::model::SCREEN_FIELD_CELLS;
     // Over the middle of the top face (z = 10), just inside the reach: the field answers with a
     // point of the face no farther than the nearest one plus the field's error.
     let q = Point::new(-5.0, 0.0, 10.0 + 0.95 * reach);
@@ -115,7 +115,7 @@ fn the_feature_region_holds_the_points_within_a_cell_of_every_feature_image() {
     let (model, mesh) = bossed_block();
     let cfg = config(CoarseMethod::Ppf);
     let scene = top_view(mesh, &posed(0.3, false), 0);
-    let judge = judge::Judge::new(&scene, &scene, Vec::new(), model, &cfg);
+    let judge = tests::judge_of(&scene, &scene, Vec::new(), model, &cfg);
     let region = trust::Region::new(model, &judge, &cfg.trust);
     let cell = region.cell();
     let key = |q: &Point| [q.x, q.y, q.z].map(|v| (v / cell).floor() as i64);
@@ -161,7 +161,7 @@ fn a_boss_in_view_decides_the_pose_and_a_flipped_start_is_corrected() {
         // Started from each near-symmetric turn of the truth, the trust stage turns it back.
         let (kept, planes) = scene::remove_bin(&scene, model, &cfg, true).unwrap();
         let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
-        let judge = judge::Judge::new(&scene, &pts, planes, model, &cfg);
+        let judge = tests::judge_of(&scene, &pts, planes, model, &cfg);
         for n in &model.near_symmetries {
             let wrong = PoseEstimate {
                 t_scene_model: truth * n.transform(0.0),
@@ -172,7 +172,7 @@ fn a_boss_in_view_decides_the_pose_and_a_flipped_start_is_corrected() {
                 &pts,
                 model,
                 &judge,
-                &cfg,
+                &cfg.trust,
                 &trust::Region::new(model, &judge, &cfg.trust),
             );
             assert!(
@@ -263,7 +263,7 @@ fn a_notch_in_view_turns_a_disc_back_from_any_turn_about_its_axis() {
     }
     let (kept, planes) = scene::remove_bin(&scene, model, &cfg, true).unwrap();
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
-    let judge = judge::Judge::new(&scene, &pts, planes, model, &cfg);
+    let judge = tests::judge_of(&scene, &pts, planes, model, &cfg);
     let region = trust::Region::new(model, &judge, &cfg.trust);
     let est = estimate_pose(&scene, model, &cfg).unwrap();
     for deg in [62.0f64, 133.0, 208.0, 289.0, 22.0, 173.0, 251.0, 328.0] {
@@ -271,7 +271,7 @@ fn a_notch_in_view_turns_a_disc_back_from_any_turn_about_its_axis() {
             t_scene_model: truth * UnitQuaternion::from_scaled_axis(Vector3::z() * deg.to_radians()),
             ..est.clone()
         };
-        let (trust, t) = trust::assess(&turned, &pts, model, &judge, &cfg, &region);
+        let (trust, t) = trust::assess(&turned, &pts, model, &judge, &cfg.trust, &region);
         let (r, d) = model.symmetries.pose_error(&t, &truth);
         assert!(
             pick_grade(model, &t, &truth),

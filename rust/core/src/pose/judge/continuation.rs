@@ -1,5 +1,5 @@
 //! Where a posed part's surface is confirmed, the scan's surface must not run on past the part in
-//! the same surface. The outline test ([`super::outline`]) looks at the edges of faces turned
+//! the same surface. The outline test ([`mod@super::outline`]) looks at the edges of faces turned
 //! toward the sensor; a tilted piece of a larger shape slips past it — a plate read on the run of
 //! a tee standing at 60°, a short rod along a longer one at 45°. Here the scan is followed from
 //! every cell of the height map where it confirms the posed part (within the tolerance of the
@@ -14,10 +14,10 @@
 //! followed: parts resting on the floor have their top faces at one height, and a neighbour's
 //! flush face is common in a pile; the outline test weighs those.
 
-use super::judge::{share, Judge, JUDGE_PROBES};
-use super::trust::plane_residual;
-use super::PoseModel;
+use super::depth::{probe_step, share, DepthTest, JUDGE_PROBES};
 use crate::geometry::Point;
+use crate::pose::model::PoseModel;
+use crate::pose::surface::plane_residual;
 use nalgebra::{Isometry3, Vector3};
 use std::collections::{HashMap, VecDeque};
 
@@ -54,17 +54,17 @@ struct Reached {
 }
 
 /// The continuation test of `model` at `t_scene_model` against the judge's scan.
-pub(crate) fn continuation(judge: &Judge, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> Continuation {
-    let map = &judge.heights;
+pub(crate) fn continuation(depth: &DepthTest, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> Continuation {
+    let map = &depth.heights;
     let target = model.target();
     let Some(normals) = target.normals() else {
         return Continuation::default();
     };
     let (w, h) = map.size();
-    let tol = judge.tol;
+    let tol = depth.tol;
     let max_depth = ((REACH * model.diameter) / map.cell()).ceil() as usize;
     let parallel = |n: &Vector3<f64>| {
-        judge
+        depth
             .supports
             .iter()
             .any(|s| s.normal.dot(n).abs() >= PARALLEL_TO_SUPPORT)
@@ -72,7 +72,7 @@ pub(crate) fn continuation(judge: &Judge, model: &PoseModel, t_scene_model: &Iso
     // Cells the posed part's surface is confirmed in, each seeded with the part's tangent plane.
     let mut state: HashMap<(usize, usize), Option<Reached>> = HashMap::new();
     let mut queue = VecDeque::new();
-    let step = Judge::probe_step(model, JUDGE_PROBES);
+    let step = probe_step(model, JUDGE_PROBES);
     for (p, n) in target.points().iter().zip(normals).step_by(step) {
         let q = t_scene_model * p;
         let n = t_scene_model.rotation * n;
@@ -86,7 +86,7 @@ pub(crate) fn continuation(judge: &Judge, model: &PoseModel, t_scene_model: &Iso
         if n.dot(&(top - q)).abs() > tol || state.contains_key(&cell) {
             continue;
         }
-        let seed = (!parallel(&n) && judge.off_supports(&top)).then_some(Reached {
+        let seed = (!parallel(&n) && depth.off_supports(&top)).then_some(Reached {
             anchor: q,
             normal: n,
             depth: 0,
@@ -126,7 +126,7 @@ pub(crate) fn continuation(judge: &Judge, model: &PoseModel, t_scene_model: &Iso
             let Some(top) = map.top_of(cell.0, cell.1) else {
                 continue;
             };
-            if r.normal.dot(&(top - r.anchor)).abs() > tol || !judge.off_supports(&top) {
+            if r.normal.dot(&(top - r.anchor)).abs() > tol || !depth.off_supports(&top) {
                 continue;
             }
             let off = off_part(&top);

@@ -10,9 +10,10 @@
 //! are several times the noise is a wrong pose (or a part unlike its CAD model): its confidence
 //! falls with the ratio.
 
-use super::trust::{plane_residual, thin};
-use super::PoseModel;
 use crate::geometry::Point;
+use crate::pose::model::PoseModel;
+use crate::pose::surface::{eigen_ascending, median, plane_residuals, robust_sigma, thin};
+use crate::pose::types::FitQuality;
 use crate::search::KdIndex;
 use nalgebra::{Isometry3, Matrix3, Vector3};
 
@@ -44,20 +45,6 @@ const DECAY_RATIO: f64 = 0.5;
 /// pile of tees 3.2.
 pub(super) const MAX_RATIO: f64 = FREE_RATIO + DECAY_RATIO;
 
-/// How well a pose's points lie on the posed model, against the scan's own noise.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FitQuality {
-    /// Robust standard deviation of the point-to-plane residuals of the pose's points about the
-    /// posed model's dense surface, mm.
-    pub residual_sigma: f64,
-    /// The scan's noise where the part lies (see the module notes), mm.
-    pub noise_floor: f64,
-    /// `residual_sigma / noise_floor`.
-    pub ratio: f64,
-    /// The factor the confidence is multiplied by, in (0, 1].
-    pub factor: f64,
-}
-
 /// The fit quality of `t_scene_model` from the scene points it claims (`points`), with the
 /// judge's tolerance `tol` (mm); `None` when too few points judge it.
 pub(super) fn fit_quality(
@@ -87,45 +74,6 @@ impl FitQuality {
 /// 1 up to [`FREE_RATIO`], then an exponential fall.
 pub(super) fn confidence_factor(ratio: f64) -> f64 {
     (-((ratio - FREE_RATIO).max(0.0) / DECAY_RATIO)).exp()
-}
-
-/// The eigenvalues of a symmetric 3×3 matrix, smallest first, with their unit eigenvectors.
-pub(super) fn eigen_ascending(m: Matrix3<f64>) -> ([f64; 3], [Vector3<f64>; 3]) {
-    let eig = m.symmetric_eigen();
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&i, &j| eig.eigenvalues[i].total_cmp(&eig.eigenvalues[j]));
-    (
-        order.map(|i| eig.eigenvalues[i]),
-        order.map(|i| eig.eigenvectors.column(i).into_owned()),
-    )
-}
-
-fn median(mut v: Vec<f64>, fewest: usize) -> Option<f64> {
-    if v.is_empty() || v.len() < fewest {
-        return None;
-    }
-    let mid = v.len() / 2;
-    Some(*v.select_nth_unstable_by(mid, f64::total_cmp).1)
-}
-
-/// 1.4826 × the median of the absolute `residuals` (a robust σ), when there are at least `fewest`.
-pub(super) fn robust_sigma(residuals: impl Iterator<Item = f64>, fewest: usize) -> Option<f64> {
-    median(residuals.map(f64::abs).collect(), fewest).map(|m| 1.4826 * m)
-}
-
-/// The point-to-plane residual of each of `points` about the posed model (`None` where no
-/// dense model point lies within `reach`).
-pub(super) fn plane_residuals(
-    points: &[Point],
-    model: &PoseModel,
-    t_scene_model: &Isometry3<f64>,
-    reach: f64,
-) -> Vec<Option<f64>> {
-    let inv = t_scene_model.inverse();
-    points
-        .iter()
-        .map(|p| plane_residual(model, &(inv * p), reach))
-        .collect()
 }
 
 /// The robust σ of the residuals of `points` within `tol` of the posed model, on at most

@@ -1,11 +1,11 @@
 //! Moves the scan cannot see: an elbow whose one leg lies under a slab can be turned about the
 //! other (seen) leg's axis without the scan telling; with both legs in view, it cannot.
 
-use super::tests::{config, tee_model, top_view};
 use super::unseen_turns::{unseen_turns, unseen_turns_of_all, weak_axis, weak_slide, BIN_SLACK};
-use super::*;
 use crate::mesh::parts::{elbow, FittingParams};
 use crate::mesh::{sample_surface, test_box, Density, TriMesh};
+use crate::pose::tests::{self, config, tee_model, top_view};
+use crate::pose::*;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::sync::OnceLock;
 
@@ -56,20 +56,23 @@ fn seen_from_above(
 }
 
 /// The truth and the unseen turns of `pose` (default: the truth).
-fn turns_of(covered: bool, pose: Option<Isometry3<f64>>) -> (Isometry3<f64>, Vec<trust::Alternative>) {
+fn turns_of(covered: bool, pose: Option<Isometry3<f64>>) -> (Isometry3<f64>, Vec<Alternative>) {
     let (model, _) = elbow_model();
     let cfg = config(CoarseMethod::Ppf);
     let (truth, scene_pts) = scene(covered);
     let (kept, planes) = scene::remove_bin(&scene_pts, model, &cfg, true).unwrap();
     let pts: Vec<Point> = kept.iter().map(|&i| scene_pts[i]).collect();
-    let judge = judge::Judge::new(&scene_pts, &pts, planes, model, &cfg);
+    let judge = tests::judge_of(&scene_pts, &pts, planes, model, &cfg);
     let pose = pose.unwrap_or(truth);
-    assert!(judge.verdict(model, &pose, &cfg).is_ok(), "the pose passes the judge");
-    let claimed: Vec<Point> = scene::scene_indices(&scene_pts, model, &pose, judge.tol)
+    assert!(judge.verdict(model, &pose).is_ok(), "the pose passes the judge");
+    let claimed: Vec<Point> = scene::scene_indices(&scene_pts, model, &pose, judge.depth.tol)
         .into_iter()
         .map(|i| scene_pts[i])
         .collect();
-    (truth, unseen_turns(&claimed, model, &pose, &judge, &cfg, None, &[]))
+    (
+        truth,
+        unseen_turns(&claimed, model, &pose, &judge, &cfg.trust, None, &[]),
+    )
 }
 
 #[test]
@@ -146,20 +149,20 @@ fn a_cylinder_patch_turns_about_and_slides_along_its_axis_and_a_corner_does_neit
 fn a_pose_off_the_surface_by_more_than_the_noise_loses_confidence() {
     let (model, _) = elbow_model();
     let (truth, scene_pts) = scene(false);
-    let tol = judge::tolerance(judge::judge_step(model));
+    let tol = judge::depth::tolerance(judge::depth::judge_step(model));
     let claimed = |t: &Isometry3<f64>| -> Vec<Point> {
         scene::scene_indices(&scene_pts, model, t, tol)
             .into_iter()
             .map(|i| scene_pts[i])
             .collect()
     };
-    let right = fit::fit_quality(&claimed(&truth), model, &truth, tol).unwrap();
+    let right = super::fit::fit_quality(&claimed(&truth), model, &truth, tol).unwrap();
     assert!(right.factor == 1.0 && right.ratio < 1.5, "{right:?}");
     assert!(right.residual_sigma < 0.13 && right.noise_floor < 0.15, "{right:?}");
     // Turned 8° about the vertical: the legs still lie within the tolerance of most points.
     let yaw = UnitQuaternion::from_scaled_axis(Vector3::z() * 8f64.to_radians());
     let wrong = Isometry3::from_parts(truth.translation, yaw * truth.rotation);
-    let off = fit::fit_quality(&claimed(&wrong), model, &wrong, tol).unwrap();
+    let off = super::fit::fit_quality(&claimed(&wrong), model, &wrong, tol).unwrap();
     assert!(off.ratio > 3.0 && off.factor < 0.75, "{off:?}");
 }
 
@@ -191,7 +194,7 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
     let (kept, planes) = scene::remove_bin(&scene_pts, model, &cfg, true).unwrap();
     assert_eq!(planes.len(), 1, "the floor is the support");
     let pts: Vec<Point> = kept.iter().map(|&i| scene_pts[i]).collect();
-    let judge = judge::Judge::new(&scene_pts, &pts, planes, model, &cfg);
+    let judge = tests::judge_of(&scene_pts, &pts, planes, model, &cfg);
     let near = model
         .near_symmetries
         .iter()
@@ -204,12 +207,9 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
     let wrong = truth * up;
     let flipped = wrong * near.transform(0.0);
     for pose in [&truth, &wrong, &flipped] {
-        assert!(
-            judge.verdict(model, pose, &cfg).is_ok(),
-            "the scan does not refute {pose:?}"
-        );
+        assert!(judge.verdict(model, pose).is_ok(), "the scan does not refute {pose:?}");
     }
-    let claimed: Vec<Point> = scene::scene_indices(&scene_pts, model, &flipped, judge.tol)
+    let claimed: Vec<Point> = scene::scene_indices(&scene_pts, model, &flipped, judge.depth.tol)
         .into_iter()
         .map(|i| scene_pts[i])
         .collect();
@@ -217,16 +217,16 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
         let (r, d) = model.symmetries.pose_error(t, &truth);
         r < 5f64.to_radians() && d < 3.0
     };
-    let alternative = trust::Alternative {
+    let alternative = Alternative {
         t_scene_model: wrong,
-        evidence: trust::FeatureEvidence::default(),
+        evidence: FeatureEvidence::default(),
     };
     let own = unseen_turns(
         &claimed,
         model,
         &flipped,
         &judge,
-        &cfg,
+        &cfg.trust,
         None,
         std::slice::from_ref(&alternative),
     );
@@ -240,7 +240,7 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
         &flipped,
         std::slice::from_ref(&alternative),
         &judge,
-        &cfg,
+        &cfg.trust,
         None,
     );
     assert!(
@@ -253,7 +253,8 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
     );
     for a in &all {
         // none deeper in the floor than the pose read
-        let deeper = judge.through_supports(model, &a.t_scene_model) - judge.through_supports(model, &flipped);
+        let deeper =
+            judge.depth.through_supports(model, &a.t_scene_model) - judge.depth.through_supports(model, &flipped);
         assert!(deeper <= BIN_SLACK, "{deeper}");
     }
 }

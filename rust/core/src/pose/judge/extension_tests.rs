@@ -2,12 +2,12 @@
 //! tee's run goes on past the elbow's corner); the elbow itself, in the same place, is a part.
 
 use super::extension::read_ends;
-use super::judge::Judge;
-use super::tests::{config, top_view};
-use super::*;
+use super::Judge;
 use crate::geometry::BinBox;
 use crate::mesh::parts::{cross, elbow, tee, FittingParams, Part, TeeParams};
 use crate::mesh::{sample_surface, Density, TriMesh};
+use crate::pose::tests::{self, config, top_view};
+use crate::pose::*;
 use crate::registration::ccp::BranchLayout;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::sync::OnceLock;
@@ -79,30 +79,29 @@ fn judged_scene(mesh: &TriMesh, pose: &Isometry3<f64>, model: &PoseModel) -> Jud
         min: Point::new(280.0, -120.0, 0.0),
         max: Point::new(520.0, 120.0, 100.0),
     });
-    Judge::new(&pts, &pts, Vec::new(), model, &cfg)
+    tests::judge_of(&pts, &pts, Vec::new(), model, &cfg)
 }
 
 /// `model` posed on `larger` lying at each of `yaws` is refused by the extension test (and the
 /// judge's verdict), and posed alone (`own` mesh) reads nothing past any end and passes.
 fn refused_on_the_larger_part_and_passed_alone(model: &PoseModel, own: &TriMesh, larger: &TriMesh, yaws: &[f64]) {
-    let cfg = config(CoarseMethod::Ppf);
     for &yaw in yaws {
         let pose = lying(yaw);
         let on_larger = judged_scene(larger, &pose, model);
-        let ends = read_ends(&on_larger, model, &pose);
+        let ends = read_ends(&on_larger.depth, model, &pose);
         assert!(ends.iter().any(|e| e.carried_on()), "yaw {yaw}: {ends:?}");
-        match on_larger.verdict(model, &pose, &cfg) {
+        match on_larger.verdict(model, &pose) {
             Err(Error::NoObjectFound { reason }) => assert!(reason.contains("past its end"), "{reason}"),
             other => panic!("yaw {yaw}: a piece of the larger part passed: {other:?}"),
         }
         let alone = judged_scene(own, &pose, model);
-        let ends = read_ends(&alone, model, &pose);
+        let ends = read_ends(&alone.depth, model, &pose);
         assert!(
             ends.iter().all(|e| !e.carried_on() && e.past == 0),
             "yaw {yaw}: {ends:?}"
         );
         assert!(
-            alone.verdict(model, &pose, &cfg).is_ok(),
+            alone.verdict(model, &pose).is_ok(),
             "yaw {yaw}: the part itself was refused"
         );
     }
