@@ -191,9 +191,8 @@ def sim_scene(name: str, kind: str, model, poses: np.ndarray, cell: sim.Cell, fr
     world = sim_world(cell, [mesh] * len(poses), poses)
     pts = sim_cloud(world, cell, frames, seed)
     dist, ids = world.nearest_surface(pts)
-    scene = Scene(
-        f"sim/{kind}/{name}_{tag}", name, "sim", kind, pts, poses, cell.bin.bounds, cell.T_base_camera[:3, 3], render
-    )
+    # As the cell asks for a swept laser scan: along the bin's up (binpick.cell's locate).
+    scene = Scene(f"sim/{kind}/{name}_{tag}", name, "sim", kind, pts, poses, cell.bin.bounds, None, render)
     scene.extra["instance_points"] = lambda i: pts[(ids == i) & (dist < 1.0)]
     return scene
 

@@ -32,7 +32,8 @@ def test_configs_are_keyword_only_and_frozen(cls):
 
 def test_configs_carry_the_core_defaults():
     pose = _core.PoseConfig()
-    assert (pose.method, pose.up, pose.min_fitness, pose.min_coverage) == ("auto", (0.0, 0.0, 1.0), 0.6, 0.8)
+    assert (pose.method, pose.up, pose.min_fitness, pose.min_coverage) == ("auto", None, 0.6, 0.8)
+    assert (pose.noise_mm, pose.noise_per_m2) == (None, 0.0)
     assert pose.max_normal_angle == pytest.approx(np.radians(70.0), abs=1e-15)
     assert (pose.reference_fraction, pose.max_hypotheses, pose.max_instances, pose.num_threads) == (0.1, 16, 1, 0)
     assert pose.search_instances == 5

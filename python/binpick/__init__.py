@@ -10,8 +10,29 @@ from __future__ import annotations
 from . import _core, parts
 from .errors import *  # noqa: F401,F403 - the exception classes are public API
 from .errors import __all__ as _error_names
-from .models import Branch, Model, PpfParams, Symmetries, estimate_normals, read_ply, voxel_downsample, write_ply
-from .poses import Alternative, IcpResult, PoseResult, estimate_pose, estimate_poses, grasp_pose, icp
+from .models import (
+    Branch,
+    FreeMotion,
+    Model,
+    PpfParams,
+    Symmetries,
+    estimate_normals,
+    read_ply,
+    scan_noise,
+    voxel_downsample,
+    write_ply,
+)
+from .poses import (
+    Alternative,
+    IcpResult,
+    PoseResult,
+    SensorModel,
+    estimate_pose,
+    estimate_poses,
+    grasp_pose,
+    icp,
+    verify_pose,
+)
 
 __version__ = _core.__version__
 
@@ -58,12 +79,16 @@ __all__ = [
     "IcpResult",
     "Model",
     "PoseResult",
+    "SensorModel",
     "Alternative",
     "PpfParams",
     "Symmetries",
     "estimate_normals",
+    "scan_noise",
+    "FreeMotion",
     "estimate_pose",
     "estimate_poses",
+    "verify_pose",
     "grasp_pose",
     "icp",
     "parts",

@@ -45,6 +45,7 @@ def _running_calls() -> int:
 def estimate_normals(points_in: _F64, k: int, viewpoint: _F64 | None, direction: _F64 | None, num_threads: int) -> _F64:
     """(N, 3) unit normals by k-NN PCA, facing ``viewpoint`` (a point) or else ``direction`` (default +z)."""
 
+def scan_noise(points_in: _F64, viewpoint: _F64 | None, direction: _F64 | None) -> float | None: ...
 def voxel_downsample(points_in: _F64, normals: _F64 | None, voxel_size: float) -> tuple[_F64, _F64 | None, _I64]:
     """One point per ``voxel_size`` voxel: (points, normals or None, index of each voxel's first input point)."""
 
@@ -182,6 +183,8 @@ class PreparedModel:
         """Dict with center (3,), continuous_axis (3,) or None, rotations (K, 3, 3), identity first."""
     def near_symmetries(self) -> list[dict[str, Any]]:
         """Dicts with center (3,), axis (3,), angle (radians or None: continuous), agreement, feature (M, 3)."""
+    def degenerate(self) -> list[dict[str, Any]]:
+        """Dicts with kind ("slide" or "turn"), axis (3,), point (3,) on a turn's axis or None."""
     def canonical(self, t_scene_model: _F64) -> _F64:
         """The canonical form of a (4, 4) pose under the symmetries."""
 
@@ -196,6 +199,8 @@ class PoseConfig:
         up: _F64 | None = None,
         method: str | None = None,
         viewpoint: _F64 | None = None,
+        noise_mm: float | None = None,
+        noise_per_m2: float | None = None,
         d_star: float | None = None,
         min_points: int | None = None,
         max_normal_angle: float | None = None,
@@ -214,7 +219,11 @@ class PoseConfig:
     @property
     def bin(self) -> _F64 | None: ...
     @property
-    def up(self) -> tuple[float, float, float]: ...
+    def up(self) -> tuple[float, float, float] | None: ...
+    @property
+    def noise_mm(self) -> float | None: ...
+    @property
+    def noise_per_m2(self) -> float: ...
     @property
     def method(self) -> str: ...
     @property
@@ -284,8 +293,14 @@ class PoseEstimate:
     @property
     def fit(self) -> dict[str, float] | None: ...
 
+#: The largest depth noise pose estimation takes, mm.
+MAX_NOISE_MM: float
+
 def estimate_poses(scene: _F64, model: PreparedModel, config: PoseConfig) -> list[PoseEstimate]:
     """Up to ``config.max_instances`` verified instances, most pickable first."""
+
+def verify_pose(scene: _F64, model: PreparedModel, config: PoseConfig, t_scene_model: _F64) -> PoseEstimate:
+    """The verdict on a given pose, judged as found ones are (unrefined)."""
 
 # --- triangulation --------------------------------------------------------------------------
 

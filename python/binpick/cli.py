@@ -308,9 +308,9 @@ def _dry_run(cell: Any, out: Path) -> int:
 # --------------------------------------------------------------------------- estimate
 
 
-def _read_scene(path: str, unit: Optional[str] = None) -> Any:
-    """The scene cloud (N, 3) mm of ``path``: a scene file (PLY, PCD, NPY, XYZ) or a scan folder,
-    reconstructed."""
+def _read_scene(path: str, unit: Optional[str] = None) -> tuple[Any, Any]:
+    """The scene cloud (N, 3) mm of ``path`` — a scene file (PLY, PCD, NPY, XYZ) or a scan folder,
+    reconstructed — and the sensor's position in its frame where the file or the scan says it."""
     from .clouds import read_scene
 
     if not os.path.exists(path):
@@ -318,27 +318,35 @@ def _read_scene(path: str, unit: Optional[str] = None) -> Any:
     if os.path.isdir(path):
         if unit is not None:
             raise _Usage("--scene-unit: a scan folder is reconstructed in mm; leave the option out")
-        return _reconstruct_scan(path).points
-    return read_scene(path, unit=unit).points
+        # A swept laser scan is judged along the bin's up, as the cell judges it.
+        return _reconstruct(_load_scan_folder(path)).points, None
+    cloud = read_scene(path, unit=unit)
+    return cloud.points, cloud.viewpoint
 
 
-def _reconstruct_scan(folder: str) -> Any:
-    """The cloud of the scan folder ``folder`` (binpick.vision.reconstruct)."""
+def _load_scan_folder(folder: str) -> Any:
+    """The scan of the scan folder ``folder``."""
     from .scan import load_scan
-    from .vision import reconstruct
 
     if not os.path.isfile(os.path.join(folder, "scan.json")):
         raise _Usage(f"{folder} is a folder without scan.json; give a scan folder or a scene file")
-    return reconstruct(load_scan(folder))
+    return load_scan(folder)
 
 
-def _reconstruct(args: argparse.Namespace) -> int:
+def _reconstruct(scan: Any) -> Any:
+    """The cloud of ``scan`` (binpick.vision.reconstruct)."""
+    from .vision import reconstruct
+
+    return reconstruct(scan)
+
+
+def _reconstruct_command(args: argparse.Namespace) -> int:
     from .clouds import write_scene
 
     if not os.path.isdir(args.scan):
         raise _Usage(f"SCAN_DIR: {args.scan} is not a folder; give a scan folder (binpick simulate writes one)")
     t0 = time.perf_counter()
-    cloud = _reconstruct_scan(args.scan)
+    cloud = _reconstruct(_load_scan_folder(args.scan))
     out = write_scene(args.out, cloud.points)
     print(f"wrote {out}: {len(cloud)} points in {time.perf_counter() - t0:.1f} s")
     return 0
@@ -348,20 +356,34 @@ def _estimate(args: argparse.Namespace) -> int:
     from . import viz
     from .poses import estimate_poses
 
-    scene = _read_scene(args.scene, args.scene_unit)
+    scene, stated = _read_scene(args.scene, args.scene_unit)
     model = _model(args.model, args.unit)
     bin_box = None if args.bin is None else (tuple(args.bin[:3]), tuple(args.bin[3:]))
+    viewpoint = _viewpoint_option(args, stated)
     found = estimate_poses(
-        scene, model, bin=bin_box, method=args.method, max_instances=args.instances, **_estimate_options(args)
+        scene,
+        model,
+        bin=bin_box,
+        method=args.method,
+        max_instances=args.instances,
+        viewpoint=viewpoint,
+        up=None if args.up is None else tuple(args.up),
+        noise_mm=args.noise_mm,
+        **_estimate_options(args),
     )
     docs = [
         {
             "T_scene_model": r.T_scene_model.tolist(),
+            "confidence": r.confidence,
+            "ambiguous": r.ambiguous,
+            "alternatives": [a.T_scene_model.tolist() for a in r.alternatives],
             "score": r.score,
             "rmse_mm": r.rmse,
+            "fit": r.fit,
             "points": int(len(r.indices)),
             "method": r.method,
             "pickability": r.pickability,
+            "viewpoint": None if viewpoint is None else [float(v) for v in viewpoint],
             "timings_ms": {k: float(v) for k, v in r.timings.items()},
         }
         for r in found
@@ -380,6 +402,20 @@ def _estimate(args: argparse.Namespace) -> int:
     )
     print(f"wrote {png}", file=sys.stderr)
     return 0
+
+
+def _viewpoint_option(args: argparse.Namespace, stated: Any) -> Any:
+    """The sensor's position of an estimate: ``--viewpoint``, the camera's origin with
+    ``--camera-frame``, or what the scene file or scan states."""
+    import numpy as np
+
+    if args.viewpoint is not None and args.camera_frame:
+        raise _Usage("--camera-frame puts the sensor at the origin; give it or --viewpoint, not both")
+    if args.camera_frame:
+        return np.zeros(3)
+    if args.viewpoint is not None:
+        return np.asarray(args.viewpoint, dtype=np.float64)
+    return stated
 
 
 # --------------------------------------------------------------------------- calibrate
@@ -622,6 +658,33 @@ def _add_estimate(sub: Any) -> None:
         metavar=("XMIN", "YMIN", "ZMIN", "XMAX", "YMAX", "ZMAX"),
         help="bin box in the scene frame, mm",
     )
+    t.add_argument(
+        "--viewpoint",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        help="the sensor's optical centre in the scene frame, mm (default: the one the scene file or scan states)",
+    )
+    t.add_argument(
+        "--camera-frame",
+        action="store_true",
+        help="the scene is in the camera's own frame (+z forward, away from the camera), as depth cameras "
+        "and PCL write it: the sensor is at the origin",
+    )
+    t.add_argument(
+        "--up",
+        type=float,
+        nargs=3,
+        metavar=("X", "Y", "Z"),
+        help="the direction out of the bin toward the sensor (default +z, or toward the viewpoint when it "
+        "lies below the scene)",
+    )
+    t.add_argument(
+        "--noise-mm",
+        type=float,
+        default=None,
+        help="the sensor's depth noise σ, mm (default: read from the scan)",
+    )
     t.add_argument("--png", default="estimate.png", help="picture to write (default estimate.png)")
     _pose_options(t)
     t.set_defaults(run=_estimate)
@@ -637,7 +700,7 @@ def _add_reconstruct(sub: Any) -> None:
     )
     r.add_argument("scan", metavar="SCAN_DIR", help="scan folder (scan.json, calibration.toml, frames/)")
     r.add_argument("--out", default="scene.ply", help="cloud file: .ply, .pcd, .xyz or .npy (default scene.ply)")
-    r.set_defaults(run=_reconstruct)
+    r.set_defaults(run=_reconstruct_command)
 
 
 def _add_calibrate(sub: Any) -> None:

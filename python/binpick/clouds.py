@@ -180,7 +180,8 @@ def write_pcd(path: str | os.PathLike[str], points: Any, *, encoding: str = "bin
     n = len(pts)
     header = (
         "# .PCD v0.7 - Point Cloud Data file format\n# unit: mm\nVERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\n"
-        f"TYPE F F F\nCOUNT 1 1 1\nWIDTH {n}\nHEIGHT 1\nVIEWPOINT {float(vp[0])!r} {float(vp[1])!r} {float(vp[2])!r} 1 0 0 0\n"
+        f"TYPE F F F\nCOUNT 1 1 1\nWIDTH {n}\nHEIGHT 1\n"
+        f"VIEWPOINT {float(vp[0])!r} {float(vp[1])!r} {float(vp[2])!r} 1 0 0 0\n"
         f"POINTS {n}\nDATA {encoding}\n"
     )
     target = Path(path)

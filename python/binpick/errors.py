@@ -32,6 +32,7 @@ __all__ = [
     "InternalError",
     "ScanFormatError",
     "SingularGeometryError",
+    "DegenerateModelWarning",
 ]
 
 
@@ -141,3 +142,9 @@ class UnknownReplyError(ProtocolError):
 
 
 __all__ += ["TruncatedReplyError", "UnknownReplyError"]
+
+
+class DegenerateModelWarning(UserWarning):
+    """A part's surface cannot be located along some motion (``Model.degenerate``): one face of a
+    box slides in its own plane, a tube without ends along its axis. Its poses come back with
+    confidence 0."""

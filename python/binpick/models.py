@@ -26,7 +26,7 @@ from ._validate import (
     unit_scale,
     write_atomic,
 )
-from .errors import InvalidInputError, InvalidTypeError
+from .errors import DegenerateModelWarning, InvalidInputError, InvalidTypeError
 from .transforms import pose_error, rotation_about
 
 __all__ = [
@@ -34,9 +34,12 @@ __all__ = [
     "Branch",
     "PpfParams",
     "Symmetries",
+    "FreeMotion",
+    "NearSymmetry",
     "read_ply",
     "write_ply",
     "estimate_normals",
+    "scan_noise",
     "voxel_downsample",
 ]
 
@@ -89,7 +92,29 @@ class Symmetries:
         return f"Symmetries(discrete={len(self.rotations)}, continuous_axis={axis})"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
+class FreeMotion:
+    """A rigid motion of a part that its surface hardly constrains and that is no symmetry of it:
+    a scan cannot locate the part along it (see :attr:`Model.degenerate`).
+
+    Attributes:
+        kind: ``"slide"`` or ``"turn"``.
+        axis: (3,) unit direction of the slide, or axis of the turn, model frame.
+        point: (3,) a point on a turn's axis, model frame, mm; None for a slide.
+    """
+
+    kind: str
+    axis: np.ndarray
+    point: Optional[np.ndarray] = None
+
+    def __str__(self) -> str:
+        axis = np.array2string(self.axis, precision=2)
+        if self.kind == "slide":
+            return f"slides along {axis}"
+        return f"turns about {axis} through {np.array2string(self.point, precision=1)} mm"
+
+
+@dataclass(frozen=True, eq=False)
 class NearSymmetry:
     """A rotation that maps most of a part's surface onto itself without being a symmetry: the
     poses it relates look alike to a scan that does not show the feature.
@@ -308,8 +333,24 @@ class Model:
             )
             if path is not None and not native.ppf_from_cache():
                 _write_cache(path, native.ppf_bytes())
+            if self._prepared is None and native.degenerate():
+                free = "; ".join(str(m) for m in _free_motions(native))
+                warnings.warn(
+                    f"{self.name}: its surface cannot locate it along some motions ({free}); no scan can fix its pose "
+                    "there, and its poses come back with confidence 0. Is this the whole part, with its edges?",
+                    DegenerateModelWarning,
+                    stacklevel=2,
+                )
             self._prepared = (params, native)
         return self._prepared[1]
+
+    @property
+    def degenerate(self) -> tuple[FreeMotion, ...]:
+        """The motions the part's surface hardly constrains and that are no symmetry of it (one face
+        of a box slides in its plane and turns about its normal; a tube without ends slides along
+        its axis): a scan cannot locate the part along them, so its poses carry confidence 0.
+        Empty for a part that can be located."""
+        return _free_motions(self.prepared())
 
     def _cache_path(self, key: tuple) -> Optional[Path]:
         root = cache_dir()
@@ -481,6 +522,17 @@ def read_ply(path: str | os.PathLike[str]) -> tuple[np.ndarray, Optional[np.ndar
     return _core.read_ply(os.fspath(path))
 
 
+def _free_motions(native: Any) -> tuple[FreeMotion, ...]:
+    return tuple(
+        FreeMotion(
+            kind=m["kind"],
+            axis=np.asarray(m["axis"], dtype=np.float64),
+            point=None if m["point"] is None else np.asarray(m["point"], dtype=np.float64),
+        )
+        for m in native.degenerate()
+    )
+
+
 def write_ply(path: str | os.PathLike[str], points: Any, normals: Any = None, *, ascii: bool = False) -> None:
     """Writes points (and normals) as PLY that MeshLab and CloudCompare open (binary by default)."""
     pts = as_points(points, "points", min_points=0)
@@ -488,6 +540,19 @@ def write_ply(path: str | os.PathLike[str], points: Any, normals: Any = None, *,
     if nrm is not None and len(nrm) != len(pts):
         raise InvalidInputError(f"normals: has {len(nrm)} rows but points has {len(pts)}")
     _core.write_ply(os.fspath(path), pts, nrm, bool(ascii))
+
+
+def scan_noise(points: Any, *, viewpoint: Any = None, direction: Any = (0.0, 0.0, 1.0)) -> Optional[float]:
+    """The standard deviation (mm) of a scan's depth noise along its sensor's rays, read from the
+    scan alone (no model): height fields fitted along the direction toward the sensor —
+    ``viewpoint`` (its optical centre) when given, else ``direction`` (+z) — over small patches,
+    the median of their residuals. It is what pose estimation reads when no noise is declared
+    (:class:`binpick.SensorModel`). None with too few points (about 200) or no surface facing the
+    sensor."""
+    pts = as_points(points, "points", min_points=0)
+    vp = None if viewpoint is None else as_vector(viewpoint, "viewpoint")
+    d = None if viewpoint is not None else as_vector(direction, "direction")
+    return _core.scan_noise(pts, vp, d)
 
 
 def estimate_normals(

@@ -23,10 +23,20 @@ from ._validate import (
     positive,
     thread_count,
 )
-from .errors import InvalidInputError
+from .errors import InvalidInputError, InvalidTypeError
 from .models import Model, estimate_normals
 
-__all__ = ["IcpResult", "icp", "Alternative", "PoseResult", "estimate_pose", "estimate_poses", "grasp_pose"]
+__all__ = [
+    "IcpResult",
+    "icp",
+    "Alternative",
+    "PoseResult",
+    "SensorModel",
+    "estimate_pose",
+    "estimate_poses",
+    "grasp_pose",
+    "verify_pose",
+]
 
 #: Ceilings of the counts that size work or allocations: beyond them a value is a mistake.
 MAX_ITERATIONS = 100_000  # ICP updates
@@ -130,6 +140,62 @@ def icp(
             if (lengths == 0).any():
                 raise InvalidInputError(f"target_normals: row {int(np.argmax(lengths == 0))} is a zero vector")
     return IcpResult._from_native(_core.icp(src, tgt, normals, init_m, config))
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """The depth noise of the sensor that made a scan, which every tolerance of pose estimation
+    derives from (the judge's depth test, a pose's inliers, the reach of its refinement, the
+    neighbourhood of the scan's normals).
+
+    Attributes:
+        noise_mm: standard deviation of the depth noise along the sensor's rays, mm (at range 0
+            when it grows with range). None (the default): read from the scan itself, which
+            binpick does well on any sensor: declare it only to override that reading.
+        noise_per_m2: growth with the range r from the viewpoint, mm per square metre:
+            σ(r) = noise_mm + noise_per_m2 · (r / 1 m)², as a triangulating depth camera's noise
+            grows (a Kinect-like camera: about 0.9 mm and 1 mm/m²; a structured-light camera:
+            about 0.05 mm and 0.15 mm/m²). Needs ``noise_mm`` and a ``viewpoint``; σ is taken at
+            the scan's median range.
+
+    Typical σ: laser-line scanners 0.05–0.2 mm, industrial structured light 0.1–0.5 mm, stereo
+    and Kinect-like depth cameras 1–5 mm, time of flight 1–3 mm.
+    """
+
+    noise_mm: Optional[float] = None
+    noise_per_m2: float = 0.0
+
+    def __post_init__(self) -> None:
+        top = _POSE_MAX_NOISE_MM
+        if self.noise_mm is not None:
+            object.__setattr__(self, "noise_mm", positive(self.noise_mm, "noise_mm"))
+            if self.noise_mm > top:
+                raise InvalidInputError(
+                    f"noise_mm: {self.noise_mm:g} mm is beyond the {top:g} mm binpick takes; is the scan in mm?"
+                )
+        object.__setattr__(self, "noise_per_m2", number(self.noise_per_m2, "noise_per_m2", 0.0, top, "mm/m²"))
+        if self.noise_per_m2 > 0 and self.noise_mm is None:
+            raise InvalidInputError(
+                "noise_per_m2: a noise growing with range needs noise_mm, the noise at the sensor; give both"
+            )
+
+
+#: The largest depth noise the core takes, mm.
+_POSE_MAX_NOISE_MM = _core.MAX_NOISE_MM
+
+
+def _sensor_model(sensor: Any, noise_mm: Any) -> SensorModel:
+    """The sensor model of ``sensor=`` / ``noise_mm=`` (at most one of them)."""
+    if sensor is not None and noise_mm is not None:
+        raise InvalidInputError("noise_mm: give either sensor= or noise_mm=, not both (noise_mm is sensor's noise_mm)")
+    if sensor is None:
+        return SensorModel(noise_mm=noise_mm)
+    if not isinstance(sensor, SensorModel):
+        raise InvalidTypeError(
+            "sensor: expected a binpick.SensorModel (e.g. binpick.SensorModel(noise_mm=2.0)), "
+            f"got {type(sensor).__name__}"
+        )
+    return sensor
 
 
 @dataclass(frozen=True)
@@ -251,8 +317,10 @@ def estimate_poses(
     *,
     max_instances: int = 5,
     method: str = _POSE.method,
-    up: Any = _POSE.up,
+    up: Any = None,
     viewpoint: Any = None,
+    sensor: Optional[SensorModel] = None,
+    noise_mm: Optional[float] = None,
     d_star: Optional[float] = None,
     min_points: Optional[int] = None,
     max_normal_angle: float = _POSE.max_normal_angle,
@@ -269,11 +337,21 @@ def estimate_poses(
     """Up to ``max_instances`` (at most 1000) verified instances of ``model`` in ``scene``, most
     pickable first. ``num_threads``: 0 = all cores, at most 256 (clamped to the machine's cores).
 
-    ``scene`` is an (N, 3) cloud in mm with ``up`` (default +z) pointing out of the bin toward the
-    sensor; ``viewpoint`` (optional) is the sensor's position in the scene frame, which orients
-    the scan's normals better than ``up`` on steep faces. ``bin`` is an axis-aligned box
-    ``((xmin, ymin, zmin), (xmax, ymax, zmax))`` in the scene frame; without it, support planes
-    much larger than the part (floor, walls) are found and removed.
+    ``scene`` is an (N, 3) cloud in mm. ``viewpoint`` (optional, and worth giving) is the sensor's
+    optical centre in the scene frame: the depth test then looks along the sensor's own rays, as a
+    fixed camera at an angle or a scene in the camera's own frame (``viewpoint=(0, 0, 0)``) need,
+    and the scan's normals face it; without it, the sensor is taken to look down along ``up``.
+    ``up`` is the direction out of the bin toward the sensor: by default +z, or, when the
+    viewpoint lies below the scene along +z (a scene in the camera's frame, +z away from the
+    camera), the direction toward the viewpoint; an ``up`` that points away from the viewpoint is
+    an error. ``bin`` is an axis-aligned box ``((xmin, ymin, zmin), (xmax, ymax, zmax))`` in the
+    scene frame; without it, support planes much larger than the part (floor, walls) are found and
+    removed.
+
+    ``sensor`` (a :class:`SensorModel`) or ``noise_mm`` (its ``noise_mm`` alone) declares the
+    sensor's depth noise; by default binpick reads it from the scan. Every tolerance derives from
+    it (the depth test takes 3σ, and no less than 1 mm), so a noisier sensor is judged at its own
+    noise rather than refused.
 
     ``method``:
 
@@ -297,16 +375,14 @@ def estimate_poses(
     surface confirmed where the scan can judge it, enough of it over scanned cells, and no pose
     through the bin's floor or walls); it never returns a guess.
     """
-    if not isinstance(model, Model):
-        raise InvalidInputError(
-            f"model: expected a binpick.Model, got {type(model).__name__}; build one with binpick.Model.from_mesh"
-        )
-    config = native_config(
-        _core.PoseConfig,
-        bin=None if bin is None else as_float_array(bin, "bin"),
-        up=as_vector(up, "up"),
+    _check_model(model)
+    config = _pose_config(
+        bin=bin,
+        up=up,
         method=method,
-        viewpoint=None if viewpoint is None else as_vector(viewpoint, "viewpoint"),
+        viewpoint=viewpoint,
+        sensor=sensor,
+        noise_mm=noise_mm,
         d_star=optional_number(d_star, "d_star"),
         min_points=optional_count(min_points, "min_points"),
         max_normal_angle=number(max_normal_angle, "max_normal_angle"),
@@ -328,6 +404,62 @@ def estimate_poses(
         )
     pts = as_points(scene, "scene", min_points=10)
     return [PoseResult._from_native(e) for e in _core.estimate_poses(pts, model.prepared(), config)]
+
+
+def _check_model(model: Any) -> None:
+    if not isinstance(model, Model):
+        raise InvalidInputError(
+            f"model: expected a binpick.Model, got {type(model).__name__}; build one with binpick.Model.from_mesh"
+        )
+
+
+def _pose_config(*, bin: Any, up: Any, viewpoint: Any, sensor: Any, noise_mm: Any, **checked: Any) -> Any:
+    """The native pose configuration of a call: the scene's frame and sensor checked here, the
+    other options as the caller checked them."""
+    noise = _sensor_model(sensor, noise_mm)
+    return native_config(
+        _core.PoseConfig,
+        bin=None if bin is None else as_float_array(bin, "bin"),
+        up=None if up is None else as_vector(up, "up"),
+        viewpoint=None if viewpoint is None else as_vector(viewpoint, "viewpoint"),
+        noise_mm=noise.noise_mm,
+        noise_per_m2=noise.noise_per_m2,
+        **checked,
+    )
+
+
+def verify_pose(
+    scene: Any,
+    model: Model,
+    T_scene_model: Any,
+    bin: Any = None,
+    *,
+    up: Any = None,
+    viewpoint: Any = None,
+    sensor: Optional[SensorModel] = None,
+    noise_mm: Optional[float] = None,
+    min_coverage: float = _POSE.min_coverage,
+    num_threads: int = _POSE.num_threads,
+) -> PoseResult:
+    """The verdict on a given pose ``T_scene_model`` (4, 4) of ``model`` in ``scene``, judged exactly
+    as :func:`estimate_poses` judges the poses it finds — the same depth test and checks, then the
+    trust stage's confidence, alternatives and fit — but not refined. For a pose from elsewhere (an
+    operator's teach-in, another vision system, a ground truth) to learn whether the scan supports it
+    and how sure binpick would be of it. Raises :class:`binpick.NoObjectFound` naming the test it
+    fails. The arguments are :func:`estimate_poses`'s; ``method`` reads ``"given"``."""
+    _check_model(model)
+    config = _pose_config(
+        bin=bin,
+        up=up,
+        viewpoint=viewpoint,
+        sensor=sensor,
+        noise_mm=noise_mm,
+        min_coverage=number(min_coverage, "min_coverage"),
+        num_threads=thread_count(num_threads),
+    )
+    pts = as_points(scene, "scene", min_points=10)
+    T = as_transform(T_scene_model, "T_scene_model")
+    return PoseResult._from_native(_core.verify_pose(pts, model.prepared(), config, T))
 
 
 def estimate_pose(scene: Any, model: Model, bin: Any = None, **options: Any) -> PoseResult:

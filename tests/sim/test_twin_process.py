@@ -351,7 +351,7 @@ def test_binpick_pick_removes_three_parts_in_three_attempts(twin, tmp_path):
     assert len(after["in_bin"]) == len(before["in_bin"]) - 3
     assert after["held"] is None
     sweeps = sorted((out / "scans").iterdir())
-    assert [p.name for p in sweeps] == ["sweep_000", "sweep_001", "sweep_002"]
+    assert [p.name for p in sweeps] == ["sweep_000", "sweep_001", "sweep_002"], done.stdout[-6000:]
     assert all(len(load_scan(p)) == FRAMES for p in sweeps)
     assert [c for c in after["collisions"] if c["with"] == "bin" or c["with"].startswith("robot")] == []
     twin.picked += 3

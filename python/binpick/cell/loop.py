@@ -321,8 +321,10 @@ class Cell:
         options = dict(cfg.estimate_options)
         options.setdefault("num_threads", cfg.num_threads)
         options.setdefault("search_instances", cfg.max_candidates)
-        # The camera's position at the first pose of the scan orients the scan's normals (PPF).
-        options.setdefault("viewpoint", (np.asarray(scan.T_base_flanges[0]) @ cfg.calibration.T_flange_camera)[:3, 3])
+        # A swept laser-line scan is judged along the bin's up, not along the camera's rays: the
+        # camera looks straight down on the bin from the scan pose, and the laser's lines, several
+        # millimetres apart, alias a grid of the camera's rays (a pose's top between two lines reads
+        # as seen through where a neighbouring line's flank lies farther along a nearby ray).
         wanted = count(max_instances, "max_instances") or cfg.max_candidates
         c0 = time.process_time()
         results = estimate_poses(scan.points[keep], cfg.model, bin=cfg.bin_bounds, max_instances=wanted, **options)

@@ -11,9 +11,11 @@
 //!
 //! Neighbours are chosen by their lateral distance, with depth counting a fraction `1/λ` as
 //! much: picked in full 3-D, points whose noise happens to lie near the sample's would be
-//! preferred and the noise read low; picked laterally alone, a patch at an occluding edge
-//! would mix the near and far surfaces. λ grows with the noise read in a first pass. The
-//! scan's noise is the median over patches (edges, flying pixels and corners are a minority).
+//! preferred and noise larger than the points' spacing read low; picked laterally alone, a patch
+//! at an occluding edge would mix the near and far surfaces. A first pass picks plain 3-D
+//! neighbours; where the noise it reads is large against the spacing, a second pass weighs depth
+//! less. The scan's noise is the median over patches (edges, flying pixels and corners are a
+//! minority).
 
 use crate::geometry::Point;
 use crate::normals::Orientation;
@@ -35,8 +37,9 @@ const LINEAR_SHARE: f64 = 0.04;
 /// Patches steeper than this slope (45°) are not fitted: a height field that steep is ill
 /// conditioned, and it is mostly where surfaces meet.
 const MAX_SLOPE: f64 = 1.0;
-/// λ of the first pass, and the noise-to-spacing factor of the second.
-const FIRST_LAMBDA: f64 = 4.0;
+/// λ of the first pass (plain 3-D neighbours: a closed surface, or a cloud merged from many
+/// views, keeps its far side out of a patch), and the noise-to-spacing factor of the second.
+const FIRST_LAMBDA: f64 = 1.0;
 const LAMBDA_PER_NOISE: f64 = 8.0;
 
 /// The standard deviation (mm) of the depth noise of `points` along the direction toward the
@@ -276,6 +279,21 @@ mod tests {
             .collect();
         let read = scan_noise(&pts, Orientation::TowardPoint(eye)).unwrap();
         assert!((read / sigma - 1.0).abs() < 0.15, "read {read:.3}");
+    }
+
+    #[test]
+    fn a_closed_surface_sampled_all_round_reads_no_noise() {
+        // A sphere 40 mm across sampled evenly all round (a model, or a cloud merged from many
+        // views): each lateral place holds two surfaces, which a patch must not mix.
+        let mut rng = Rng::new(2);
+        let pts: Vec<Point> = (0..4000)
+            .map(|_| {
+                let v = Vector3::new(rng.normal(), rng.normal(), rng.normal()).normalize();
+                Point::from(v * 20.0)
+            })
+            .collect();
+        let read = scan_noise(&pts, Orientation::TowardDirection(Vector3::z())).unwrap();
+        assert!(read < 0.05, "read {read:.3}");
     }
 
     #[test]

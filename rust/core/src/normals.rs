@@ -65,15 +65,9 @@ pub fn normals_at(
     k: usize,
     orientation: Orientation,
 ) -> Vec<Vector3<f64>> {
-    let cancel = crate::cancel::current();
-    queries
-        .par_iter()
-        .map_init(Vec::new, |found, p| {
-            if cancel.requested() {
-                return Vector3::z();
-            }
-            normal_at(p, cloud, index, k, orientation, found)
-        })
+    surfaces_at(queries, cloud, index, k, orientation)
+        .into_iter()
+        .map(|(_, n)| n)
         .collect()
 }
 
@@ -88,18 +82,49 @@ pub fn normal_at(
     orientation: Orientation,
     found: &mut Vec<(f64, u32)>,
 ) -> Vector3<f64> {
+    surface_at(p, cloud, index, k, orientation, found).1
+}
+
+/// `p` moved onto the plane fitted to its `k` nearest points of `cloud` (through their centroid),
+/// and that plane's unit normal facing `orientation`, for each of `queries`: on a noisy scan the
+/// points of a smooth surface with their noise averaged over the neighbourhood.
+pub fn surfaces_at(
+    queries: &[Point],
+    cloud: &[Point],
+    index: &KdIndex,
+    k: usize,
+    orientation: Orientation,
+) -> Vec<(Point, Vector3<f64>)> {
+    let cancel = crate::cancel::current();
+    queries
+        .par_iter()
+        .map_init(Vec::new, |found, p| {
+            if cancel.requested() {
+                return (*p, Vector3::z());
+            }
+            surface_at(p, cloud, index, k, orientation, found)
+        })
+        .collect()
+}
+
+/// One query of [`surfaces_at`].
+fn surface_at(
+    p: &Point,
+    cloud: &[Point],
+    index: &KdIndex,
+    k: usize,
+    orientation: Orientation,
+    found: &mut Vec<(f64, u32)>,
+) -> (Point, Vector3<f64>) {
     index.knn_into(p, k, found);
-    let (_, cov) = covariance_of(found.iter().map(|f| &cloud[f.1 as usize]));
+    let (c, cov) = covariance_of(found.iter().map(|f| &cloud[f.1 as usize]));
     let n = extreme_axis(&cov, false).unwrap_or_else(|| principal_axes(&cov).1[2]);
+    let on_plane = p - n * n.dot(&(p - c));
     let facing = match orientation {
         Orientation::TowardPoint(v) => v - p,
         Orientation::TowardDirection(d) => d,
     };
-    if n.dot(&facing) < 0.0 {
-        -n
-    } else {
-        n
-    }
+    (on_plane, if n.dot(&facing) < 0.0 { -n } else { n })
 }
 
 #[cfg(test)]

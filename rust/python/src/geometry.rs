@@ -42,6 +42,25 @@ fn estimate_normals<'py>(
     Ok(vectors_to_py(py, &normals))
 }
 
+/// The depth noise σ (mm) of a scan along the direction toward its sensor (`viewpoint`, a point,
+/// or else `direction`), read without a model; None where too few patches fit.
+#[pyfunction]
+#[pyo3(signature = (points_in, viewpoint, direction))]
+fn scan_noise(
+    py: Python<'_>,
+    points_in: PyReadonlyArray2<'_, f64>,
+    viewpoint: Option<PyReadonlyArray1<'_, f64>>,
+    direction: Option<PyReadonlyArray1<'_, f64>>,
+) -> PyResult<Option<f64>> {
+    let pts = points(&points_in, "points")?;
+    let orientation = match (viewpoint, direction) {
+        (Some(v), _) => Orientation::TowardPoint(Point::from(vector3(&v, "viewpoint")?)),
+        (None, Some(d)) => Orientation::TowardDirection(vector3(&d, "direction")?),
+        (None, None) => Orientation::TowardDirection(Vector3::z()),
+    };
+    run(py, move || Ok(binpick_core::scan_noise(&pts, orientation)))
+}
+
 /// Voxel downsampling: (points, normals or None, first indices).
 #[pyfunction]
 #[pyo3(signature = (points_in, normals, voxel_size))]
@@ -174,6 +193,7 @@ fn part_fitting<'py>(
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(estimate_normals, m)?)?;
+    m.add_function(wrap_pyfunction!(scan_noise, m)?)?;
     m.add_function(wrap_pyfunction!(voxel_downsample, m)?)?;
     m.add_function(wrap_pyfunction!(read_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(sample_mesh, m)?)?;

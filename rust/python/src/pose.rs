@@ -1,10 +1,15 @@
 //! Pose-estimation bindings: a prepared model (built once per Model), the frozen [`PpfParams`]
 //! and [`PoseConfig`] in, [`PoseEstimate`]s out.
 
-use crate::convert::{bin_box, bin_box_to_py, branch_layout, indices_to_py, isometry_to_py, matrix4, mesh_from_py};
+use crate::convert::{
+    bin_box, bin_box_to_py, branch_layout, indices_to_py, isometry, isometry_to_py, matrix4, mesh_from_py,
+};
 use crate::convert::{points, points_to_py, real_number, rotations_to_rows, threads, vector3, vectors, whole_number};
 use crate::errors::{run, to_py};
-use binpick_core::{estimate_poses as core_estimate, isometry_from_matrix, CcpConfig, CoarseMethod, DetectConfig};
+use binpick_core::{
+    estimate_poses as core_estimate, isometry_from_matrix, CcpConfig, CoarseMethod, DetectConfig, FreeMotion,
+    SensorModel,
+};
 use binpick_core::{stage_totals, FeatureEvidence, FitQuality, PoseModel, PpfConfig, PpfModel};
 use nalgebra::{Point3, Vector3};
 use numpy::{PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArrayDyn};
@@ -161,6 +166,31 @@ impl PreparedModel {
         Ok(d)
     }
 
+    /// The motions the part's surface hardly constrains and that are no symmetry of it: dicts with
+    /// `kind` ("slide" or "turn"), `axis` (3,) and, for a turn, `point` (3,) on its axis.
+    fn degenerate<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
+        self.inner
+            .degenerate
+            .iter()
+            .map(|m| {
+                let d = PyDict::new(py);
+                match m {
+                    FreeMotion::Slide(a) => {
+                        d.set_item("kind", "slide")?;
+                        d.set_item("axis", a.as_slice().to_vec())?;
+                        d.set_item("point", py.None())?;
+                    }
+                    FreeMotion::Turn(a, p) => {
+                        d.set_item("kind", "turn")?;
+                        d.set_item("axis", a.as_slice().to_vec())?;
+                        d.set_item("point", p.coords.as_slice().to_vec())?;
+                    }
+                }
+                Ok(d)
+            })
+            .collect()
+    }
+
     /// The near-symmetries: dicts with `center` (3,), `axis` (3,), `angle` (radians, None for a
     /// continuous near axis), `agreement` and `feature` (M, 3), the model points that break it.
     fn near_symmetries<'py>(&self, py: Python<'py>) -> PyResult<Vec<Bound<'py, PyDict>>> {
@@ -203,13 +233,15 @@ pub struct PoseConfig {
 impl PoseConfig {
     /// Keyword-only; see `binpick.estimate_poses` for each argument.
     #[new]
-    #[pyo3(signature = (*, bin=None, up=None, method=None, viewpoint=None, d_star=None, min_points=None, max_normal_angle=None, inlier_distance=None, min_fitness=None, min_coverage=None, ccp_closer_radius=None, ccp_tau=None, reference_fraction=None, max_hypotheses=None, max_instances=None, search_instances=None, num_threads=None))]
+    #[pyo3(signature = (*, bin=None, up=None, method=None, viewpoint=None, noise_mm=None, noise_per_m2=None, d_star=None, min_points=None, max_normal_angle=None, inlier_distance=None, min_fitness=None, min_coverage=None, ccp_closer_radius=None, ccp_tau=None, reference_fraction=None, max_hypotheses=None, max_instances=None, search_instances=None, num_threads=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         bin: Option<PyReadonlyArrayDyn<'_, f64>>,
         up: Option<PyReadonlyArray1<'_, f64>>,
         method: Option<&str>,
         viewpoint: Option<PyReadonlyArray1<'_, f64>>,
+        noise_mm: Option<f64>,
+        noise_per_m2: Option<f64>,
         d_star: Option<f64>,
         min_points: Option<usize>,
         max_normal_angle: Option<f64>,
@@ -232,7 +264,7 @@ impl PoseConfig {
         };
         let inner = binpick_core::PoseConfig {
             bin: bin.map(|b| bin_box(&b, "bin")).transpose()?.or(d.bin),
-            up: up.map(|u| vector3(&u, "up")).transpose()?.unwrap_or(d.up),
+            up: up.map(|u| vector3(&u, "up")).transpose()?.or(d.up),
             method: method
                 .map(CoarseMethod::from_name)
                 .transpose()
@@ -255,6 +287,10 @@ impl PoseConfig {
                 Some(v) => Some(Point3::from(vector3(&v, "viewpoint")?)),
                 None => d.viewpoint,
             },
+            sensor: SensorModel {
+                noise_mm: noise_mm.or(d.sensor.noise_mm),
+                noise_per_m2: noise_per_m2.unwrap_or(d.sensor.noise_per_m2),
+            },
             max_instances: max_instances.unwrap_or(d.max_instances),
             search_instances: search_instances.unwrap_or(d.search_instances),
             num_threads: num_threads.map(threads).transpose()?.unwrap_or(d.num_threads),
@@ -267,10 +303,20 @@ impl PoseConfig {
     fn bin<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray2<f64>>> {
         self.inner.bin.as_ref().map(|b| bin_box_to_py(py, b))
     }
-    /// Direction toward the sensor.
+    /// What is up in the bin (toward the sensor), or None: +z, or toward a viewpoint below the scene.
     #[getter]
-    fn up(&self) -> (f64, f64, f64) {
-        triple(&self.inner.up)
+    fn up(&self) -> Option<(f64, f64, f64)> {
+        self.inner.up.map(|u| triple(&u))
+    }
+    /// The sensor's depth noise σ, mm, or None: read from the scan.
+    #[getter]
+    fn noise_mm(&self) -> Option<f64> {
+        self.inner.sensor.noise_mm
+    }
+    /// Growth of the noise with range, mm per m² (σ(r) = noise_mm + noise_per_m2 · r²).
+    #[getter]
+    fn noise_per_m2(&self) -> f64 {
+        self.inner.sensor.noise_per_m2
     }
     /// `"auto"`, `"ppf"`, `"ccp"` or `"centroid"`.
     #[getter]
@@ -354,14 +400,16 @@ impl PoseConfig {
             .bin
             .map(|b| format!("({:?}, {:?})", triple(&b.min.coords), triple(&b.max.coords)));
         format!(
-            "PoseConfig(bin={}, up={:?}, method='{}', viewpoint={}, d_star={}, min_points={}, max_normal_angle={:?}, \
+            "PoseConfig(bin={}, up={}, method='{}', viewpoint={}, noise_mm={}, noise_per_m2={:?}, d_star={}, min_points={}, max_normal_angle={:?}, \
              inlier_distance={}, min_fitness={:?}, min_coverage={:?}, ccp_closer_radius={}, ccp_tau={}, \
              reference_fraction={:?}, max_hypotheses={}, max_instances={}, search_instances={}, num_threads={})",
             bin.unwrap_or_else(|| "None".into()),
-            triple(&c.up),
+            c.up.map_or("None".into(), |u| format!("{:?}", triple(&u))),
             c.method.name(),
             c.viewpoint
                 .map_or("None".into(), |p| format!("{:?}", triple(&p.coords))),
+            or_none(c.sensor.noise_mm),
+            c.sensor.noise_per_m2,
             or_none(c.d_star),
             or_none(c.min_points),
             c.max_normal_angle,
@@ -556,11 +604,31 @@ fn estimate_poses(
     Ok(found.into_iter().map(|inner| PoseEstimate { inner }).collect())
 }
 
+/// The verdict on a given pose `T_scene_model` (4×4), judged as found ones are.
+#[pyfunction]
+#[pyo3(name = "verify_pose")]
+fn verify_pose_py(
+    py: Python<'_>,
+    scene: PyReadonlyArray2<'_, f64>,
+    model: &PreparedModel,
+    config: &PoseConfig,
+    t_scene_model: PyReadonlyArray2<'_, f64>,
+) -> PyResult<PoseEstimate> {
+    let pts = points(&scene, "scene")?;
+    let t = isometry(&t_scene_model, "T_scene_model")?;
+    let cfg = config.inner.clone();
+    let model = model.inner.clone();
+    let inner = run(py, move || binpick_core::verify_pose(&pts, &model, &cfg, &t))?;
+    Ok(PoseEstimate { inner })
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PpfParams>()?;
     m.add_class::<PreparedModel>()?;
     m.add_class::<PoseConfig>()?;
     m.add_class::<PoseEstimate>()?;
     m.add_function(wrap_pyfunction!(estimate_poses, m)?)?;
+    m.add_function(wrap_pyfunction!(verify_pose_py, m)?)?;
+    m.add("MAX_NOISE_MM", binpick_core::MAX_NOISE_MM)?;
     Ok(())
 }

@@ -72,6 +72,17 @@ pub fn covariance(points: &[Point]) -> (Point, Matrix3<f64>) {
     covariance_of(points.iter())
 }
 
+/// The eigenvalues of a symmetric 3×3 matrix, smallest first, with their unit eigenvectors.
+pub fn eigen_ascending(m: Matrix3<f64>) -> ([f64; 3], [Vector3<f64>; 3]) {
+    let eig = m.symmetric_eigen();
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&i, &j| eig.eigenvalues[i].total_cmp(&eig.eigenvalues[j]));
+    (
+        order.map(|i| eig.eigenvalues[i]),
+        order.map(|i| eig.eigenvectors.column(i).into_owned()),
+    )
+}
+
 /// Principal axes of a covariance: eigenvalues sorted descending with their unit eigenvectors.
 pub fn principal_axes(cov: &Matrix3<f64>) -> ([f64; 3], [Vector3<f64>; 3]) {
     let eig = SymmetricEigen::new(*cov);

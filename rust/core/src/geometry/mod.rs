@@ -9,8 +9,8 @@ mod plane;
 pub(crate) use camera::PerCamera;
 pub use camera::{Camera, RayTable};
 pub use cloud::{
-    centroid, check_count, check_finite, check_spread, covariance, covariance_of, extreme_axis, isometry_from_matrix,
-    principal_axes, transform_points, Point,
+    centroid, check_count, check_finite, check_spread, covariance, covariance_of, eigen_ascending, extreme_axis,
+    isometry_from_matrix, principal_axes, transform_points, Point,
 };
 pub use kabsch::kabsch;
 pub use plane::{BinBox, Plane};

@@ -5,6 +5,7 @@
 //! model points on the scene), give the best few a short ICP, and the winner is refined on all
 //! of the object's points. Their tunables are [`CcpPathParams`].
 
+use super::judge::depth::NOISE_SIGMAS;
 use super::judge::Judge;
 use super::model::PoseModel;
 use super::scene::{scene_indices, Context};
@@ -209,9 +210,11 @@ impl<'a> Checks<'a> {
     fn new(ctx: &Context<'a>, object: &[Point], s: Sampling) -> Self {
         let (model, cfg) = (ctx.model, ctx.cfg);
         let p = &cfg.ccp_path;
-        let tol = cfg
-            .inlier_distance
-            .unwrap_or((2.0 * model.spacing + 1.5 * s.along.min(2.0 * model.spacing)).max(1.0));
+        let tol = cfg.inlier_distance.unwrap_or(
+            (2.0 * model.spacing + 1.5 * s.along.min(2.0 * model.spacing))
+                .max(1.0)
+                .max(NOISE_SIGMAS * ctx.noise),
+        );
         let sample = object
             .iter()
             .step_by(object.len().div_ceil(p.sample_points))
@@ -239,7 +242,7 @@ impl<'a> Checks<'a> {
         Checks {
             model,
             params: p,
-            heights: HeightMap::new(ctx.scene, &ctx.up, (1.5 * s.across).max(0.5)),
+            heights: HeightMap::new(ctx.scene, ctx.view, (1.5 * s.across).max(0.5)),
             probe,
             sample,
             tol,

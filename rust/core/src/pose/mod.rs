@@ -36,18 +36,20 @@ mod tests;
 mod trust;
 mod types;
 
-pub use model::PoseModel;
+pub use model::{FreeMotion, PoseModel};
 pub use types::{
     stage_totals, Alternative, CcpPathParams, CheckIcpParams, CoarseMethod, FeatureEvidence, FineIcpParams, FitQuality,
-    PoseConfig, PoseEstimate, Timings, TrustParams,
+    PoseConfig, PoseEstimate, SensorModel, Timings, TrustParams, MAX_NOISE_MM,
 };
 
 use crate::error::{Error, Result};
 use crate::geometry::Point;
+use crate::registration::verify::inlier_stats;
 use ccp_path::run;
 use judge::Judge;
+use nalgebra::Isometry3;
 use ppf_path::{detect, DetectionScene};
-use scene::{check_scene, remove_bin, Context};
+use scene::{check_scene, remove_bin, scene_noise, Context};
 use std::time::Instant;
 use trust::trusted;
 
@@ -63,8 +65,33 @@ pub fn estimate_pose(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Re
 /// baseline find the top object only; PPF finds every instance it can confirm.
 pub fn estimate_poses(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<PoseEstimate>> {
     cfg.validate()?;
-    crate::parallel::with_threads(cfg.num_threads, || dispatch(scene, model, cfg))
+    crate::parallel::with_threads(cfg.num_threads, || dispatch(scene, model, cfg, None))
 }
+
+/// Judges a given pose `t_scene_model` of `model` in `scene` exactly as [`estimate_poses`] judges
+/// the poses it finds (the one judge, then the trust stage: confidence, alternatives, fit), without
+/// refining it; `NoObjectFound` says which test it fails. For a pose from elsewhere (another
+/// system, a known placement), or to see what the judge makes of a ground truth.
+pub fn verify_pose(
+    scene: &[Point],
+    model: &PoseModel,
+    cfg: &PoseConfig,
+    t_scene_model: &Isometry3<f64>,
+) -> Result<PoseEstimate> {
+    cfg.validate()?;
+    if !(t_scene_model.translation.vector.iter().all(|v| v.is_finite())
+        && t_scene_model.rotation.coords.iter().all(|v| v.is_finite()))
+    {
+        return Err(Error::invalid("T_scene_model", "must be a finite rigid transform"));
+    }
+    crate::parallel::with_threads(cfg.num_threads, || dispatch(scene, model, cfg, Some(t_scene_model)))
+        .map(|mut found| found.swap_remove(0))
+}
+
+/// The judge's tolerance (three standard deviations of the scan's depth noise) may be at most this
+/// share of the part's diameter: beyond it the noise blurs the part's shape into its neighbours'
+/// (a 5 mm noise on a 200 mm part is 0.075; uniform clutter reads as noise of tens of mm).
+pub const MAX_TOLERANCE_SHARE: f64 = 0.15;
 
 /// The method a model can run: `Auto` is PPF without a branch layout, CCP without a table.
 fn resolve_method(method: CoarseMethod, model: &PoseModel) -> CoarseMethod {
@@ -75,18 +102,42 @@ fn resolve_method(method: CoarseMethod, model: &PoseModel) -> CoarseMethod {
     }
 }
 
-fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<PoseEstimate>> {
+/// The pipeline of one call: a search with the configured method, or (`given`) the verdict on a pose.
+fn dispatch(
+    scene: &[Point],
+    model: &PoseModel,
+    cfg: &PoseConfig,
+    given: Option<&Isometry3<f64>>,
+) -> Result<Vec<PoseEstimate>> {
     let up = check_scene(scene, model, cfg)?;
-    let method = resolve_method(cfg.method, model);
+    let method = match given {
+        Some(_) => CoarseMethod::Given,
+        None => resolve_method(cfg.method, model),
+    };
+    let clock = Instant::now();
+    let view = Context::view_of(cfg, up);
+    let noise = scene_noise(scene, cfg, view);
+    let tol = judge::depth::NOISE_SIGMAS * noise;
+    if tol > MAX_TOLERANCE_SHARE * model.diameter {
+        return Err(Error::NoObjectFound {
+            reason: format!(
+                "the scan's depth noise (σ {noise:.2} mm{}) blurs it by ±{tol:.1} mm, more than {:.0} % of the part's {:.0} mm: no pose of it can be told from its neighbours; scan it closer or with a finer sensor",
+                if cfg.sensor.noise_mm.is_some() { ", as declared" } else { ", read from the scan" },
+                100.0 * MAX_TOLERANCE_SHARE,
+                model.diameter
+            ),
+        });
+    }
+    let mut timings = vec![("noise", clock.elapsed().as_secs_f64() * 1e3)];
     // Bin removal: PPF removes support planes itself, on its voxel grid.
     let clock = Instant::now();
     let (kept, removed) = remove_bin(
         scene,
         model,
         cfg,
-        matches!(method, CoarseMethod::Ccp | CoarseMethod::Centroid),
+        matches!(method, CoarseMethod::Ccp | CoarseMethod::Centroid | CoarseMethod::Given),
     )?;
-    let mut timings = vec![("bin_removal", clock.elapsed().as_secs_f64() * 1e3)];
+    timings.push(("bin_removal", clock.elapsed().as_secs_f64() * 1e3));
     crate::cancel::check()?;
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
     let ctx = Context {
@@ -96,6 +147,8 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
         model,
         cfg,
         up,
+        view,
+        noise,
     };
     let (found, judge) = match method {
         CoarseMethod::Ccp | CoarseMethod::Centroid => {
@@ -108,6 +161,11 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
             (found, prepared.judge)
         }
         CoarseMethod::Auto => auto(&ctx, &mut timings)?,
+        CoarseMethod::Given => {
+            let judge = Judge::new(&ctx, &pts, removed);
+            let t = given.ok_or_else(|| Error::invalid("method", "\"given\" is verify_pose's: pass the pose to it"))?;
+            (vec![judged_as_given(&ctx, &judge, t)?], judge)
+        }
     };
     let clock = Instant::now();
     crate::cancel::check()?;
@@ -121,6 +179,18 @@ fn dispatch(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<
             ..e
         })
         .collect())
+}
+
+/// A given pose as the judge sees it, unrefined: `NoObjectFound` where it fails a test.
+fn judged_as_given(ctx: &Context<'_>, judge: &Judge, t: &Isometry3<f64>) -> Result<PoseEstimate> {
+    let (t, e) = judge.verdict(ctx.model, t)?;
+    let t = ctx.model.symmetries.canonical(&t);
+    let tol = judge.depth.tol;
+    let indices = scene::scene_indices(ctx.pts, ctx.model, &t, tol);
+    let claimed: Vec<Point> = indices.iter().map(|&i| ctx.pts[i]).collect();
+    let (_, rmse) = inlier_stats(&claimed, ctx.model.target(), &t.inverse(), tol);
+    let e = PoseEstimate::verified(CoarseMethod::Given, t, t, &e, (e.coverage(), rmse), 0, indices);
+    Ok(reindex(e, ctx.kept))
 }
 
 /// Indices of the points a method saw (`kept` of the scene) become scene indices.

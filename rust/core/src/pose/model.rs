@@ -4,7 +4,7 @@
 
 use super::types::TrustParams;
 use crate::error::{Error, Result};
-use crate::geometry::Point;
+use crate::geometry::{eigen_ascending, Point};
 use crate::mesh::{sample_surface, Density, TriMesh};
 use crate::registration::ccp::BranchLayout;
 use crate::registration::ppf::{PpfConfig, PpfModel};
@@ -13,7 +13,7 @@ use crate::search::KdIndex;
 use crate::segment::point_spacing;
 use crate::symmetry::{detect_all_symmetries, NearSymmetry, Symmetries, SymmetryConfig};
 use crate::voxel::subsample;
-use nalgebra::{Isometry3, Vector3};
+use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 use std::f64::consts::TAU;
 
 /// The coarse checks' nearest field: cells of 1/64 of the part's diameter (coarser cells let
@@ -67,6 +67,101 @@ pub struct PoseModel {
     pub surface: Option<IcpTarget>,
     /// With a branch layout: probes on and past each end of each branch (see [`BranchEnd`]).
     pub(crate) branch_ends: Vec<BranchEnd>,
+    /// The motions the part's whole surface hardly constrains and that are no symmetry of it (a
+    /// plate without edges slides in its plane and turns about its normal, a tube without ends
+    /// slides along its axis): no scan can locate the part along them.
+    pub degenerate: Vec<FreeMotion>,
+}
+
+/// A rigid motion of a part that its surface hardly constrains (model frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum FreeMotion {
+    /// A slide along a unit direction.
+    Slide(Vector3<f64>),
+    /// A turn about a unit axis through a point.
+    Turn(Vector3<f64>, Point),
+}
+
+/// A motion is free when moving the part by a tenth of its size along it moves its surface off
+/// itself by less than a hundredth of that size (root mean square over the surface): the
+/// constraint's eigenvalue per sample, against the motion's size, is below this (0.1² · …).
+const FREE_SHARE: f64 = 0.01;
+/// Samples the degeneracy is judged on, at most.
+const FREE_SAMPLES: usize = 4000;
+/// A free turn is a symmetry (a surface of revolution) when this share of the samples turned by
+/// [`REVOLUTION_TURN`] lies on the surface.
+const REVOLUTION_SHARE: f64 = 0.98;
+/// The turn (radians) a free turn is tried at.
+const REVOLUTION_TURN: f64 = 0.5;
+
+/// A free turn within about 10° of a continuous near-symmetry's axis is that near-symmetry.
+const NEAR_AXIS_COS: f64 = 0.985;
+
+/// The free motions of a surface sampled by `points` with `normals` (see [`PoseModel::degenerate`]),
+/// `target` the samples' search structure and `spacing` their spacing. A turn about the axis of a
+/// continuous near-symmetry (a shaft with a keyway) is not one: its feature decides it, which the
+/// trust stage weighs.
+fn free_motions(
+    points: &[Point],
+    normals: &[Vector3<f64>],
+    target: &IcpTarget,
+    spacing: f64,
+    near: &[NearSymmetry],
+) -> Vec<FreeMotion> {
+    let stride = points.len().div_ceil(FREE_SAMPLES).max(1);
+    let q: Vec<(Point, Vector3<f64>)> = points
+        .iter()
+        .zip(normals)
+        .step_by(stride)
+        .map(|(p, n)| (*p, *n))
+        .collect();
+    let n = q.len() as f64;
+    if q.len() < 12 {
+        return Vec::new();
+    }
+    let c = Constraints::of(&q);
+    let mut free = Vec::new();
+    let (values, vectors) = c.slides();
+    for (v, d) in values.iter().zip(vectors) {
+        if *v < FREE_SHARE * n {
+            free.push(FreeMotion::Slide(d));
+        }
+    }
+    let r2 = q
+        .iter()
+        .map(|(p, _)| (p.coords - c.centroid).norm_squared())
+        .sum::<f64>()
+        / n;
+    let Some((values, vectors)) = c.turns() else {
+        return free;
+    };
+    for (v, axis) in values.iter().zip(vectors) {
+        let Some(at) = c.axis_point(&axis) else { continue };
+        let near_axis = near
+            .iter()
+            .any(|s| s.angle.is_none() && s.axis.dot(&axis).abs() > NEAR_AXIS_COS);
+        if *v >= FREE_SHARE * n * r2 || near_axis {
+            continue;
+        }
+        let turn = Translation3::from(at.coords)
+            * UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(axis), REVOLUTION_TURN)
+            * Translation3::from(-at.coords);
+        let reach = 2.0 * spacing;
+        let on = q
+            .iter()
+            .filter(|(p, _)| {
+                let t = turn * p;
+                target
+                    .search()
+                    .nearest_within(&[t.x, t.y, t.z], reach * reach)
+                    .is_some()
+            })
+            .count();
+        if (on as f64) < REVOLUTION_SHARE * n {
+            free.push(FreeMotion::Turn(axis, at));
+        }
+    }
+    free
 }
 
 impl PoseModel {
@@ -110,7 +205,15 @@ impl PoseModel {
             Some(layout) => branch_ends(layout, spacing, &target),
             None => Vec::new(),
         };
+        let degenerate = free_motions(
+            target.points(),
+            target.normals().unwrap_or(&[]),
+            &target,
+            spacing,
+            &near_symmetries,
+        );
         Ok(PoseModel {
+            degenerate,
             branch_ends,
             target,
             diameter,
@@ -301,4 +404,67 @@ pub(super) fn turns_of(n: &NearSymmetry, p: &TrustParams) -> Vec<Turn> {
 /// The turns of every near-symmetry of `model` (see [`turns_of`]).
 pub(super) fn near_turns(model: &PoseModel, p: &TrustParams) -> Vec<Turn> {
     model.near_symmetries.iter().flat_map(|n| turns_of(n, p)).collect()
+}
+
+/// How surface samples with normals hold a rigid motion: the point-to-plane constraints of a small
+/// turn ω about their centroid c and slide t, each sample's row J = [(p − c) × n; n]. A motion the
+/// samples barely constrain (a small eigenvalue) moves their surface along itself: a cylinder
+/// turns about and slides along its axis, a plane slides in itself and turns about its normal.
+pub(crate) struct Constraints {
+    /// The samples' centroid.
+    pub centroid: Vector3<f64>,
+    /// Σ (p − c) × n ((p − c) × n)ᵀ: turns alone.
+    turn: Matrix3<f64>,
+    /// Σ (p − c) × n nᵀ: turns against slides.
+    mixed: Matrix3<f64>,
+    /// Σ n nᵀ: slides alone.
+    slide: Matrix3<f64>,
+}
+
+impl Constraints {
+    /// The constraints of `q` (points with unit normals).
+    pub fn of(q: &[(Point, Vector3<f64>)]) -> Self {
+        let n = q.len().max(1) as f64;
+        let centroid = q.iter().fold(Vector3::zeros(), |s, (p, _)| s + p.coords) / n;
+        let (mut turn, mut mixed, mut slide) = (Matrix3::zeros(), Matrix3::zeros(), Matrix3::zeros());
+        for (p, nrm) in q {
+            let r = (p.coords - centroid).cross(nrm);
+            turn += r * r.transpose();
+            mixed += r * nrm.transpose();
+            slide += nrm * nrm.transpose();
+        }
+        Constraints {
+            centroid,
+            turn,
+            mixed,
+            slide,
+        }
+    }
+
+    /// The slides' constraint, weakest first: eigenvalues (per sample, summed) and unit directions.
+    pub fn slides(&self) -> ([f64; 3], [Vector3<f64>; 3]) {
+        eigen_ascending(self.slide)
+    }
+
+    /// The slides' constraint inverted, slightly regularised (a flat patch leaves some slides free).
+    fn slide_inverse(&self) -> Option<Matrix3<f64>> {
+        let reg = 1e-9 * self.slide.trace().max(1e-12);
+        (self.slide + Matrix3::identity() * reg).try_inverse()
+    }
+
+    /// The turns' constraint with the slide that best accompanies each turn taken out (the Schur
+    /// complement), weakest first: eigenvalues (mm² per sample, summed) and unit axes.
+    pub fn turns(&self) -> Option<([f64; 3], [Vector3<f64>; 3])> {
+        let cinv = self.slide_inverse()?;
+        Some(eigen_ascending(self.turn - self.mixed * cinv * self.mixed.transpose()))
+    }
+
+    /// A point on the axis of the turn about `omega` with its best slide: the translation that
+    /// accompanies a turn about an axis through the centroid moves the axis to where the turn
+    /// keeps the surface on itself.
+    pub fn axis_point(&self, omega: &Vector3<f64>) -> Option<Point> {
+        let cinv = self.slide_inverse()?;
+        let dt = -(cinv * self.mixed.transpose() * omega);
+        Some(Point::from(self.centroid + omega.cross(&dt) / omega.norm_squared()))
+    }
 }

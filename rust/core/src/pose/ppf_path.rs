@@ -12,7 +12,7 @@ use super::scene::{scene_indices, Context};
 use super::types::{CoarseMethod, Laps, PoseConfig, PoseEstimate, Timings};
 use crate::error::{Error, Result};
 use crate::geometry::Point;
-use crate::normals::{normals_at, Orientation};
+use crate::normals::{normals_at, surfaces_at, MAX_NORMALS_K};
 use crate::registration::ppf::{DetectConfig, Hypothesis, PpfModel};
 use crate::registration::verify::{depth_evidence, Evidence};
 use crate::registration::{icp, Convergence, IcpConfig};
@@ -213,17 +213,41 @@ pub(super) fn detect(
     Ok((out, scene))
 }
 
+/// Neighbours a voting sample's normal is fitted to, at least.
+const NORMAL_NEIGHBOURS: usize = 10;
+/// A voting sample's normal may tilt by noise this much (radians, a standard deviation): under
+/// the 6° of one angle bin of the feature table.
+const NORMAL_TILT: f64 = 0.08;
+
+/// Neighbours a voting normal is fitted to on voxels `voxel` mm apart with depth noise σ `noise`
+/// mm: a plane through k points of a disc (radius about voxel·√(k/π)) tilts by about
+/// 2σ / (r √k) = 2√π σ / (voxel k), so k ≥ 2√π σ / (voxel · [`NORMAL_TILT`]); at least
+/// [`NORMAL_NEIGHBOURS`], at most [`MAX_NORMALS_K`].
+fn normal_neighbours(noise: f64, voxel: f64) -> usize {
+    let k = 2.0 * std::f64::consts::PI.sqrt() * noise / (voxel * NORMAL_TILT);
+    if k.is_finite() {
+        (k.ceil() as usize).clamp(NORMAL_NEIGHBOURS, MAX_NORMALS_K)
+    } else {
+        NORMAL_NEIGHBOURS
+    }
+}
+
 /// Pose hypotheses from the votes of the voxel grid's even subsample at the PPF step.
 fn vote(scene: &DetectionScene, ctx: &Context<'_>, ppf: &PpfModel, laps: &mut Laps<'_>) -> Result<Vec<Hypothesis>> {
     let cfg = ctx.cfg;
     let keep = subsample(&scene.fine, ppf.step());
-    let sparse: Vec<Point> = keep.iter().map(|&i| scene.fine[i]).collect();
-    let orientation = match cfg.viewpoint {
-        Some(v) => Orientation::TowardPoint(v),
-        None => Orientation::TowardDirection(ctx.up),
+    let mut sparse: Vec<Point> = keep.iter().map(|&i| scene.fine[i]).collect();
+    // Only the voting samples need normals (ICP uses the model's). Where the noise widens their
+    // neighbourhoods, the samples move onto the fitted surface too: a pair's distance is a
+    // feature, quantised in PPF steps not much larger than the noise.
+    let k = normal_neighbours(ctx.noise, voxel_size(ppf.step()));
+    let sparse_normals = if k > NORMAL_NEIGHBOURS {
+        let fitted = surfaces_at(&sparse, &scene.fine, &scene.fine_index, k, ctx.view);
+        sparse = fitted.iter().map(|f| f.0).collect();
+        fitted.into_iter().map(|f| f.1).collect()
+    } else {
+        normals_at(&sparse, &scene.fine, &scene.fine_index, k, ctx.view)
     };
-    // Only the voting samples need normals (ICP uses the model's).
-    let sparse_normals = normals_at(&sparse, &scene.fine, &scene.fine_index, 10, orientation);
     let sparse_index = KdIndex::new(&sparse);
     laps.lap("normals");
     let detect_cfg = DetectConfig {

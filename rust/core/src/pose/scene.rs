@@ -6,6 +6,7 @@ use super::model::PoseModel;
 use super::types::PoseConfig;
 use crate::error::{Error, Result};
 use crate::geometry::{check_finite, Plane, Point};
+use crate::normals::Orientation;
 use crate::search::KdIndex;
 use crate::segment::{could_hold_support_plane, crop_to_bin, point_spacing, remove_support_planes};
 use nalgebra::{Isometry3, Vector3};
@@ -24,12 +25,49 @@ pub(super) struct Context<'a> {
     pub model: &'a PoseModel,
     /// The configuration.
     pub cfg: &'a PoseConfig,
-    /// Unit direction toward the sensor: `cfg.up` as [`check_scene`] checked and normalised it.
+    /// Unit direction out of the bin, toward the sensor: `cfg.up` as [`check_scene`] checked and
+    /// resolved it.
     pub up: Vector3<f64>,
+    /// How the sensor sees the scene: from its viewpoint when known, else along `up`.
+    pub view: Orientation,
+    /// The standard deviation of the scan's depth noise, mm: declared ([`crate::pose::types::SensorModel`],
+    /// at the scan's median range) or read from the scan ([`crate::scan_noise`]); 0 where neither says.
+    pub noise: f64,
 }
 
-/// Checks the scene against the model and the configuration's `up`; returns `up` normalised,
-/// the direction every stage reads.
+impl Context<'_> {
+    /// The sensor's view of a scene whose up is `up`: from `cfg.viewpoint` when given.
+    pub fn view_of(cfg: &PoseConfig, up: Vector3<f64>) -> Orientation {
+        match cfg.viewpoint {
+            Some(v) => Orientation::TowardPoint(v),
+            None => Orientation::TowardDirection(up),
+        }
+    }
+}
+
+/// Points the declared noise's range is read over, at most (evenly thinned).
+const RANGE_SAMPLES: usize = 2000;
+
+/// The standard deviation of `scene`'s depth noise, mm, as `cfg.sensor` declares it or, without
+/// a declaration, as the scan shows it (see [`Context::noise`]).
+pub(super) fn scene_noise(scene: &[Point], cfg: &PoseConfig, view: Orientation) -> f64 {
+    let range = match view {
+        Orientation::TowardPoint(v) => {
+            let stride = scene.len().div_ceil(RANGE_SAMPLES).max(1);
+            let mut r: Vec<f64> = scene.iter().step_by(stride).map(|p| (p - v).norm()).collect();
+            let mid = r.len() / 2;
+            r.select_nth_unstable_by(mid, f64::total_cmp).1.to_owned()
+        }
+        Orientation::TowardDirection(_) => 0.0,
+    };
+    cfg.sensor
+        .sigma_at(range)
+        .or_else(|| crate::scan_noise(scene, view))
+        .unwrap_or(0.0)
+}
+
+/// Checks the scene against the model and the configuration's `up`; returns `up` normalised (or,
+/// without one, resolved: see [`PoseConfig::up`]), the direction every stage reads.
 pub(super) fn check_scene(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vector3<f64>> {
     check_finite("scene", scene)?;
     if scene.len() < 10 {
@@ -40,8 +78,10 @@ pub(super) fn check_scene(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) 
             hint: "; pass the scan's points".into(),
         });
     }
-    if !(cfg.up.norm() > 0.0) {
-        return Err(Error::invalid("up", "must be a non-zero direction"));
+    if let Some(up) = cfg.up {
+        if !(up.norm() > 0.0 && up.iter().all(|v| v.is_finite())) {
+            return Err(Error::invalid("up", "must be a finite non-zero direction"));
+        }
     }
     let (lo, hi) = scene
         .iter()
@@ -56,8 +96,53 @@ pub(super) fn check_scene(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) 
             ),
         ));
     }
-    Ok(cfg.up.normalize())
+    let centroid = crate::geometry::centroid(scene);
+    if cfg.up.is_none() && cfg.viewpoint.is_none() && in_a_camera_frame(scene, &centroid) {
+        return Err(Error::invalid(
+            "viewpoint",
+            "the scene lies in front of the origin along +z, as in a depth camera's own frame (+z away from the camera), where +z is not up: say where the sensor is, viewpoint=(0, 0, 0) for the camera's frame (binpick estimate --camera-frame), or that +z is up after all with up=(0, 0, 1)",
+        ));
+    }
+    let toward_sensor = cfg.viewpoint.map(|v| v - centroid);
+    match (cfg.up, toward_sensor) {
+        (Some(up), Some(v)) if up.dot(&v) <= 0.0 => Err(Error::invalid(
+            "up",
+            format!(
+                "points away from the sensor at the viewpoint ({:.0}, {:.0}, {:.0}) mm: the bin's up must face the sensor that sees into it; in the camera's own frame (+z away from the camera) leave up out",
+                v.x + centroid.x,
+                v.y + centroid.y,
+                v.z + centroid.z
+            ),
+        )),
+        (Some(up), _) => Ok(up.normalize()),
+        // A sensor looks into the bin from above: a viewpoint below the scene along +z says the
+        // scene is in the sensor's own frame, where "up" is toward the sensor.
+        (None, Some(v)) if !(v.z > UP_FROM_VIEW_COS * v.norm()) => Ok(v.try_normalize(1e-9).unwrap_or(Vector3::z())),
+        (None, _) => Ok(Vector3::z()),
+    }
 }
+
+/// Whether `scene` (with centroid `centroid`) looks like a cloud in a camera's own frame: every
+/// point in front of the origin along +z within a field of view up to about 100° across, and the
+/// scene centred on the optical axis (within about 17°). A cell's base frame has its floor near
+/// z = 0, or its bin away from the base's axis.
+fn in_a_camera_frame(scene: &[Point], centroid: &Point) -> bool {
+    centroid.z > 0.0
+        && centroid.x.hypot(centroid.y) <= CAMERA_AXIS_SHARE * centroid.z
+        && scene
+            .iter()
+            .all(|p| p.z > 0.0 && p.x.abs().max(p.y.abs()) <= CAMERA_FIELD_SHARE * p.z)
+}
+
+/// See [`in_a_camera_frame`]: the largest tangent of the field of view's half angle, and of the
+/// scene centroid's angle off the optical axis.
+const CAMERA_FIELD_SHARE: f64 = 1.2;
+const CAMERA_AXIS_SHARE: f64 = 0.3;
+
+/// Without an `up`, scene +z is up when the direction from the scene to the viewpoint lies within
+/// about 80° of it (a camera tilted up to 80° from vertical); otherwise the direction to the
+/// viewpoint is.
+const UP_FROM_VIEW_COS: f64 = 0.17;
 
 /// Scene indices inside the bin box (all without one), and — with `planes` and no box — without
 /// the support planes wider than the part, which are returned too.

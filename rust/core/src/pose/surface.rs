@@ -4,7 +4,7 @@
 
 use super::model::PoseModel;
 use crate::geometry::Point;
-use nalgebra::{Isometry3, Matrix3, Vector3};
+use nalgebra::Isometry3;
 
 /// Every k-th point of `v`, so that at most about `n` remain.
 pub(super) fn thin(v: &[Point], n: usize) -> Vec<Point> {
@@ -60,15 +60,4 @@ pub(super) fn median(mut v: Vec<f64>, fewest: usize) -> Option<f64> {
     }
     let mid = v.len() / 2;
     Some(*v.select_nth_unstable_by(mid, f64::total_cmp).1)
-}
-
-/// The eigenvalues of a symmetric 3×3 matrix, smallest first, with their unit eigenvectors.
-pub(super) fn eigen_ascending(m: Matrix3<f64>) -> ([f64; 3], [Vector3<f64>; 3]) {
-    let eig = m.symmetric_eigen();
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&i, &j| eig.eigenvalues[i].total_cmp(&eig.eigenvalues[j]));
-    (
-        order.map(|i| eig.eigenvalues[i]),
-        order.map(|i| eig.eigenvectors.column(i).into_owned()),
-    )
 }

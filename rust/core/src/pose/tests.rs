@@ -4,7 +4,7 @@
 
 use super::judge::Judge;
 use super::ppf_path::DetectionScene;
-use super::scene::{remove_bin, Context};
+use super::scene::{check_scene, remove_bin, scene_noise, Context};
 use super::*;
 use crate::geometry::{transform_points, BinBox, Plane};
 use crate::mesh::parts::{tee, TeeParams};
@@ -73,13 +73,17 @@ pub(super) fn context<'a>(
     model: &'a PoseModel,
     cfg: &'a PoseConfig,
 ) -> Context<'a> {
+    let up = check_scene(scene, model, cfg).expect("a scene the test checked");
+    let view = Context::view_of(cfg, up);
     Context {
         scene,
         kept: &[],
         pts,
         model,
         cfg,
-        up: cfg.up.normalize(),
+        up,
+        view,
+        noise: scene_noise(scene, cfg, view),
     }
 }
 
@@ -411,4 +415,68 @@ fn stage_totals_add_up_the_runs_of_a_stage_in_first_run_order() {
     let laps = vec![("a", 1.0), ("b", 2.0), ("a", 3.0), ("c", 0.5), ("b", 1.0)];
     assert_eq!(stage_totals(&laps), vec![("a", 4.0), ("b", 3.0), ("c", 0.5)]);
     assert!(stage_totals(&[]).is_empty());
+}
+
+/// `scene` with noise of σ `sigma` along +z (the ray of a sensor straight above).
+fn noisy(scene: &[Point], sigma: f64, seed: u64) -> Vec<Point> {
+    let mut rng = Rng::new(seed);
+    scene
+        .iter()
+        .map(|p| Point::new(p.x, p.y, p.z + sigma * rng.normal()))
+        .collect()
+}
+
+#[test]
+fn the_judges_tolerance_follows_the_scans_noise_and_its_geometry_below_it() {
+    let (model, mesh) = tee_model();
+    let mut rng = Rng::new(4);
+    let truth = random_pose(&mut rng);
+    let clean = top_view(mesh, &truth, 4);
+    let cfg = config(CoarseMethod::Ppf);
+    let tol_of = |scene: &[Point], cfg: &PoseConfig| judge_of(scene, scene, Vec::new(), model, cfg).depth.tol;
+    // Low noise: the geometric tolerance (0.12 of the PPF step, at least 1 mm), as before.
+    let geometric = judge::depth::tolerance(judge::depth::judge_step(model), 0.0);
+    assert_eq!(tol_of(&clean, &cfg), geometric);
+    // A noisier sensor: three standard deviations of the noise the scan shows ...
+    for sigma in [1.0, 2.0] {
+        let tol = tol_of(&noisy(&clean, sigma, 5), &cfg);
+        assert!(
+            (tol / (3.0 * sigma) - 1.0).abs() < 0.15,
+            "σ {sigma}: tolerance {tol:.2}"
+        );
+    }
+    // ... or of the noise declared, whatever the scan shows.
+    let declared = PoseConfig {
+        sensor: SensorModel {
+            noise_mm: Some(1.5),
+            noise_per_m2: 0.0,
+        },
+        ..cfg.clone()
+    };
+    assert!((tol_of(&clean, &declared) - 4.5).abs() < 1e-9);
+    // And the pose is still found where the tolerance widened with the noise.
+    let est = estimate_pose(&noisy(&clean, 1.5, 6), model, &cfg).unwrap();
+    let (rot, shift) = model.symmetries.pose_error(&est.t_scene_model, &truth);
+    assert!(
+        rot.to_degrees() < 3.0 && shift < 2.0,
+        "{:.2}° {shift:.2} mm",
+        rot.to_degrees()
+    );
+}
+
+#[test]
+fn noise_larger_than_the_part_can_resolve_is_no_object_and_says_so() {
+    let (model, mesh) = tee_model();
+    let scene = top_view(mesh, &random_pose(&mut Rng::new(9)), 9);
+    let cfg = PoseConfig {
+        sensor: SensorModel {
+            noise_mm: Some(0.06 * model.diameter),
+            noise_per_m2: 0.0,
+        },
+        ..config(CoarseMethod::Ppf)
+    };
+    match estimate_poses(&scene, model, &cfg) {
+        Err(Error::NoObjectFound { reason }) => assert!(reason.contains("depth noise"), "{reason}"),
+        other => panic!("expected NoObjectFound, got {other:?}"),
+    }
 }

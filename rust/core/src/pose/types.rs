@@ -59,6 +59,8 @@ pub enum CoarseMethod {
     Ppf,
     /// PPF, and CCP too where the model has a branch layout; the verified winner is kept.
     Auto,
+    /// No search: a pose given to [`verify_pose`](super::verify_pose), judged as found ones are.
+    Given,
 }
 
 impl CoarseMethod {
@@ -69,6 +71,7 @@ impl CoarseMethod {
             CoarseMethod::Centroid => "centroid",
             CoarseMethod::Ppf => "ppf",
             CoarseMethod::Auto => "auto",
+            CoarseMethod::Given => "given",
         }
     }
 
@@ -91,14 +94,66 @@ impl CoarseMethod {
 /// default ([`PoseConfig::search_instances`]), so that asking for fewer only truncates the answer.
 pub const SEARCH_INSTANCES: usize = 5;
 
+/// The sensor's depth noise, which every tolerance of the judge derives from (its depth test,
+/// the inliers of a pose, the reach of its refinement, the scale of the scan's normals).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SensorModel {
+    /// Standard deviation of the depth noise along the sensor's rays, mm (at range 0 when it
+    /// grows with range); `None`: read from the scan itself ([`crate::scan_noise`]).
+    pub noise_mm: Option<f64>,
+    /// Growth of the noise with the range r from the viewpoint:
+    /// σ(r) = `noise_mm` + `noise_per_m2` · (r / 1000 mm)², in mm per square metre (a triangulating
+    /// depth camera's noise grows as the square of its range). Needs `noise_mm` and a viewpoint;
+    /// the judge takes σ at the median range of the scan. Default 0.
+    pub noise_per_m2: f64,
+}
+
+impl SensorModel {
+    /// Checks the values (and that a growth comes with a noise and a viewpoint).
+    pub fn validate(&self, viewpoint: Option<&Point>) -> Result<()> {
+        if let Some(v) = self.noise_mm {
+            if !(v.is_finite() && v > 0.0 && v <= MAX_NOISE_MM) {
+                return Err(Error::invalid(
+                    "noise_mm",
+                    format!("must be a positive number of mm up to {MAX_NOISE_MM}, got {v}; leave it out to read the noise from the scan"),
+                ));
+            }
+        }
+        let g = self.noise_per_m2;
+        if !(g.is_finite() && (0.0..=MAX_NOISE_MM).contains(&g)) {
+            return Err(Error::invalid(
+                "noise_per_m2",
+                format!("must be a number of mm per m² in [0, {MAX_NOISE_MM}], got {g}"),
+            ));
+        }
+        if g > 0.0 && (self.noise_mm.is_none() || viewpoint.is_none()) {
+            return Err(Error::invalid(
+                "noise_per_m2",
+                "a noise growing with range needs noise_mm (the noise at the sensor) and the viewpoint its range is measured from",
+            ));
+        }
+        Ok(())
+    }
+
+    /// The declared noise at range `range` (mm), or `None` where the noise is to be read from the scan.
+    pub fn sigma_at(&self, range: f64) -> Option<f64> {
+        self.noise_mm.map(|s| s + self.noise_per_m2 * (range / 1000.0).powi(2))
+    }
+}
+
+/// The largest depth noise binpick takes, mm (a depth camera at the end of its range reads tens).
+pub const MAX_NOISE_MM: f64 = 100.0;
+
 /// Parameters of [`estimate_pose`](super::estimate_pose); `None` fields take defaults derived from the scan's point
 /// spacing and the model's size.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PoseConfig {
     /// The bin box in the scene frame; without it, support planes are found and removed.
     pub bin: Option<BinBox>,
-    /// Direction toward the sensor (scene +z by default).
-    pub up: Vector3<f64>,
+    /// What is up in the bin: the direction out of it, toward the sensor. `None` (the default):
+    /// scene +z, unless the viewpoint lies on the far side of the scene along +z (a scene in the
+    /// camera's frame, whose +z points away from the camera), then the direction toward it.
+    pub up: Option<Vector3<f64>>,
     /// Coarse-pose method.
     pub method: CoarseMethod,
     /// d* of segmentation, mm (default: 3 × the scan's point spacing, at least 1.6 × the spacing
@@ -125,9 +180,12 @@ pub struct PoseConfig {
     pub detect: DetectConfig,
     /// Tunables of the disambiguation of near-symmetric poses and of the confidence.
     pub trust: TrustParams,
-    /// The sensor's position in the scene frame, mm, when known (orients the scan's normals;
-    /// otherwise they face `up`).
+    /// The sensor's optical centre in the scene frame, mm, when known: the depth test then looks
+    /// along the sensor's own rays (an oblique camera, a scene in the camera's frame), and the
+    /// scan's normals face it; otherwise both look along `up`.
     pub viewpoint: Option<Point>,
+    /// The sensor's depth noise (declared, or read from the scan).
+    pub sensor: SensorModel,
     /// Instances returned by [`estimate_poses`](super::estimate_poses).
     pub max_instances: usize,
     /// Instances the PPF search is sized for (hypotheses refined, poses polished) when more than
@@ -142,7 +200,7 @@ impl Default for PoseConfig {
     fn default() -> Self {
         PoseConfig {
             bin: None,
-            up: Vector3::z(),
+            up: None,
             method: CoarseMethod::Auto,
             d_star: None,
             min_points: None,
@@ -155,6 +213,7 @@ impl Default for PoseConfig {
             detect: DetectConfig::default(),
             trust: TrustParams::default(),
             viewpoint: None,
+            sensor: SensorModel::default(),
             max_instances: 1,
             search_instances: SEARCH_INSTANCES,
             num_threads: 0,
@@ -207,7 +266,7 @@ impl PoseConfig {
                 return Err(Error::invalid("viewpoint", "must be a finite point"));
             }
         }
-        Ok(())
+        self.sensor.validate(self.viewpoint.as_ref())
     }
 }
 

@@ -13,14 +13,23 @@
 
 use super::icp::IcpTarget;
 use crate::geometry::Point;
+use crate::normals::Orientation;
 use nalgebra::{Isometry3, Vector3};
 
-/// The scan as a height map along `up` on a dense grid.
+/// The scan as a height map seen from the sensor, on a dense grid: orthographic along a
+/// direction toward the sensor (a sensor far above, or a scan merged from many poses), or
+/// perspective from the sensor's optical centre, each cell a bundle of rays. A point's *height*
+/// grows toward the sensor: its distance along the direction, or minus its range from the
+/// centre; each cell keeps its highest scan point, the first surface the sensor saw there.
 pub struct HeightMap {
     e1: Vector3<f64>,
     e2: Vector3<f64>,
-    /// Unit direction toward the sensor.
+    /// Unit direction toward the sensor (the optical axis reversed, for a perspective map).
     pub up: Vector3<f64>,
+    /// The optical centre of a perspective map.
+    eye: Option<Point>,
+    /// A perspective map's lateral coordinates are those at this range, mm (its cells' size there).
+    focal: f64,
     cell: f64,
     origin: (f64, f64),
     size: (usize, usize),
@@ -30,10 +39,10 @@ pub struct HeightMap {
 }
 
 impl HeightMap {
-    /// The height map of `points` with cells of `cell` mm (enlarged if the grid would exceed
-    /// 4 million cells).
-    pub fn new(points: &[Point], up: &Vector3<f64>, cell: f64) -> Self {
-        HeightMap::layout(points, up, cell).filled(points)
+    /// The height map of `points` seen as `view` says (along a direction, or from an optical
+    /// centre), with cells of `cell` mm (enlarged if the grid would exceed 4 million cells).
+    pub fn new(points: &[Point], view: Orientation, cell: f64) -> Self {
+        HeightMap::layout(points, view, cell).filled(points)
     }
 
     /// This grid (from [`HeightMap::layout`]) with the highest of `points` in each cell.
@@ -53,22 +62,55 @@ impl HeightMap {
     }
 
     /// The grid of a map of `points` with cells of `cell` mm (its frame, origin, cell and size),
-    /// holding no cell yet.
-    fn layout(points: &[Point], up: &Vector3<f64>, cell: f64) -> Self {
-        let up = up.normalize();
+    /// holding no cell yet. A perspective map looks along the direction from its centre to the
+    /// points' centroid, its lateral coordinates scaled to the points' median range.
+    fn layout(points: &[Point], view: Orientation, cell: f64) -> Self {
+        let (up, eye, focal) = match view {
+            Orientation::TowardDirection(d) => (d.try_normalize(1e-12).unwrap_or(Vector3::z()), None, 1.0),
+            Orientation::TowardPoint(eye) => {
+                let n = points.len().max(1) as f64;
+                let centroid = points.iter().fold(Vector3::zeros(), |s, p| s + p.coords) / n;
+                let up = (eye.coords - centroid).try_normalize(1e-12).unwrap_or(Vector3::z());
+                let stride = points.len().div_ceil(2000).max(1);
+                let mut ranges: Vec<f64> = points.iter().step_by(stride).map(|p| (p - eye).norm()).collect();
+                let focal = if ranges.is_empty() {
+                    1.0
+                } else {
+                    let mid = ranges.len() / 2;
+                    *ranges.select_nth_unstable_by(mid, f64::total_cmp).1
+                };
+                (
+                    up,
+                    Some(eye),
+                    if focal.is_finite() && focal > 1e-9 { focal } else { 1.0 },
+                )
+            }
+        };
         let e1 = up
             .cross(&if up.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() })
             .normalize();
         let e2 = up.cross(&e1);
+        let mut map = HeightMap {
+            e1,
+            e2,
+            up,
+            eye,
+            focal,
+            cell: 1.0,
+            origin: (0.0, 0.0),
+            size: (1, 1),
+            top: Vec::new(),
+            height: Vec::new(),
+        };
         let (mut lo, mut hi) = ((f64::INFINITY, f64::INFINITY), (f64::NEG_INFINITY, f64::NEG_INFINITY));
         for p in points {
-            let (a, b) = (p.coords.dot(&e1), p.coords.dot(&e2));
+            let Some((a, b, _)) = map.project(p) else { continue };
             lo = (lo.0.min(a), lo.1.min(b));
             hi = (hi.0.max(a), hi.1.max(b));
         }
         // An empty scan, or one whose extent overflows an f64, gets a one-cell map that covers
         // nothing beyond its first cell.
-        if points.is_empty() || !((hi.0 - lo.0).is_finite() && (hi.1 - lo.1).is_finite()) {
+        if !((hi.0 - lo.0).is_finite() && (hi.1 - lo.1).is_finite()) {
             lo = (0.0, 0.0);
             hi = (0.0, 0.0);
         }
@@ -76,17 +118,10 @@ impl HeightMap {
         while ((hi.0 - lo.0) / cell + 1.0) * ((hi.1 - lo.1) / cell + 1.0) > 4e6 {
             cell *= 1.5;
         }
-        let size = (((hi.0 - lo.0) / cell) as usize + 1, ((hi.1 - lo.1) / cell) as usize + 1);
-        HeightMap {
-            e1,
-            e2,
-            up,
-            cell,
-            origin: lo,
-            size,
-            top: Vec::new(),
-            height: Vec::new(),
-        }
+        map.cell = cell;
+        map.origin = lo;
+        map.size = (((hi.0 - lo.0) / cell) as usize + 1, ((hi.1 - lo.1) / cell) as usize + 1);
+        map
     }
 
     /// The height map with the smallest cell, from `cell` up, at which the scan covers its
@@ -94,10 +129,10 @@ impl HeightMap {
     /// while more than a fifth of the occupied cells have empty cells on both sides along a grid
     /// axis (a line pattern; the edge of a surface has them on one side only), up to 8 × `cell`.
     /// The cells tried are judged on which of them hold a point; only the map kept is filled.
-    pub fn fitted(points: &[Point], up: &Vector3<f64>, cell: f64) -> Self {
+    pub fn fitted(points: &[Point], view: Orientation, cell: f64) -> Self {
         let mut c = cell;
         loop {
-            let grid = HeightMap::layout(points, up, c);
+            let grid = HeightMap::layout(points, view, c);
             let mut occupied = vec![false; grid.size.0 * grid.size.1];
             for p in points {
                 if let (Some(k), _) = grid.key(p) {
@@ -111,16 +146,63 @@ impl HeightMap {
         }
     }
 
+    /// `p`'s lateral coordinates on the map's plane (mm; at the reference range for a perspective
+    /// map) and its height; `None` behind a perspective map's centre.
+    #[inline]
+    fn project(&self, p: &Point) -> Option<(f64, f64, f64)> {
+        match self.eye {
+            None => {
+                let v = p.coords;
+                Some((v.dot(&self.e1), v.dot(&self.e2), v.dot(&self.up)))
+            }
+            Some(eye) => {
+                let d = p - eye;
+                let z = -d.dot(&self.up);
+                if !(z > 1e-9) {
+                    return None;
+                }
+                let s = self.focal / z;
+                Some((s * d.dot(&self.e1), s * d.dot(&self.e2), -d.norm()))
+            }
+        }
+    }
+
     #[inline]
     fn key(&self, p: &Point) -> (Option<usize>, f64) {
-        let v = p.coords;
-        let a = (v.dot(&self.e1) - self.origin.0) / self.cell;
-        let b = (v.dot(&self.e2) - self.origin.1) / self.cell;
-        let h = v.dot(&self.up);
-        if a < 0.0 || b < 0.0 || a >= self.size.0 as f64 || b >= self.size.1 as f64 {
+        let Some((a, b, h)) = self.project(p) else {
+            return (None, f64::NAN);
+        };
+        let a = (a - self.origin.0) / self.cell;
+        let b = (b - self.origin.1) / self.cell;
+        if !(a >= 0.0 && b >= 0.0 && a < self.size.0 as f64 && b < self.size.1 as f64) {
             return (None, h);
         }
         (Some(a as usize * self.size.1 + b as usize), h)
+    }
+
+    /// The height of `p` on this map: its distance along [`HeightMap::up`], or minus its range
+    /// from a perspective map's centre (higher is nearer the sensor).
+    #[inline]
+    pub fn height(&self, p: &Point) -> f64 {
+        match self.eye {
+            None => p.coords.dot(&self.up),
+            Some(eye) => -(p - eye).norm(),
+        }
+    }
+
+    /// Unit direction from `p` toward the sensor: [`HeightMap::up`], or toward a perspective
+    /// map's centre.
+    #[inline]
+    pub fn toward(&self, p: &Point) -> Vector3<f64> {
+        match self.eye {
+            None => self.up,
+            Some(eye) => (eye - p).try_normalize(1e-12).unwrap_or(self.up),
+        }
+    }
+
+    /// Whether the map looks along one direction (no optical centre).
+    pub fn is_orthographic(&self) -> bool {
+        self.eye.is_none()
     }
 
     /// The grid's size in cells along its two axes.
@@ -144,22 +226,21 @@ impl HeightMap {
         Some(Point::new(t[0] as f64, t[1] as f64, t[2] as f64))
     }
 
-    /// The map's in-plane axes (unit, orthogonal to [`HeightMap::up`] and to each other).
-    pub fn axes(&self) -> (Vector3<f64>, Vector3<f64>) {
-        (self.e1, self.e2)
+    /// Edge of a cell at `p`, mm: the map's cell, scaled by `p`'s range for a perspective map.
+    #[inline]
+    pub fn cell_at(&self, p: &Point) -> f64 {
+        match self.eye {
+            None => self.cell,
+            Some(eye) => self.cell * (p - eye).norm() / self.focal,
+        }
     }
 
-    /// Edge of a cell, mm.
-    pub fn cell(&self) -> f64 {
-        self.cell
-    }
-
-    /// How far a cell's top may lie from a probe of surface whose normal has share `c` along
-    /// [`HeightMap::up`] and still confirm it: `tol`, widened by the cell's rise on that slope
+    /// How far a cell's top may lie from a probe at `p` of surface whose normal has share `c`
+    /// toward the sensor and still confirm it: `tol`, widened by the cell's rise on that slope
     /// (the top of a cell lies up to a cell × tan(slope) above the probe).
     #[inline]
-    pub fn slack(&self, tol: f64, c: f64) -> f64 {
-        tol + self.cell * (1.0 - c * c).sqrt() / c
+    pub fn slack(&self, tol: f64, c: f64, p: &Point) -> f64 {
+        tol + self.cell_at(p) * (1.0 - c * c).sqrt() / c
     }
 
     /// Height of the scan's top surface over `p`'s cell, or `None` where nothing was scanned.
@@ -253,21 +334,27 @@ pub fn depth_evidence_with(
     check_occluders: bool,
     mut on_violated: impl FnMut(Point),
 ) -> Evidence {
-    let up_model = t_scene_model.rotation.inverse() * heights.up;
     let normals = target.normals().unwrap_or(&[]);
     let t_model_scene = t_scene_model.inverse();
     let mut e = Evidence::default();
     let rot = t_scene_model.rotation.to_rotation_matrix().into_inner();
     let shift = t_scene_model.translation.vector;
+    // Looking along one direction, it is one direction in the model's frame too.
+    let up_model = heights
+        .is_orthographic()
+        .then(|| t_scene_model.rotation.inverse() * heights.up);
     for (p, n) in target.points().iter().zip(normals).step_by(step.max(1)) {
-        let c = n.dot(&up_model);
+        let q = Point::from(rot * p.coords + shift);
+        let c = match &up_model {
+            Some(u) => n.dot(u),
+            None => (rot * n).dot(&heights.toward(&q)),
+        };
         if c < 0.3 {
             continue;
         }
         e.facing += 1;
-        let q = Point::from(rot * p.coords + shift);
-        let h = q.coords.dot(&heights.up);
-        let slack = heights.slack(tol, c);
+        let h = heights.height(&q);
+        let slack = heights.slack(tol, c, &q);
         match heights.top_at(&q) {
             // Steep faces go unscanned for many reasons (perspective, laser shadows); only
             // surface within 45° of facing the sensor is expected to be in the scan.
@@ -369,10 +456,10 @@ mod tests {
             Point::new(1e308, 0.0, 0.0),
             Point::new(0.0, 0.0, 1.0),
         ];
-        let map = HeightMap::new(&far, &Vector3::z(), 1.0);
+        let map = HeightMap::new(&far, Orientation::TowardDirection(Vector3::z()), 1.0);
         assert!(map.height.len() <= 4_000_000);
         let offset = [Point::new(1e16, 1e16, 0.0), Point::new(1e16 + 400.0, 1e16 + 300.0, 0.0)];
-        let map = HeightMap::new(&offset, &Vector3::z(), 1.0);
+        let map = HeightMap::new(&offset, Orientation::TowardDirection(Vector3::z()), 1.0);
         assert!(map.height.len() <= 4_000_000);
         assert!(map.top_at(&offset[0]).is_some());
     }
@@ -387,7 +474,7 @@ mod tests {
         let target = IcpTarget::new(plate.clone(), Some(normals)).unwrap();
         let at = |z: f64| Isometry3::from_parts(Translation3::new(0.0, 0.0, z), UnitQuaternion::identity());
         let scan: Vec<Point> = plate.iter().map(|p| at(10.0) * p).collect();
-        let map = HeightMap::new(&scan, &Vector3::z(), 1.0);
+        let map = HeightMap::new(&scan, Orientation::TowardDirection(Vector3::z()), 1.0);
         let e = depth_evidence(&target, &map, &at(10.0), 1, 0.5, true);
         assert_eq!(e.facing, 1600);
         assert_eq!(e.seen, 1600);
@@ -413,10 +500,62 @@ mod tests {
         assert_eq!(e.visible_fraction(), 1.0);
         // A sparse scan (every third row) gets a coarser map without holes.
         let sparse: Vec<Point> = scan.iter().filter(|p| (p.y as i64) % 3 == 0).copied().collect();
-        let fitted = HeightMap::fitted(&sparse, &Vector3::z(), 1.0);
+        let fitted = HeightMap::fitted(&sparse, Orientation::TowardDirection(Vector3::z()), 1.0);
         assert!(fitted.cell > 2.0, "{}", fitted.cell);
         let (fit, rmse) = inlier_stats(&scan, &target, &at(10.0).inverse(), 0.5);
         assert_eq!(fit, 1.0);
         assert!(rmse < 1e-9);
+    }
+}
+
+#[cfg(test)]
+mod perspective_tests {
+    use super::*;
+    use nalgebra::{Translation3, UnitQuaternion};
+
+    /// A 40 × 40 mm plate at z = 10 on a floor at z = 0, seen by a sensor at `eye`: the points
+    /// where the sensor's rays first meet the plate or the floor.
+    fn seen_from(eye: &Point) -> Vec<Point> {
+        let mut out = Vec::new();
+        for i in -200..200 {
+            for j in -200..200 {
+                let floor = Point::new(i as f64 * 0.5, j as f64 * 0.5, 0.0);
+                let ray = floor - eye;
+                // Where the ray to this floor point crosses the plate's plane.
+                let s = (10.0 - eye.z) / ray.z;
+                let at = eye + ray * s;
+                let on_plate = (0.0..40.0).contains(&at.x) && (0.0..40.0).contains(&at.y);
+                out.push(if on_plate { at } else { floor });
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn a_perspective_map_judges_along_the_sensors_rays() {
+        // A sensor 300 mm up and 200 mm aside: a plate's top as it sees it, and the floor past it.
+        let eye = Point::new(-200.0, 20.0, 300.0);
+        let scan = seen_from(&eye);
+        let plate: Vec<Point> = (0..1600)
+            .map(|i| Point::new((i % 40) as f64, (i / 40) as f64, 0.0))
+            .collect();
+        let target = IcpTarget::new(plate, Some(vec![Vector3::z(); 1600])).unwrap();
+        let at = |x: f64, z: f64| Isometry3::from_parts(Translation3::new(x, 0.0, z), UnitQuaternion::identity());
+        let map = HeightMap::new(&scan, Orientation::TowardPoint(eye), 0.5);
+        assert!(!map.is_orthographic());
+        let e = depth_evidence(&target, &map, &at(0.0, 10.0), 1, 0.5, true);
+        assert!(e.seen > 1500 && e.violated <= 16, "{e:?}"); // cells straddling the edge
+                                                             // Lifted toward the sensor: it sees through it along its rays.
+        let e = depth_evidence(&target, &map, &at(0.0, 20.0), 1, 0.5, true);
+        assert!(e.violated > 1000, "{e:?}");
+        // Sunk below the plate: under it along the rays (occluded), but for a strip along the edge
+        // nearest the sensor, whose rays pass under the plate's edge (it is a sheet, not a block).
+        let e = depth_evidence(&target, &map, &at(0.0, 4.0), 1, 0.5, true);
+        assert!(e.occluded > 1000 && e.violated < e.occluded / 5, "{e:?}");
+        // Looked at straight down instead, the oblique scan's floor points past the plate's far
+        // edge lie where a vertical column meets the plate: the rays are what decide.
+        let down = HeightMap::new(&scan, Orientation::TowardDirection(Vector3::z()), 0.5);
+        let e = depth_evidence(&target, &down, &at(0.0, 10.0), 1, 0.5, true);
+        assert!(e.violated > 0 || e.missing > 0, "{e:?}");
     }
 }

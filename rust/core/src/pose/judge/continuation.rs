@@ -62,7 +62,8 @@ pub(crate) fn continuation(depth: &DepthTest, model: &PoseModel, t_scene_model: 
     };
     let (w, h) = map.size();
     let tol = depth.tol;
-    let max_depth = ((REACH * model.diameter) / map.cell()).ceil() as usize;
+    let max_depth =
+        ((REACH * model.diameter) / map.cell_at(&(t_scene_model * model.symmetries.center))).ceil() as usize;
     let parallel = |n: &Vector3<f64>| {
         depth
             .supports
@@ -76,7 +77,7 @@ pub(crate) fn continuation(depth: &DepthTest, model: &PoseModel, t_scene_model: 
     for (p, n) in target.points().iter().zip(normals).step_by(step) {
         let q = t_scene_model * p;
         let n = t_scene_model.rotation * n;
-        if n.dot(&map.up) < MIN_FACING {
+        if n.dot(&map.toward(&q)) < MIN_FACING {
             continue;
         }
         let Some(cell) = map.cell_of(&q) else { continue };

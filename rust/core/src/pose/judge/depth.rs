@@ -40,8 +40,14 @@ pub(crate) struct DepthTest {
     /// Depth-test and inlier tolerance, mm.
     pub tol: f64,
     /// Support surfaces no part can pass through: the bin's floor and walls (from the bin box),
-    /// or the floor-like support planes removed without one; normals point to the free side.
+    /// or the floor-like support planes removed without one that nothing of the scan lies under;
+    /// normals point to the free side.
     pub supports: Vec<Plane>,
+    /// Every floor-like support plane removed without a bin box, normal toward `up`: solid where
+    /// the sensor sees it. A table with the room's floor or the robot's base under its edge is no
+    /// support everywhere (see `supports`), but where the scan shows its surface in front of a
+    /// pose's surface, that surface is inside the table.
+    pub seen_planes: Vec<Plane>,
 }
 
 /// The PPF step of `model` (its table's, or the default table's when it has none): the scale of
@@ -54,11 +60,17 @@ pub(crate) fn judge_step(model: &PoseModel) -> f64 {
         .unwrap_or(PpfConfig::default().sampling_ratio * model.diameter)
 }
 
-/// Tolerance of the depth test and of inliers for a PPF step (mm): 0.12 of the step, not below
-/// 1 mm (scan noise and the voxel means' bias on curved surfaces).
-pub(crate) fn tolerance(step: f64) -> f64 {
-    (0.12 * step).max(1.0)
+/// Tolerance of the depth test and of inliers for a PPF step and the scan's depth noise (σ, mm):
+/// 0.12 of the step, not below 1 mm (the voxel means' bias on curved surfaces, and the noise of
+/// the laser scanners the 1 mm was set for), and not below [`NOISE_SIGMAS`] σ.
+pub(crate) fn tolerance(step: f64, noise: f64) -> f64 {
+    (0.12 * step).max(1.0).max(NOISE_SIGMAS * noise)
 }
+
+/// The depth test's tolerance in standard deviations of the scan's depth noise: a cell's top is
+/// the nearest of its points, on average a standard deviation or more nearer than the surface,
+/// and a confirmed surface must stay confirmed nearly everywhere (3σ leaves one point in 370 out).
+pub(crate) const NOISE_SIGMAS: f64 = 3.0;
 
 /// Voxel size of the detection grid for a PPF step, mm.
 pub(crate) fn voxel_size(step: f64) -> f64 {
@@ -76,16 +88,18 @@ impl DepthTest {
     /// tolerance and cells derive from the model's PPF step ([`judge_step`]).
     pub fn new(ctx: &Context<'_>, remaining: &[Point], removed: Vec<Plane>) -> Self {
         let step = judge_step(ctx.model);
-        let tol = tolerance(step);
+        let tol = tolerance(step, ctx.noise);
         let up = ctx.up;
+        let seen_planes = floors(removed, &up);
         let supports = match &ctx.cfg.bin {
             Some(bin) => bin_walls(bin),
-            None => floors_below(remaining, removed, &up, tol),
+            None => with_nothing_below(remaining, &seen_planes, tol),
         };
         DepthTest {
-            heights: HeightMap::fitted(ctx.scene, &up, (0.5 * voxel_size(step)).max(1.0)),
+            heights: HeightMap::fitted(ctx.scene, ctx.view, (0.5 * voxel_size(step)).max(1.0)),
             tol,
             supports,
+            seen_planes,
         }
     }
 
@@ -143,11 +157,12 @@ impl DepthTest {
 
     /// Fraction of the posed part's surface more than twice the tolerance beyond a support.
     pub fn through_supports(&self, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> f64 {
-        if self.supports.is_empty() {
+        if self.supports.is_empty() && self.seen_planes.is_empty() {
             return 0.0;
         }
         let pts = model.target().points();
         let step = (pts.len() / 500).max(1);
+        let margin = 2.0 * self.tol;
         let inside = pts
             .iter()
             .step_by(step)
@@ -155,7 +170,14 @@ impl DepthTest {
                 let q = t_scene_model * *p;
                 self.supports
                     .iter()
-                    .any(|s| s.normal.dot(&q.coords) < s.offset - 2.0 * self.tol)
+                    .any(|s| s.normal.dot(&q.coords) < s.offset - margin)
+                    || self.seen_planes.iter().any(|s| {
+                        s.normal.dot(&q.coords) < s.offset - margin
+                            && self
+                                .heights
+                                .top_at(&q)
+                                .is_some_and(|(_, top)| (s.normal.dot(&top.coords) - s.offset).abs() <= margin)
+                    })
             })
             .count();
         inside as f64 / pts.len().div_ceil(step) as f64
@@ -184,9 +206,8 @@ fn bin_walls(bin: &BinBox) -> Vec<Plane> {
 }
 
 /// Of the removed support planes, the floors (which side of a wall is free is not known
-/// without the bin) with the scene above them (a bin's rim is a wide plane too, with parts
-/// below), normals toward `up`.
-fn floors_below(remaining: &[Point], planes: Vec<Plane>, up: &Vector3<f64>, tol: f64) -> Vec<Plane> {
+/// without the bin), normals toward `up`.
+fn floors(planes: Vec<Plane>, up: &Vector3<f64>) -> Vec<Plane> {
     planes
         .into_iter()
         .filter(|p| p.normal.dot(up).abs() > 0.8)
@@ -200,6 +221,14 @@ fn floors_below(remaining: &[Point], planes: Vec<Plane>, up: &Vector3<f64>, tol:
                 }
             }
         })
+        .collect()
+}
+
+/// Of `floors`, those with the scene above them (a bin's rim is a wide plane too, with parts
+/// below): supports everywhere.
+fn with_nothing_below(remaining: &[Point], floors: &[Plane], tol: f64) -> Vec<Plane> {
+    floors
+        .iter()
         .filter(|p| {
             remaining
                 .iter()
@@ -208,5 +237,6 @@ fn floors_below(remaining: &[Point], planes: Vec<Plane>, up: &Vector3<f64>, tol:
                 * 50
                 < remaining.len()
         })
+        .copied()
         .collect()
 }

@@ -74,14 +74,14 @@ pub(crate) fn read_ends(depth: &DepthTest, model: &PoseModel, t_scene_model: &Is
     // The scan point topping the probe's cell, when it lies at the probe's height.
     let topped = |p: &Point, n: &Vector3<f64>| {
         let n = t_scene_model.rotation * n;
-        let c = n.dot(&map.up);
+        let q = t_scene_model * p;
+        let c = n.dot(&map.toward(&q));
         if c < MIN_FACING {
             return None;
         }
-        let q = t_scene_model * p;
-        let h = q.coords.dot(&map.up);
+        let h = map.height(&q);
         map.top_at(&q)
-            .filter(|(top, _)| (top - h).abs() <= map.slack(tol, c))
+            .filter(|(top, _)| (top - h).abs() <= map.slack(tol, c, &q))
             .map(|(_, at)| to_model * at)
     };
     // Off the part as the continuation test has it: nothing of the dense surface within twice

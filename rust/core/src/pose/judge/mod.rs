@@ -105,7 +105,7 @@ impl Judge {
         let through = self.depth.through_supports(model, t_scene_model);
         if through >= MAX_THROUGH {
             return fail(format!(
-                "the best pose puts {:.0} % of the part through the bin's floor or walls",
+                "the best pose puts {:.0} % of the part through the bin's floor or walls or a support surface the scan shows in front of it",
                 100.0 * through
             ));
         }

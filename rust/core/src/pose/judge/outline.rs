@@ -69,14 +69,21 @@ impl Footprint {
 /// The outline test of `model` at `t_scene_model` against the judge's scan.
 pub(crate) fn outline(depth: &DepthTest, model: &PoseModel, t_scene_model: &Isometry3<f64>) -> Outline {
     let map = &depth.heights;
-    let (e1, e2) = map.axes();
-    let up = map.up;
+    // The footprint is drawn looking at the part from the sensor (for a perspective map, along
+    // the ray to the part's centre: the rays spread by a few degrees across one part).
+    let up = map.toward(&(t_scene_model * model.symmetries.center));
+    let e1 = up
+        .cross(&if up.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() })
+        .normalize();
+    let e2 = up.cross(&e1);
     let target = model.target();
     let Some(normals) = target.normals() else {
         return Outline::default();
     };
     // Cells no finer than the samples, so that the footprint has no holes between them.
-    let g = map.cell().max(1.5 * model.spacing);
+    let g = map
+        .cell_at(&(t_scene_model * model.symmetries.center))
+        .max(1.5 * model.spacing);
     let posed: Vec<Posed> = target
         .points()
         .iter()
@@ -131,7 +138,7 @@ pub(crate) fn outline(depth: &DepthTest, model: &PoseModel, t_scene_model: &Isom
     let mut out = Outline::default();
     for a in lo.0..=hi.0 {
         for b in lo.1..=hi.1 {
-            let Some((q, _, h)) = fp.cell_of(a, b).and_then(|k| fp.top[k]) else {
+            let Some((q, _, _)) = fp.cell_of(a, b).and_then(|k| fp.top[k]) else {
                 continue;
             };
             // Outward: toward the empty neighbours of the footprint.
@@ -146,7 +153,7 @@ pub(crate) fn outline(depth: &DepthTest, model: &PoseModel, t_scene_model: &Isom
                 continue;
             }
             let Some((hs, _)) = map.top_at(&q) else { continue };
-            if (hs - h).abs() > tol {
+            if (hs - map.height(&q)).abs() > tol {
                 continue; // not confirmed here (covered, or not seen): the edge says nothing
             }
             // The face's plane from two cells inward: the edge's own normals are those of its bevel.
@@ -190,7 +197,7 @@ pub(crate) fn outline(depth: &DepthTest, model: &PoseModel, t_scene_model: &Isom
                         (top.coords.dot(&e1) / g).floor() as i64,
                         (top.coords.dot(&e2) / g).floor() as i64,
                     );
-                    (hp - probe.coords.dot(&up)).abs() < tol && !own && !on_support(&top)
+                    (hp - map.height(&probe)).abs() < tol && !own && !on_support(&top)
                 })
             });
             out.continued += goes_on as usize;

@@ -10,9 +10,10 @@
 //! are several times the noise is a wrong pose (or a part unlike its CAD model): its confidence
 //! falls with the ratio.
 
+use crate::geometry::eigen_ascending;
 use crate::geometry::Point;
 use crate::pose::model::PoseModel;
-use crate::pose::surface::{eigen_ascending, median, plane_residuals, robust_sigma, thin};
+use crate::pose::surface::{median, plane_residuals, robust_sigma, thin};
 use crate::pose::types::FitQuality;
 use crate::search::KdIndex;
 use nalgebra::{Isometry3, Matrix3, Vector3};
@@ -52,9 +53,14 @@ pub(super) fn fit_quality(
     model: &PoseModel,
     t_scene_model: &Isometry3<f64>,
     tol: f64,
+    scene_noise: f64,
 ) -> Option<FitQuality> {
     let sigma = residual_sigma(points, model, t_scene_model, tol)?;
-    let floor = noise_floor(points)?.max(FLOOR_SHARE_OF_TOLERANCE * tol);
+    // The chords read noise larger than the points' spacing low; the scan's own noise, read along
+    // the sensor's rays ([`crate::scan_noise`]), does not.
+    let floor = noise_floor(points)?
+        .max(scene_noise)
+        .max(FLOOR_SHARE_OF_TOLERANCE * tol);
     let ratio = sigma / floor;
     Some(FitQuality {
         residual_sigma: sigma,

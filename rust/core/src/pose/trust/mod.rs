@@ -14,6 +14,7 @@
 //! against the scan's own noise ([`fit`]) and the turns and slides the view leaves open
 //! ([`unseen_turns`]), the children of this module.
 
+mod evidence;
 mod fit;
 #[cfg(test)]
 mod tests;
@@ -26,9 +27,10 @@ use crate::geometry::Point;
 use crate::pose::judge::Judge;
 use crate::pose::model::{turns_of, PoseModel, Turn};
 use crate::pose::scene::{scene_indices, Context};
-use crate::pose::surface::{plane_residual, plane_residuals, robust_sigma, thin};
+use crate::pose::surface::thin;
 use crate::pose::types::{Alternative, FeatureEvidence, FitQuality, PoseEstimate, TrustParams};
 use crate::registration::{icp, Convergence, IcpConfig};
+use evidence::{base_confidence, decisiveness, evidence_of, fine_tolerance, fit_flags, local_points, weigh, Scored};
 use nalgebra::{Isometry3, Vector3};
 use std::f64::consts::TAU;
 
@@ -96,7 +98,7 @@ pub(super) fn trusted(found: Vec<PoseEstimate>, ctx: &Context<'_>, judge: &Judge
                 .map(|&i| scene[i])
                 .filter(|p| judge.depth.off_supports(p))
                 .collect();
-            e.fit = fit::fit_quality(&claimed, model, &e.t_scene_model, judge.depth.tol);
+            e.fit = fit::fit_quality(&claimed, model, &e.t_scene_model, judge.depth.tol, ctx.noise);
             if let Some(f) = e.fit.filter(|f| !f.acceptable()) {
                 misfit.get_or_insert(f);
                 return None;
@@ -104,6 +106,7 @@ pub(super) fn trusted(found: Vec<PoseEstimate>, ctx: &Context<'_>, judge: &Judge
             e.confidence = t.confidence * e.fit.map_or(1.0, |f| f.factor);
             e.ambiguous = t.ambiguous;
             e.alternatives = t.alternatives;
+
             // A free axis already says the turn is unknown.
             let noise = e.fit.map(|f| f.noise_floor);
             let unseen = match t.free_axis {
@@ -127,6 +130,12 @@ pub(super) fn trusted(found: Vec<PoseEstimate>, ctx: &Context<'_>, judge: &Judge
             }
             e.free_axis = t.free_axis;
             e.feature_evidence = t.evidence;
+            if !model.degenerate.is_empty() {
+                // The part's surface cannot fix its pose along a free motion (one face of a box):
+                // whatever the scan shows, the pose is one of many.
+                e.confidence = 0.0;
+                e.ambiguous = true;
+            }
             Some(e)
         })
         .collect();
@@ -145,13 +154,6 @@ pub(super) fn trusted(found: Vec<PoseEstimate>, ctx: &Context<'_>, judge: &Judge
     }
 }
 
-/// Confidence from the judge alone: how much of the surface the scan can judge confirms the
-/// pose (0.6 at the acceptance threshold, 0.99 at 95 % and above).
-fn base_confidence(coverage: f64, min_coverage: f64) -> f64 {
-    let span = (0.95 - min_coverage).max(1e-3);
-    0.6 + 0.39 * ((coverage - min_coverage) / span).clamp(0.0, 1.0)
-}
-
 /// Assesses `est` (a verified pose whose points are among `points`): with
 /// near-symmetries, poses and compares their alternatives and may replace the pose by the one
 /// the scan supports; returns the trust and the pose kept.
@@ -165,20 +167,10 @@ pub(super) fn assess(
 ) -> (Trust, Isometry3<f64>) {
     let e0 = judge.depth.evidence(model, &est.t_scene_model);
     let base = base_confidence(e0.coverage(), judge.min_coverage);
-    let center = est.t_scene_model * model.symmetries.center;
-    let reach = model.radius + 2.0 * judge.depth.tol;
-    // One pass over the points beats building a tree for the few poses assessed.
     let local: Vec<Point> = if model.near_symmetries.is_empty() {
         Vec::new()
     } else {
-        points
-            .iter()
-            .filter(|p| (*p - center).norm_squared() <= reach * reach)
-            // Points on the floor or a wall lie in the plane of the part's faces that rest on
-            // it and would confirm material wherever a pose puts it: only the part's own count.
-            .filter(|p| judge.depth.off_supports(p))
-            .copied()
-            .collect()
+        local_points(points, model, judge, &est.t_scene_model)
     };
     if local.len() < 12 {
         return (Trust::undecided(base), est.t_scene_model);
@@ -297,46 +289,23 @@ pub(super) fn assess(
     }
     let top = &scored[best];
     let kept = candidates[best].t_scene_model;
-    let mut alternatives: Vec<Alternative> = Vec::new();
-    let mut free = false;
-    // The smallest lead of the pose kept over a distinct candidate, in that candidate's margins.
-    let mut lead = f64::INFINITY;
-    for (i, c) in candidates.iter().enumerate() {
-        let s = scored[i].evidence.score;
-        let margin = margin_between(p, &scored[best], &scored[i], per_probe);
-        let Some(open) = standing(s, scored[i].judged_ok, top.evidence.score, margin) else {
-            continue;
-        };
-        let same = |t: &Isometry3<f64>| {
-            let (r, d) = model.symmetries.pose_error(&c.t_scene_model, t);
-            r < p.pick_rotation && d < p.pick_translation
-        };
-        if i == best || same(&kept) {
-            continue;
-        }
-        lead = lead.min((top.evidence.score - s) / margin);
-        if open && !alternatives.iter().any(|a| same(&a.t_scene_model)) {
-            free |= c.continuous;
-            alternatives.push(Alternative {
-                t_scene_model: model.symmetries.canonical(&c.t_scene_model),
-                evidence: scored[i].evidence,
-            });
-        }
-    }
+    let poses: Vec<Isometry3<f64>> = candidates.iter().map(|c| c.t_scene_model).collect();
+    let (open, lead) = weigh(&poses, &scored, best, model, p, per_probe);
+    let free = open.iter().any(|&i| candidates[i].continuous);
+    let alternatives: Vec<Alternative> = open
+        .into_iter()
+        .map(|i| Alternative {
+            t_scene_model: model.symmetries.canonical(&candidates[i].t_scene_model),
+            evidence: scored[i].evidence,
+        })
+        .collect();
     let base = if best == 0 {
         base
     } else {
         base_confidence(judge.depth.evidence(model, &kept).coverage(), judge.min_coverage)
     };
     let confidence = if alternatives.is_empty() {
-        // How far the best leads the runner-up, in margins: 1 margin halves the confidence, each
-        // further margin shrinks the doubt e-fold.
-        let decisive = if lead.is_finite() {
-            1.0 - 0.5 * (-(lead - 1.0).max(0.0)).exp()
-        } else {
-            1.0
-        };
-        base * decisive
+        base * decisiveness(lead)
     } else if free {
         // The turn about the free axis is unknown: a pick-grade turn is as likely as its share
         // of the circle.
@@ -353,41 +322,6 @@ pub(super) fn assess(
         evidence: Some(top.evidence),
     };
     (trust, kept)
-}
-
-/// A refined candidate as the comparison weighs it.
-pub(super) struct Scored {
-    /// Its feature evidence.
-    pub evidence: FeatureEvidence,
-    /// Whether the judge accepts it.
-    pub judged_ok: bool,
-    /// Whether each judged point lies within the fine tolerance of it.
-    pub fits: Vec<bool>,
-}
-
-/// The margin by which one candidate's feature evidence must lead another's to rule it out (see
-/// [`TrustParams::margin_sigmas`]): from the judged points that fit one and not the other and the
-/// difference of their probes seen through, `per_probe` scan points apiece. The d split points
-/// spread the lead by 2√d points; a probe counts as `per_probe` points in the score but is one
-/// observation, so k probes that differ spread it by `per_probe` √k (not √(`per_probe` k): on a
-/// dense scan one probe stands for tens of points, and one probe more seen through is no
-/// stronger evidence for that).
-pub(super) fn margin_between(p: &TrustParams, a: &Scored, b: &Scored, per_probe: f64) -> f64 {
-    let split = a.fits.iter().zip(&b.fits).filter(|(x, y)| x != y).count() as f64;
-    let probes = a.evidence.seen_through.abs_diff(b.evidence.seen_through) as f64;
-    p.min_margin
-        .max(p.margin_sigmas * (4.0 * split + per_probe * per_probe * probes).sqrt())
-}
-
-/// How a candidate with feature score `score` stands against the pose kept (score `kept`):
-/// `None` when it is ruled out — the judge refuses it (`judged_ok` false: a see-through patch,
-/// say) and the feature does not favour it either; else whether the scan cannot rule it out:
-/// its score is within `margin` of the kept pose's, or ahead of it. A turn the judge refuses
-/// but the feature favours means the scan contradicts the pose kept where the two differ: the
-/// pose is then in doubt, not confirmed.
-pub(super) fn standing(score: f64, judged_ok: bool, kept: f64, margin: f64) -> Option<bool> {
-    let ahead = score > kept;
-    (judged_ok || ahead).then_some(ahead || kept - score < margin)
 }
 
 /// The most cells of the feature region's grid (one byte each).
@@ -494,44 +428,6 @@ impl Region {
     /// Whether the model-frame point `q` lies within about one cell of the region.
     pub(super) fn contains(&self, q: &Point) -> bool {
         self.index(&key(q, self.cell)).is_some_and(|i| self.cells[i])
-    }
-}
-
-/// The fine tolerance: `noise_sigmas` robust standard deviations of the point-to-plane residuals
-/// of `local` about the pose (at least `min_fine_tolerance`, at most the judge's tolerance).
-fn fine_tolerance(
-    local: &[Point],
-    model: &PoseModel,
-    t_scene_model: &Isometry3<f64>,
-    tol: f64,
-    p: &TrustParams,
-) -> f64 {
-    let res = plane_residuals(local, model, t_scene_model, tol);
-    match robust_sigma(res.into_iter().flatten(), 12) {
-        Some(sigma) => (p.noise_sigmas * sigma).clamp(p.min_fine_tolerance.min(tol), tol),
-        None => tol,
-    }
-}
-
-/// Whether each of `judged` lies within `tol` of the posed model's surface.
-fn fit_flags(judged: &[Point], model: &PoseModel, t_scene_model: &Isometry3<f64>, tol: f64) -> Vec<bool> {
-    let inv = t_scene_model.inverse();
-    judged
-        .iter()
-        .map(|l| plane_residual(model, &(inv * *l), 3.0 * tol).is_some_and(|r| r.abs() <= tol))
-        .collect()
-}
-
-/// The evidence of a pose from the fit of each judged point and its probes seen through.
-fn evidence_of(fit: &[bool], tol: f64, violated: usize, per_probe: f64) -> FeatureEvidence {
-    let fits = fit.iter().filter(|&&f| f).count();
-    let misfits = fit.len() - fits;
-    FeatureEvidence {
-        fits,
-        misfits,
-        seen_through: violated,
-        tolerance: tol,
-        score: fits as f64 - misfits as f64 - violated as f64 * per_probe,
     }
 }
 

@@ -79,7 +79,7 @@ fn the_margin_grows_with_the_points_two_poses_disagree_on_not_with_those_they_sh
     let p = TrustParams::default();
     // A candidate that misses the first `misses` of `n` judged points and puts `seen` probes
     // where the sensor saw free space.
-    let scored = |n: usize, misses: usize, seen: usize| trust::Scored {
+    let scored = |n: usize, misses: usize, seen: usize| trust::evidence::Scored {
         evidence: FeatureEvidence {
             seen_through: seen,
             ..FeatureEvidence::default()
@@ -89,17 +89,17 @@ fn the_margin_grows_with_the_points_two_poses_disagree_on_not_with_those_they_sh
     };
     // Nothing to tell them apart: the floor of the margin.
     let all = scored(4000, 0, 0);
-    assert_eq!(trust::margin_between(&p, &all, &all, 1.0), p.min_margin);
+    assert_eq!(trust::evidence::margin_between(&p, &all, &all, 1.0), p.min_margin);
     // 52 points fit one and not the other: 3 × 2√52 ≈ 43.3 points, among 400 or 4000 judged.
     for n in [400, 4000] {
-        let m = trust::margin_between(&p, &scored(n, 0, 0), &scored(n, 52, 0), 1.0);
+        let m = trust::evidence::margin_between(&p, &scored(n, 0, 0), &scored(n, 52, 0), 1.0);
         assert!((m - 6.0 * 52f64.sqrt()).abs() < 1e-9, "{n}: {m}");
     }
     // Probes seen through count as the scan points they stand for, each one observation: 10
     // probes of 2 points spread the lead by 2√10, 10 probes of 40 points by 40√10.
-    let m = trust::margin_between(&p, &scored(400, 0, 10), &scored(400, 52, 0), 2.0);
+    let m = trust::evidence::margin_between(&p, &scored(400, 0, 10), &scored(400, 52, 0), 2.0);
     assert!((m - 3.0 * (4.0 * 52.0 + 4.0 * 10.0f64).sqrt()).abs() < 1e-9, "{m}");
-    let m = trust::margin_between(&p, &scored(400, 0, 10), &scored(400, 52, 0), 40.0);
+    let m = trust::evidence::margin_between(&p, &scored(400, 0, 10), &scored(400, 52, 0), 40.0);
     assert!((m - 3.0 * (4.0 * 52.0 + 1600.0 * 10.0f64).sqrt()).abs() < 1e-9, "{m}");
 }
 
@@ -211,16 +211,16 @@ fn a_boss_out_of_view_is_ambiguous_with_the_truth_among_the_alternatives() {
 fn a_turn_the_judge_refuses_but_the_feature_favours_keeps_the_pose_in_doubt() {
     let margin = 30.0;
     // Judged possible: ruled out only by a lead of a margin or more.
-    assert_eq!(trust::standing(100.0, true, 200.0, margin), Some(false));
-    assert_eq!(trust::standing(180.0, true, 200.0, margin), Some(true));
-    assert_eq!(trust::standing(250.0, true, 200.0, margin), Some(true));
+    assert_eq!(trust::evidence::standing(100.0, true, 200.0, margin), Some(false));
+    assert_eq!(trust::evidence::standing(180.0, true, 200.0, margin), Some(true));
+    assert_eq!(trust::evidence::standing(250.0, true, 200.0, margin), Some(true));
     // Refused by the judge and trailing on the feature: ruled out, even within the margin.
-    assert_eq!(trust::standing(180.0, false, 200.0, margin), None);
-    assert_eq!(trust::standing(-50.0, false, 200.0, margin), None);
+    assert_eq!(trust::evidence::standing(180.0, false, 200.0, margin), None);
+    assert_eq!(trust::evidence::standing(-50.0, false, 200.0, margin), None);
     // Refused by the judge (a see-through patch of 10 probes) but far ahead on the feature: the
     // flipped tee of a simulated pile, whose kept pose had 161 fits and 246 misfits there and
     // the refused turn 366 and 41. The scan contradicts the kept pose; it stays open.
-    assert_eq!(trust::standing(261.3, false, -141.2, margin), Some(true));
+    assert_eq!(trust::evidence::standing(261.3, false, -141.2, margin), Some(true));
 }
 
 /// A disc 60 mm across and 10 thick with a notch 10 mm wide and 3 deep through its rim on +x:

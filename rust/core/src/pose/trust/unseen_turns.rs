@@ -16,11 +16,11 @@
 use super::fit::{thinned_sigma, FREE_RATIO};
 use crate::geometry::Point;
 use crate::pose::judge::Judge;
-use crate::pose::model::PoseModel;
-use crate::pose::surface::{eigen_ascending, plane_residuals, thin};
+use crate::pose::model::{Constraints, PoseModel};
+use crate::pose::surface::{plane_residuals, thin};
 use crate::pose::types::{Alternative, FeatureEvidence, TrustParams};
 use crate::registration::{icp, Convergence, IcpConfig};
-use nalgebra::{Isometry3, Matrix3, Translation3, Unit, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
 
 /// The turn about the weakest axis is probed when the claimed points constrain it less than this
 /// share of the next weakest: the seen surface is then nearly a surface of revolution about it.
@@ -85,38 +85,20 @@ impl Move {
 /// model normals), model frame, when it is weak (see [`WEAK_SHARE`]): along a cylinder seen
 /// without its ends, say.
 pub(super) fn weak_slide(q: &[(Point, Vector3<f64>)]) -> Option<Unit<Vector3<f64>>> {
-    let cc = q.iter().fold(Matrix3::zeros(), |s, (_, n)| s + n * n.transpose());
-    let (values, vectors) = eigen_ascending(cc);
+    let (values, vectors) = Constraints::of(q).slides();
     (values[1] > 0.0 && values[0] <= WEAK_SHARE * values[1]).then(|| Unit::new_normalize(vectors[0]))
 }
 
 /// The weakest rotation axis of the point-to-plane constraints of `q` (model-frame points with
 /// their model normals) and a point on it, model frame, when it is weak (see [`WEAK_SHARE`]).
 pub(super) fn weak_axis(q: &[(Point, Vector3<f64>)]) -> Option<(Unit<Vector3<f64>>, Point)> {
-    let n = q.len() as f64;
-    let c = q.iter().fold(Vector3::zeros(), |s, (p, _)| s + p.coords) / n;
-    let (mut a, mut b, mut cc) = (Matrix3::zeros(), Matrix3::zeros(), Matrix3::zeros());
-    for (p, nrm) in q {
-        let r = (p.coords - c).cross(nrm);
-        a += r * r.transpose();
-        b += r * nrm.transpose();
-        cc += nrm * nrm.transpose();
-    }
-    // Eliminate the translation (a flat patch leaves some of it free: regularise slightly).
-    let reg = 1e-9 * cc.trace().max(1e-12);
-    let cinv = (cc + Matrix3::identity() * reg).try_inverse()?;
-    let s = a - b * cinv * b.transpose();
-    let (values, vectors) = eigen_ascending(s);
+    let c = Constraints::of(q);
+    let (values, vectors) = c.turns()?;
     let (w0, w1) = (values[0], values[1]);
     if !(w1 > 0.0) || w0 > WEAK_SHARE * w1 {
         return None;
     }
-    let omega = vectors[0];
-    // The translation that best accompanies a turn about an axis through the centroid moves the
-    // axis to where the turn keeps the surface on itself.
-    let dt = -(cinv * b.transpose() * omega);
-    let on_axis = Point::from(c + omega.cross(&dt) / omega.norm_squared());
-    Some((Unit::new_normalize(omega), on_axis))
+    Some((Unit::new_normalize(vectors[0]), c.axis_point(&vectors[0])?))
 }
 
 /// Claimed points within `reach` of the posed model, with its normals, model frame.

@@ -149,20 +149,20 @@ fn a_cylinder_patch_turns_about_and_slides_along_its_axis_and_a_corner_does_neit
 fn a_pose_off_the_surface_by_more_than_the_noise_loses_confidence() {
     let (model, _) = elbow_model();
     let (truth, scene_pts) = scene(false);
-    let tol = judge::depth::tolerance(judge::depth::judge_step(model));
+    let tol = judge::depth::tolerance(judge::depth::judge_step(model), 0.0);
     let claimed = |t: &Isometry3<f64>| -> Vec<Point> {
         scene::scene_indices(&scene_pts, model, t, tol)
             .into_iter()
             .map(|i| scene_pts[i])
             .collect()
     };
-    let right = super::fit::fit_quality(&claimed(&truth), model, &truth, tol).unwrap();
+    let right = super::fit::fit_quality(&claimed(&truth), model, &truth, tol, 0.0).unwrap();
     assert!(right.factor == 1.0 && right.ratio < 1.5, "{right:?}");
     assert!(right.residual_sigma < 0.13 && right.noise_floor < 0.15, "{right:?}");
     // Turned 8° about the vertical: the legs still lie within the tolerance of most points.
     let yaw = UnitQuaternion::from_scaled_axis(Vector3::z() * 8f64.to_radians());
     let wrong = Isometry3::from_parts(truth.translation, yaw * truth.rotation);
-    let off = super::fit::fit_quality(&claimed(&wrong), model, &wrong, tol).unwrap();
+    let off = super::fit::fit_quality(&claimed(&wrong), model, &wrong, tol, 0.0).unwrap();
     assert!(off.ratio > 3.0 && off.factor < 0.75, "{off:?}");
 }
 
