@@ -5,7 +5,7 @@
 //! model points on the scene), give the best few a short ICP, and the winner is refined on all
 //! of the object's points. Their tunables are [`CcpPathParams`].
 
-use super::judge::depth::NOISE_SIGMAS;
+use super::types::NOISE_SIGMAS;
 use super::judge::Judge;
 use super::model::PoseModel;
 use super::scene::{scene_indices, Context};

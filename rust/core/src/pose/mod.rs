@@ -117,7 +117,7 @@ fn dispatch(
     let clock = Instant::now();
     let view = Context::view_of(cfg, up);
     let noise = scene_noise(scene, cfg, view);
-    let tol = judge::depth::NOISE_SIGMAS * noise;
+    let tol = types::NOISE_SIGMAS * noise;
     if tol > MAX_TOLERANCE_SHARE * model.diameter {
         return Err(Error::NoObjectFound {
             reason: format!(
@@ -136,6 +136,7 @@ fn dispatch(
         model,
         cfg,
         matches!(method, CoarseMethod::Ccp | CoarseMethod::Centroid | CoarseMethod::Given),
+        noise,
     )?;
     timings.push(("bin_removal", clock.elapsed().as_secs_f64() * 1e3));
     crate::cancel::check()?;
@@ -225,7 +226,7 @@ fn auto(ctx: &Context<'_>, timings: &mut Timings) -> Result<(Vec<PoseEstimate>, 
     let (ccp_kept, removed) = if ctx.cfg.bin.is_some() {
         (ctx.kept.to_vec(), Vec::new())
     } else {
-        remove_bin(ctx.scene, ctx.model, ctx.cfg, true)?
+        remove_bin(ctx.scene, ctx.model, ctx.cfg, true, ctx.noise)?
     };
     let ccp_pts: Vec<Point> = ccp_kept.iter().map(|&i| ctx.scene[i]).collect();
     // One judge for both paths: PPF's, when it prepared the scene; CCP's own only without it.

@@ -9,7 +9,7 @@
 use super::judge::{probe_step, voxel_size, Judge};
 use super::model::{PoseModel, SCREEN_REACH};
 use super::scene::{scene_indices, Context};
-use super::types::{CoarseMethod, Laps, PoseConfig, PoseEstimate, Timings};
+use super::types::{CoarseMethod, Laps, PoseConfig, PoseEstimate, Timings, NOISE_SIGMAS};
 use crate::error::{Error, Result};
 use crate::geometry::Point;
 use crate::normals::{normals_at, surfaces_at, MAX_NORMALS_K};
@@ -41,7 +41,8 @@ impl DetectionScene {
         let mut fine = voxel_downsample(ctx.pts, None, voxel)?.points;
         let mut removed = Vec::new();
         if ctx.cfg.bin.is_none() && fine.len() >= 50 {
-            let (keep, planes) = remove_support_planes(&fine, ctx.model.diameter, (0.5 * voxel).max(1.0), 1);
+            let band = (0.5 * voxel).max(1.0).max(NOISE_SIGMAS * ctx.noise);
+            let (keep, planes) = remove_support_planes(&fine, ctx.model.diameter, band, 1);
             fine = keep.iter().map(|&i| fine[i]).collect();
             removed = planes;
         }

@@ -3,7 +3,7 @@
 //! only the model and the plain data types.
 
 use super::model::PoseModel;
-use super::types::PoseConfig;
+use super::types::{PoseConfig, NOISE_SIGMAS};
 use crate::error::{Error, Result};
 use crate::geometry::{check_finite, Plane, Point};
 use crate::normals::Orientation;
@@ -145,18 +145,22 @@ const CAMERA_AXIS_SHARE: f64 = 0.3;
 const UP_FROM_VIEW_COS: f64 = 0.17;
 
 /// Scene indices inside the bin box (all without one), and — with `planes` and no box — without
-/// the support planes wider than the part, which are returned too.
+/// the support planes wider than the part, which are returned too. `noise` is the scan's depth
+/// noise (mm): what lies within [`NOISE_SIGMAS`] of it from the bin's floor and walls, or a
+/// support plane, is theirs.
 pub(super) fn remove_bin(
     scene: &[Point],
     model: &PoseModel,
     cfg: &PoseConfig,
     planes: bool,
+    noise: f64,
 ) -> Result<(Vec<usize>, Vec<Plane>)> {
+    let band = NOISE_SIGMAS * noise;
     let (kept, removed): (Vec<usize>, Vec<Plane>) = match &cfg.bin {
-        Some(bin) => (crop_to_bin(scene, bin, 1.0)?, Vec::new()),
+        Some(bin) => (crop_to_bin(scene, bin, band.max(1.0))?, Vec::new()),
         None if planes && could_hold_support_plane(scene, model.diameter) => {
             let idx = KdIndex::new(scene);
-            let tol = (2.0 * point_spacing(scene, &idx)).max(0.5);
+            let tol = (2.0 * point_spacing(scene, &idx)).max(0.5).max(band);
             remove_support_planes(scene, model.diameter, tol, 1)
         }
         None => ((0..scene.len()).collect(), Vec::new()),

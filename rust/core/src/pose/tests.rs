@@ -220,7 +220,7 @@ fn arbitration_keeps_the_better_verified_pose() {
     let auto = estimate_pose(&scene, model, &config(CoarseMethod::Auto)).unwrap();
     // Judge both on the terms the arbitration uses: the PPF path's prepared scene.
     let cfg = config(CoarseMethod::Auto);
-    let (kept, _) = remove_bin(&scene, model, &cfg, false).unwrap();
+    let (kept, _) = remove_bin(&scene, model, &cfg, false, 0.0).unwrap();
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
     let prepared = DetectionScene::new(&context(&scene, &pts, model, &cfg), model.ppf.as_ref().unwrap()).unwrap();
     let q_ccp = prepared.judge.depth.evidence(model, &by_ccp.t_scene_model).quality();
@@ -332,7 +332,7 @@ fn the_judge_refuses_a_pose_through_the_floor_and_accepts_the_truth() {
         }
     }
     let cfg = config(CoarseMethod::Ppf);
-    let (kept, removed) = remove_bin(&scene, model, &cfg, true).unwrap();
+    let (kept, removed) = remove_bin(&scene, model, &cfg, true, 0.0).unwrap();
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
     let judge = judge_of(&scene, &pts, removed, model, &cfg);
     assert!(!judge.depth.supports.is_empty(), "the floor is a support");
@@ -369,7 +369,7 @@ fn the_judge_refuses_a_pose_whose_surface_the_sensor_saw_through_in_a_patch() {
     }
     let cfg = config(CoarseMethod::Ppf);
     let judge_of = |scene: &[Point]| {
-        let (kept, removed) = remove_bin(scene, model, &cfg, true).unwrap();
+        let (kept, removed) = remove_bin(scene, model, &cfg, true, 0.0).unwrap();
         let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
         judge_of(scene, &pts, removed, model, &cfg)
     };

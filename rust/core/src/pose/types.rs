@@ -141,6 +141,12 @@ impl SensorModel {
     }
 }
 
+/// The judge's tolerance, in standard deviations of the scan's depth noise (the depth test, the
+/// inliers of a pose, the bin's crop and the support planes' band): a cell's top is
+/// the nearest of its points, on average a standard deviation or more nearer than the surface,
+/// and a confirmed surface must stay confirmed nearly everywhere (3σ leaves one point in 370 out).
+pub const NOISE_SIGMAS: f64 = 3.0;
+
 /// The largest depth noise binpick takes, mm (a depth camera at the end of its range reads tens).
 pub const MAX_NOISE_MM: f64 = 100.0;
 

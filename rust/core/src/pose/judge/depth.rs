@@ -6,6 +6,7 @@
 
 use crate::geometry::{BinBox, Plane, Point};
 use crate::pose::model::PoseModel;
+use crate::pose::types::NOISE_SIGMAS;
 use crate::pose::scene::Context;
 use crate::registration::ppf::PpfConfig;
 use crate::registration::verify::{depth_evidence, depth_evidence_with, Evidence, HeightMap};
@@ -67,10 +68,6 @@ pub(crate) fn tolerance(step: f64, noise: f64) -> f64 {
     (0.12 * step).max(1.0).max(NOISE_SIGMAS * noise)
 }
 
-/// The depth test's tolerance in standard deviations of the scan's depth noise: a cell's top is
-/// the nearest of its points, on average a standard deviation or more nearer than the surface,
-/// and a confirmed surface must stay confirmed nearly everywhere (3σ leaves one point in 370 out).
-pub(crate) const NOISE_SIGMAS: f64 = 3.0;
 
 /// Voxel size of the detection grid for a PPF step, mm.
 pub(crate) fn voxel_size(step: f64) -> f64 {

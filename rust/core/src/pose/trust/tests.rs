@@ -159,7 +159,7 @@ fn a_boss_in_view_decides_the_pose_and_a_flipped_start_is_corrected() {
         assert!(!est.ambiguous, "yaw {yaw}: the boss is in view");
         assert!(est.confidence > 0.8, "yaw {yaw}: confidence {}", est.confidence);
         // Started from each near-symmetric turn of the truth, the trust stage turns it back.
-        let (kept, planes) = scene::remove_bin(&scene, model, &cfg, true).unwrap();
+        let (kept, planes) = scene::remove_bin(&scene, model, &cfg, true, 0.0).unwrap();
         let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
         let judge = tests::judge_of(&scene, &pts, planes, model, &cfg);
         for n in &model.near_symmetries {
@@ -261,7 +261,7 @@ fn a_notch_in_view_turns_a_disc_back_from_any_turn_about_its_axis() {
     for p in &mut scene {
         p.z += 0.15 * rng.normal();
     }
-    let (kept, planes) = scene::remove_bin(&scene, model, &cfg, true).unwrap();
+    let (kept, planes) = scene::remove_bin(&scene, model, &cfg, true, 0.0).unwrap();
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
     let judge = tests::judge_of(&scene, &pts, planes, model, &cfg);
     let region = trust::Region::new(model, &judge, &cfg.trust);

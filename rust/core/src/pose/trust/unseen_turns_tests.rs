@@ -60,7 +60,7 @@ fn turns_of(covered: bool, pose: Option<Isometry3<f64>>) -> (Isometry3<f64>, Vec
     let (model, _) = elbow_model();
     let cfg = config(CoarseMethod::Ppf);
     let (truth, scene_pts) = scene(covered);
-    let (kept, planes) = scene::remove_bin(&scene_pts, model, &cfg, true).unwrap();
+    let (kept, planes) = scene::remove_bin(&scene_pts, model, &cfg, true, 0.0).unwrap();
     let pts: Vec<Point> = kept.iter().map(|&i| scene_pts[i]).collect();
     let judge = tests::judge_of(&scene_pts, &pts, planes, model, &cfg);
     let pose = pose.unwrap_or(truth);
@@ -191,7 +191,7 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
     let (model, _) = tee_model();
     let cfg = config(CoarseMethod::Ppf);
     let (truth, scene_pts) = hidden_stem_scene();
-    let (kept, planes) = scene::remove_bin(&scene_pts, model, &cfg, true).unwrap();
+    let (kept, planes) = scene::remove_bin(&scene_pts, model, &cfg, true, 0.0).unwrap();
     assert_eq!(planes.len(), 1, "the floor is the support");
     let pts: Vec<Point> = kept.iter().map(|&i| scene_pts[i]).collect();
     let judge = tests::judge_of(&scene_pts, &pts, planes, model, &cfg);
