@@ -1,7 +1,8 @@
 """Issue 14's measurement: the simulated cell empties piles of 8-12 parts.
 
-Per part (tee, elbow, cross, and the real CAD parts of ../shared/data/parts in metres where
-present), seeds × piles: parts removed per pile, bins emptied, wrong-pose lifts (judged modulo
+Per part (tee, elbow, cross, the near-symmetric parts of ``binpick.parts.NEAR_SYMMETRIC`` and
+``MORE_NEAR_SYMMETRIC`` (issue 39), and the real CAD parts of ../shared/data/parts in metres where
+present; ``--parts`` picks some), seeds × piles: parts removed per pile, bins emptied, wrong-pose lifts (judged modulo
 the part's symmetries by the cell), grasps on nothing (the gripper closed empty), gripper-floor
 contacts (executed plans whose gripper outline reaches the bin floor), time per cycle by stage
 (ms), and the process CPU time per pick (it includes the simulator's renderer and emulators,
@@ -34,6 +35,9 @@ CPU = ("scan.cpu.extract", "cpu.pose", "cpu.plan")  # binpick's own compute per 
 
 def _parts(quick: bool) -> list:
     parts = [("tee", binpick.parts.tee), ("elbow", binpick.parts.elbow), ("cross", binpick.parts.cross)]
+    # The near-symmetric parts (issue 39): picked with grasps the same on every pose the scan
+    # cannot rule out.
+    parts += list(binpick.parts.NEAR_SYMMETRIC.items()) + list(binpick.parts.MORE_NEAR_SYMMETRIC.items())
     for name in CAD[:1] if quick else CAD:
         path = PARTS_DIR / name
         if path.exists():
@@ -110,6 +114,8 @@ def run_pile(make, seed: int, count: int, frames: int, threads: int = 1) -> dict
         "cycles": len(recs),
         "stages_ms": {s: float(np.mean([r.timings.get(s, 0.0) for r in recs])) for s in STAGES + CPU},
         "looks": sum(r.looks for r in recs),
+        # Parts lifted whose orientation the scan left open (picked with a grasp the same on every alternative).
+        "orientation_open": sum(r.success and r.orientation_decided is False for r in recs),
         "skipped": sum(len(r.skipped) for r in recs),
         "cpu_s_per_pick": cpu / max(1, len(recs)),
         # Measuring each grasp's finger opening, once per grasp and part (not per pick), ms.

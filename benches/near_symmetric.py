@@ -191,8 +191,9 @@ def sim_scene(name: str, kind: str, model, poses: np.ndarray, cell: sim.Cell, fr
     world = sim_world(cell, [mesh] * len(poses), poses)
     pts = sim_cloud(world, cell, frames, seed)
     dist, ids = world.nearest_surface(pts)
-    # As the cell asks for a swept laser scan: along the bin's up (binpick.cell's locate).
-    scene = Scene(f"sim/{kind}/{name}_{tag}", name, "sim", kind, pts, poses, cell.bin.bounds, None, render)
+    scene = Scene(
+        f"sim/{kind}/{name}_{tag}", name, "sim", kind, pts, poses, cell.bin.bounds, cell.T_base_camera[:3, 3], render
+    )
     scene.extra["instance_points"] = lambda i: pts[(ids == i) & (dist < 1.0)]
     return scene
 
@@ -302,7 +303,10 @@ def judge(scene: Scene, model, base, group=None) -> dict:
     """Runs ``estimate_pose`` on the scene and judges the first pose."""
     start = time.perf_counter()
     try:
-        res = binpick.estimate_pose(scene.points, model, bin=scene.bin, viewpoint=scene.viewpoint, num_threads=1)
+        # As the cell asks for a swept laser scan: normals toward the camera, judged along up.
+        res = binpick.estimate_pose(
+            scene.points, model, bin=scene.bin, viewpoint=scene.viewpoint, along_rays=False, num_threads=1
+        )
     except binpick.NoObjectFound:
         res = None
     ms = 1000 * (time.perf_counter() - start)

@@ -141,9 +141,11 @@ class Case:
     alone: Optional[Callable[[int], int]] = None  # pixels truth instance i fills rendered alone with the bin
 
     def sensor(self) -> dict:
-        """How binpick is told where the sensor is: ``up`` (the bunny's and the laser's scans) or the
-        viewpoint."""
-        return {"up": self.up} if self.up is not None else {"viewpoint": self.scene.viewpoint}
+        """How binpick is told where the sensor is: ``up`` (the bunny's scans) or the viewpoint; a
+        swept laser scan judged along up, as the cell asks (binpick.cell)."""
+        if self.up is not None:
+            return {"up": self.up}
+        return {"viewpoint": self.scene.viewpoint, "along_rays": self.set != "laser"}
 
 
 def read_ply_points(path: Path) -> np.ndarray:
@@ -299,7 +301,5 @@ def sim_cases(set_name: str, part: Part, views: int, piles: int, simulator: Simu
         r.meta.update(render_s=time.perf_counter() - start, seed=seed)
         name = f"{set_name}/{part.name}/{kind}{k}"
         scene = Scene(name, kind, part, r.cloud, np.asarray(pile.poses), np.asarray(r.viewpoint), bin=cell.bin.bounds)
-        # A swept laser scan is judged along the bin's up, as the cell judges it (binpick.cell).
-        up = (0.0, 0.0, 1.0) if set_name == "laser" else None
-        cases.append(Case(set_name, kind, scene, up=up, meta=r.meta, pixels=r.pixels, alone=r.alone))
+        cases.append(Case(set_name, kind, scene, meta=r.meta, pixels=r.pixels, alone=r.alone))
     return cases

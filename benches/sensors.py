@@ -12,8 +12,8 @@ Sets (``--sets``), every scene seeded, each with the ground truth ``T_scene_mode
 - ``laser``: binpick's simulated cell (``Cell.for_part``: the paper's cell, or one grown to a large
   part) — ``--frames`` laser frames (45) swept over the bin from the scan pose, ``extract_line`` on
   each and ``triangulate`` (``near_symmetric.sim_cloud``: ``binpick.vision.reconstruct``'s chain
-  without the round trip through PNG files); judged along the bin's up, as the cell judges a swept
-  laser scan (the camera's position orients Open3D's normals).
+  without the round trip through PNG files); normals toward the cell's camera, judged along the
+  bin's up (``along_rays=False``), as the cell asks for a swept laser scan.
 - ``structured``: ``DepthCamera.structured_light()`` 30° off vertical at 0.7–1.0 m from the bin
   floor's centre, azimuth varied; its ``axial_sigma_0`` set per scene so that σ_z = 0.3 mm at
   that distance at normal incidence (0.05 + 0.15 z² mm would give 0.12–0.2 mm).

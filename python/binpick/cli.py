@@ -64,7 +64,22 @@ def _print_table(report: Any, out: Any = None) -> None:
     """The picks as a table (one row each: result, part removed, kind of failure, pose quality),
     a line of totals (parts removed, failures by kind) and one line per failed pick."""
     out = out or sys.stdout
-    rows = [("pick", "result", "removed", "failure", "score", "rmse mm", "rot err °", "pos err mm", "grasp", "time s")]
+    rows = [
+        (
+            "pick",
+            "result",
+            "removed",
+            "failure",
+            "score",
+            "confidence",
+            "orientation",
+            "rmse mm",
+            "rot err °",
+            "pos err mm",
+            "grasp",
+            "time s",
+        )
+    ]
     for r in report.records:
         rows.append(
             (
@@ -73,6 +88,8 @@ def _print_table(report: Any, out: Any = None) -> None:
                 _removed_cell(report, r),
                 r.failure or "-",
                 "-" if r.score is None else f"{r.score:.2f}",
+                _confidence_cell(r),
+                "-" if r.orientation_decided is None else ("decided" if r.orientation_decided else "open"),
                 "-" if r.rmse is None else f"{r.rmse:.2f}",
                 "-" if r.truth is None else f"{r.truth.rotation_error_deg:.2f}",
                 "-" if r.truth is None else f"{r.truth.translation_error_mm:.2f}",
@@ -95,6 +112,15 @@ def _print_table(report: Any, out: Any = None) -> None:
     for r in report.records:
         if r.error:
             print(f"pick {r.index}: {r.error}", file=out)
+
+
+def _confidence_cell(r: Any) -> str:
+    """The pose's confidence, and with open alternatives the confidence that one of them is right."""
+    if r.confidence is None:
+        return "-"
+    if r.orientation_decided is False and r.confidence_any is not None:
+        return f"{r.confidence:.2f} (any {r.confidence_any:.2f})"
+    return f"{r.confidence:.2f}"
 
 
 def _failure_pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> list[Path]:
@@ -318,8 +344,8 @@ def _read_scene(path: str, unit: Optional[str] = None) -> tuple[Any, Any]:
     if os.path.isdir(path):
         if unit is not None:
             raise _Usage("--scene-unit: a scan folder is reconstructed in mm; leave the option out")
-        # A swept laser scan is judged along the bin's up, as the cell judges it.
-        return _reconstruct(_load_scan_folder(path)).points, None
+        scan = _load_scan_folder(path)
+        return _reconstruct(scan).points, _scan_camera(scan)
     cloud = read_scene(path, unit=unit)
     return cloud.points, cloud.viewpoint
 
@@ -338,6 +364,13 @@ def _reconstruct(scan: Any) -> Any:
     from .vision import reconstruct
 
     return reconstruct(scan)
+
+
+def _scan_camera(scan: Any) -> Any:
+    """The camera's optical centre (base frame, mm) where ``scan``'s first frame was grabbed."""
+    import numpy as np
+
+    return (np.asarray(scan.T_base_flanges[0]) @ scan.calibration.T_flange_camera)[:3, 3]
 
 
 def _reconstruct_command(args: argparse.Namespace) -> int:
@@ -360,6 +393,8 @@ def _estimate(args: argparse.Namespace) -> int:
     model = _model(args.model, args.unit)
     bin_box = None if args.bin is None else (tuple(args.bin[:3]), tuple(args.bin[3:]))
     viewpoint = _viewpoint_option(args, stated)
+    # A scan folder is a swept laser scan: judged along up, as the cell asks (binpick.cell).
+    swept = os.path.isdir(args.scene) and args.viewpoint is None and not args.camera_frame
     found = estimate_poses(
         scene,
         model,
@@ -367,6 +402,7 @@ def _estimate(args: argparse.Namespace) -> int:
         method=args.method,
         max_instances=args.instances,
         viewpoint=viewpoint,
+        along_rays=not swept,
         up=None if args.up is None else tuple(args.up),
         noise_mm=args.noise_mm,
         **_estimate_options(args),

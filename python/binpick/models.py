@@ -394,18 +394,24 @@ class Model:
         poses that differ only by a symmetry (the one whose rotation is nearest the identity)."""
         return self.prepared().canonical(as_transform(T_scene_model, "T_scene_model"))
 
-    def pose_error(self, T_estimate: Any, T_truth: Any) -> tuple[float, float]:
+    def pose_error(self, T_estimate: Any, T_truth: Any, *, turn_about: Any = None) -> tuple[float, float]:
         """Rotation (degrees) and translation (mm) error of a pose against the truth, minimised
         over the part's symmetries (as the BOP benchmark judges): :func:`binpick.transforms.pose_error`
-        with this part's symmetry group (its continuous axis, if any, exactly)."""
+        with this part's symmetry group (its continuous axis, if any, exactly). ``turn_about``
+        (centre, unit axis; model frame), for a part without a continuous symmetry, minimises over
+        the turns about that axis too: the error of a pose whose turn about a free axis the scan
+        left open (``PoseResult.free_axis``), as a grasp across the axis sees it."""
         sym = self.symmetries
+        axis, center = sym.continuous_axis, sym.center
+        if turn_about is not None and axis is None:
+            center, axis = (as_vector(v, "turn_about", 3) for v in turn_about)
         maps = []
         for R in sym.rotations:
             S = np.eye(4)
             S[:3, :3] = R
             S[:3, 3] = sym.center - R @ sym.center
             maps.append(S)
-        return pose_error(T_estimate, T_truth, maps, continuous_axis=sym.continuous_axis, center=sym.center)
+        return pose_error(T_estimate, T_truth, maps, continuous_axis=axis, center=center)
 
     def add_grasp(self, name: str, T_gripper_object: Any) -> None:
         """Declares a grasp: the object's pose in the gripper frame when the gripper holds it."""

@@ -43,8 +43,10 @@ __all__ = [
     "flange",
     "notched_hex",
     "bossed_rod",
+    "d_shaft",
     "base_shape",
     "NEAR_SYMMETRIC",
+    "MORE_NEAR_SYMMETRIC",
     "MAX_PART_SIZE_MM",
     "MAX_BOLT_HOLES",
 ]
@@ -217,6 +219,42 @@ def keyed_shaft(
 
     mesh = _shapes.axial_solid(radius, s, phi, what="keyed_shaft: diameter/length")
     return _near_model(mesh, "keyed_shaft", spacing, seed)
+
+
+def d_shaft(
+    *,
+    diameter: float = 20.0,
+    length: float = 120.0,
+    flat_depth: float = 1.5,
+    flat_length: float = 50.0,
+    feature: bool = True,
+    spacing: Optional[float] = None,
+    seed: int = 0,
+) -> Model:
+    """A round shaft along z with a D-flat on +x at its +z end: the flat ``flat_depth`` deep (its
+    plane ``diameter/2 − flat_depth`` from the axis) over the last ``flat_length`` mm, as on a
+    motor shaft. Without the flat it is continuously symmetric about z and flips end for end; the
+    flat alone fixes both the turn about the axis and which end is which. Sampled every ``spacing``
+    mm (1 mm by default)."""
+    R = _size(diameter, "diameter") / 2
+    L = _size(length, "length")
+    d = _size(flat_depth, "flat_depth") if _flag(feature) else 0.0
+    lf = _size(flat_length, "flat_length")
+    if d >= R or lf >= L:
+        raise InvalidInputError("flat_depth/flat_length: the flat must fit on the shaft")
+    chord = 2.0 * float(np.sqrt(R * R - (R - d) ** 2)) if d > 0 else 0.0
+    wall = float(np.arctan(chord / (2 * (R - d)))) if d > 0 else 0.0
+    phi = _shapes.angle_samples(0.4, R, steps=[wall, -wall] if d > 0 else [])
+    s = _shapes.stations(L, 5.0, steps=[L - lf] if d > 0 else []) - L / 2
+
+    def radius(z, p):
+        if d == 0:
+            return np.full_like(z, R)
+        flat = _slot_radius(R - d, chord + 1e-9, p)
+        return np.where(z > L / 2 - lf, np.minimum(flat, R), R)
+
+    mesh = _shapes.axial_solid(radius, s, phi, what="d_shaft: diameter/length")
+    return _near_model(mesh, "d_shaft", spacing, seed)
 
 
 def cut_plate(
@@ -396,6 +434,10 @@ NEAR_SYMMETRIC = {
     "notched_hex": notched_hex,
     "bossed_rod": bossed_rod,
 }
+
+
+#: Near-symmetric parts beyond the bench's five, for the cell's bin clearing (issue 39).
+MORE_NEAR_SYMMETRIC = {"d_shaft": d_shaft}
 
 
 def base_shape(name: str, **sizes) -> Model:

@@ -240,6 +240,10 @@ class PoseResult:
             within 3 mm, modulo the part's symmetries). Calibrated: of the poses reported at
             confidence ≥ c, at least a fraction c were pick-grade on the project's test sets
             (``benches/near_symmetric.py`` prints the reliability table).
+        confidence_any: in [0, 1], how likely the pose or one of its ``alternatives`` (any turn about
+            ``free_axis``) is pick-grade: what a grasp that is the same on every one of them stakes
+            (a grip across a shaft whose keyway is hidden; the cell picks an ambiguous part with
+            such grasps, judged by this). Equal to ``confidence`` for a pose without alternatives.
         ambiguous: True when the scan cannot rule out a distinct alternative: a near-symmetric
             flip whose deciding feature is out of sight, a turn about a free axis, or a turn or
             slide that what the view shows leaves open (one leg of an elbow seen alone, a shaft
@@ -272,6 +276,7 @@ class PoseResult:
     occluded_fraction: float = float("nan")
     pickability: float = 1.0
     confidence: float = 0.0
+    confidence_any: float = 0.0
     ambiguous: bool = False
     alternatives: tuple = ()
     free_axis: Optional[np.ndarray] = None
@@ -292,6 +297,7 @@ class PoseResult:
             occluded_fraction=float("nan") if e.occluded_fraction is None else e.occluded_fraction,
             pickability=1.0 if e.pickability is None else e.pickability,
             confidence=e.confidence,
+            confidence_any=e.confidence_any,
             ambiguous=e.ambiguous,
             alternatives=tuple(Alternative(a["T_scene_model"], a["evidence"]) for a in e.alternatives),
             free_axis=None if e.free_axis is None else np.asarray(e.free_axis, dtype=np.float64),
@@ -319,6 +325,7 @@ def estimate_poses(
     method: str = _POSE.method,
     up: Any = None,
     viewpoint: Any = None,
+    along_rays: bool = _POSE.along_rays,
     sensor: Optional[SensorModel] = None,
     noise_mm: Optional[float] = None,
     d_star: Optional[float] = None,
@@ -344,9 +351,12 @@ def estimate_poses(
     ``up`` is the direction out of the bin toward the sensor: by default +z, or, when the
     viewpoint lies below the scene along +z (a scene in the camera's frame, +z away from the
     camera), the direction toward the viewpoint; an ``up`` that points away from the viewpoint is
-    an error. ``bin`` is an axis-aligned box ``((xmin, ymin, zmin), (xmax, ymax, zmax))`` in the
-    scene frame; without it, support planes much larger than the part (floor, walls) are found and
-    removed.
+    an error. ``along_rays=False`` keeps the depth test looking along ``up`` though a viewpoint is
+    given (which then orients the normals only): for a laser-line scan swept over the bin by a
+    camera looking down on it, whose lines, several millimetres apart, alias a grid of the
+    camera's rays (binpick's cell asks so). ``bin`` is an axis-aligned box
+    ``((xmin, ymin, zmin), (xmax, ymax, zmax))`` in the scene frame; without it, support planes much
+    larger than the part (floor, walls) are found and removed.
 
     ``sensor`` (a :class:`SensorModel`) or ``noise_mm`` (its ``noise_mm`` alone) declares the
     sensor's depth noise; by default binpick reads it from the scan. Every tolerance derives from
@@ -381,6 +391,7 @@ def estimate_poses(
         up=up,
         method=method,
         viewpoint=viewpoint,
+        along_rays=_flag(along_rays, "along_rays"),
         sensor=sensor,
         noise_mm=noise_mm,
         d_star=optional_number(d_star, "d_star"),
@@ -404,6 +415,12 @@ def estimate_poses(
         )
     pts = as_points(scene, "scene", min_points=10)
     return [PoseResult._from_native(e) for e in _core.estimate_poses(pts, model.prepared(), config)]
+
+
+def _flag(value: Any, name: str) -> bool:
+    if not isinstance(value, (bool, np.bool_)):
+        raise InvalidTypeError(f"{name}: expected True or False, got {value!r:.40}")
+    return bool(value)
 
 
 def _check_model(model: Any) -> None:
@@ -436,6 +453,7 @@ def verify_pose(
     *,
     up: Any = None,
     viewpoint: Any = None,
+    along_rays: bool = _POSE.along_rays,
     sensor: Optional[SensorModel] = None,
     noise_mm: Optional[float] = None,
     min_coverage: float = _POSE.min_coverage,
@@ -452,6 +470,7 @@ def verify_pose(
         bin=bin,
         up=up,
         viewpoint=viewpoint,
+        along_rays=_flag(along_rays, "along_rays"),
         sensor=sensor,
         noise_mm=noise_mm,
         min_coverage=number(min_coverage, "min_coverage"),

@@ -24,7 +24,7 @@ from ..errors import BinpickError, InvalidInputError, InvalidTypeError, SafetyEr
 from ..models import Model
 from ..transforms import inverse, rotation_about
 from .records import PickPlan
-from .symmetry import GraspMatcher, continuous_symmetry, symmetry_maps
+from .symmetry import GraspMatcher, continuous_near_axis, continuous_symmetry, symmetry_maps
 
 if TYPE_CHECKING:  # annotations only: config imports this module for branch_grasps
     from .config import CellConfig, GripperGeometry
@@ -426,7 +426,9 @@ def _candidates(
     T_og[:, :3, 3] = -np.einsum("nji,nj->ni", T_go[:, :3, :3], T_go[:, :3, 3])
     T_og[:, 3, 3] = 1.0
     T_bo = np.asarray(T_base_object, dtype=np.float64)
-    continuous = continuous_symmetry(config.model.symmetries)
+    # About a continuous symmetry, or near-symmetry (a keyed shaft), the grasps turn to the most
+    # upright: the located turn about it is arbitrary, or left open by a hidden feature.
+    continuous = continuous_symmetry(config.model.symmetries) or continuous_near_axis(config.model)
     if continuous is not None:
         T_og = _most_upright(T_bo, T_og, *continuous)
     T_bg = T_bo @ T_og
@@ -590,7 +592,7 @@ def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarr
             config.symmetries,
             tolerance_deg=config.ambiguity_tolerance_deg,
             tolerance_mm=config.ambiguity_tolerance_mm,
-            continuous=continuous_symmetry(config.model.symmetries),
+            continuous=continuous_symmetry(config.model.symmetries) or continuous_near_axis(config.model),
         )
         alternatives = [np.asarray(a.T_scene_model, dtype=np.float64) for a in result.alternatives]
         tests.append(lambda T_bg: all(matcher.within(matcher.error(inverse(T_bg) @ T_a)) for T_a in alternatives))

@@ -145,7 +145,11 @@ class PickRecord:
     parts passed over on the way (no usable grasp, low confidence, …); ``looks``: how many scans
     the attempt took (more than one when the first showed nothing pickable); ``scan``: the last
     of them (for the picture of a failure); ``nudges``: the :class:`~binpick.cell.nudge.NudgePlan`
-    s run before it, when every part located was blocked.
+    s run before it, when every part located was blocked. ``confidence`` and ``confidence_any``:
+    the located pose's (:class:`binpick.PoseResult`); ``orientation_decided``: False when the scan
+    could not rule out alternatives (a hidden keyway, a flip the feature of which is out of sight)
+    and the part was picked with a grasp the same on all of them — its orientation in the gripper
+    is still open.
     """
 
     index: int
@@ -154,6 +158,9 @@ class PickRecord:
     score: Optional[float] = None
     rmse: Optional[float] = None
     method: Optional[str] = None
+    confidence: Optional[float] = None
+    confidence_any: Optional[float] = None
+    orientation_decided: Optional[bool] = None
     points: int = 0
     grasp: Optional[str] = None
     held: Optional[bool] = None
@@ -177,6 +184,9 @@ class PickRecord:
             "score": self.score,
             "rmse_mm": self.rmse,
             "method": self.method,
+            "confidence": self.confidence,
+            "confidence_any": self.confidence_any,
+            "orientation_decided": self.orientation_decided,
             "points": self.points,
             "grasp": self.grasp,
             "held": self.held,

@@ -13,7 +13,7 @@ from .._validate import as_transform, as_vector, instance_of, positive
 from ..errors import InvalidInputError
 from ..transforms import rotation_angle_deg
 
-__all__ = ["GraspMatcher", "continuous_symmetry", "symmetry_maps"]
+__all__ = ["GraspMatcher", "continuous_symmetry", "continuous_near_axis", "symmetry_maps"]
 
 
 def symmetry_maps(symmetries: Any) -> tuple[np.ndarray, ...]:
@@ -39,6 +39,17 @@ def continuous_symmetry(symmetries: Any) -> Optional[tuple[np.ndarray, np.ndarra
     if symmetries.continuous_axis is None:
         return None
     return np.asarray(symmetries.center, dtype=np.float64), np.asarray(symmetries.continuous_axis, dtype=np.float64)
+
+
+def continuous_near_axis(model: Any) -> Optional[tuple[np.ndarray, np.ndarray]]:
+    """A part's continuous near-symmetry (a round shaft whose keyway alone fixes the turn about
+    it) as (centre, unit axis) in the object frame; None when it has none. Every turn about it maps
+    all of the part but the feature onto itself: a grasp across the round body grips the same at
+    any turn."""
+    for near in model.near_symmetries:
+        if near.angle is None:
+            return np.asarray(near.center, dtype=np.float64), np.asarray(near.axis, dtype=np.float64)
+    return None
 
 
 class GraspMatcher:

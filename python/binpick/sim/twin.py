@@ -28,6 +28,7 @@ from ..cell.config import CellConfig, GripperGeometry
 from ..cell.grasp import GraspMatcher, continuous_symmetry, grip_width, symmetry_maps
 from ..cell.loop import Cell, quiet
 from ..cell.records import PoseTruth
+from ..cell.symmetry import continuous_near_axis
 from ..devices import (
     DynamixelConfig,
     DynamixelMotor,
@@ -345,12 +346,14 @@ class TwinWorld:
         """The declared grasps of the running cell, matched with the grip tolerances."""
         if self._matcher is None:
             cfg = self.config
+            # A grasp turned about a continuous near-symmetry's axis (a keyed shaft's) grips the
+            # round body the same: the feature is a small share of where the fingers land.
             self._matcher = GraspMatcher(
                 cfg.grasps,
                 cfg.symmetries,
                 tolerance_deg=self.grip_tolerance_deg,
                 tolerance_mm=self.grip_tolerance_mm,
-                continuous=continuous_symmetry(self.model.symmetries),
+                continuous=continuous_symmetry(self.model.symmetries) or continuous_near_axis(self.model),
             )
             # How far from the part's centre any grasp puts the TCP (the matcher's reach, with its tolerance).
             T = np.stack(list(cfg.grasps.values()))
@@ -485,14 +488,15 @@ class TwinWorld:
                 )
 
     # -- ground truth
-    def judge(self, T_base_object: np.ndarray) -> PoseTruth:
+    def judge(self, T_base_object: np.ndarray, *, turn_about: Any = None) -> PoseTruth:
         """The located pose against the nearest part of the pile, its errors modulo the part's
         proper symmetries (:meth:`binpick.Model.pose_error`): a pose turned by a symmetry is as
-        good as the true one, as the BOP benchmark judges."""
+        good as the true one, as the BOP benchmark judges; with ``turn_about`` (centre, axis in the
+        model frame) modulo the turns about that axis too (a free axis, gripped across)."""
         self.settle_pending()
         best = None
         for pid, T_bo in zip(self.pile.ids, self.pile.poses):
-            deg, mm = self.model.pose_error(T_base_object, T_bo)
+            deg, mm = self.model.pose_error(T_base_object, T_bo, turn_about=turn_about)
             if best is None or mm < best.translation_error_mm:
                 best = PoseTruth(instance=int(pid), rotation_error_deg=deg, translation_error_mm=mm)
         if best is None:

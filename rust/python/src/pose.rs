@@ -233,13 +233,14 @@ pub struct PoseConfig {
 impl PoseConfig {
     /// Keyword-only; see `binpick.estimate_poses` for each argument.
     #[new]
-    #[pyo3(signature = (*, bin=None, up=None, method=None, viewpoint=None, noise_mm=None, noise_per_m2=None, d_star=None, min_points=None, max_normal_angle=None, inlier_distance=None, min_fitness=None, min_coverage=None, ccp_closer_radius=None, ccp_tau=None, reference_fraction=None, max_hypotheses=None, max_instances=None, search_instances=None, num_threads=None))]
+    #[pyo3(signature = (*, bin=None, up=None, method=None, viewpoint=None, along_rays=None, noise_mm=None, noise_per_m2=None, d_star=None, min_points=None, max_normal_angle=None, inlier_distance=None, min_fitness=None, min_coverage=None, ccp_closer_radius=None, ccp_tau=None, reference_fraction=None, max_hypotheses=None, max_instances=None, search_instances=None, num_threads=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         bin: Option<PyReadonlyArrayDyn<'_, f64>>,
         up: Option<PyReadonlyArray1<'_, f64>>,
         method: Option<&str>,
         viewpoint: Option<PyReadonlyArray1<'_, f64>>,
+        along_rays: Option<bool>,
         noise_mm: Option<f64>,
         noise_per_m2: Option<f64>,
         d_star: Option<f64>,
@@ -287,6 +288,7 @@ impl PoseConfig {
                 Some(v) => Some(Point3::from(vector3(&v, "viewpoint")?)),
                 None => d.viewpoint,
             },
+            along_rays: along_rays.unwrap_or(d.along_rays),
             sensor: SensorModel {
                 noise_mm: noise_mm.or(d.sensor.noise_mm),
                 noise_per_m2: noise_per_m2.unwrap_or(d.sensor.noise_per_m2),
@@ -307,6 +309,11 @@ impl PoseConfig {
     #[getter]
     fn up(&self) -> Option<(f64, f64, f64)> {
         self.inner.up.map(|u| triple(&u))
+    }
+    /// With a viewpoint: whether the depth test looks along the sensor's rays (else along up).
+    #[getter]
+    fn along_rays(&self) -> bool {
+        self.inner.along_rays
     }
     /// The sensor's depth noise σ, mm, or None: read from the scan.
     #[getter]
@@ -526,6 +533,11 @@ impl PoseEstimate {
     #[getter]
     fn confidence(&self) -> f64 {
         self.inner.confidence
+    }
+    /// In [0, 1]: how likely the pose or one of its alternatives is pick-grade.
+    #[getter]
+    fn confidence_any(&self) -> f64 {
+        self.inner.confidence_any
     }
     /// Whether the scan cannot rule out a distinct alternative.
     #[getter]

@@ -5,10 +5,10 @@
 //! model points on the scene), give the best few a short ICP, and the winner is refined on all
 //! of the object's points. Their tunables are [`CcpPathParams`].
 
-use super::types::NOISE_SIGMAS;
 use super::judge::Judge;
 use super::model::PoseModel;
 use super::scene::{scene_indices, Context};
+use super::types::NOISE_SIGMAS;
 use super::types::{CcpPathParams, CoarseMethod, Laps, PoseConfig, PoseEstimate, Timings};
 use crate::error::{Error, Result};
 use crate::geometry::{centroid, check_count, covariance, principal_axes, Point};

@@ -116,6 +116,7 @@ fn dispatch(
     };
     let clock = Instant::now();
     let view = Context::view_of(cfg, up);
+    let facing = Context::facing_of(cfg, up);
     let noise = scene_noise(scene, cfg, view);
     let tol = types::NOISE_SIGMAS * noise;
     if tol > MAX_TOLERANCE_SHARE * model.diameter {
@@ -149,6 +150,7 @@ fn dispatch(
         cfg,
         up,
         view,
+        facing,
         noise,
     };
     let (found, judge) = match method {

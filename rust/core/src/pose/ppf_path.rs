@@ -243,11 +243,11 @@ fn vote(scene: &DetectionScene, ctx: &Context<'_>, ppf: &PpfModel, laps: &mut La
     // feature, quantised in PPF steps not much larger than the noise.
     let k = normal_neighbours(ctx.noise, voxel_size(ppf.step()));
     let sparse_normals = if k > NORMAL_NEIGHBOURS {
-        let fitted = surfaces_at(&sparse, &scene.fine, &scene.fine_index, k, ctx.view);
+        let fitted = surfaces_at(&sparse, &scene.fine, &scene.fine_index, k, ctx.facing);
         sparse = fitted.iter().map(|f| f.0).collect();
         fitted.into_iter().map(|f| f.1).collect()
     } else {
-        normals_at(&sparse, &scene.fine, &scene.fine_index, k, ctx.view)
+        normals_at(&sparse, &scene.fine, &scene.fine_index, k, ctx.facing)
     };
     let sparse_index = KdIndex::new(&sparse);
     laps.lap("normals");

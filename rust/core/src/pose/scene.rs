@@ -28,16 +28,27 @@ pub(super) struct Context<'a> {
     /// Unit direction out of the bin, toward the sensor: `cfg.up` as [`check_scene`] checked and
     /// resolved it.
     pub up: Vector3<f64>,
-    /// How the sensor sees the scene: from its viewpoint when known, else along `up`.
+    /// How the depth test looks at the scene: along the sensor's rays from its viewpoint when
+    /// known (and `cfg.along_rays`), else along `up`.
     pub view: Orientation,
+    /// Where the scan's normals face: the viewpoint when known, else `up`.
+    pub facing: Orientation,
     /// The standard deviation of the scan's depth noise, mm: declared ([`crate::pose::types::SensorModel`],
     /// at the scan's median range) or read from the scan ([`crate::scan_noise`]); 0 where neither says.
     pub noise: f64,
 }
 
 impl Context<'_> {
-    /// The sensor's view of a scene whose up is `up`: from `cfg.viewpoint` when given.
+    /// The depth test's view of a scene whose up is `up` (see [`Context::view`]).
     pub fn view_of(cfg: &PoseConfig, up: Vector3<f64>) -> Orientation {
+        match cfg.viewpoint {
+            Some(v) if cfg.along_rays => Orientation::TowardPoint(v),
+            _ => Orientation::TowardDirection(up),
+        }
+    }
+
+    /// Where the normals of a scene whose up is `up` face (see [`Context::facing`]).
+    pub fn facing_of(cfg: &PoseConfig, up: Vector3<f64>) -> Orientation {
         match cfg.viewpoint {
             Some(v) => Orientation::TowardPoint(v),
             None => Orientation::TowardDirection(up),
@@ -51,14 +62,14 @@ const RANGE_SAMPLES: usize = 2000;
 /// The standard deviation of `scene`'s depth noise, mm, as `cfg.sensor` declares it or, without
 /// a declaration, as the scan shows it (see [`Context::noise`]).
 pub(super) fn scene_noise(scene: &[Point], cfg: &PoseConfig, view: Orientation) -> f64 {
-    let range = match view {
-        Orientation::TowardPoint(v) => {
+    let range = match cfg.viewpoint {
+        Some(v) => {
             let stride = scene.len().div_ceil(RANGE_SAMPLES).max(1);
             let mut r: Vec<f64> = scene.iter().step_by(stride).map(|p| (p - v).norm()).collect();
             let mid = r.len() / 2;
             r.select_nth_unstable_by(mid, f64::total_cmp).1.to_owned()
         }
-        Orientation::TowardDirection(_) => 0.0,
+        None => 0.0,
     };
     cfg.sensor
         .sigma_at(range)

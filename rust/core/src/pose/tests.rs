@@ -83,6 +83,7 @@ pub(super) fn context<'a>(
         cfg,
         up,
         view,
+        facing: Context::facing_of(cfg, up),
         noise: scene_noise(scene, cfg, view),
     }
 }

@@ -190,6 +190,12 @@ pub struct PoseConfig {
     /// along the sensor's own rays (an oblique camera, a scene in the camera's frame), and the
     /// scan's normals face it; otherwise both look along `up`.
     pub viewpoint: Option<Point>,
+    /// With a viewpoint, whether the depth test looks along the sensor's rays (the default: a
+    /// depth camera's image, a fixed camera at an angle, a scene in the camera's frame) or along
+    /// `up` (a laser-line scan swept over the bin by a camera looking down on it, whose lines,
+    /// several millimetres apart, alias a grid of the camera's rays); the normals face the
+    /// viewpoint either way.
+    pub along_rays: bool,
     /// The sensor's depth noise (declared, or read from the scan).
     pub sensor: SensorModel,
     /// Instances returned by [`estimate_poses`](super::estimate_poses).
@@ -219,6 +225,7 @@ impl Default for PoseConfig {
             detect: DetectConfig::default(),
             trust: TrustParams::default(),
             viewpoint: None,
+            along_rays: true,
             sensor: SensorModel::default(),
             max_instances: 1,
             search_instances: SEARCH_INSTANCES,
@@ -494,6 +501,10 @@ pub struct PoseEstimate {
     /// In [0, 1]: how likely the pose is pick-grade (calibrated: of the poses reported at
     /// confidence ≥ c, at least a fraction c are).
     pub confidence: f64,
+    /// In [0, 1]: how likely the pose or one of its `alternatives` (any turn about a `free_axis`)
+    /// is pick-grade — what a grasp the same on every one of them stakes; `confidence` where
+    /// there are none.
+    pub confidence_any: f64,
     /// Whether the scan cannot rule out a distinct alternative (a near-symmetric flip, a free axis).
     pub ambiguous: bool,
     /// The distinct poses the scan cannot rule out, each with its evidence.
@@ -535,6 +546,7 @@ impl PoseEstimate {
             occluded_fraction: Some(e.occluded_fraction()),
             pickability: None,
             confidence: 0.0,
+            confidence_any: 0.0,
             ambiguous: false,
             alternatives: Vec::new(),
             free_axis: None,

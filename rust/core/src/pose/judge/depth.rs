@@ -6,8 +6,8 @@
 
 use crate::geometry::{BinBox, Plane, Point};
 use crate::pose::model::PoseModel;
-use crate::pose::types::NOISE_SIGMAS;
 use crate::pose::scene::Context;
+use crate::pose::types::NOISE_SIGMAS;
 use crate::registration::ppf::PpfConfig;
 use crate::registration::verify::{depth_evidence, depth_evidence_with, Evidence, HeightMap};
 use nalgebra::{Isometry3, Vector3};
@@ -67,7 +67,6 @@ pub(crate) fn judge_step(model: &PoseModel) -> f64 {
 pub(crate) fn tolerance(step: f64, noise: f64) -> f64 {
     (0.12 * step).max(1.0).max(NOISE_SIGMAS * noise)
 }
-
 
 /// Voxel size of the detection grid for a PPF step, mm.
 pub(crate) fn voxel_size(step: f64) -> f64 {

@@ -39,6 +39,8 @@ use std::f64::consts::TAU;
 pub struct Trust {
     /// In [0, 1]: how likely the pose is pick-grade.
     pub confidence: f64,
+    /// In [0, 1]: how likely the pose or one of its alternatives is pick-grade.
+    pub confidence_any: f64,
     /// Whether the scan cannot rule out a distinct alternative.
     pub ambiguous: bool,
     /// Those alternatives.
@@ -55,6 +57,7 @@ impl Trust {
     fn undecided(confidence: f64) -> Self {
         Trust {
             confidence,
+            confidence_any: confidence,
             ..Trust::default()
         }
     }
@@ -104,6 +107,7 @@ pub(super) fn trusted(found: Vec<PoseEstimate>, ctx: &Context<'_>, judge: &Judge
                 return None;
             }
             e.confidence = t.confidence * e.fit.map_or(1.0, |f| f.factor);
+            e.confidence_any = t.confidence_any * e.fit.map_or(1.0, |f| f.factor);
             e.ambiguous = t.ambiguous;
             e.alternatives = t.alternatives;
 
@@ -134,6 +138,7 @@ pub(super) fn trusted(found: Vec<PoseEstimate>, ctx: &Context<'_>, judge: &Judge
                 // The part's surface cannot fix its pose along a free motion (one face of a box):
                 // whatever the scan shows, the pose is one of many.
                 e.confidence = 0.0;
+                e.confidence_any = 0.0;
                 e.ambiguous = true;
             }
             Some(e)
@@ -316,6 +321,9 @@ pub(super) fn assess(
     let axis = model.near_symmetries.iter().find(|n| n.angle.is_none()).map(|n| n.axis);
     let trust = Trust {
         confidence,
+        // The truth is one of the pose and the alternatives the scan could not rule out (a turn
+        // about the free axis) as often as the judge confirms the pose.
+        confidence_any: if alternatives.is_empty() { confidence } else { base },
         ambiguous: !alternatives.is_empty(),
         alternatives,
         free_axis: axis.filter(|_| free).map(|a| kept.rotation * a),
