@@ -60,26 +60,16 @@ def _removed_cell(report: Any, r: Any) -> str:
     return "?" if not report.ground_truth and r.success else "-"
 
 
+_TABLE_HEADER = tuple(
+    "pick|result|removed|failure|score|confidence|orientation|rmse mm|rot err °|pos err mm|grasp|time s".split("|")
+)
+
+
 def _print_table(report: Any, out: Any = None) -> None:
     """The picks as a table (one row each: result, part removed, kind of failure, pose quality),
     a line of totals (parts removed, failures by kind) and one line per failed pick."""
     out = out or sys.stdout
-    rows = [
-        (
-            "pick",
-            "result",
-            "removed",
-            "failure",
-            "score",
-            "confidence",
-            "orientation",
-            "rmse mm",
-            "rot err °",
-            "pos err mm",
-            "grasp",
-            "time s",
-        )
-    ]
+    rows = [_TABLE_HEADER]
     for r in report.records:
         rows.append(
             (
@@ -118,9 +108,8 @@ def _confidence_cell(r: Any) -> str:
     """The pose's confidence, and with open alternatives the confidence that one of them is right."""
     if r.confidence is None:
         return "-"
-    if r.orientation_decided is False and r.confidence_any is not None:
-        return f"{r.confidence:.2f} (any {r.confidence_any:.2f})"
-    return f"{r.confidence:.2f}"
+    extra = f" (any {r.confidence_any:.2f})" if r.orientation_decided is False and r.confidence_any else ""
+    return f"{r.confidence:.2f}{extra}"
 
 
 def _failure_pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> list[Path]:
@@ -344,8 +333,8 @@ def _read_scene(path: str, unit: Optional[str] = None) -> tuple[Any, Any]:
     if os.path.isdir(path):
         if unit is not None:
             raise _Usage("--scene-unit: a scan folder is reconstructed in mm; leave the option out")
-        scan = _load_scan_folder(path)
-        return _reconstruct(scan).points, _scan_camera(scan)
+        scan = _load_scan_folder(path)  # the camera where its first frame was grabbed: the viewpoint
+        return _reconstruct(scan).points, (scan.T_base_flanges[0] @ scan.calibration.T_flange_camera)[:3, 3]
     cloud = read_scene(path, unit=unit)
     return cloud.points, cloud.viewpoint
 
@@ -364,13 +353,6 @@ def _reconstruct(scan: Any) -> Any:
     from .vision import reconstruct
 
     return reconstruct(scan)
-
-
-def _scan_camera(scan: Any) -> Any:
-    """The camera's optical centre (base frame, mm) where ``scan``'s first frame was grabbed."""
-    import numpy as np
-
-    return (np.asarray(scan.T_base_flanges[0]) @ scan.calibration.T_flange_camera)[:3, 3]
 
 
 def _reconstruct_command(args: argparse.Namespace) -> int:

@@ -44,6 +44,7 @@ __all__ = [
     "notched_hex",
     "bossed_rod",
     "d_shaft",
+    "pinned_flange",
     "base_shape",
     "NEAR_SYMMETRIC",
     "MORE_NEAR_SYMMETRIC",
@@ -436,8 +437,46 @@ NEAR_SYMMETRIC = {
 }
 
 
+def pinned_flange(
+    *,
+    diameter: float = 70.0,
+    thickness: float = 10.0,
+    pin_diameter: float = 6.0,
+    pin_height: float = 5.0,
+    pin_circle_diameter: float = 50.0,
+    feature: bool = True,
+    spacing: Optional[float] = None,
+    seed: int = 0,
+) -> Model:
+    """A flange disc about z, ``diameter`` × ``thickness`` (z from −thickness/2), with one locating
+    pin of ``pin_diameter`` standing ``pin_height`` proud of its top face on +x, on the
+    ``pin_circle_diameter``. Without the pin it is continuously symmetric about z and flips face
+    for face; the pin alone fixes the turn about the axis and which face is up."""
+    R = _size(diameter, "diameter") / 2
+    T = _size(thickness, "thickness")
+    rp, rc = _size(pin_diameter, "pin_diameter") / 2, _size(pin_circle_diameter, "pin_circle_diameter") / 2
+    hp = _size(pin_height, "pin_height") if _flag(feature) else 0.0
+    if rc + rp >= R - 1.0 or rc - rp <= 1.0:
+        raise InvalidInputError("pin_circle_diameter/pin_diameter: the pin must stand inside the flange's face")
+    phi = _shapes.angle_samples(0.3, rc + rp)
+    fine = np.arange(rc - rp - 0.5, rc + rp + 0.5, 0.25)
+    rho = np.unique(np.r_[np.linspace(0, R, int(np.ceil(R / 2.0)) + 1)[1:], fine]) / R
+    _shapes.check_grid(2 * len(rho) + 2, len(phi), "pinned_flange: diameter/pin_diameter")
+
+    def face(share, z_face, proud):
+        x, y = share * R * np.cos(phi), share * R * np.sin(phi)
+        pin = (x - rc) ** 2 + y**2 < rp * rp
+        return np.c_[x, y, np.where(pin, z_face + proud, z_face)]
+
+    bottom = [face(t, -T / 2, 0.0) for t in rho]
+    side = [np.c_[R * np.cos(phi), R * np.sin(phi), np.full_like(phi, z)] for z in np.linspace(-T / 2, T / 2, 4)[1:-1]]
+    top = [face(t, T / 2, hp) for t in rho[::-1]]
+    mesh = _shapes.ring_solid(np.array(bottom + side + top), (0.0, 0.0, -T / 2), (0.0, 0.0, T / 2))
+    return _near_model(mesh, "pinned_flange", spacing, seed)
+
+
 #: Near-symmetric parts beyond the bench's five, for the cell's bin clearing (issue 39).
-MORE_NEAR_SYMMETRIC = {"d_shaft": d_shaft}
+MORE_NEAR_SYMMETRIC = {"d_shaft": d_shaft, "pinned_flange": pinned_flange}
 
 
 def base_shape(name: str, **sizes) -> Model:

@@ -99,3 +99,42 @@ def test_a_low_confidence_pose_is_not_picked(sim):
     with pytest.raises(NoGraspError) as err:
         sim.cell.plan(located(T, _result(T, confidence=cfg.min_confidence / 2)))
     assert err.value.reason == "low confidence"
+
+
+def test_an_undecided_pose_is_staked_on_confidence_any_with_a_shared_grasp(sim):
+    """A pose whose alternatives the scan could not rule out has a low ``confidence`` (one of
+    several), but a grasp the same on all of them stakes only that one of them is right."""
+    cfg = sim.cell.config
+    T = _pose(sim)
+    centre = cfg.model.near_symmetries[0].center
+    other = _turned(T, (0, 1, 0), 180.0, centre)
+    low = cfg.min_confidence / 2
+    undecided = _result(T, alternatives=[other], confidence=low)
+    undecided.confidence_any = 0.9
+    plan = sim.cell.plan(located(T, undecided))
+    from binpick.cell.grasp import GraspMatcher
+
+    m = GraspMatcher(cfg.grasps, cfg.symmetries, tolerance_deg=5.0, tolerance_mm=3.0)
+    assert all(m.within(m.error(np.linalg.inv(plan.T_base_gripper) @ A)) for A in (T, other))
+    # The same pose without a grasp shared by its alternative, or unsure even that one of them is
+    # right, is not picked.
+    undecided.confidence_any = low
+    with pytest.raises(NoGraspError) as err:
+        sim.cell.plan(located(T, undecided))
+    assert err.value.reason == "low confidence"
+
+
+def test_a_keyed_shaft_whose_keyway_is_hidden_is_picked_across_its_body():
+    """A pile of keyed shafts in the simulated cell: poses whose keyway the scan does not show
+    come back with a free axis (confidence 0.03) and are picked with a grasp across the shaft's
+    body, whose turn about the axis does not matter; the record says the orientation is open."""
+    with SimulatedCell(binpick.parts.keyed_shaft(), count=3, seed=2, frames=90) as s:
+        report = s.cell.run(3)
+        min_confidence = s.cell.config.min_confidence
+    records = report.records
+    assert all(r.success for r in records), [r.error for r in records]
+    open_ones = [r for r in records if r.orientation_decided is False]
+    assert len(open_ones) >= 2, [(r.confidence, r.orientation_decided) for r in records]
+    for r in open_ones:
+        assert r.confidence < min_confidence <= r.confidence_any  # staked on the shared grasp
+        assert r.grasp.startswith("mesh")

@@ -65,8 +65,8 @@ def test_demo_counts_symmetric_picks_as_picked(tmp_path, capsys, monkeypatch, pa
     raw: list[float] = []
     judge = SimulatedCell.judge
 
-    def noting_judge(self, T_base_object):
-        truth = judge(self, T_base_object)
+    def noting_judge(self, T_base_object, **kw):
+        truth = judge(self, T_base_object, **kw)
         T_true = dict(zip(map(int, self.pile.ids), self.pile.poses))[truth.instance]
         raw.append(pose_error(T_base_object, T_true)[0])  # no symmetries: the pose as located
         return truth

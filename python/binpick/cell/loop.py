@@ -49,7 +49,7 @@ from .config import CellConfig, check_static_poses
 from .frames import FrameSource
 from .grasp import NoGraspError, grasp_filter, plan_bin_clash, plan_grasp
 from .nudge import nudge_blocked
-from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult, Skipped, located_line
+from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult, Skipped, located_line, pose_trust
 from .symmetry import continuous_near_axis
 from .views import deciding_views
 
@@ -319,16 +319,11 @@ class Cell:
                 f"the scan's {len(keep)} usable points span {span:.0f} mm, less than a fifth of the "
                 f"{cfg.model.name} ({cfg.model.diameter:.0f} mm): nothing to locate"
             )
-        options = dict(cfg.estimate_options)
-        options.setdefault("num_threads", cfg.num_threads)
-        options.setdefault("search_instances", cfg.max_candidates)
-        # The camera's position at the first pose of the scan orients the scan's normals (PPF); the
-        # swept laser scan is judged along the bin's up, not along the camera's rays: the camera
-        # looks straight down on the bin, and the laser's lines, several millimetres apart, alias a
-        # grid of its rays (a pose's top between two lines reads as seen through where a
-        # neighbouring line's flank lies farther along a nearby ray).
-        options.setdefault("viewpoint", (np.asarray(scan.T_base_flanges[0]) @ cfg.calibration.T_flange_camera)[:3, 3])
-        options.setdefault("along_rays", False)
+        # The camera at the scan's first pose orients the normals; the swept scan is judged along up
+        # (along_rays=False): its lines, millimetres apart, alias a grid of the camera's rays.
+        camera = (np.asarray(scan.T_base_flanges[0]) @ cfg.calibration.T_flange_camera)[:3, 3]
+        defaults = dict(num_threads=cfg.num_threads, search_instances=cfg.max_candidates, viewpoint=camera)
+        options = {**defaults, "along_rays": False, **cfg.estimate_options}
         wanted = count(max_instances, "max_instances") or cfg.max_candidates
         c0 = time.process_time()
         results = estimate_poses(scan.points[keep], cfg.model, bin=cfg.bin_bounds, max_instances=wanted, **options)
@@ -360,17 +355,13 @@ class Cell:
     def _judge_located(self, result: Any, T: np.ndarray) -> Optional[PoseTruth]:
         """The truth of a located pose (None without ground truth). For a pose flagged ambiguous
         the best of it and its alternatives: :meth:`plan` picks such a pose only with a grasp
-        that grips every alternative the same way, so whichever of them is true, the pick is."""
+        that grips every alternative the same way, so whichever of them is true, the pick is;
+        with a free axis, only across that axis, so any turn about it is as good."""
         if self.truth is None:
             return None
-        # A pose whose turn about a free axis is open is picked only across that axis: any turn is as good.
         about = continuous_near_axis(self.config.model) if getattr(result, "free_axis", None) is not None else None
-        truths = [self.truth.judge(T, turn_about=about)]
-        if getattr(result, "ambiguous", False):
-            truths += [
-                self.truth.judge(np.asarray(a.T_scene_model, dtype=np.float64), turn_about=about)
-                for a in result.alternatives
-            ]
+        poses = [T, *(a.T_scene_model for a in result.alternatives)] if getattr(result, "ambiguous", False) else [T]
+        truths = [self.truth.judge(np.asarray(P, dtype=np.float64), turn_about=about) for P in poses]
         return min(truths, key=lambda t: (not t.pick_grade, t.rotation_error_deg / 5.0 + t.translation_error_mm / 3.0))
 
     def locate_and_plan(self, scan: ScanResult, skipped: Optional[list[Skipped]] = None) -> tuple[Located, PickPlan]:
@@ -454,16 +445,13 @@ class Cell:
         others = np.ones(len(pts), dtype=bool)
         others[located.indices] = False
         res = located.result
-        # With alternatives the scan could not rule out, only a grasp that is the same on every one
-        # of them is used (grasp_filter): it stakes that one of them is right (confidence_any).
-        accept = grasp_filter(self.config, res)
-        staked = "confidence_any" if accept is not None else "confidence"
-        confidence = float(getattr(res, staked, 1.0))
+        accept = grasp_filter(self.config, res)  # a grasp the same on every alternative stakes confidence_any
+        confidence = float(getattr(res, "confidence" if accept is None else "confidence_any", 1.0))
         if confidence < self.config.min_confidence:
-            what = "it or one of its alternatives is right with" if accept is not None else "it has"
             raise NoGraspError(
-                f"the located {self.config.model.name}: {what} confidence {confidence:.2f}, below the cell's "
-                f"min_confidence {self.config.min_confidence:.2f}; it is not picked",
+                f"the located {self.config.model.name}{'' if accept is None else ' (or one of its alternatives)'} "
+                f"has confidence {confidence:.2f}, below the cell's min_confidence {self.config.min_confidence:.2f}; "
+                "it is not picked",
                 reason="low confidence",
             )
         try:
@@ -513,9 +501,7 @@ class Cell:
             score=float(res.score),
             rmse=float(res.rmse),
             method=getattr(res, "method", None),
-            confidence=float(getattr(res, "confidence", 1.0)),
-            confidence_any=float(getattr(res, "confidence_any", getattr(res, "confidence", 1.0))),
-            orientation_decided=not getattr(res, "ambiguous", False),
+            **pose_trust(res),
             points=len(located.scan.points),
             grasp=plan.grasp,
             held=held,

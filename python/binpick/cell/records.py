@@ -201,6 +201,14 @@ class PickRecord:
         }
 
 
+def pose_trust(result: Any) -> dict:
+    """A located pose's ``confidence``, ``confidence_any`` and ``orientation_decided`` (see
+    :class:`PickRecord`) from its :class:`binpick.PoseResult` (a bare one reads as sure)."""
+    c = float(getattr(result, "confidence", 1.0))
+    any_ = float(getattr(result, "confidence_any", c))
+    return {"confidence": c, "confidence_any": any_, "orientation_decided": not getattr(result, "ambiguous", False)}
+
+
 @dataclass(frozen=True, eq=False)
 class RunReport:
     """The picks of :meth:`Cell.run`, why it stopped (None when every pick was tried), the last

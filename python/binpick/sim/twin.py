@@ -124,28 +124,53 @@ def sim_limits(layout: Any = None, gripper: Optional[GripperGeometry] = None) ->
 MAX_SIM_FINGER_MM = 150.0
 
 
-def sim_gripper(layout: Any = None) -> GripperGeometry:
+#: A part thinner than this share of its footprint's width is flat: lying on its face, it can be
+#: gripped only across that face.
+FLAT_SHARE = 0.25
+
+
+def sim_gripper(layout: Any = None, model: Optional[Model] = None) -> GripperGeometry:
     """The simulated cell's gripper: :class:`GripperGeometry`'s defaults but for fingers long
     enough to reach the bin's floor with the palm above the rim (the bin's depth plus the
     fingertips' reach past the TCP; at least the default 45 mm, at most :data:`MAX_SIM_FINGER_MM`),
     the TCP moved away from the flange by what the fingers grew — the fingers a bin-picking cell
-    fits so that the palm clears the walls when a part lies against them."""
+    fits so that the palm clears the walls when a part lies against them. For a flat part
+    (``model``: thinner than :data:`FLAT_SHARE` of its footprint's narrowest width — a flange, a
+    plate), which lying on its face can be gripped only across it, the fingers open as far as that
+    width and the pre-shape's clearance need, within the simulated gripper's stroke."""
     layout = instance_of(Layout() if layout is None else layout, Layout, "layout", "binpick.sim.Cell()")
     base = GripperGeometry()
     lo, hi = layout.bin.bounds
     length = float(np.clip(float(hi[2] - lo[2]) + base.tip_depth_mm, base.finger_length_mm, MAX_SIM_FINGER_MM))
     T = base.T_flange_gripper.copy()
     T[:3, 3] += T[:3, 2] * (length - base.finger_length_mm)
-    return GripperGeometry(T_flange_gripper=T, finger_length_mm=length)
+    opening = base.open_width_mm
+    if model is not None:
+        width, thickness = _footprint(instance_of(model, Model, "model", "binpick.parts.flange()"))
+        if thickness < FLAT_SHARE * width:
+            needed = width + 2.0 * (base.preshape_clearance_mm or 0.0) + 2.0
+            opening = float(min(max(opening, needed), GripperConfig().stroke_mm))
+    return GripperGeometry(T_flange_gripper=T, finger_length_mm=length, open_width_mm=opening)
 
 
-def _layout_and_gripper(layout: Any, gripper: Any) -> tuple[Layout, GripperGeometry]:
+def _footprint(model: Model) -> tuple[float, float]:
+    """The narrowest width of a part's footprint on its largest face (its caliper width across the
+    two longest principal axes, over directions every 2°) and its thickness along the third, mm."""
+    pts = np.asarray(model.points, dtype=np.float64)
+    _, axes = np.linalg.eigh(np.cov((pts - pts.mean(axis=0)).T))
+    face = pts @ axes[:, 1:]  # the two longest axes (eigh sorts ascending)
+    angles = np.radians(np.arange(0.0, 180.0, 2.0))
+    widths = np.ptp(face @ np.stack([np.cos(angles), np.sin(angles)]), axis=0)
+    return float(widths.min()), float(np.ptp(pts @ axes[:, 0]))
+
+
+def _layout_and_gripper(layout: Any, gripper: Any, model: Optional[Model] = None) -> tuple[Layout, GripperGeometry]:
     """The simulated hardware and the gripper, each its default when None (:func:`sim_gripper` of
-    the layout; InvalidTypeError naming it when it is not one)."""
+    the layout and the part; InvalidTypeError naming it when it is not one)."""
     layout = instance_of(Layout() if layout is None else layout, Layout, "layout", "binpick.sim.Cell()")
     return (
         layout,
-        sim_gripper(layout)
+        sim_gripper(layout, model)
         if gripper is None
         else instance_of(gripper, GripperGeometry, "gripper", "binpick.sim.sim_gripper(layout)"),
     )
@@ -214,7 +239,7 @@ class TwinWorld:
             raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}")
         if layout is None:
             layout = Layout.for_part(model)
-        self.layout, self.gripper_geometry = _layout_and_gripper(layout, gripper)
+        self.layout, self.gripper_geometry = _layout_and_gripper(layout, gripper, model)
         self.arm = sim_arm(self.layout, self.gripper_geometry)
         self.model = model
         self.seed = _validate.count(seed, "seed")
