@@ -138,3 +138,40 @@ def test_a_keyed_shaft_whose_keyway_is_hidden_is_picked_across_its_body():
     for r in open_ones:
         assert r.confidence < min_confidence <= r.confidence_any  # staked on the shared grasp
         assert r.grasp.startswith("mesh")
+
+
+def test_a_second_view_judged_with_the_first_decides_what_the_first_left_open():
+    """A keyed shaft lying with its keyway to the side: seen from above the keyway is out of view
+    and the turn about the shaft is open; a second look from that side, judged together with the
+    first (ScanResult.joined, as the cell looks again), decides it."""
+    from binpick import sim
+    from binpick.cell.records import ScanResult
+    from binpick.vision import Cloud
+
+    model = binpick.parts.keyed_shaft()
+    T = np.eye(4)
+    T[:3, :3] = rotation_about((0, 1, 0), np.pi / 2)  # the axis along x, the keyway (+x) facing -z ...
+    T[:3, :3] = rotation_about((1, 0, 0), np.pi / 2) @ T[:3, :3]  # ... turned to face +y, sideways
+    T[:3, 3] = (400.0, 0.0, 12.0)
+    world = sim.World()
+    world.add_bin(sim.Bin())
+    world.add_parts(model, [0], T[None])
+    ideal = sim.DepthCamera(noise=sim.DepthNoise.ideal())
+
+    def seen(tilt, azimuth):
+        cam = ideal.looking_at((400.0, 0.0, 12.0), distance=500.0, tilt_deg=tilt, azimuth_deg=azimuth)
+        frame = sim.render_depth(world, cam)
+        pts = frame.cloud[np.abs(frame.cloud[:, 0] - 400.0) < 120.0]
+        n = len(pts)
+        cloud = Cloud(points=pts, frame=np.zeros(n, dtype=np.int64), pixels=np.zeros((n, 2)), angle=np.zeros(n))
+        return ScanResult(cloud, np.zeros(1), frame.T_base_camera[None], {}, {})
+
+    above, side = seen(0.0, 0.0), seen(45.0, 90.0)
+    bin_box = sim.Bin().bounds
+    first = binpick.estimate_pose(above.points, model, bin=bin_box)
+    assert first.ambiguous and first.free_axis is not None
+    both = above.joined(side)
+    assert len(both.points) == len(above.points) + len(side.points) and len(both.T_base_flanges) == 2
+    res = binpick.estimate_pose(both.points, model, bin=bin_box)
+    rot, trans = model.pose_error(res.T_scene_model, T)
+    assert not res.ambiguous and rot < 5 and trans < 3, (res, rot, trans)

@@ -675,12 +675,12 @@ class Cell:
             nudges.append(plan)
 
     def _look_and_pick(self, i: int) -> tuple[PickRecord, Optional[str]]:
-        """Scan, locate and plan — looking again from each of
-        ``config.look_again_poses`` while nothing is pickable (from one only when neither look
-        finds any part) — then pick; the record, and why the run stops (None to go on)."""
+        """Scan, locate and plan — looking again from each of ``config.look_again_poses`` while
+        nothing is pickable (from one only when neither look finds any part), each look judged
+        together with the first — then pick; the record, and why the run stops (None to go on)."""
         t0 = time.perf_counter()
         self._cpu = {}
-        scan: Optional[ScanResult] = None
+        scan = first = None  # the look now, and the first look each later one is judged with
         located: Optional[Located] = None
         skipped: list[Skipped] = []
         times: dict[str, float] = {}
@@ -695,7 +695,8 @@ class Cell:
                         f"nothing pickable; looking again from flange ({T[0, 3]:.1f}, {T[1, 3]:.1f}, {T[2, 3]:.1f}) "
                         f"mm, tool tilted {math.degrees(math.acos(max(-1.0, min(1.0, -T[2, 2])))):.0f}°",
                     )
-                scan = self.scan(view)
+                scan = self.scan(view) if first is None else first.joined(self.scan(view))
+                first = first or scan
                 looks += 1
                 self._last = (scan, self._last[1])
                 for key, v in scan.timings.items():

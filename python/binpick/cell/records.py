@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from types import MappingProxyType
 from typing import Any, Optional
 
 import numpy as np
@@ -37,6 +38,30 @@ class ScanResult:
     def points(self) -> np.ndarray:
         """(N, 3) points, mm, base frame."""
         return self.cloud.points
+
+    def joined(self, later: ScanResult) -> ScanResult:
+        """This scan and a ``later`` one of the same bin from another pose, as one: their points
+        (each with its frame, renumbered after this scan's), angles and flange poses in turn, the
+        later scan's kept frames and timings. The camera rides on the arm and both poses are
+        known, so a feature one view shows and the other does not is judged with everything
+        else both show."""
+        from ..vision import Cloud
+
+        n = len(self.angles)
+        a, b = self.cloud, later.cloud
+        cloud = Cloud(
+            points=np.concatenate([a.points, b.points]),
+            frame=np.concatenate([a.frame, np.asarray(b.frame) + n]),
+            pixels=np.concatenate([a.pixels, b.pixels]),
+            angle=np.concatenate([a.angle, b.angle]),
+        )
+        return ScanResult(
+            cloud=cloud,
+            angles=np.concatenate([self.angles, later.angles]),
+            T_base_flanges=np.concatenate([self.T_base_flanges, later.T_base_flanges]),
+            frames=MappingProxyType({k + n: v for k, v in later.frames.items()}),
+            timings=later.timings,
+        )
 
 
 @dataclass(frozen=True)
