@@ -70,28 +70,27 @@ def test_without_ground_truth_the_removed_count_is_not_known_and_the_lifts_are_n
 
 
 def test_demo_prints_one_line_per_skipped_part(tmp_path, capsys):
-    # In this pile the second scan finds first a cross lying flat against the bin's wall, its far
-    # end hidden (the scan cannot rule out a slide along its arm: low confidence) or no grasp
-    # keeping the palm inside the bin; the cell says so in one line and picks the next part found.
-    out = tmp_path / "cross"
-    argv = ["demo", "--part", "cross", "--picks", "2", "--count", "3", "--frames", "45", "--seed", "0"]
+    # In this pile a scan finds first a tee whose every grasp would take the palm into the bin's
+    # wall or beyond the tilt limit; the cell says so in one line and picks the next part found.
+    out = tmp_path / "tee"
+    argv = ["demo", "--part", "tee", "--picks", "3", "--count", "6", "--frames", "45", "--seed", "2"]
     code = main([*argv, "--out", str(out)])
     text = capsys.readouterr().out
     assert code == 0, text
     skips = [line for line in text.splitlines() if re.match(r"\[\s*[\d.]+ s\] skip ", line)]
     assert len(skips) >= 1, text
     for line in skips:
-        at = r"skip\s+cross at \(-?[\d.]+, -?[\d.]+, -?[\d.]+\) mm: "
+        at = r"skip\s+tee at \(-?[\d.]+, -?[\d.]+, -?[\d.]+\) mm: "
         assert re.search(at + r"(none of \d+ grasps usable \(|low confidence$)", line), line
         assert len(line) < 160, line
     assert "trying the next part" not in text and "declare more grasps" not in "\n".join(skips)
     records = json.loads((out / "picks.json").read_text())["picks"]
-    assert [r["failure"] for r in records] == [None, None], text
+    assert [r["failure"] for r in records] == [None, None, None], text
     skipped = [k for r in records for k in r["skipped"]]
     assert len(skipped) == len(skips)
     assert all(
         (k["reason"].startswith("none of") and "bin" in k["reason"]) or k["reason"] == "low confidence" for k in skipped
     )
     removed = [r["picked_instance"] for r in records]
-    assert f"removed 2 parts ({removed[0]}, {removed[1]}); failures: none" in text
-    assert "2 of 2 picks succeeded" in text
+    assert f"removed 3 parts ({removed[0]}, {removed[1]}, {removed[2]}); failures: none" in text
+    assert "3 of 3 picks succeeded" in text
