@@ -179,6 +179,11 @@ def branch_grasps(
     return grasps
 
 
+#: Two antipodal pairs through about the same point are distinct grasps when their closing
+#: directions differ by more than this (degrees): across another pair of faces.
+DISTINCT_CLOSING_DEG = 20.0
+
+
 def mesh_grasps(
     model: Model,
     gripper: GripperGeometry,
@@ -195,11 +200,12 @@ def mesh_grasps(
     ``max_angle_deg``, no farther apart than the open fingers (``open_width_mm`` less 2 mm). Its
     quality is the mean alignment of the two normals with the closing direction less the
     distance from the pair's midpoint to the samples' centroid (the centre of mass of a shell,
-    a stand-in for the solid's) in units of the part's diameter. The best ``pairs`` pairs with
-    midpoints at least a finger width apart are kept; each is approached from ``approaches``
-    directions about the closing axis, the TCP at the midpoint (so the contacts lie within the
-    fingers' depth), both ways round the wrist. Returns name → ``T_gripper_object``; names say
-    the pair, the quality and the approach.
+    a stand-in for the solid's) in units of the part's diameter. The best ``pairs`` pairs whose
+    midpoints lie at least a finger width apart, or whose closing directions differ by more than
+    :data:`DISTINCT_CLOSING_DEG` (the three pairs of flats of a hex through one centre), are kept;
+    each is approached from ``approaches`` directions about the closing axis, the TCP at the
+    midpoint (so the contacts lie within the fingers' depth), both ways round the wrist. Returns
+    name → ``T_gripper_object``; names say the pair, the quality and the approach.
     """
     instance_of(model, Model, "model", "binpick.parts.tee()")
     pts = np.asarray(model.points, dtype=np.float64)
@@ -229,8 +235,9 @@ def mesh_grasps(
         found.append((float(quality), mid, u))
     found.sort(key=lambda f: -f[0])
     kept: list = []
+    distinct = math.cos(math.radians(DISTINCT_CLOSING_DEG))
     for q, mid, u in found:
-        if all(np.linalg.norm(mid - m) >= gripper.finger_width_mm for _, m, _ in kept):
+        if all(np.linalg.norm(mid - m) >= gripper.finger_width_mm or abs(u @ v) < distinct for _, m, v in kept):
             kept.append((q, mid, u))
         if len(kept) == pairs:
             break
