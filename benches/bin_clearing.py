@@ -86,9 +86,15 @@ def _floor_gap(sim) -> list:
     return gaps
 
 
-def run_pile(make, seed: int, count: int, frames: int, threads: int = 1) -> dict:
+def run_pile(make, seed: int, count: int, frames: int, threads: int = 1, orientation_needed: bool = False) -> dict:
     with SimulatedCell(
-        make(), count=count, seed=seed, frames=frames, estimate_options=ESTIMATE, num_threads=threads
+        make(),
+        count=count,
+        seed=seed,
+        frames=frames,
+        estimate_options=ESTIMATE,
+        num_threads=threads,
+        orientation_needed=orientation_needed,
     ) as sim:
         gaps = _floor_gap(sim)
         cpu0, wall0 = time.process_time(), time.perf_counter()
@@ -116,6 +122,7 @@ def run_pile(make, seed: int, count: int, frames: int, threads: int = 1) -> dict
         "looks": sum(r.looks for r in recs),
         # Parts lifted whose orientation the scan left open (picked with a grasp the same on every alternative).
         "orientation_open": sum(r.success and r.orientation_decided is False for r in recs),
+        "orientation_undecided_skips": sum(s.reason == "orientation undecided" for r in recs for s in r.skipped),
         "skipped": sum(len(r.skipped) for r in recs),
         "cpu_s_per_pick": cpu / max(1, len(recs)),
         # Measuring each grasp's finger opening, once per grasp and part (not per pick), ms.
@@ -138,6 +145,11 @@ def main() -> None:
         default=1,
         help="threads for rendering and binpick (default 1: binpick's compute is measured on one core)",
     )
+    ap.add_argument(
+        "--orientation-needed",
+        action="store_true",
+        help="the cell places parts by their orientation: undecided poses are not picked (orientation_needed)",
+    )
     ap.add_argument("--out", default="bin_clearing.json")
     args = ap.parse_args()
     seeds = range(1) if args.quick else range(args.first_seed, args.first_seed + args.seeds)
@@ -150,7 +162,7 @@ def main() -> None:
         piles = []
         for s in seeds:
             count = 8 if args.quick else 8 + s % 5
-            piles.append(run_pile(make, s, count, frames, args.threads))
+            piles.append(run_pile(make, s, count, frames, args.threads, args.orientation_needed))
             p = piles[-1]
             print(
                 f"{name} seed {s}: removed {p['removed']}/{p['count']} in {p['cycles']} cycles, stopped: {p['stopped']}"

@@ -124,6 +124,27 @@ def test_an_undecided_pose_is_staked_on_confidence_any_with_a_shared_grasp(sim):
     assert err.value.reason == "low confidence"
 
 
+def test_a_cell_that_places_by_orientation_does_not_pick_an_undecided_pose(sim):
+    """``orientation_needed``: however sure it is that one of its alternatives is right, a pose
+    whose flip (or turn about a free axis) the scan left open is not picked; a decided one is."""
+    import dataclasses
+
+    from binpick.cell.grasp import staked_filter
+
+    cfg = dataclasses.replace(sim.cell.config, orientation_needed=True)
+    T = _pose(sim)
+    other = _turned(T, (0, 1, 0), 180.0, cfg.model.near_symmetries[0].center)
+    for undecided in (_result(T, alternatives=[other]), _result(T, free_axis=np.array([0.0, 1.0, 0.0]))):
+        undecided.confidence_any = 1.0
+        assert grasp_filter(cfg, undecided) is not None  # a shared grasp exists ...
+        with pytest.raises(NoGraspError) as err:
+            staked_filter(cfg, undecided)  # ... but the orientation matters
+        assert err.value.reason == "orientation undecided"
+    assert staked_filter(cfg, _result(T)) is None
+    with pytest.raises(binpick.errors.InvalidTypeError, match="orientation_needed"):
+        dataclasses.replace(cfg, orientation_needed="yes")
+
+
 def test_a_keyed_shaft_whose_keyway_is_hidden_is_picked_across_its_body():
     """A pile of keyed shafts in the simulated cell: poses whose keyway the scan does not show
     come back with a free axis (confidence 0.03) and are picked with a grasp across the shaft's

@@ -58,6 +58,8 @@ def test_the_example_reads(cell_dir):
         ("preshape_clearance_mm = 5.0", "preshape_clearance_mm = true", r"\[gripper\] preshape_clearance_mm must"),
         ("approach_height_mm = 315.0", 'approach_height_mm = "high"', r"\[limits\] approach_height_mm must be a"),
         ("max_tool_tilt_deg = 45.0", "max_tool_tilt_deg = inf", r"\[limits\] max_tool_tilt_deg"),
+        ("orientation_needed = false", 'orientation_needed = "yes"', r"\[cell\] orientation_needed must be true or"),
+        ("# min_confidence = 0.3", "min_confidence = []", r"\[cell\] min_confidence must be a finite number"),
         ("# d_star = 12.0", "dstar = 12.0", r"\[estimate\] 'dstar' is not an option of binpick.estimate_pose"),
         ("baudrate = 9600", 'baudrate = "fast"', r"\[robot\] baudrate must be a whole number"),
         ("override_percent = 10", "override_percent = {}", r"\[robot\] override_percent must be a finite number"),
@@ -73,6 +75,15 @@ def test_a_wrong_value_names_the_file_table_and_key_before_any_port_is_opened(ce
     with pytest.raises(InvalidInputError, match=match) as info:
         cell_from_file(load_cell_file(cell_dir / "cell.toml"))  # the ports in the example do not exist
     assert str(info.value).startswith(str(cell_dir / "cell.toml"))
+
+
+def test_how_sure_a_pose_must_be_is_read_from_the_cell_table(cell_dir):
+    assert not _config(cell_dir).orientation_needed  # the example leaves undecided poses to shared grasps
+    text = CELL_FILE_EXAMPLE.replace("orientation_needed = false", "orientation_needed = true")
+    config = _config(cell_dir, text.replace("# min_confidence = 0.3", "min_confidence = 0.6"))
+    assert config.orientation_needed and config.min_confidence == 0.6
+    with pytest.raises(InvalidInputError, match="min_confidence"):
+        _config(cell_dir, CELL_FILE_EXAMPLE.replace("# min_confidence = 0.3", "min_confidence = 1.5"))
 
 
 def test_the_gripper_shape_is_read_from_the_gripper_table(cell_dir):

@@ -104,6 +104,8 @@ drop_pose = [400.0, -250.0, 350.0, 180.0, 0.0, 0.0]
 frames = 90
 tool = [0.0, 0.0, 195.0, 0.0, 0.0, 0.0]   # the gripper's TCP in the flange frame
 # scan_height_mm = 120.0     # how far above the rim parts are looked for (default: the bin's depth or the part's size)
+orientation_needed = false   # true: parts are placed by their orientation, an undecided pose is not picked
+# min_confidence = 0.3       # a located pose less sure than this is not picked
 
 [calibration_board]          # the printed checkerboard lying face up, for `binpick calibrate capture`
 pattern = [9, 6]             # inner corners: columns, rows
@@ -177,6 +179,13 @@ class CellFile:
         v = self.get(table, key, default)
         if isinstance(v, bool) or not isinstance(v, int):
             raise self._wrong(table, key, v, "a whole number")
+        return v
+
+    def boolean(self, table: str, key: str, default: Any = ...) -> bool:
+        """``[table] key`` as true or false."""
+        v = self.get(table, key, default)
+        if not isinstance(v, bool):
+            raise self._wrong(table, key, v, "true or false")
         return v
 
     def number(self, table: str, key: str, default: Any = ...) -> float:
@@ -272,11 +281,22 @@ def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig
         drop_pose=f.pose("cell", "drop_pose"),
         frames=f.integer("cell", "frames", 90),
         scan_height_mm=None if f.get("cell", "scan_height_mm", None) is None else f.number("cell", "scan_height_mm"),
+        **_stake(f),
         gripper=_gripper_geometry(f, tool),
         limits=_limits(f),
         num_threads=num_threads,
         estimate_options=_estimate_options(f),
     )
+
+
+def _stake(f: CellFile) -> dict[str, Any]:
+    """``[cell] orientation_needed`` and ``min_confidence`` where the file sets them (else CellConfig's defaults)."""
+    out: dict[str, Any] = {}
+    if f.get("cell", "orientation_needed", None) is not None:
+        out["orientation_needed"] = f.boolean("cell", "orientation_needed")
+    if f.get("cell", "min_confidence", None) is not None:
+        out["min_confidence"] = f.number("cell", "min_confidence")
+    return out
 
 
 def capture_calibration(

@@ -17,7 +17,17 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
-from .._validate import MAX_COORDINATE, as_box, as_transform, count, instance_of, non_negative, number, positive
+from .._validate import (
+    MAX_COORDINATE,
+    as_box,
+    as_transform,
+    count,
+    flag,
+    instance_of,
+    non_negative,
+    number,
+    positive,
+)
 from ..calibration import CellCalibration
 from ..devices import safety
 from ..errors import InvalidInputError, SafetyError
@@ -194,6 +204,12 @@ class CellConfig:
         min_confidence: a located pose whose ``confidence`` is lower is not picked (skipped with the
             reason "low confidence"); 0.3 by default — poses that confident were pick-grade at
             least 30 % of the time on the project's test sets (see PoseResult.confidence).
+        orientation_needed: the cell places parts by their orientation (into a fixture, a machine's
+            chuck): a pose the scan cannot decide (``ambiguous``, or a ``free_axis`` a near-symmetric
+            part turns about) is not picked — the cell looks again, and a look judged with the first
+            that decides it is; False (the default): such a pose is picked with a grasp the same on
+            every pose it leaves open, staking ``confidence_any``, and the pick record says the
+            orientation was undecided.
         ambiguity_tolerance_deg: how closely (degrees) a grasp must land the same way on every
             alternative of an ambiguous pose, and align with a free axis …
         ambiguity_tolerance_mm: … and in translation, mm (see :func:`binpick.cell.grasp.grasp_filter`).
@@ -233,6 +249,7 @@ class CellConfig:
     max_collision_points: int = 15
     floor_clearance_mm: float = 0.0
     min_confidence: float = 0.3
+    orientation_needed: bool = False
     ambiguity_tolerance_deg: float = 5.0
     ambiguity_tolerance_mm: float = 3.0
     max_candidates: int = 8
@@ -259,6 +276,7 @@ class CellConfig:
         count(self.max_nudges, "max_nudges", 0, 20)
         non_negative(self.floor_clearance_mm, "floor_clearance_mm", "mm")
         number(self.min_confidence, "min_confidence", 0.0, 1.0)
+        object.__setattr__(self, "orientation_needed", flag(self.orientation_needed, "orientation_needed"))
         positive(self.ambiguity_tolerance_deg, "ambiguity_tolerance_deg", "deg")
         positive(self.ambiguity_tolerance_mm, "ambiguity_tolerance_mm")
         object.__setattr__(

@@ -626,6 +626,32 @@ def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarr
     return lambda T_bg: all(t(T_bg) for t in tests)
 
 
+def staked_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarray], bool]]:
+    """The grasp test of :func:`grasp_filter` for a located pose, once the pose's stake is checked:
+    NoGraspError (reason "low confidence") when the pose — or, planned with a grasp the same on
+    every alternative, the pose or one of its alternatives (``confidence_any``) — is less
+    confident than ``config.min_confidence``; NoGraspError (reason "orientation undecided") for
+    an undecided pose when ``config.orientation_needed`` (the part is placed by its orientation:
+    the cell looks again, and a look that decides it is picked)."""
+    accept = grasp_filter(config, result)
+    name = config.model.name
+    if accept is not None and config.orientation_needed:
+        what = "flip" if getattr(result, "ambiguous", False) else "turn about its axis"
+        raise NoGraspError(
+            f"the scan cannot decide the located {name}'s {what} and the cell places parts by their "
+            "orientation (orientation_needed); it is not picked until a look decides it",
+            reason="orientation undecided",
+        )
+    confidence = float(getattr(result, "confidence" if accept is None else "confidence_any", 1.0))
+    if confidence < config.min_confidence:
+        raise NoGraspError(
+            f"the located {name}{'' if accept is None else ' (or one of its alternatives)'} has confidence "
+            f"{confidence:.2f}, below the cell's min_confidence {config.min_confidence:.2f}; it is not picked",
+            reason="low confidence",
+        )
+    return accept
+
+
 def _plan(
     config: CellConfig,
     name: str,

@@ -47,7 +47,7 @@ from ..poses import estimate_poses
 from ..vision import LaserWindow, triangulate
 from .config import CellConfig, check_static_poses
 from .frames import FrameSource
-from .grasp import NoGraspError, grasp_filter, plan_bin_clash, plan_grasp
+from .grasp import NoGraspError, plan_bin_clash, plan_grasp, staked_filter
 from .nudge import nudge_blocked
 from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult, Skipped, located_line, pose_trust
 from .symmetry import continuous_near_axis
@@ -445,15 +445,7 @@ class Cell:
         others = np.ones(len(pts), dtype=bool)
         others[located.indices] = False
         res = located.result
-        accept = grasp_filter(self.config, res)  # a grasp the same on every alternative stakes confidence_any
-        confidence = float(getattr(res, "confidence" if accept is None else "confidence_any", 1.0))
-        if confidence < self.config.min_confidence:
-            raise NoGraspError(
-                f"the located {self.config.model.name}{'' if accept is None else ' (or one of its alternatives)'} "
-                f"has confidence {confidence:.2f}, below the cell's min_confidence {self.config.min_confidence:.2f}; "
-                "it is not picked",
-                reason="low confidence",
-            )
+        accept = staked_filter(self.config, res)  # a grasp the same on every alternative stakes confidence_any
         try:
             plan, hits = plan_grasp(self.config, located.T_base_object, pts[others], self.robot.read_pose(), accept)
         except NoGraspError as exc:
