@@ -74,6 +74,9 @@ def test_a_scene_in_the_camera_frame_gives_the_same_pose_as_turned_to_z_up(obliq
     # An up that points away from the sensor contradicts the viewpoint.
     with pytest.raises(binpick.InvalidInputError, match="up: points away from the sensor"):
         binpick.estimate_pose(in_camera, model, viewpoint=(0.0, 0.0, 0.0), up=(0.0, 0.0, 1.0))
+    # A bin box (floor at its lowest z) means nothing where up is not +z.
+    with pytest.raises(binpick.InvalidInputError, match="bin: the bin box has its floor at its lowest z"):
+        binpick.estimate_pose(in_camera, model, viewpoint=(0.0, 0.0, 0.0), bin=pile.bin.bounds)
 
 
 def test_a_declared_noise_sets_the_tolerance_and_an_absurd_one_refuses(oblique):

@@ -125,6 +125,22 @@ def test_a_gripper_that_cannot_be_set_to_a_width_plans_every_grasp_fully_open(si
     assert sim.cell.finger_opening(plan) == 30.0
 
 
+def test_a_part_whose_turn_is_open_is_gripped_open_for_its_pin_at_any_turn():
+    """A flange whose locating pin the scan did not show may lie at any turn about its axis: each
+    grasp opens for the pin wherever it may be (swept_points), never less than for the turn located."""
+    from binpick.cell.grasp import mesh_grasps, swept_points
+
+    flange, g = binpick.parts.pinned_flange(), GripperGeometry()
+    grasps = mesh_grasps(flange, g)
+    swept = swept_points(flange)
+    assert len(swept) > len(flange.points)
+    here, anywhere = grasp_openings(g, flange, grasps), grasp_openings(g, flange, grasps, swept)
+    wider = [anywhere[n] - here[n] for n in grasps if here[n] is not None and anywhere[n] is not None]
+    assert min(wider) >= 0.0 and max(wider) > 5.0  # the pin turned into the fingers' slab reaches farther
+    # A part without a continuous near axis is measured as it is.
+    assert len(swept_points(binpick.parts.cut_plate())) == len(binpick.parts.cut_plate().points)
+
+
 def _located(T_base_object):
     return located(T_base_object, SimpleNamespace(score=1.0, rmse=0.0, method="test", timings={}))
 

@@ -33,7 +33,7 @@ from ..devices import safety
 from ..errors import InvalidInputError, SafetyError
 from ..models import Model
 from ..transforms import laser_sweep, rotation_about, translation
-from .grasp import branch_grasps, grasp_openings, mesh_grasps
+from .grasp import branch_grasps, grasp_openings, mesh_grasps, swept_points
 from .views import turned_scan_poses
 
 __all__ = ["CellConfig", "GripperGeometry", "check_static_poses", "sweep_angles", "turned_scan_poses"]
@@ -203,7 +203,9 @@ class CellConfig:
             plan closer to the floor, or crossing the bin's walls below the rim, is refused.
         min_confidence: a located pose whose ``confidence`` is lower is not picked (skipped with the
             reason "low confidence"); 0.3 by default — poses that confident were pick-grade at
-            least 30 % of the time on the project's test sets (see PoseResult.confidence).
+            least 30 % of the time on the project's test sets (see PoseResult.confidence). A pose
+            the scan left undecided, planned with a grasp the same on every pose it leaves open,
+            is held to it by its ``confidence_any`` instead.
         orientation_needed: the cell places parts by their orientation (into a fixture, a machine's
             chuck): a pose the scan cannot decide (``ambiguous``, or a ``free_axis`` a near-symmetric
             part turns about) is not picked — the cell looks again, and a look judged with the first
@@ -345,15 +347,18 @@ class CellConfig:
             )
         return mesh_grasps(self.model, self.gripper)
 
-    def openings(self, names: Sequence[str]) -> np.ndarray:
+    def openings(self, names: Sequence[str], *, swept: bool = False) -> np.ndarray:
         """The finger opening (mm) of each named grasp, the one its plan is checked with and the
         gripper opens to (:func:`~binpick.cell.grasp.grasp_openings`), NaN where the part does
-        not fit between the open fingers; each grasp measured on first use and remembered."""
-        known = self._openings
+        not fit between the open fingers; each grasp measured on first use and remembered.
+        ``swept``: for the part at any turn about its continuous near-symmetry axis
+        (:func:`~binpick.cell.grasp.swept_points`: its key or pin may be anywhere about it)."""
+        known = self._openings.setdefault(swept, {})
         todo = [n for n in dict.fromkeys(names) if n not in known]
         if todo:
             c0 = time.process_time()
-            known.update(grasp_openings(self.gripper, self.model, {n: self.grasps[n] for n in todo}))
+            points = swept_points(self.model) if swept else None
+            known.update(grasp_openings(self.gripper, self.model, {n: self.grasps[n] for n in todo}, points))
             self._openings_cpu[0] += time.process_time() - c0
         return np.array([np.nan if known[n] is None else known[n] for n in names], dtype=np.float64)
 
@@ -364,7 +369,7 @@ class CellConfig:
         return self._openings_cpu[0] * 1e3
 
     @cached_property
-    def _openings(self) -> dict[str, Optional[float]]:
+    def _openings(self) -> dict[bool, dict[str, Optional[float]]]:
         return {}
 
     @cached_property

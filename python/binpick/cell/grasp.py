@@ -378,7 +378,7 @@ def grip_width(gripper: GripperGeometry, model_points: np.ndarray, T_gripper_obj
 
 
 def grasp_openings(
-    gripper: GripperGeometry, model: Model, grasps: Mapping[str, np.ndarray]
+    gripper: GripperGeometry, model: Model, grasps: Mapping[str, np.ndarray], points: Optional[np.ndarray] = None
 ) -> dict[str, Optional[float]]:
     """Grasp name → the finger opening (mm) for it, or None when the part does not fit between
     the open fingers there (a finger would come down on it).
@@ -386,11 +386,13 @@ def grasp_openings(
     The part's width across the fingers is twice the farthest of its points in the slab the
     fingers sweep (more than :data:`GRAZE_MM` inside it: a finger's edge may graze the part),
     out to the open fingers' outer faces (what lies beyond them is for the collision checks);
-    the opening is :meth:`GripperGeometry.opening_for` that width. Every grasp at once."""
+    the opening is :meth:`GripperGeometry.opening_for` that width. Every grasp at once.
+    ``points``: the part's points to measure (default ``model.points``; :func:`swept_points` for
+    a part whose turn about its near axis is open)."""
     names = list(grasps)
     if not names:
         return {}
-    pts = np.asarray(model.points, dtype=np.float64)
+    pts = np.asarray(model.points if points is None else points, dtype=np.float64)
     T = np.stack([np.asarray(grasps[n], dtype=np.float64) for n in names])
     outer = gripper.open_width_mm / 2 + gripper.finger_thickness_mm
     lo_z = gripper.tip_depth_mm - gripper.finger_length_mm + GRAZE_MM
@@ -420,7 +422,11 @@ GRAZE_MM = 0.5
 
 
 def _candidates(
-    config: CellConfig, T_base_object: np.ndarray, rejected: dict[str, int], samples: dict[str, list]
+    config: CellConfig,
+    T_base_object: np.ndarray,
+    rejected: dict[str, int],
+    samples: dict[str, list],
+    free_turn: bool = False,
 ) -> Iterator[tuple]:
     """(tilt, name, T_base_gripper, T_base_flange, waypoints, opening) of every grasp within the tool-tilt
     limit whose gripper clears the bin's floor and walls along approach, grasp and lift, most
@@ -433,9 +439,11 @@ def _candidates(
     T_og[:, :3, 3] = -np.einsum("nji,nj->ni", T_go[:, :3, :3], T_go[:, :3, 3])
     T_og[:, 3, 3] = 1.0
     T_bo = np.asarray(T_base_object, dtype=np.float64)
-    # About a continuous symmetry, or near-symmetry (a keyed shaft), the grasps turn to the most
-    # upright: the located turn about it is arbitrary, or left open by a hidden feature.
-    continuous = continuous_symmetry(config.model.symmetries) or continuous_near_axis(config.model)
+    # About a continuous symmetry, or a near-symmetry whose turn the scan left open (a keyed shaft
+    # with its keyway hidden), the grasps turn to the most upright: the located turn is arbitrary.
+    continuous = continuous_symmetry(config.model.symmetries)
+    if continuous is None and free_turn:
+        continuous = continuous_near_axis(config.model)
     if continuous is not None:
         T_og = _most_upright(T_bo, T_og, *continuous)
     T_bg = T_bo @ T_og
@@ -447,7 +455,7 @@ def _candidates(
     # The outline at the grasp, shifted back along the approach and straight up for the lift
     # (only for the grasps within the tilt limit: most are not).
     idx = np.flatnonzero(ok)
-    openings = config.openings([names[i] for i in idx])
+    openings = config.openings([names[i] for i in idx], swept=free_turn)
     fits = ~np.isnan(openings)
     rejected["width"] += int((~fits).sum())
     _keep_some(samples, "width", T_bg[idx[~fits]])
@@ -473,6 +481,25 @@ def _candidates(
             drop_pose=config.drop_pose,
         )
         yield float(tilt[i]), names[i], T_bg[i], T_bf[i], waypoints, opening_of[int(i)]
+
+
+def swept_points(model: Model) -> np.ndarray:
+    """The part's points with the feature of its continuous near-symmetry (a shaft's key or flat,
+    a flange's pin) turned all the way about the near axis, in steps no longer than the part's
+    sample spacing at the feature's radius: where the part may lie at any turn about that axis,
+    what the gripper must clear. ``model.points`` for a part without a continuous near axis."""
+    pts = np.asarray(model.points, dtype=np.float64)
+    for near in model.near_symmetries:
+        if near.angle is not None or len(near.feature) == 0:
+            continue
+        a = np.asarray(near.axis, dtype=np.float64)
+        c = np.asarray(near.center, dtype=np.float64)
+        f = np.asarray(near.feature, dtype=np.float64) - c
+        radius = float(np.linalg.norm(f - np.outer(f @ a, a), axis=1).max())
+        steps = int(np.clip(np.ceil(2.0 * np.pi * radius / float(model.spacing)), 8, 720))
+        turns = [rotation_about(a, 2.0 * np.pi * k / steps) for k in range(1, steps)]
+        return np.concatenate([pts] + [f @ R.T + c for R in turns])
+    return pts
 
 
 def _most_upright(T_bo: np.ndarray, T_og: np.ndarray, centre: np.ndarray, axis: np.ndarray) -> np.ndarray:
@@ -636,7 +663,7 @@ def staked_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndar
     accept = grasp_filter(config, result)
     name = config.model.name
     if accept is not None and config.orientation_needed:
-        what = "flip" if getattr(result, "ambiguous", False) else "turn about its axis"
+        what = "turn about its axis" if getattr(result, "free_axis", None) is not None else "flip"
         raise NoGraspError(
             f"the scan cannot decide the located {name}'s {what} and the cell places parts by their "
             "orientation (orientation_needed); it is not picked until a look decides it",
@@ -705,6 +732,7 @@ def plan_grasp(
     scene: np.ndarray,
     here: np.ndarray,
     accept: Optional[Callable[[np.ndarray], bool]] = None,
+    free_turn: bool = False,
 ) -> tuple[PickPlan, int]:
     """The declared grasp of the part at ``T_base_object`` that is within the tilt limit,
     reachable, clear of the ``scene`` points (base frame, the part's own left out) and of the
@@ -712,7 +740,10 @@ def plan_grasp(
     whose whole motion from the flange pose ``here`` passes the safety rules, and which ``accept``
     (``T_base_gripper → bool``, see :func:`grasp_filter`) accepts — of those, the one with the
     fewest scene points inside its gripper, the most vertical among equals; with that number of
-    points. NoGraspError when none is."""
+    points. NoGraspError when none is. ``free_turn``: the part's turn about its continuous
+    near-symmetry axis is open (the result's ``free_axis``): the grasps turn to the most upright
+    about it, and the fingers' opening and the part's own collisions are checked against the part
+    at every turn (:func:`swept_points`)."""
     T_base_object, scene, here = plan_inputs(config, T_base_object, scene, here, "here")
     if accept is not None and not callable(accept):
         raise InvalidTypeError(f"accept: expected a function T_base_gripper → bool, got {type(accept).__name__}")
@@ -730,13 +761,14 @@ def plan_grasp(
     # not run into its other branches either: those are checked against the model at the located
     # pose, which also covers the part's unseen underside. Only scene points the fingers and
     # body can reach from a TCP on the part are kept.
-    part = np.asarray(config.model.points) @ T_base_object[:3, :3].T + T_base_object[:3, 3]
+    own = swept_points(config.model) if free_turn and continuous_near_axis(config.model) is not None else None
+    part = np.asarray(config.model.points if own is None else own) @ T_base_object[:3, :3].T + T_base_object[:3, 3]
     z_mid, radius = _occupied_sphere(config.gripper)
     centre = part.mean(axis=0)
     reach = abs(z_mid) + radius + float(np.linalg.norm(part - centre, axis=1).max())
     scene = _near(scene, centre, reach)
     samples: dict[str, list] = {}
-    candidates = _candidates(config, T_base_object, rejected, samples)
+    candidates = _candidates(config, T_base_object, rejected, samples, own is not None)
     # The grasps with scene points inside the gripper (up to max_collision_points: stray points,
     # a neighbour's edge) are tried only after every clean one: most vertical first among the
     # clean, then fewest points first (most vertical among equals).

@@ -319,9 +319,11 @@ class Cell:
                 f"the scan's {len(keep)} usable points span {span:.0f} mm, less than a fifth of the "
                 f"{cfg.model.name} ({cfg.model.diameter:.0f} mm): nothing to locate"
             )
-        # The camera at the scan's first pose orients the normals; the swept scan is judged along up
+        # The camera orients the normals (up does for looks from several poses joined: a face only
+        # the side look saw may face away from the first camera); the swept scan is judged along up
         # (along_rays=False): its lines, millimetres apart, alias a grid of the camera's rays.
-        camera = (np.asarray(scan.T_base_flanges[0]) @ cfg.calibration.T_flange_camera)[:3, 3]
+        cameras = (np.asarray(scan.T_base_flanges) @ cfg.calibration.T_flange_camera)[:, :3, 3]
+        camera = cameras[0] if np.ptp(cameras, axis=0).max() < 1.0 else None
         defaults = dict(num_threads=cfg.num_threads, search_instances=cfg.max_candidates, viewpoint=camera)
         options = {**defaults, "along_rays": False, **cfg.estimate_options}
         wanted = count(max_instances, "max_instances") or cfg.max_candidates
@@ -447,7 +449,10 @@ class Cell:
         res = located.result
         accept = staked_filter(self.config, res)  # a grasp the same on every alternative stakes confidence_any
         try:
-            plan, hits = plan_grasp(self.config, located.T_base_object, pts[others], self.robot.read_pose(), accept)
+            free = getattr(res, "free_axis", None) is not None
+            plan, hits = plan_grasp(
+                self.config, located.T_base_object, pts[others], self.robot.read_pose(), accept, free
+            )
         except NoGraspError as exc:
             if accept is not None and exc.reason.startswith("none") and "ambiguous" in exc.reason:
                 raise NoGraspError(str(exc), reason=f"ambiguous: {exc.reason}", refused=exc.refused) from None

@@ -115,7 +115,7 @@ pub(super) fn check_scene(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) 
         ));
     }
     let toward_sensor = cfg.viewpoint.map(|v| v - centroid);
-    match (cfg.up, toward_sensor) {
+    let up = match (cfg.up, toward_sensor) {
         (Some(up), Some(v)) if up.dot(&v) <= 0.0 => Err(Error::invalid(
             "up",
             format!(
@@ -130,8 +130,23 @@ pub(super) fn check_scene(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) 
         // scene is in the sensor's own frame, where "up" is toward the sensor.
         (None, Some(v)) if !(v.z > UP_FROM_VIEW_COS * v.norm()) => Ok(v.try_normalize(1e-9).unwrap_or(Vector3::z())),
         (None, _) => Ok(Vector3::z()),
+    }?;
+    // The bin box is axis-aligned with its floor at its lowest z: it means nothing in a frame
+    // whose up is not +z (a scene in a camera's frame).
+    if cfg.bin.is_some() && up.z < BIN_UP_COS {
+        return Err(Error::invalid(
+            "bin",
+            format!(
+                "the bin box has its floor at its lowest z, but the scene's up is ({:.2}, {:.2}, {:.2}) (a scene in a camera's frame?): transform the scene into a frame whose +z is up (the robot's base) for a bin box, or leave bin out",
+                up.x, up.y, up.z
+            ),
+        ));
     }
+    Ok(up)
 }
+
+/// A bin box needs the scene's up within 10° of +z (its floor's normal).
+const BIN_UP_COS: f64 = 0.985;
 
 /// Whether `scene` (with centroid `centroid`) looks like a cloud in a camera's own frame: every
 /// point in front of the origin along +z within a field of view up to about 100° across, and the
