@@ -694,8 +694,8 @@ def _add_estimate(sub: Any) -> None:
         type=float,
         nargs=3,
         metavar=("X", "Y", "Z"),
-        help="the direction out of the bin toward the sensor (default +z, or toward the viewpoint when it "
-        "lies below the scene)",
+        help="the direction out of the bin toward the sensor (default +z, or toward the viewpoint when that "
+        "lies more than 80 degrees off +z from the scene, as in a camera's own frame)",
     )
     t.add_argument(
         "--noise-mm",

@@ -553,8 +553,8 @@ def scan_noise(points: Any, *, viewpoint: Any = None, direction: Any = (0.0, 0.0
     scan alone (no model): height fields fitted along the direction toward the sensor —
     ``viewpoint`` (its optical centre) when given, else ``direction`` (+z) — over small patches,
     the median of their residuals. It is what pose estimation reads when no noise is declared
-    (:class:`binpick.SensorModel`). None with too few points (about 200) or no surface facing the
-    sensor."""
+    (:class:`binpick.SensorModel`). None with too few points (under 80) or fitted patches (20), or no
+    surface facing the sensor."""
     pts = as_points(points, "points", min_points=0)
     vp = None if viewpoint is None else as_vector(viewpoint, "viewpoint")
     d = None if viewpoint is not None else as_vector(direction, "direction")

@@ -30,7 +30,7 @@ from typing import Optional
 import numpy as np
 
 from . import _core, _shapes
-from ._validate import count, non_negative, positive
+from ._validate import count, flag, non_negative, positive
 from .errors import InvalidInputError, InvalidTypeError
 from .models import Branch, Model
 
@@ -69,13 +69,6 @@ def _size(value, name: str) -> float:
             f"{name}: {v:g} mm is over the ceiling of {MAX_PART_SIZE_MM:g} mm for a built-in part; pass its size in mm"
         )
     return v
-
-
-def _flag(value, name: str = "feature") -> bool:
-    """``value`` when it is a bool, else InvalidTypeError naming ``name`` (a string such as "no" is not False)."""
-    if not isinstance(value, (bool, np.bool_)):
-        raise InvalidTypeError(f"{name}: must be True or False, got {type(value).__name__} {value!r:.40}")
-    return bool(value)
 
 
 def _boss(semi_axes, height) -> tuple[tuple[float, float], float]:
@@ -204,7 +197,7 @@ def keyed_shaft(
     alone fixes the turn about the axis. Sampled every ``spacing`` mm (1 mm by default)."""
     R = _size(diameter, "diameter") / 2
     L = _size(length, "length")
-    d = _size(keyway_depth, "keyway_depth") if _flag(feature) else 0.0
+    d = _size(keyway_depth, "keyway_depth") if flag(feature, "feature") else 0.0
     w, lk = _size(keyway_width, "keyway_width"), _size(keyway_length, "keyway_length")
     if d >= R or lk >= L or w >= 2 * (R - d):
         raise InvalidInputError("keyway_depth/keyway_width/keyway_length: the keyway must fit inside the shaft")
@@ -239,7 +232,7 @@ def d_shaft(
     mm (1 mm by default)."""
     R = _size(diameter, "diameter") / 2
     L = _size(length, "length")
-    d = _size(flat_depth, "flat_depth") if _flag(feature) else 0.0
+    d = _size(flat_depth, "flat_depth") if flag(feature, "feature") else 0.0
     lf = _size(flat_length, "flat_length")
     if d >= R or lf >= L:
         raise InvalidInputError("flat_depth/flat_length: the flat must fit on the shaft")
@@ -273,7 +266,7 @@ def cut_plate(
     it only the flip about the diagonal through the cut corner is left."""
     h = _size(side, "side") / 2
     t = _size(thickness, "thickness")
-    c = _size(cut, "cut") if _flag(feature) else 0.0
+    c = _size(cut, "cut") if flag(feature, "feature") else 0.0
     if c >= h:
         raise InvalidInputError(f"cut: {c:g} mm must be less than half the side ({h:g} mm)")
     corners = [(-h, -h), (h, -h), (h, h - c), (h - c, h), (-h, h)] if c > 0 else [(-h, -h), (h, -h), (h, h), (-h, h)]
@@ -302,7 +295,7 @@ def notched_hex(
     about y is left."""
     a = _size(across_flats, "across_flats") / 2
     L = _size(length, "length")
-    d = _size(notch_depth, "notch_depth") if _flag(feature) else 0.0
+    d = _size(notch_depth, "notch_depth") if flag(feature, "feature") else 0.0
     w = _size(notch_width, "notch_width")
     if d >= a or w >= a:
         raise InvalidInputError("notch_depth/notch_width: the notch must fit on one flat")
@@ -344,7 +337,7 @@ def bossed_rod(
     R = _size(diameter, "diameter") / 2
     L = _size(length, "length")
     rb = _size(boss_diameter, "boss_diameter") / 2
-    hb = _size(boss_height, "boss_height") if _flag(feature) else 0.0
+    hb = _size(boss_height, "boss_height") if flag(feature, "feature") else 0.0
     if rb >= R or rb >= L / 2:
         raise InvalidInputError("boss_diameter: the boss must be narrower than the run")
     walls = [float(np.arcsin(rb / R)), -float(np.arcsin(rb / R))] if hb > 0 else []
@@ -398,7 +391,7 @@ def flange(
         _size(bolt_circle_diameter, "bolt_circle_diameter") / 2,
     )
     hd = _size(hole_depth, "hole_depth")
-    d = _size(notch_depth, "notch_depth") if _flag(feature) else 0.0
+    d = _size(notch_depth, "notch_depth") if flag(feature, "feature") else 0.0
     w = _size(notch_width, "notch_width")
     if rc + rh >= R - d - 1.0 or rc - rh <= 1.0 or 2 * hd >= T:
         raise InvalidInputError("bolt_holes/bolt_circle_diameter/hole_depth: the holes must lie inside the flange")
@@ -455,7 +448,7 @@ def pinned_flange(
     R = _size(diameter, "diameter") / 2
     T = _size(thickness, "thickness")
     rp, rc = _size(pin_diameter, "pin_diameter") / 2, _size(pin_circle_diameter, "pin_circle_diameter") / 2
-    hp = _size(pin_height, "pin_height") if _flag(feature) else 0.0
+    hp = _size(pin_height, "pin_height") if flag(feature, "feature") else 0.0
     if rc + rp >= R - 1.0 or rc - rp <= 1.0:
         raise InvalidInputError("pin_circle_diameter/pin_diameter: the pin must stand inside the flange's face")
     phi = _shapes.angle_samples(0.3, rc + rp)

@@ -15,6 +15,7 @@ from ._validate import (
     as_transform,
     as_vector,
     count,
+    flag,
     native_config,
     non_negative,
     number,
@@ -349,14 +350,15 @@ def estimate_poses(
     fixed camera at an angle or a scene in the camera's own frame (``viewpoint=(0, 0, 0)``) need,
     and the scan's normals face it; without it, the sensor is taken to look down along ``up``.
     ``up`` is the direction out of the bin toward the sensor: by default +z, or, when the
-    viewpoint lies below the scene along +z (a scene in the camera's frame, +z away from the
-    camera), the direction toward the viewpoint; an ``up`` that points away from the viewpoint is
-    an error. ``along_rays=False`` keeps the depth test looking along ``up`` though a viewpoint is
-    given (which then orients the normals only): for a laser-line scan swept over the bin by a
-    camera looking down on it, whose lines, several millimetres apart, alias a grid of the
-    camera's rays (binpick's cell asks so). ``bin`` is an axis-aligned box
-    ``((xmin, ymin, zmin), (xmax, ymax, zmax))`` in the scene frame; without it, support planes much
-    larger than the part (floor, walls) are found and removed.
+    direction from the scene to the viewpoint lies more than 80° off +z (a scene in the camera's
+    frame, +z away from the camera), the direction toward the viewpoint; an ``up`` that points
+    away from the viewpoint is an error. ``along_rays=False`` keeps the depth test looking along
+    ``up`` though a viewpoint is given (which then orients the normals only): for a laser-line
+    scan swept over the bin by a camera looking down on it, whose lines, several millimetres
+    apart, alias a grid of the camera's rays (binpick's cell asks so). ``bin`` is an axis-aligned
+    box ``((xmin, ymin, zmin), (xmax, ymax, zmax))`` in the scene frame (whose up must then be
+    +z); without it, support planes much larger than the part (floor, walls) are found and
+    removed.
 
     ``sensor`` (a :class:`SensorModel`) or ``noise_mm`` (its ``noise_mm`` alone) declares the
     sensor's depth noise; by default binpick reads it from the scan. Every tolerance derives from
@@ -391,7 +393,7 @@ def estimate_poses(
         up=up,
         method=method,
         viewpoint=viewpoint,
-        along_rays=_flag(along_rays, "along_rays"),
+        along_rays=flag(along_rays, "along_rays"),
         sensor=sensor,
         noise_mm=noise_mm,
         d_star=optional_number(d_star, "d_star"),
@@ -415,12 +417,6 @@ def estimate_poses(
         )
     pts = as_points(scene, "scene", min_points=10)
     return [PoseResult._from_native(e) for e in _core.estimate_poses(pts, model.prepared(), config)]
-
-
-def _flag(value: Any, name: str) -> bool:
-    if not isinstance(value, (bool, np.bool_)):
-        raise InvalidTypeError(f"{name}: expected True or False, got {value!r:.40}")
-    return bool(value)
 
 
 def _check_model(model: Any) -> None:
@@ -461,16 +457,19 @@ def verify_pose(
 ) -> PoseResult:
     """The verdict on a given pose ``T_scene_model`` (4, 4) of ``model`` in ``scene``, judged exactly
     as :func:`estimate_poses` judges the poses it finds — the same depth test and checks, then the
-    trust stage's confidence, alternatives and fit — but not refined. For a pose from elsewhere (an
-    operator's teach-in, another vision system, a ground truth) to learn whether the scan supports it
-    and how sure binpick would be of it. Raises :class:`binpick.NoObjectFound` naming the test it
-    fails. The arguments are :func:`estimate_poses`'s; ``method`` reads ``"given"``."""
+    trust stage's confidence, alternatives and fit — but not refined (the pose returned may
+    still differ from the one given: by a turn of the part onto itself where the scan supports
+    that turn better, or, where the trust stage finds a better-supported alternative, by it). For
+    a pose from elsewhere (an operator's teach-in, another vision system, a ground truth) to learn
+    whether the scan supports it and how sure binpick would be of it. Raises
+    :class:`binpick.NoObjectFound` naming the test it fails. The arguments are
+    :func:`estimate_poses`'s; ``method`` reads ``"given"``."""
     _check_model(model)
     config = _pose_config(
         bin=bin,
         up=up,
         viewpoint=viewpoint,
-        along_rays=_flag(along_rays, "along_rays"),
+        along_rays=flag(along_rays, "along_rays"),
         sensor=sensor,
         noise_mm=noise_mm,
         min_coverage=number(min_coverage, "min_coverage"),

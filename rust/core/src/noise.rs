@@ -17,7 +17,7 @@
 //! less. The scan's noise is the median over patches (edges, flying pixels and corners are a
 //! minority).
 
-use crate::geometry::Point;
+use crate::geometry::{median, perpendicular_basis, thin, Point};
 use crate::normals::Orientation;
 use crate::search::KdIndex;
 use nalgebra::{Matrix2, SMatrix, SVector, Vector3};
@@ -43,8 +43,8 @@ const FIRST_LAMBDA: f64 = 1.0;
 const LAMBDA_PER_NOISE: f64 = 8.0;
 
 /// The standard deviation (mm) of the depth noise of `points` along the direction toward the
-/// sensor, read from the scan alone; `None` with too few fitted patches (fewer than about 200
-/// points, or a scan with no surface within 45° of facing the sensor).
+/// sensor, read from the scan alone; `None` with too few points (under `4 × MIN_PATCHES`) or
+/// fitted patches (under `MIN_PATCHES`: a scan with no surface within 45° of facing the sensor).
 pub fn scan_noise(points: &[Point], toward: Orientation) -> Option<f64> {
     let pts = thin(points, MAX_POINTS);
     if pts.len() < MIN_PATCHES * 4 {
@@ -76,14 +76,8 @@ struct Frame {
 
 impl Frame {
     fn new(w: Vector3<f64>) -> Self {
-        let e1 = w
-            .cross(&if w.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() })
-            .normalize();
-        Frame {
-            e2: w.cross(&e1),
-            e1,
-            w,
-        }
+        let (e1, e2) = perpendicular_basis(&w);
+        Frame { e1, e2, w }
     }
 }
 
@@ -138,7 +132,7 @@ fn pass(pts: &[Point], frame: &Frame, toward: Orientation, lambda: f64) -> Optio
     if sigmas.len() < MIN_PATCHES {
         return None;
     }
-    Some((median(&mut sigmas), median(&mut spacings)))
+    Some((median(sigmas, 1)?, median(spacings, 1)?))
 }
 
 /// The residual standard deviation of a height field fitted to `patch` (lateral `a`, `b` and
@@ -204,15 +198,6 @@ fn fit<const K: usize>(
     let rss: f64 = rows.map(|(x, h)| (h - x.dot(&coef)).powi(2)).sum();
     let sigma = (rss / (n - K) as f64).sqrt();
     sigma.is_finite().then_some((sigma, coef))
-}
-
-fn thin(v: &[Point], n: usize) -> Vec<Point> {
-    v.iter().step_by(v.len().div_ceil(n.max(1)).max(1)).copied().collect()
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    let mid = v.len() / 2;
-    *v.select_nth_unstable_by(mid, f64::total_cmp).1
 }
 
 #[cfg(test)]

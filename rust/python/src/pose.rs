@@ -305,7 +305,7 @@ impl PoseConfig {
     fn bin<'py>(&self, py: Python<'py>) -> Option<Bound<'py, PyArray2<f64>>> {
         self.inner.bin.as_ref().map(|b| bin_box_to_py(py, b))
     }
-    /// What is up in the bin (toward the sensor), or None: +z, or toward a viewpoint below the scene.
+    /// What is up in the bin (toward the sensor), or None: +z, or toward a viewpoint more than 80° off +z.
     #[getter]
     fn up(&self) -> Option<(f64, f64, f64)> {
         self.inner.up.map(|u| triple(&u))
@@ -409,7 +409,7 @@ impl PoseConfig {
         format!(
             "PoseConfig(bin={}, up={}, method='{}', viewpoint={}, noise_mm={}, noise_per_m2={:?}, d_star={}, min_points={}, max_normal_angle={:?}, \
              inlier_distance={}, min_fitness={:?}, min_coverage={:?}, ccp_closer_radius={}, ccp_tau={}, \
-             reference_fraction={:?}, max_hypotheses={}, max_instances={}, search_instances={}, num_threads={})",
+             reference_fraction={:?}, max_hypotheses={}, max_instances={}, search_instances={}, num_threads={}, along_rays={})",
             bin.unwrap_or_else(|| "None".into()),
             c.up.map_or("None".into(), |u| format!("{:?}", triple(&u))),
             c.method.name(),
@@ -429,7 +429,8 @@ impl PoseConfig {
             c.detect.max_hypotheses,
             c.max_instances,
             c.search_instances,
-            c.num_threads
+            c.num_threads,
+            if c.along_rays { "True" } else { "False" }
         )
     }
 }

@@ -201,6 +201,35 @@ pub fn isometry_from_matrix(arg: &str, m: &Matrix4<f64>) -> Result<Isometry3<f64
     Ok(Isometry3::from_parts(t, UnitQuaternion::from_rotation_matrix(&rot)))
 }
 
+/// The median distance (mm) of `points` from `eye`, read over at most about 2000 of them
+/// (evenly thinned); None for no points.
+pub fn median_range(points: &[Point], eye: &Point) -> Option<f64> {
+    median(thin(points, 2000).iter().map(|p| (p - eye).norm()).collect(), 1)
+}
+
+/// Two unit vectors completing the unit vector `a` to a right-handed frame: (u, v = a × u).
+pub fn perpendicular_basis(a: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+    let helper = if a.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+    let u = a.cross(&helper).normalize();
+    (u, a.cross(&u))
+}
+
+/// Every `len / n`-th point of `v` (rounded up): at most about `n` points, evenly spread over
+/// the slice's order.
+pub fn thin(v: &[Point], n: usize) -> Vec<Point> {
+    v.iter().step_by(v.len().div_ceil(n.max(1)).max(1)).copied().collect()
+}
+
+/// The median of `v` (the upper one of an even count), None when it holds fewer than `fewest`
+/// values or none.
+pub fn median(mut v: Vec<f64>, fewest: usize) -> Option<f64> {
+    if v.is_empty() || v.len() < fewest {
+        return None;
+    }
+    let mid = v.len() / 2;
+    Some(*v.select_nth_unstable_by(mid, f64::total_cmp).1)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

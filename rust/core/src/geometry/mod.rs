@@ -10,7 +10,7 @@ pub(crate) use camera::PerCamera;
 pub use camera::{Camera, RayTable};
 pub use cloud::{
     centroid, check_count, check_finite, check_spread, covariance, covariance_of, eigen_ascending, extreme_axis,
-    isometry_from_matrix, principal_axes, transform_points, Point,
+    isometry_from_matrix, median, median_range, perpendicular_basis, principal_axes, thin, transform_points, Point,
 };
 pub use kabsch::kabsch;
 pub use plane::{BinBox, Plane};

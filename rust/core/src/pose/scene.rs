@@ -56,21 +56,13 @@ impl Context<'_> {
     }
 }
 
-/// Points the declared noise's range is read over, at most (evenly thinned).
-const RANGE_SAMPLES: usize = 2000;
-
 /// The standard deviation of `scene`'s depth noise, mm, as `cfg.sensor` declares it or, without
 /// a declaration, as the scan shows it (see [`Context::noise`]).
 pub(super) fn scene_noise(scene: &[Point], cfg: &PoseConfig, view: Orientation) -> f64 {
-    let range = match cfg.viewpoint {
-        Some(v) => {
-            let stride = scene.len().div_ceil(RANGE_SAMPLES).max(1);
-            let mut r: Vec<f64> = scene.iter().step_by(stride).map(|p| (p - v).norm()).collect();
-            let mid = r.len() / 2;
-            r.select_nth_unstable_by(mid, f64::total_cmp).1.to_owned()
-        }
-        None => 0.0,
-    };
+    let range = cfg
+        .viewpoint
+        .and_then(|v| crate::geometry::median_range(scene, &v))
+        .unwrap_or(0.0);
     cfg.sensor
         .sigma_at(range)
         .or_else(|| crate::scan_noise(scene, view))
@@ -126,7 +118,7 @@ pub(super) fn check_scene(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) 
             ),
         )),
         (Some(up), _) => Ok(up.normalize()),
-        // A sensor looks into the bin from above: a viewpoint below the scene along +z says the
+        // A sensor looks into the bin from above: a viewpoint more than about 80° off +z says the
         // scene is in the sensor's own frame, where "up" is toward the sensor.
         (None, Some(v)) if !(v.z > UP_FROM_VIEW_COS * v.norm()) => Ok(v.try_normalize(1e-9).unwrap_or(Vector3::z())),
         (None, _) => Ok(Vector3::z()),

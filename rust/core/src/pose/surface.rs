@@ -4,12 +4,8 @@
 
 use super::model::PoseModel;
 use crate::geometry::Point;
+pub(super) use crate::geometry::{median, thin};
 use nalgebra::Isometry3;
-
-/// Every k-th point of `v`, so that at most about `n` remain.
-pub(super) fn thin(v: &[Point], n: usize) -> Vec<Point> {
-    v.iter().step_by(v.len().div_ceil(n.max(1)).max(1)).copied().collect()
-}
 
 /// Distance of a model-frame point from the tangent plane of its nearest dense model point,
 /// when that point lies within `reach`.
@@ -51,13 +47,4 @@ pub(super) fn plane_residuals(
 /// 1.4826 × the median of the absolute `residuals` (a robust σ), when there are at least `fewest`.
 pub(super) fn robust_sigma(residuals: impl Iterator<Item = f64>, fewest: usize) -> Option<f64> {
     median(residuals.map(f64::abs).collect(), fewest).map(|m| 1.4826 * m)
-}
-
-/// The median of `v`, when it holds at least `fewest` values.
-pub(super) fn median(mut v: Vec<f64>, fewest: usize) -> Option<f64> {
-    if v.is_empty() || v.len() < fewest {
-        return None;
-    }
-    let mid = v.len() / 2;
-    Some(*v.select_nth_unstable_by(mid, f64::total_cmp).1)
 }

@@ -12,7 +12,7 @@
 //! buried instances show as occluded.
 
 use super::icp::IcpTarget;
-use crate::geometry::Point;
+use crate::geometry::{median_range, perpendicular_basis, Point};
 use crate::normals::Orientation;
 use nalgebra::{Isometry3, Vector3};
 
@@ -71,14 +71,7 @@ impl HeightMap {
                 let n = points.len().max(1) as f64;
                 let centroid = points.iter().fold(Vector3::zeros(), |s, p| s + p.coords) / n;
                 let up = (eye.coords - centroid).try_normalize(1e-12).unwrap_or(Vector3::z());
-                let stride = points.len().div_ceil(2000).max(1);
-                let mut ranges: Vec<f64> = points.iter().step_by(stride).map(|p| (p - eye).norm()).collect();
-                let focal = if ranges.is_empty() {
-                    1.0
-                } else {
-                    let mid = ranges.len() / 2;
-                    *ranges.select_nth_unstable_by(mid, f64::total_cmp).1
-                };
+                let focal = median_range(points, &eye).unwrap_or(1.0);
                 (
                     up,
                     Some(eye),
@@ -86,10 +79,7 @@ impl HeightMap {
                 )
             }
         };
-        let e1 = up
-            .cross(&if up.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() })
-            .normalize();
-        let e2 = up.cross(&e1);
+        let (e1, e2) = perpendicular_basis(&up);
         let mut map = HeightMap {
             e1,
             e2,

@@ -29,7 +29,9 @@
 //! continuous axis and a flip, which is all the structure [`Symmetries`] can hold.
 
 use crate::error::{Error, Result};
-use crate::geometry::{check_count, check_finite, check_spread, covariance, principal_axes, Point};
+use crate::geometry::{
+    check_count, check_finite, check_spread, covariance, perpendicular_basis, principal_axes, Point,
+};
 use crate::rng::Rng;
 use crate::search::corr_tree::CorrespondenceTree;
 use crate::search::KdIndex;
@@ -423,13 +425,6 @@ fn has_patch(points: &[Point], link: f64, min: usize) -> bool {
 /// Rotation by `angle` about `axis` (any length but zero).
 fn rot(axis: &V3, angle: f64) -> Rot {
     Rot::from_axis_angle(&Unit::new_normalize(*axis), angle)
-}
-
-/// Two unit vectors completing `a` (unit) to a right-handed frame: (u, v = a × u).
-fn perpendicular_basis(a: &V3) -> (V3, V3) {
-    let helper = if a.x.abs() < 0.6 { V3::x() } else { V3::y() };
-    let u = a.cross(&helper).normalize();
-    (u, a.cross(&u))
 }
 
 fn same_line(a: &V3, b: &V3, angle: f64) -> bool {

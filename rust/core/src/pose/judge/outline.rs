@@ -10,7 +10,7 @@
 //! walls) do not count: a thin part lying on the floor meets the floor at its edges.
 
 use super::depth::{share, DepthTest};
-use crate::geometry::Point;
+use crate::geometry::{perpendicular_basis, Point};
 use crate::pose::model::PoseModel;
 use nalgebra::{Isometry3, Vector3};
 
@@ -72,10 +72,7 @@ pub(crate) fn outline(depth: &DepthTest, model: &PoseModel, t_scene_model: &Isom
     // The footprint is drawn looking at the part from the sensor (for a perspective map, along
     // the ray to the part's centre: the rays spread by a few degrees across one part).
     let up = map.toward(&(t_scene_model * model.symmetries.center));
-    let e1 = up
-        .cross(&if up.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() })
-        .normalize();
-    let e2 = up.cross(&e1);
+    let (e1, e2) = perpendicular_basis(&up);
     let target = model.target();
     let Some(normals) = target.normals() else {
         return Outline::default();
