@@ -135,7 +135,7 @@ def test_a_cell_that_places_by_orientation_does_not_pick_an_undecided_pose(sim):
     T = _pose(sim)
     other = _turned(T, (0, 1, 0), 180.0, cfg.model.near_symmetries[0].center)
     for undecided in (_result(T, alternatives=[other]), _result(T, free_axis=np.array([0.0, 1.0, 0.0]))):
-        undecided.confidence_any = 1.0
+        undecided.confidence_any, undecided.ambiguous = 1.0, True  # a free axis comes ambiguous too
         assert grasp_filter(cfg, undecided) is not None  # a shared grasp exists ...
         with pytest.raises(NoGraspError) as err:
             staked_filter(cfg, undecided)  # ... but the orientation matters
