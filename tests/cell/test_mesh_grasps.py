@@ -57,3 +57,26 @@ def test_an_stl_part_without_grasps_is_picked_with_generated_grasps(ell):
     record = report.records[0]
     assert record.success, record.error
     assert record.held is True and remaining == 0
+
+
+def test_a_plate_lying_on_the_floor_is_pinched_from_above_by_its_edges():
+    """A plate 10 mm thick lying flat: a grasp with the TCP at its middle reaches the fingertips
+    5 mm through the floor; each mesh grasp's shallow variant bites SHALLOW_BITE_MM past the
+    contacts, and the simulated cell lifts the plate with one."""
+    from binpick.cell.grasp import SHALLOW_BITE_MM
+
+    plate, g = binpick.parts.cut_plate(), GripperGeometry()
+    grasps = mesh_grasps(plate, g)
+    shallow = {n: T for n, T in grasps.items() if n.endswith("/shallow")}
+    assert len(shallow) == len(grasps) // 2
+    for name, T_go in shallow.items():
+        full = grasps[name.removesuffix("/shallow")]
+        # The same closing and approach, the TCP drawn back along the approach by tip - bite.
+        np.testing.assert_allclose(T_go[:3, :3], full[:3, :3], atol=1e-12)
+        np.testing.assert_allclose(T_go[2, 3] - full[2, 3], g.tip_depth_mm - SHALLOW_BITE_MM, atol=1e-9)
+    with SimulatedCell(plate, count=1, seed=0, frames=60) as sim:
+        report = sim.cell.run(1)
+        remaining = len(sim.pile.ids)
+    record = report.records[0]
+    assert record.held is True and remaining == 0, record.error
+    assert record.grasp.endswith("/shallow")

@@ -183,6 +183,12 @@ def branch_grasps(
 #: directions differ by more than this (degrees): across another pair of faces.
 DISTINCT_CLOSING_DEG = 20.0
 
+#: How far (mm) past the contacts the fingertips reach in each mesh grasp's shallow variant: an
+#: edge pinched from above while the fingertips stay clear of what the part lies on (a plate
+#: 10 mm thick lying on the floor: the full grasp's fingertips, ``tip_depth_mm`` past its middle,
+#: would reach through the floor).
+SHALLOW_BITE_MM = 4.0
+
 
 def mesh_grasps(
     model: Model,
@@ -204,7 +210,10 @@ def mesh_grasps(
     midpoints lie at least a finger width apart, or whose closing directions differ by more than
     :data:`DISTINCT_CLOSING_DEG` (the three pairs of flats of a hex through one centre), are kept;
     each is approached from ``approaches`` directions about the closing axis, the TCP at the
-    midpoint (so the contacts lie within the fingers' depth), both ways round the wrist. Returns
+    midpoint (so the contacts lie within the fingers' depth), both ways round the wrist; and each
+    again shallow (named ``…/shallow``, after all the full ones): the TCP drawn back so that the
+    fingertips reach only :data:`SHALLOW_BITE_MM` past the contacts, for an edge gripped from
+    above off a floor (where the gripper's ``tip_depth_mm`` exceeds that bite). Returns
     name → ``T_gripper_object``; names say the pair, the quality and the approach.
     """
     instance_of(model, Model, "model", "binpick.parts.tee()")
@@ -242,19 +251,23 @@ def mesh_grasps(
         if len(kept) == pairs:
             break
     grasps: dict[str, np.ndarray] = {}
-    for k, (q, mid, u) in enumerate(kept):
-        helper = np.array([0.0, 0.0, 1.0]) if abs(u[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
-        z0 = np.cross(u, helper)
-        z0 /= np.linalg.norm(z0)
-        for a in range(approaches):
-            z = rotation_about(u, 2 * math.pi * a / approaches) @ z0
-            for flip in (1.0, -1.0):
-                x = flip * u
-                T_object_gripper = np.eye(4)
-                T_object_gripper[:3, :3] = np.column_stack([x, np.cross(z, x), z])
-                T_object_gripper[:3, 3] = mid
-                name = f"mesh{k}/q{q:.2f}/{round(360 * a / approaches)}°{'/flipped' if flip < 0 else ''}"
-                grasps[name] = inverse(T_object_gripper)
+    draws = [(0.0, "")]
+    if gripper.tip_depth_mm > SHALLOW_BITE_MM:
+        draws.append((gripper.tip_depth_mm - SHALLOW_BITE_MM, "/shallow"))
+    for back, tag in draws:
+        for k, (q, mid, u) in enumerate(kept):
+            helper = np.array([0.0, 0.0, 1.0]) if abs(u[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+            z0 = np.cross(u, helper)
+            z0 /= np.linalg.norm(z0)
+            for a in range(approaches):
+                z = rotation_about(u, 2 * math.pi * a / approaches) @ z0
+                for flip in (1.0, -1.0):
+                    x = flip * u
+                    T_object_gripper = np.eye(4)
+                    T_object_gripper[:3, :3] = np.column_stack([x, np.cross(z, x), z])
+                    T_object_gripper[:3, 3] = mid - back * z
+                    name = f"mesh{k}/q{q:.2f}/{round(360 * a / approaches)}°{'/flipped' if flip < 0 else ''}{tag}"
+                    grasps[name] = inverse(T_object_gripper)
     return grasps
 
 
