@@ -244,7 +244,8 @@ class PoseResult:
         confidence_any: in [0, 1], how likely the pose or one of its ``alternatives`` (any turn about
             ``free_axis``) is pick-grade: what a grasp that is the same on every one of them stakes
             (a grip across a shaft whose keyway is hidden; the cell picks an ambiguous part with
-            such grasps, judged by this). Equal to ``confidence`` for a pose without alternatives.
+            such grasps, judged by this; ``benches/near_symmetric.py`` prints its reliability table
+            too). Equal to ``confidence`` for a pose without alternatives.
         ambiguous: True when the scan cannot rule out a distinct alternative: a near-symmetric
             flip whose deciding feature is out of sight, a turn about a free axis, or a turn or
             slide that what the view shows leaves open (one leg of an elbow seen alone, a shaft

@@ -91,8 +91,10 @@ pub(super) fn evidence_of(fit: &[bool], tol: f64, violated: usize, per_probe: f6
 
 /// The candidates (`poses`, scored as `scored`) that the scan cannot rule out against the best
 /// (index `best`): those distinct from it (not pick-grade of each other) that [`standing`] leaves
-/// open, one per pose; and the smallest lead of the best over a distinct candidate, in that
-/// candidate's margins (infinite with none).
+/// open, one per pose; the smallest lead of the best over a distinct candidate, in that
+/// candidate's margins (infinite with none); and the smallest lead over a distinct candidate
+/// ruled out by its evidence and not the same as one left open (how sure the scan is that the
+/// truth is among the pose and those left open; infinite with none).
 pub(super) fn weigh(
     poses: &[Isometry3<f64>],
     scored: &[Scored],
@@ -100,10 +102,15 @@ pub(super) fn weigh(
     model: &PoseModel,
     p: &TrustParams,
     per_probe: f64,
-) -> (Vec<usize>, f64) {
+) -> (Vec<usize>, f64, f64) {
     let top = &scored[best];
     let kept = poses[best];
+    let same = |t: &Isometry3<f64>, u: &Isometry3<f64>| {
+        let (r, d) = model.symmetries.pose_error(t, u);
+        r < p.pick_rotation && d < p.pick_translation
+    };
     let mut open: Vec<usize> = Vec::new();
+    let mut ruled_out: Vec<(usize, f64)> = Vec::new();
     let mut lead = f64::INFINITY;
     for (i, t) in poses.iter().enumerate() {
         let s = scored[i].evidence.score;
@@ -111,19 +118,22 @@ pub(super) fn weigh(
         let Some(undecided) = standing(s, scored[i].judged_ok, top.evidence.score, margin) else {
             continue;
         };
-        let same = |u: &Isometry3<f64>| {
-            let (r, d) = model.symmetries.pose_error(t, u);
-            r < p.pick_rotation && d < p.pick_translation
-        };
-        if i == best || same(&kept) {
+        if i == best || same(t, &kept) {
             continue;
         }
-        lead = lead.min((top.evidence.score - s) / margin);
-        if undecided && !open.iter().any(|&j| same(&poses[j])) {
+        let ahead = (top.evidence.score - s) / margin;
+        lead = lead.min(ahead);
+        if !undecided {
+            ruled_out.push((i, ahead));
+        } else if !open.iter().any(|&j| same(t, &poses[j])) {
             open.push(i);
         }
     }
-    (open, lead)
+    let lead_out = ruled_out
+        .into_iter()
+        .filter(|&(i, _)| !open.iter().any(|&j| same(&poses[i], &poses[j])))
+        .fold(f64::INFINITY, |m, (_, a)| m.min(a));
+    (open, lead, lead_out)
 }
 
 /// The share of the confidence a lead of `lead` margins over the runner-up keeps: 1 margin
