@@ -80,3 +80,36 @@ def test_a_plate_lying_on_the_floor_is_pinched_from_above_by_its_edges():
     record = report.records[0]
     assert record.held is True and remaining == 0, record.error
     assert record.grasp.endswith("/shallow")
+
+
+def test_a_shaft_standing_steeper_than_the_tool_may_tilt_is_gripped_end_on():
+    """A keyed shaft (150 mm) leaning 60° up from the floor with its keyway out of view (a free
+    axis): across its body the tool would tilt 60°, past the 45° limit; the mesh grasps keep pairs
+    near its ends, and one of them, closing square to the axis with the TCP on it (valid at any
+    turn of the shaft), comes down along the shaft within the limit."""
+    from types import SimpleNamespace
+
+    from binpick.cell.grasp import grasp_filter, plan_grasp
+    from binpick.transforms import rotation_about
+
+    shaft = binpick.parts.keyed_shaft()
+    with SimulatedCell(shaft, count=1, seed=0, frames=4) as sim:
+        cfg, here = sim.cell.config, sim.robot_emulator.pose()
+    g = cfg.gripper
+    # Pairs within reach of the fingers from each end (the shaft runs along z, centred).
+    mids = np.array([-(T[:3, :3].T @ T[:3, 3]) for T in cfg.grasps.values()])
+    half = float(np.ptp(np.asarray(shaft.points)[:, 2])) / 2
+    assert (mids[:, 2] > half - g.finger_length_mm + 10.0).any() and (
+        mids[:, 2] < -half + g.finger_length_mm - 10.0
+    ).any()
+    lo, hi = cfg.bin_bounds
+    T = np.eye(4)
+    T[:3, :3] = rotation_about(np.array([1.0, 0.0, 0.0]), np.radians(30.0))  # the axis 30° off vertical
+    T[:3, 3] = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2] + 12.0 + 75.0 * np.cos(np.radians(30.0))]
+    axis = T[:3, 2]
+    result = SimpleNamespace(T_scene_model=T, ambiguous=False, alternatives=(), free_axis=axis, confidence=0.03)
+    plan, _ = plan_grasp(cfg, T, np.zeros((0, 3)), here, grasp_filter(cfg, result), free_turn=True)
+    assert plan.tilt_deg <= 45.0 + 1e-6
+    T_bg = plan.T_base_gripper
+    assert abs(T_bg[:3, 0] @ axis) < 0.1  # closing square to the shaft
+    assert abs(T_bg[:3, 2] @ axis) > 0.85  # coming down along it, end-on

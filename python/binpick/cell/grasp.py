@@ -629,8 +629,8 @@ def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarr
       does (within ``config.ambiguity_tolerance_deg`` / ``_mm``, modulo the part's symmetries) —
       whichever of the poses is true, the grip is the same;
     - ``result.free_axis`` (a continuous near-symmetry leaves the turn about it open): the TCP on
-      that axis and the fingers' width direction along it (a grasp across a shaft), so that any
-      turn about the axis leaves the grip unchanged.
+      that axis and the fingers closing square to it (across a shaft's body, from its side or
+      end-on), so that any turn about the axis turns the grip about it and leaves it unchanged.
     """
     tests = []
     if getattr(result, "ambiguous", False) and getattr(result, "alternatives", ()):
@@ -653,12 +653,12 @@ def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarr
                 centre = np.asarray(near.center, dtype=np.float64)
                 break
         c = T_bo[:3, :3] @ centre + T_bo[:3, 3]
-        cos_tol = math.cos(math.radians(config.ambiguity_tolerance_deg))
+        sin_tol = math.sin(math.radians(config.ambiguity_tolerance_deg))
 
         def across(T_bg: np.ndarray) -> bool:
             off = T_bg[:3, 3] - c
             off_axis = float(np.linalg.norm(off - (off @ a) * a))
-            return abs(float(T_bg[:3, 1] @ a)) >= cos_tol and off_axis <= config.ambiguity_tolerance_mm
+            return abs(float(T_bg[:3, 0] @ a)) <= sin_tol and off_axis <= config.ambiguity_tolerance_mm
 
         tests.append(across)
     if not tests:
