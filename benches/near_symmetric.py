@@ -58,6 +58,7 @@ import numpy as np  # noqa: E402
 
 import binpick  # noqa: E402
 from binpick import _core, _shapes, parts, sim  # noqa: E402
+from binpick.cell.symmetry import continuous_near_axis  # noqa: E402
 from binpick.transforms import pose_error, rotation_about  # noqa: E402
 from binpick.vision import extract_line, triangulate  # noqa: E402
 
@@ -322,6 +323,10 @@ def judge(scene: Scene, model, base, group=None) -> dict:
     ok, rot, trans = pick_grade(model, res.T_scene_model, scene.truths[index], group)
     alternatives = getattr(res, "alternatives", None)
     alt_ok = any(pick_grade(model, a.T_scene_model, scene.truths[index], group)[0] for a in alternatives or [])
+    if getattr(res, "free_axis", None) is not None and not alt_ok:
+        # The turn about a free axis is open: any turn of the pose about it is one of its alternatives.
+        deg, mm = model.pose_error(res.T_scene_model, scene.truths[index], turn_about=continuous_near_axis(model))
+        alt_ok = bool(deg < 5.0 and mm < 3.0)
     ambiguous = getattr(res, "ambiguous", None)
     confidence = getattr(res, "confidence", None)
     confidence_any = getattr(res, "confidence_any", None)
