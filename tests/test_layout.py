@@ -11,10 +11,10 @@ from typing import Optional
 
 import pytest
 
-import binpick
-
-PACKAGE = Path(binpick.__file__).resolve().parent
-ROOT = PACKAGE.parent.parent
+# The repository's own sources, wherever the tests import binpick from: installed by `pip install .`
+# binpick lives in site-packages, and a root found from it held no sources, so nothing was checked.
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGE = ROOT / "python" / "binpick"
 MAX_LINES = 800
 SOURCE_SUFFIXES = (".py", ".pyi", ".rs")
 

@@ -63,7 +63,7 @@ def test_a_plate_lying_on_the_floor_is_pinched_from_above_by_its_edges():
     """A plate 10 mm thick lying flat: a grasp with the TCP at its middle reaches the fingertips
     5 mm through the floor; each mesh grasp's shallow variant bites SHALLOW_BITE_MM past the
     contacts, and the simulated cell lifts the plate with one."""
-    from binpick.cell.grasp import SHALLOW_BITE_MM
+    from binpick.cell.grasp_sets import SHALLOW_BITE_MM
 
     plate, g = binpick.parts.cut_plate(), GripperGeometry()
     grasps = mesh_grasps(plate, g)
