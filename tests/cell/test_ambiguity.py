@@ -4,6 +4,7 @@ at all (issue 14 item 4)."""
 
 from __future__ import annotations
 
+import json
 from types import SimpleNamespace
 
 import numpy as np
@@ -159,6 +160,19 @@ def test_a_keyed_shaft_whose_keyway_is_hidden_is_picked_across_its_body():
     for r in open_ones:
         assert r.confidence < min_confidence <= r.confidence_any  # staked on the shared grasp
         assert r.grasp.startswith("mesh")
+        # The hand-off to the placing station: the part's pose in the gripper under the located
+        # pose and each alternative, and the open turn's axis — across the fingers' closing.
+        assert len(r.T_gripper_object_options) >= 1
+        for T_go in r.T_gripper_object_options:
+            np.testing.assert_allclose(T_go[:3, :3] @ T_go[:3, :3].T, np.eye(3), atol=1e-9)
+            assert np.linalg.norm(T_go[:3, 3]) < 85.0  # the shaft's centre within half its length of the TCP
+        a = r.free_axis_gripper
+        assert a is not None and abs(np.linalg.norm(a) - 1.0) < 1e-9 and abs(a[0]) < 0.1
+        d = json.loads(json.dumps(r.as_dict()))
+        assert len(d["T_gripper_object_options"]) == len(r.T_gripper_object_options)
+    for r in records:
+        if r.orientation_decided:
+            assert r.T_gripper_object_options == () and r.free_axis_gripper is None
 
 
 def test_a_second_view_judged_with_the_first_decides_what_the_first_left_open():

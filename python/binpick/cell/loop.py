@@ -498,7 +498,7 @@ class Cell:
             score=float(res.score),
             rmse=float(res.rmse),
             method=getattr(res, "method", None),
-            **pose_trust(res),
+            **pose_trust(res, plan.T_base_gripper),
             points=len(located.scan.points),
             grasp=plan.grasp,
             held=held,

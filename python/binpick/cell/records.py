@@ -174,7 +174,12 @@ class PickRecord:
     the located pose's (:class:`binpick.PoseResult`); ``orientation_decided``: False when the scan
     could not rule out alternatives (a hidden keyway, a flip the feature of which is out of sight)
     and the part was picked with a grasp the same on all of them — its orientation in the gripper
-    is still open.
+    is still open. For such a pick, the hand-off to the station that places it:
+    ``T_gripper_object_options``, the part's pose in the gripper (4×4 ``T_gripper_object``) under
+    the located pose and under each alternative the scan left open, one of which is the part's;
+    ``free_axis_gripper``, the unit axis (gripper frame, through the part's symmetry centre)
+    about which its turn is open, or None. A check at the station (a camera, a probe, a fixture
+    that only one of them fits) decides among them.
     """
 
     index: int
@@ -199,6 +204,8 @@ class PickRecord:
     looks: int = 1
     scan: Optional[ScanResult] = None
     nudges: tuple[Any, ...] = ()
+    T_gripper_object_options: tuple[np.ndarray, ...] = ()
+    free_axis_gripper: Optional[np.ndarray] = None
 
     def as_dict(self) -> dict:
         """A JSON-ready summary."""
@@ -212,6 +219,10 @@ class PickRecord:
             "confidence": self.confidence,
             "confidence_any": self.confidence_any,
             "orientation_decided": self.orientation_decided,
+            "T_gripper_object_options": [np.round(T, 6).tolist() for T in self.T_gripper_object_options],
+            "free_axis_gripper": None
+            if self.free_axis_gripper is None
+            else np.round(self.free_axis_gripper, 6).tolist(),
             "points": self.points,
             "grasp": self.grasp,
             "held": self.held,
@@ -226,12 +237,25 @@ class PickRecord:
         }
 
 
-def pose_trust(result: Any) -> dict:
+def pose_trust(result: Any, T_base_gripper: Optional[np.ndarray] = None) -> dict:
     """A located pose's ``confidence``, ``confidence_any`` and ``orientation_decided`` (see
-    :class:`PickRecord`) from its :class:`binpick.PoseResult` (a bare one reads as sure)."""
+    :class:`PickRecord`) from its :class:`binpick.PoseResult` (a bare one reads as sure); with the
+    grasp ``T_base_gripper`` of a pick whose orientation is open, the hand-off too
+    (``T_gripper_object_options``, ``free_axis_gripper``)."""
     c = float(getattr(result, "confidence", 1.0))
     any_ = float(getattr(result, "confidence_any", c))
-    return {"confidence": c, "confidence_any": any_, "orientation_decided": not getattr(result, "ambiguous", False)}
+    decided = not getattr(result, "ambiguous", False)
+    out = {"confidence": c, "confidence_any": any_, "orientation_decided": decided}
+    if decided or T_base_gripper is None:
+        return out
+    T_gb = np.linalg.inv(np.asarray(T_base_gripper, dtype=np.float64))
+    poses = [result.T_scene_model, *(a.T_scene_model for a in getattr(result, "alternatives", ()))]
+    out["T_gripper_object_options"] = tuple(T_gb @ np.asarray(P, dtype=np.float64) for P in poses)
+    axis = getattr(result, "free_axis", None)
+    if axis is not None:
+        a = T_gb[:3, :3] @ np.asarray(axis, dtype=np.float64)
+        out["free_axis_gripper"] = a / np.linalg.norm(a)
+    return out
 
 
 @dataclass(frozen=True, eq=False)
