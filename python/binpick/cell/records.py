@@ -10,6 +10,8 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ..transforms import inverse
+
 __all__ = ["ScanResult", "PoseTruth", "Located", "Skipped", "PickPlan", "PickRecord", "RunReport", "FAILURE_KINDS"]
 
 #: What a failed pick attempt can have gone wrong with, in the order a pick meets them.
@@ -248,7 +250,7 @@ def pose_trust(result: Any, T_base_gripper: Optional[np.ndarray] = None) -> dict
     out = {"confidence": c, "confidence_any": any_, "orientation_decided": decided}
     if decided or T_base_gripper is None:
         return out
-    T_gb = np.linalg.inv(np.asarray(T_base_gripper, dtype=np.float64))
+    T_gb = inverse(np.asarray(T_base_gripper, dtype=np.float64))
     poses = [result.T_scene_model, *(a.T_scene_model for a in getattr(result, "alternatives", ()))]
     out["T_gripper_object_options"] = tuple(T_gb @ np.asarray(P, dtype=np.float64) for P in poses)
     axis = getattr(result, "free_axis", None)
