@@ -210,3 +210,18 @@ def test_a_second_view_judged_with_the_first_decides_what_the_first_left_open():
     res = binpick.estimate_pose(both.points, model, bin=bin_box)
     rot, trans = model.pose_error(res.T_scene_model, T)
     assert not res.ambiguous and rot < 5 and trans < 3, (res, rot, trans)
+
+
+def test_a_lift_on_a_wrong_pose_says_which_case(sim):
+    """The failure message is written per case: another part's pose, or this part's pose off by
+    so much (it once said "was not pick-grade or belonged to part 11" of part 11)."""
+    from binpick.cell.records import PoseTruth
+
+    def judged(truth, picked):
+        return sim.cell._judge_pick(SimpleNamespace(truth=truth, T_base_object=np.eye(4)), True, picked)
+
+    kind, why = judged(PoseTruth(instance=11, rotation_error_deg=21.3, translation_error_mm=0.4), 11)
+    assert kind == "wrong pose" and "21.3°, 0.4 mm off (not pick-grade)" in why and " or " not in why, why
+    kind, why = judged(PoseTruth(instance=11, rotation_error_deg=0.1, translation_error_mm=0.1), 5)
+    assert kind == "wrong pose" and why == "part 5 left the bin, but the located pose was part 11's", why
+    assert judged(PoseTruth(instance=11, rotation_error_deg=0.1, translation_error_mm=0.1), 11) == (None, None)

@@ -543,10 +543,11 @@ class Cell:
             return None, None
         if picked is None:
             return "nothing lifted", "no part left the bin"
-        return "wrong pose", (
-            f"part {picked} left the bin, but the located pose was not pick-grade or belonged to part "
-            f"{None if truth is None else truth.instance}"
-        )
+        if truth is None or picked != truth.instance:
+            owner = "no part" if truth is None else f"part {truth.instance}"
+            return "wrong pose", f"part {picked} left the bin, but the located pose was {owner}'s"
+        off = f"{truth.rotation_error_deg:.1f}°, {truth.translation_error_mm:.1f} mm"
+        return "wrong pose", f"part {picked} left the bin, but its located pose was {off} off (not pick-grade)"
 
     def check_plan(self, plan: PickPlan) -> dict[str, tuple[np.ndarray, bool]]:
         """The moves of ``plan`` as :meth:`pick` makes them (:data:`PICK_MOVES`), checked whole
