@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from ._cli_parts import _model, _Usage
-from .errors import BinpickError, InvalidInputError
+from .errors import BinpickError, InvalidInputError, NoObjectFound
 
 __all__ = ["main"]
 
@@ -750,7 +750,8 @@ def _add_bench(sub: Any) -> None:
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
-    """Runs ``binpick`` with ``argv`` (without the program name; default ``sys.argv[1:]``); returns the exit code."""
+    """Runs ``binpick`` with ``argv`` (without the program name; default ``sys.argv[1:]``); returns the exit code:
+    0 done, 1 a fault, a safety refusal or another error, 2 bad input, 3 no object found, 130 interrupted."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] == "simulate":
         from .sim.cli import simulate_main
@@ -776,12 +777,15 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except InvalidInputError as exc:
         print(f"binpick {args.command}: {exc}", file=sys.stderr)
         return 2
+    except NoObjectFound as exc:
+        print(f"binpick {args.command}: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 3
     except BinpickError as exc:
         print(f"binpick {args.command}: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f"binpick {args.command}: interrupted", file=sys.stderr)
-        return 1
+        return 130  # as a shell reports SIGINT
 
 
 def _forward(entry: Any, argv: list[str]) -> int:

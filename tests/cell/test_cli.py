@@ -90,3 +90,19 @@ drop_pose = [2000.0, 0.0, 400.0, 180.0, 0.0, 0.0]
         assert main(["pick", str(cfg)]) == 1
         assert "drop_pose" in capsys.readouterr().err
         assert robot.requests == []
+
+
+def test_exit_codes_say_no_object_found_and_interrupted(tmp_path, capsys, monkeypatch):
+    """3 when the scene holds no such part (not 1, as a fault), 130 on Ctrl-C (as a shell reports
+    SIGINT), as the README lists them."""
+    noise = tmp_path / "noise.npy"
+    np.save(noise, np.random.default_rng(1).uniform([260.0, -90.0, 0.0], [540.0, 90.0, 80.0], (20000, 3)))
+    assert main(["estimate", str(noise), "tee"]) == 3
+    assert "NoObjectFound" in capsys.readouterr().err
+
+    def interrupted(args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr("binpick.cli._estimate", interrupted)
+    assert main(["estimate", str(noise), "tee"]) == 130
+    assert "interrupted" in capsys.readouterr().err
