@@ -14,7 +14,7 @@ import numpy as np
 
 import binpick
 from binpick import sim
-from binpick.transforms import inverse, rotation_about
+from binpick.transforms import inverse, quaternion_matrix, rotation_about
 from near_symmetric import sim_cloud
 from pose_peers import DENSE_SPACING, SYMMETRIES, Part, Scene
 from pose_peers import symmetries as table_symmetries
@@ -148,29 +148,6 @@ class Case:
         return {"viewpoint": self.scene.viewpoint, "along_rays": self.set != "laser"}
 
 
-def read_ply_points(path: Path) -> np.ndarray:
-    """The vertices (x, y, z) of an ASCII PLY range scan, metres (its range_grid ignored)."""
-    with path.open() as f:
-        n = 0
-        for line in f:
-            if line.startswith("element vertex"):
-                n = int(line.split()[2])
-            if line.strip() == "end_header":
-                break
-        return np.loadtxt(f, max_rows=n, usecols=(0, 1, 2), dtype=np.float64)
-
-
-def quaternion_matrix(q: np.ndarray) -> np.ndarray:
-    x, y, z, w = q / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
 def bunny_scans(root: Path, limit: Optional[int]) -> list[tuple[str, np.ndarray, np.ndarray]]:
     """(name, points mm in the scan's frame, T_scan_mesh) of each scan ``bun.conf`` registers."""
     scans = []
@@ -178,10 +155,10 @@ def bunny_scans(root: Path, limit: Optional[int]) -> list[tuple[str, np.ndarray,
         f = line.split()
         if not f or f[0] != "bmesh":
             continue
-        t, q = np.array(f[2:5], dtype=np.float64) * 1e3, np.array(f[5:9], dtype=np.float64)
+        t, (x, y, z, w) = np.array(f[2:5], dtype=np.float64) * 1e3, np.array(f[5:9], dtype=np.float64)
         T_mesh_scan = np.eye(4)
-        T_mesh_scan[:3, :3], T_mesh_scan[:3, 3] = quaternion_matrix(q).T, t
-        scans.append((Path(f[1]).stem, read_ply_points(root / f[1]) * 1e3, inverse(T_mesh_scan)))
+        T_mesh_scan[:3, :3], T_mesh_scan[:3, 3] = quaternion_matrix((w, x, y, z)).T, t
+        scans.append((Path(f[1]).stem, binpick.read_scene(root / f[1]).points * 1e3, inverse(T_mesh_scan)))
         if limit is not None and len(scans) >= limit:
             break
     return scans

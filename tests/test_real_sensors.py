@@ -13,15 +13,9 @@ import pytest
 
 import binpick
 from binpick import sim
+from binpick.transforms import inverse, quaternion_matrix, rotation_about
 
 BUNNY = Path(__file__).resolve().parents[2] / "shared" / "data" / "real" / "bunny"
-
-
-def _invert(T: np.ndarray) -> np.ndarray:
-    out = np.eye(4)
-    out[:3, :3] = T[:3, :3].T
-    out[:3, 3] = -T[:3, :3].T @ T[:3, 3]
-    return out
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +55,7 @@ def test_a_scene_in_the_camera_frame_gives_the_same_pose_as_turned_to_z_up(obliq
     model, pile, frame = oblique
     base = binpick.estimate_pose(frame.cloud, model, bin=pile.bin.bounds, viewpoint=frame.viewpoint)
     # The same points in the camera's own frame (+z forward), the sensor at the origin.
-    T_camera_base = _invert(frame.T_base_camera)
+    T_camera_base = inverse(frame.T_base_camera)
     in_camera = frame.cloud @ T_camera_base[:3, :3].T + T_camera_base[:3, 3]
     seen = binpick.estimate_pose(in_camera, model, viewpoint=(0.0, 0.0, 0.0))
     back = frame.T_base_camera @ seen.T_scene_model
@@ -154,31 +148,25 @@ def test_a_one_face_model_is_degenerate_and_never_confident():
 
 def _bunny_scan(name: str) -> tuple[np.ndarray, np.ndarray]:
     """A scan's points (mm, its scanner frame) and T_scan_mesh from bun.conf (p_mesh = R(q)ᵀ s + t)."""
-    with open(BUNNY / name) as fh:
-        count = None
-        while True:
-            line = fh.readline()
-            if line.startswith("element vertex"):
-                count = int(line.split()[2])
-            if line.startswith("end_header"):
-                break
-        pts = np.loadtxt(fh, max_rows=count) * 1000.0
+    pts = binpick.read_scene(BUNNY / name).points * 1000.0
     for line in (BUNNY / "bun.conf").read_text().splitlines():
         row = line.split()
         if row[:2] == ["bmesh", name]:
             t = np.array(row[2:5], dtype=float) * 1000.0
-            x, y, z, w = np.array(row[5:9], dtype=float) / np.linalg.norm(np.array(row[5:9], dtype=float))
-            R = np.array(
-                [
-                    [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                    [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                    [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-                ]
-            )
+            x, y, z, w = np.array(row[5:9], dtype=float)
             T_mesh_scan = np.eye(4)
-            T_mesh_scan[:3, :3], T_mesh_scan[:3, 3] = R.T, t
-            return pts, _invert(T_mesh_scan)
+            T_mesh_scan[:3, :3], T_mesh_scan[:3, 3] = quaternion_matrix((w, x, y, z)).T, t
+            return pts, inverse(T_mesh_scan)
     raise AssertionError(f"{name} is not in bun.conf")
+
+
+def test_a_quaternion_is_the_turn_about_its_axis_by_twice_its_half_angle():
+    """bun.conf's rotations (and the robot emulator's interpolation) read quaternions (w, x, y, z)."""
+    axis, angle = np.array([1.0, -2.0, 0.5]) / np.linalg.norm([1.0, -2.0, 0.5]), 1.1
+    q = np.r_[np.cos(angle / 2), np.sin(angle / 2) * axis] * 3.0  # any length
+    np.testing.assert_allclose(quaternion_matrix(q), rotation_about(axis, angle), atol=1e-12)
+    with pytest.raises(binpick.InvalidInputError, match="quaternion"):
+        quaternion_matrix([0.0, 0.0, 0.0, 0.0])
 
 
 @pytest.fixture(scope="module")

@@ -20,6 +20,7 @@ __all__ = [
     "inverse",
     "translation",
     "rotation_about",
+    "quaternion_matrix",
     "rot_y",
     "rotation_angle_deg",
     "look_down",
@@ -56,6 +57,22 @@ def rotation_about(axis: Any, angle: float) -> np.ndarray:
     angle = number(angle, "angle", unit="rad")
     K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
     return np.eye(3) + math.sin(angle) * K + (1 - math.cos(angle)) * K @ K
+
+
+def quaternion_matrix(q: Any) -> np.ndarray:
+    """The 3×3 rotation of the quaternion ``q`` = (w, x, y, z), scalar first (any non-zero length)."""
+    v = as_vector(q, "q", 4)
+    norm = float(np.linalg.norm(v))
+    if not norm > 1e-12:
+        raise InvalidInputError(f"q: {v.tolist()} is no rotation; pass a non-zero quaternion (w, x, y, z)")
+    w, x, y, z = v / norm
+    return np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def rot_y(angle: float) -> np.ndarray:

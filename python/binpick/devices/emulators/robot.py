@@ -28,6 +28,7 @@ import numpy as np
 
 from ..._validate import check_number
 from ...errors import InvalidInputError
+from ...transforms import quaternion_matrix
 from ..xyzabc import rotation_from_abc, xyzabc_from_transform
 from ._pty import Fault, PtyEmulator, monotonic
 
@@ -228,17 +229,6 @@ def _quat(R: np.ndarray) -> np.ndarray:
     return np.array(q)
 
 
-def _quat_matrix(q: np.ndarray) -> np.ndarray:
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
 def _straight_path(T0: np.ndarray, T1: np.ndarray, steps: int) -> list[np.ndarray]:
     q0, q1 = _quat(T0[:3, :3]), _quat(T1[:3, :3])
     if q0 @ q1 < 0:
@@ -251,7 +241,7 @@ def _straight_path(T0: np.ndarray, T1: np.ndarray, steps: int) -> list[np.ndarra
         else:
             q = (math.sin((1 - s) * angle) * q0 + math.sin(s * angle) * q1) / math.sin(angle)
         T = np.eye(4)
-        T[:3, :3] = _quat_matrix(q)
+        T[:3, :3] = quaternion_matrix(q)
         T[:3, 3] = (1 - s) * T0[:3, 3] + s * T1[:3, 3]
         poses.append(T)
     return poses
