@@ -34,6 +34,7 @@ from ..errors import InvalidInputError, SafetyError
 from ..models import Model
 from ..transforms import laser_sweep, rotation_about, translation
 from .grasp import branch_grasps, grasp_openings, mesh_grasps, swept_points
+from .symmetry import GraspMatcher, continuous_near_axis, continuous_symmetry
 from .views import turned_scan_poses
 
 __all__ = ["CellConfig", "GripperGeometry", "check_static_poses", "sweep_angles", "turned_scan_poses"]
@@ -367,6 +368,18 @@ class CellConfig:
         """CPU time (ms) spent so far measuring grasp openings: once per grasp and part, so the
         pick loop counts it apart from each pick's planning."""
         return self._openings_cpu[0] * 1e3
+
+    @cached_property
+    def ambiguity_matcher(self) -> GraspMatcher:
+        """The declared grasps matched with the ambiguity tolerances (the test a grasp must pass
+        on every alternative of an undecided pose): built once per cell, not per plan."""
+        return GraspMatcher(
+            self.grasps,
+            self.symmetries,
+            tolerance_deg=self.ambiguity_tolerance_deg,
+            tolerance_mm=self.ambiguity_tolerance_mm,
+            continuous=continuous_symmetry(self.model.symmetries) or continuous_near_axis(self.model),
+        )
 
     @cached_property
     def _openings(self) -> dict[bool, dict[str, Optional[float]]]:

@@ -441,13 +441,7 @@ def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarr
     """
     tests = []
     if getattr(result, "ambiguous", False) and getattr(result, "alternatives", ()):
-        matcher = GraspMatcher(
-            config.grasps,
-            config.symmetries,
-            tolerance_deg=config.ambiguity_tolerance_deg,
-            tolerance_mm=config.ambiguity_tolerance_mm,
-            continuous=continuous_symmetry(config.model.symmetries) or continuous_near_axis(config.model),
-        )
+        matcher = config.ambiguity_matcher
         alternatives = [np.asarray(a.T_scene_model, dtype=np.float64) for a in result.alternatives]
         tests.append(lambda T_bg: all(matcher.within(matcher.error(inverse(T_bg) @ T_a)) for T_a in alternatives))
     axis = getattr(result, "free_axis", None)
