@@ -17,16 +17,16 @@ Exit codes: 0 done, 1 failed (the message says why), 2 bad usage or input.
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import os
-import subprocess
 import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Optional
 
-from ._cli_parts import _model, _Usage
+from ._cli_parts import _model, _Usage, run_bench
 from .errors import BinpickError, InvalidInputError, NoObjectFound
 
 __all__ = ["main"]
@@ -535,35 +535,6 @@ def _calibrate_folder(args: argparse.Namespace) -> int:
     return 0
 
 
-# --------------------------------------------------------------------------- bench
-
-
-def _bench(args: argparse.Namespace) -> int:
-    root = Path(__file__).resolve().parents[2] / "benches"
-    scripts = sorted(root.glob("*.py")) if root.is_dir() else []
-    if not scripts:
-        print(
-            "binpick bench: the benchmarks live in the source repository's benches/ folder (criterion benches: "
-            "`cargo bench -p binpick-bench`; Python benches: `python benches/<name>.py`); this installation has none."
-        )
-        return 0
-    if args.list:
-        for s in scripts:
-            print(s.stem)
-        return 0
-    chosen = [s for s in scripts if not args.names or s.stem in args.names]
-    unknown = set(args.names) - {s.stem for s in scripts}
-    if unknown:
-        raise _Usage(
-            f"bench: unknown bench {', '.join(sorted(unknown))}; available: {', '.join(s.stem for s in scripts)}"
-        )
-    status = 0
-    for s in chosen:
-        print(f"== {s.stem}", flush=True)
-        status |= subprocess.call([sys.executable, str(s)])
-    return 1 if status else 0
-
-
 # --------------------------------------------------------------------------- parser
 
 
@@ -642,6 +613,18 @@ def _add_forwarded(sub: Any) -> None:
         add_help=False,
     )
     e.set_defaults(forward="emulate")
+    v = sub.add_parser(
+        "serve", help="serve the cell's vision to its robot program over TCP (`binpick serve --help`)", add_help=False
+    )
+    v.set_defaults(forward="serve")
+
+
+#: The commands whose own parsers read the rest: name -> (module, entry point).
+_FORWARDED = {
+    "simulate": (".sim.cli", "simulate_main"),
+    "emulate": (".devices.cli", "emulate_main"),
+    "serve": (".server.cli", "serve_main"),
+}
 
 
 def _add_estimate(sub: Any) -> None:
@@ -746,21 +729,16 @@ def _add_bench(sub: Any) -> None:
     b = sub.add_parser("bench", help="run the benchmarks of a source checkout")
     b.add_argument("names", nargs="*", help="benches to run (default all)")
     b.add_argument("--list", action="store_true", help="list the benches")
-    b.set_defaults(run=_bench)
+    b.set_defaults(run=run_bench)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Runs ``binpick`` with ``argv`` (without the program name; default ``sys.argv[1:]``); returns the exit code:
     0 done, 1 a fault, a safety refusal or another error, 2 bad input, 3 no object found, 130 interrupted."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    if argv and argv[0] == "simulate":
-        from .sim.cli import simulate_main
-
-        return _forward(simulate_main, argv[1:])
-    if argv and argv[0] == "emulate":
-        from .devices.cli import emulate_main
-
-        return _forward(emulate_main, argv[1:])
+    if argv and argv[0] in _FORWARDED:
+        module, entry = _FORWARDED[argv[0]]
+        return _forward(getattr(importlib.import_module(module, __package__), entry), argv[1:])
     parser = _parser()
     try:
         args = parser.parse_args(argv)

@@ -21,6 +21,8 @@ __all__ = [
     "translation",
     "rotation_about",
     "quaternion_matrix",
+    "matrix_quaternion",
+    "rotation_vector",
     "rot_y",
     "rotation_angle_deg",
     "look_down",
@@ -73,6 +75,50 @@ def quaternion_matrix(q: Any) -> np.ndarray:
             [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
         ]
     )
+
+
+def matrix_quaternion(R: Any) -> np.ndarray:
+    """The unit quaternion (w, x, y, z) of the 3×3 rotation ``R``, with w ≥ 0 (the inverse of
+    :func:`quaternion_matrix`). From the largest of the four diagonal combinations (Shepperd), so
+    that no component is found by dividing by a small one."""
+    R = _rotation(R)
+    trace = float(np.trace(R))
+    candidates = (trace, R[0, 0], R[1, 1], R[2, 2])
+    k = int(np.argmax(candidates))
+    if k == 0:
+        w = math.sqrt(max(0.0, 1.0 + trace)) / 2.0
+        q = [w, (R[2, 1] - R[1, 2]) / (4 * w), (R[0, 2] - R[2, 0]) / (4 * w), (R[1, 0] - R[0, 1]) / (4 * w)]
+    else:
+        i, j, m = k - 1, k % 3, (k + 1) % 3
+        v = [0.0, 0.0, 0.0]
+        v[i] = math.sqrt(max(0.0, 1.0 + R[i, i] - R[j, j] - R[m, m])) / 2.0
+        v[j] = (R[j, i] + R[i, j]) / (4 * v[i])
+        v[m] = (R[m, i] + R[i, m]) / (4 * v[i])
+        q = [(R[m, j] - R[j, m]) / (4 * v[i]), *v]
+    out = np.array(q, dtype=np.float64)
+    out /= np.linalg.norm(out)
+    return -out if out[0] < 0 else out
+
+
+def rotation_vector(R: Any) -> np.ndarray:
+    """The rotation vector (axis × angle, radians, angle in [0, π]) of the 3×3 rotation ``R``; the
+    inverse of :func:`rotation_about` (``rotation_about(v, |v|)``). Through the quaternion, so
+    that turns near 0 and near π keep their precision."""
+    w, *xyz = matrix_quaternion(R)
+    v = np.array(xyz)
+    s = float(np.linalg.norm(v))
+    if s < 1e-15:
+        return np.zeros(3)
+    return v / s * (2.0 * math.atan2(s, w))
+
+
+def _rotation(R: Any) -> np.ndarray:
+    R = as_float_array(R, "R")
+    if R.shape != (3, 3):
+        raise ShapeError(f"R: expected a (3, 3) rotation, got shape {R.shape}")
+    if not np.isfinite(R).all():
+        raise InvalidInputError("R: holds NaN or infinity; pass a finite rotation")
+    return R
 
 
 def rot_y(angle: float) -> np.ndarray:

@@ -218,7 +218,7 @@ def test_a_lift_on_a_wrong_pose_says_which_case(sim):
     from binpick.cell.records import PoseTruth
 
     def judged(truth, picked):
-        return sim.cell._judge_pick(SimpleNamespace(truth=truth, T_base_object=np.eye(4)), True, picked)
+        return sim.cell.judge_pick(SimpleNamespace(truth=truth, T_base_object=np.eye(4)), True, picked)
 
     kind, why = judged(PoseTruth(instance=11, rotation_error_deg=21.3, translation_error_mm=0.4), 11)
     assert kind == "wrong pose" and "21.3°, 0.4 mm off (not pick-grade)" in why and " or " not in why, why

@@ -32,6 +32,7 @@ from ..devices import (
 )
 from ..devices.gripper import Gripper
 from ..devices.motor import LaserMotor
+from ..devices.robot import Robot
 from ..devices.xyzabc import transform_from_xyzabc
 from ..errors import BinpickError, CalibrationError, InvalidInputError, MeshFileNotFoundError
 from ..models import Model
@@ -46,6 +47,8 @@ __all__ = [
     "load_cell_file",
     "cell_from_file",
     "config_from_file",
+    "robot_from_file",
+    "gripper_from_file",
     "capture_calibration",
 ]
 
@@ -221,31 +224,40 @@ def load_cell_file(path: Any) -> CellFile:
 
 
 def cell_from_file(
-    cell_file: CellFile, *, progress: Optional[Callable[[str, str], None]] = None, num_threads: int = 0
+    cell_file: CellFile,
+    *,
+    progress: Optional[Callable[[str, str], None]] = None,
+    num_threads: int = 0,
+    robot: Optional[Robot] = None,
+    gripper: Optional[Gripper] = None,
 ) -> Cell:
     """Builds the drivers, camera and :class:`CellConfig` a cell file describes (nothing is sent
     yet: open the returned cell as a context manager). Every value of the file is read and
-    checked before the first port is opened."""
+    checked before the first port is opened. ``robot`` and ``gripper``, when given, are used
+    instead of the file's ``[robot]`` and ``[gripper]`` ports (the vision server's arm and gripper,
+    which the robot program drives); their limits must be the file's."""
     config = config_from_file(cell_file, num_threads=num_threads)
     check_static_poses(config)
     try:
-        open_robot, open_motor = _robot(cell_file, config.limits), _motor(cell_file)
-        open_gripper, open_camera = _gripper(cell_file), _camera(cell_file, config.model, num_threads)
+        open_robot = _robot(cell_file, config.limits) if robot is None else lambda: robot
+        open_motor = _motor(cell_file)
+        open_gripper = _gripper(cell_file) if gripper is None else lambda _: gripper
+        open_camera = _camera(cell_file, config.model, num_threads)
     except InvalidInputError as exc:
         if str(exc).startswith(str(cell_file.path)):
             raise
         raise InvalidInputError(f"{cell_file.path}: {exc}") from None
     opened: list[Any] = []
     try:
-        robot = open_robot()
-        opened.append(robot.close)
+        arm = open_robot()
+        opened.append(arm.close)
         motor = open_motor()
         opened.append(motor.close)
-        gripper = open_gripper(robot)
-        opened.append(gripper.close_port)
+        hand = open_gripper(arm)
+        opened.append(hand.close_port)
         camera = open_camera()
         opened.append(camera.close)
-        return Cell(config, robot=robot, motor=motor, gripper=gripper, camera=camera, progress=progress)
+        return Cell(config, robot=arm, motor=motor, gripper=hand, camera=camera, progress=progress)
     except BaseException:  # nothing opened is left open
         for close in reversed(opened):
             try:
@@ -253,6 +265,16 @@ def cell_from_file(
             except (BinpickError, OSError):
                 pass
         raise
+
+
+def robot_from_file(cell_file: CellFile) -> Robot:
+    """The robot driver of the file's ``[robot]`` table, with the file's limits (opened, no session yet)."""
+    return _robot(cell_file, _limits(cell_file))()
+
+
+def gripper_from_file(cell_file: CellFile, robot: Robot) -> Gripper:
+    """The gripper driver of the file's ``[gripper]`` table (``robot``: the arm a hand gripper is wired to)."""
+    return _gripper(cell_file)(robot)
 
 
 def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig:
@@ -402,7 +424,7 @@ def _gripper_geometry(f: CellFile, tool: np.ndarray) -> GripperGeometry:
         raise InvalidInputError(f"{f.path}: [gripper] {exc}") from None
 
 
-def _robot(f: CellFile, limits: safety.CellLimits) -> Callable[[], MelfaRobot]:
+def _robot(f: CellFile, limits: safety.CellLimits) -> Callable[[], Robot]:
     port = f.text("robot", "port")
     config = MelfaConfig(
         serial=SerialSettings(baudrate=f.integer("robot", "baudrate", 9600), parity="E", stopbits=2, timeout_s=2.0),
@@ -425,7 +447,7 @@ def _motor(f: CellFile) -> Callable[[], LaserMotor]:
     raise InvalidInputError(f"{f.path}: [motor] protocol = {protocol!r:.40}; use 'dynamixel' or 'aimotor'")
 
 
-def _gripper(f: CellFile) -> Callable[[MelfaRobot], Gripper]:
+def _gripper(f: CellFile) -> Callable[[Any], Gripper]:
     kind = f.text("gripper", "kind", "modbus")
     if kind == "modbus":
         port = f.text("gripper", "port")

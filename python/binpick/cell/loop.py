@@ -49,7 +49,18 @@ from .config import CellConfig, check_static_poses
 from .frames import FrameSource
 from .grasp import NoGraspError, plan_bin_clash, plan_grasp, staked_filter
 from .nudge import nudge_blocked
-from .records import Located, PickPlan, PickRecord, PoseTruth, RunReport, ScanResult, Skipped, located_line, pose_trust
+from .records import (
+    Located,
+    PickPlan,
+    PickRecord,
+    PoseTruth,
+    RunReport,
+    ScanResult,
+    Skipped,
+    failed_record,
+    located_line,
+    pose_trust,
+)
 from .symmetry import continuous_near_axis
 from .views import deciding_views
 
@@ -429,6 +440,10 @@ class Cell:
         errors = (self.config.model.pose_error(T, P) for P in poses)
         return any(mm < self.EMPTY_GRIP_RADIUS_MM and deg < self.EMPTY_GRIP_TURN_DEG for deg, mm in errors)
 
+    def pass_over(self, located: Located) -> None:
+        """Remembers that ``located`` was passed over, not tried: a part found there again goes last."""
+        self._passed_over.append(located.T_base_object.copy())
+
     def _refuse_empty_grip_spot(self, located: Located) -> None:
         t = located.T_base_object[:3, 3]
         if self._near_any(located.T_base_object, self._empty_grips):
@@ -481,7 +496,7 @@ class Cell:
         held = self._execute(plan)
         times["motion"] = _ms_since(t3)
         picked = self.truth.take_picked() if self.truth is not None else None
-        failure, error = self._judge_pick(located, held, picked)
+        failure, error = self.judge_pick(located, held, picked)
         ok = failure is None
         times["total"] = _ms_since(t0)
         self.progress(
@@ -527,7 +542,7 @@ class Cell:
             times["plan"] = _ms_since(t1)
         return located, plan
 
-    def _judge_pick(
+    def judge_pick(
         self, located: Located, held: Optional[bool], picked: Optional[int]
     ) -> tuple[Optional[str], Optional[str]]:
         """The kind of failure of the pick (None when it succeeded, see :attr:`PickRecord.failure`)
@@ -734,7 +749,7 @@ class Cell:
                 why = f"pick {i}: none of the {len(skipped)} parts located in {looks} looks could be picked — {exc}"
             times.update(self._cpu)
             times["total"] = _ms_since(t0)
-            record = self._failed(i, scan, located, exc, times, failure=failure)
+            record = failed_record(i, scan, located, exc, times, failure=failure)
             return replace(record, skipped=tuple(skipped), looks=looks, scan=scan), why
 
     def _something_in_bin(self, scan: ScanResult) -> bool:
@@ -770,29 +785,3 @@ class Cell:
             f"({T[0, 3]:.1f}, {T[1, 3]:.1f}, {T[2, 3]:.1f}) mm: looking from there first",
         )
         return [views[i] for i in order]
-
-    @staticmethod
-    def _failed(
-        i: int,
-        scan: Optional[ScanResult],
-        loc: Optional[Located],
-        exc: BaseException,
-        times: dict[str, float],
-        *,
-        failure: str,
-    ) -> PickRecord:
-        res = None if loc is None else loc.result
-        return PickRecord(
-            index=i,
-            success=False,
-            T_base_object=None if loc is None else loc.T_base_object,
-            score=None if res is None else float(res.score),
-            rmse=None if res is None else float(res.rmse),
-            method=None if res is None else res.method,
-            points=0 if scan is None else len(scan.points),
-            truth=None if loc is None else loc.truth,
-            error=str(exc),
-            fault=failure == "fault",
-            failure=failure,
-            timings=MappingProxyType(dict(times)),
-        )

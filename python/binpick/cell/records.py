@@ -294,3 +294,30 @@ class RunReport:
         """Failed attempts per kind of :data:`FAILURE_KINDS` (the kinds that occurred, in that order)."""
         counts = {kind: sum(r.failure == kind for r in self.records) for kind in FAILURE_KINDS}
         return {kind: n for kind, n in counts.items() if n}
+
+
+def failed_record(
+    i: int,
+    scan: Optional[ScanResult],
+    loc: Optional[Located],
+    exc: BaseException,
+    times: dict[str, float],
+    *,
+    failure: str,
+) -> PickRecord:
+    """The record of pick ``i`` that failed with ``exc`` (of kind ``failure``) before any motion."""
+    res = None if loc is None else loc.result
+    return PickRecord(
+        index=i,
+        success=False,
+        T_base_object=None if loc is None else loc.T_base_object,
+        score=None if res is None else float(res.score),
+        rmse=None if res is None else float(res.rmse),
+        method=None if res is None else res.method,
+        points=0 if scan is None else len(scan.points),
+        truth=None if loc is None else loc.truth,
+        error=str(exc),
+        fault=failure == "fault",
+        failure=failure,
+        timings=MappingProxyType(dict(times)),
+    )
