@@ -11,42 +11,18 @@ import os
 import re
 import signal
 import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-import binpick
+from _readme import command_shim, readme_block
 from binpick.calibration import CellCalibration
 from binpick.calibration.compare import captured_angles, compare_calibrations
 from binpick.transforms import rot_y, rotation_about, rotation_angle_deg
 
-README = Path(__file__).resolve().parents[1] / "README.md"
 MARKER = "<!-- commission-commands -->"
 #: The whole flow's longest run, s (about 2.5 min on a loaded 2-core machine).
 TIMEOUT_S = 900
-
-
-def readme_commands() -> str:
-    """The fenced block right after the marker in README.md."""
-    text = README.read_text(encoding="utf-8")
-    assert MARKER in text, f"README.md lost the {MARKER} marker"
-    block = re.match(r"\s*```[^\n]*\n(.*?)```", text[text.index(MARKER) + len(MARKER) :], re.S)
-    assert block is not None, "the marker must be followed by the fenced block"
-    return block.group(1)
-
-
-def _command_shim(folder: Path) -> dict:
-    """An environment whose `binpick` is this interpreter running the package under test."""
-    folder.mkdir()
-    shim = folder / "binpick"
-    shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m binpick "$@"\n')
-    shim.chmod(0o755)
-    package_root = str(Path(binpick.__file__).resolve().parents[1])
-    env = dict(os.environ, PATH=f"{folder}{os.pathsep}{os.environ['PATH']}")
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, os.environ.get("PYTHONPATH")) if p)
-    return env
 
 
 def _step_times(trace: str, end: float) -> list[tuple[str, float]]:
@@ -68,9 +44,9 @@ def commissioned(tmp_path_factory):
     import time
 
     work = tmp_path_factory.mktemp("commission")
-    env = _command_shim(work / ".bin")
+    env = command_shim(work / ".bin")
     script = work / "commission.sh"
-    script.write_text(readme_commands())
+    script.write_text(readme_block(MARKER))
     t0 = time.time()
     proc = subprocess.Popen(
         # Each command traced with its start time (bash's xtrace; bash takes no PS4 from a root

@@ -16,6 +16,7 @@ import math
 import re
 import socket
 import sys
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -106,9 +107,17 @@ class Reply:
 class VisionClient:
     """The client side of docs/protocol.md: one request line out, one reply line in."""
 
-    def __init__(self, host: str, port: int, brand: str, timeout_s: float = 120.0) -> None:
+    def __init__(self, host: str, port: int, brand: str, timeout_s: float = 120.0, wait_s: float = 60.0) -> None:
         self.brand = brand
-        self.sock = socket.create_connection((host, port), timeout=timeout_s)
+        deadline = time.monotonic() + wait_s
+        while True:  # as a controller does: retry until the server is up
+            try:
+                self.sock = socket.create_connection((host, port), timeout=timeout_s)
+                break
+            except ConnectionRefusedError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.5)
         self.file = self.sock.makefile("rb")
 
     def call(self, line: str) -> Reply:

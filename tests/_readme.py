@@ -1,0 +1,37 @@
+"""Running a README block word for word: the fenced block after a marker, and an environment
+whose `binpick` command is this interpreter running the package under test."""
+
+from __future__ import annotations
+
+import os
+import re
+import sys
+from pathlib import Path
+
+import binpick
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def readme_block(marker: str) -> str:
+    """The fenced block right after ``marker`` in README.md."""
+    text = README.read_text(encoding="utf-8")
+    assert marker in text, f"README.md lost the {marker} marker"
+    block = re.match(r"\s*```[^\n]*\n(.*?)```", text[text.index(marker) + len(marker) :], re.S)
+    assert block is not None, "the marker must be followed by the fenced block"
+    return block.group(1)
+
+
+def command_shim(folder: Path) -> dict:
+    """An environment whose `binpick` (and `python`) is this interpreter running the package under test."""
+    folder.mkdir()
+    shim = folder / "binpick"
+    shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m binpick "$@"\n')
+    shim.chmod(0o755)
+    python = folder / "python"  # `python` in a block is this interpreter too
+    python.write_text(f'#!/bin/sh\nexec "{sys.executable}" "$@"\n')
+    python.chmod(0o755)
+    package_root = str(Path(binpick.__file__).resolve().parents[1])
+    env = dict(os.environ, PATH=f"{folder}{os.pathsep}{os.environ['PATH']}")
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, os.environ.get("PYTHONPATH")) if p)
+    return env
