@@ -126,7 +126,7 @@ class VisionClient:
 
     def read(self) -> Reply:
         raw = self.file.readline(4096).decode("ascii")
-        m = re.fullmatch(r"\(([^()]*)\)(?: (.*))?\n", raw)
+        m = re.fullmatch(r"\(([^()]*)\)(?: (.*))?\r\n", raw)
         if m is None:
             raise RuntimeError(f"not a reply line: {raw!r}")
         numbers = [float(x) for x in m.group(1).split(",")]

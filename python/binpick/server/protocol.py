@@ -1,8 +1,9 @@
 """The vision server's protocol, version 1: pure encoding and decoding, no sockets (the spec is
 ``docs/protocol.md``; this module is its one implementation on binpick's side).
 
-One line of ASCII per message, terminated by LF (a CR before it is ignored), at most
-:data:`MAX_LINE_BYTES` bytes with the terminator. A request is a verb and its numbers, separated
+One line of ASCII per message. A request ends with LF, CR or CR LF (robot languages differ) and
+is at most :data:`MAX_LINE_BYTES` bytes with its end; an empty line is ignored. A reply ends with
+CR LF. A request is a verb and its numbers, separated
 by spaces or commas; brackets and URScript's ``p[`` are ignored, so that what a robot language
 prints for a pose can be sent as it is. A reply is ``(`` numbers ``)``, then, for an error,
 a space and a text without parentheses; the first number is the reply code (:class:`Code`), and
@@ -36,8 +37,8 @@ __all__ = [
 PROTOCOL_VERSION = 1
 #: Longest message, bytes with the terminator; a longer one closes the connection.
 MAX_LINE_BYTES = 512
-#: Longest error text in a reply, characters.
-MAX_TEXT = 300
+#: Longest error text in a reply, characters (a reply stays within :data:`MAX_LINE_BYTES`).
+MAX_TEXT = 200
 
 
 class Code(enum.IntEnum):
@@ -121,13 +122,11 @@ _ARGUMENTS = {
 
 
 def parse_request(line: bytes, pose_size: int) -> Request:
-    """The request in ``line`` (without its LF); RequestError with the code to reply for a line
+    """The request in ``line`` (without its line end); RequestError with the code to reply for a line
     that is not printable ASCII, an unknown verb, a wrong count of numbers or a number that is
     not one. SCAN takes ``pose_size`` numbers (the flange pose in the brand's convention)."""
     if len(line) >= MAX_LINE_BYTES:
         raise RequestError(Code.TOO_LONG, f"a message is at most {MAX_LINE_BYTES - 1} bytes before its LF")
-    if line.endswith(b"\r"):
-        line = line[:-1]
     if any(b < 0x20 or b > 0x7E for b in line if b != 0x09):
         raise RequestError(Code.MALFORMED, "a message is one line of printable ASCII")
     text = line.decode("ascii").strip()
@@ -159,7 +158,7 @@ def parse_request(line: bytes, pose_size: int) -> Request:
 def encode_reply(code: Code, numbers: Sequence[float] = (), *, size: int, text: str = "") -> bytes:
     """The reply line: ``(code,numbers…)`` padded with zeros to ``size`` numbers, then, when
     ``text`` is given, a space and the text (printable ASCII, parentheses made brackets, at most
-    :data:`MAX_TEXT` characters), then LF."""
+    :data:`MAX_TEXT` characters), then CR LF."""
     values = [int(code), *numbers]
     if len(values) > size:
         raise ValueError(f"a reply of {size} numbers cannot hold {len(values)}")
@@ -169,7 +168,7 @@ def encode_reply(code: Code, numbers: Sequence[float] = (), *, size: int, text: 
     if text:
         clean = "".join(c if " " <= c <= "~" else "?" for c in text).replace("(", "[").replace(")", "]")
         line += " " + (clean if len(clean) <= MAX_TEXT else clean[: MAX_TEXT - 3] + "...")
-    return line.encode("ascii") + b"\n"
+    return line.encode("ascii") + b"\r\n"
 
 
 def _number(v: float) -> str:

@@ -5,12 +5,13 @@ at a time, and hands each request line to a :class:`~binpick.server.service.Visi
   A robot controller that drops the connection (a program restart) reconnects and goes on:
   the service keeps its state between connections.
 * A connection silent for ``idle_timeout_s`` is closed; so is one whose line grows past
-  :data:`~binpick.server.protocol.MAX_LINE_BYTES` without an LF (after a TOO_LONG reply).
+  :data:`~binpick.server.protocol.MAX_LINE_BYTES` without a line end (after a TOO_LONG reply).
 * Every other fault of a request is an error reply; the server keeps serving.
 """
 
 from __future__ import annotations
 
+import re
 import socket
 import threading
 from typing import Any, Callable, Optional
@@ -21,6 +22,9 @@ from .protocol import MAX_LINE_BYTES, Code, encode_reply
 from .service import VisionService
 
 __all__ = ["VisionServer", "DEFAULT_PORT"]
+
+#: A request's end: LF, CR or CR LF (an empty line between a CR and an LF is ignored).
+_LINE_END = re.compile(rb"\r\n?|\n")
 
 #: The port the server listens on unless the cell file or the command line names another.
 DEFAULT_PORT = 50100
@@ -141,14 +145,18 @@ class VisionServer:
             if not chunk:
                 return "closed by the robot program"
             pending += chunk
-            while b"\n" in pending:
-                line, pending = pending.split(b"\n", 1)
+            while True:
+                end = _LINE_END.search(pending)
+                if end is None:
+                    break
+                line, pending = pending[: end.start()], pending[end.end() :]
                 reply = self.service.handle_line(line)
-                conn.sendall(reply)
-                if line.strip().upper().startswith(b"BYE") and reply.startswith(b"(0"):
+                if reply:
+                    conn.sendall(reply)
+                if line.strip().upper() == b"BYE":
                     return "said BYE"
             if len(pending) >= MAX_LINE_BYTES:
-                text = f"a message is at most {MAX_LINE_BYTES - 1} bytes before its LF; closing"
+                text = f"a message is at most {MAX_LINE_BYTES - 1} bytes before its line end; closing"
                 conn.sendall(encode_reply(Code.TOO_LONG, size=1, text=text))
                 return "sent a line too long, closed"
         return "the server stopped"

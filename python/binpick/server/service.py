@@ -125,7 +125,10 @@ class VisionService:
 
     # -- one request
     def handle_line(self, line: bytes) -> bytes:
-        """The reply to one request line (without its LF); never raises for anything the line holds."""
+        """The reply to one request line (without its line end); never raises for anything the
+        line holds. An empty line gets no reply (b""): a stray line end is not a request."""
+        if not line.strip():
+            return b""
         verb = None
         t0 = time.perf_counter()
         self.compute_ms = 0.0
