@@ -182,6 +182,7 @@ class Cell:
         self.truth = truth
         self._empty_grips: list[np.ndarray] = []
         self._passed_over: list[np.ndarray] = []  # where parts were passed over earlier in the run
+        self._declined: list[np.ndarray] = []  # parts the robot program would not try (the vision server)
         self._cpu: dict[str, float] = {}
         check_static_poses(config)
 
@@ -440,12 +441,15 @@ class Cell:
         errors = (self.config.model.pose_error(T, P) for P in poses)
         return any(mm < self.EMPTY_GRIP_RADIUS_MM and deg < self.EMPTY_GRIP_TURN_DEG for deg, mm in errors)
 
-    def pass_over(self, located: Located) -> None:
-        """Remembers that ``located`` was passed over, not tried: a part found there again goes last."""
-        self._passed_over.append(located.T_base_object.copy())
+    def decline(self, located: Optional[Located]) -> None:
+        """Leaves the part at ``located`` out of later plans (the vision server's robot program
+        would not try it); ``None`` forgets every part declined (a new scan)."""
+        self._declined = [] if located is None else [*self._declined, located.T_base_object.copy()]
 
     def _refuse_empty_grip_spot(self, located: Located) -> None:
         t = located.T_base_object[:3, 3]
+        if self._near_any(located.T_base_object, self._declined):
+            raise NoGraspError("the robot program declined this part", reason="declined by the robot program")
         if self._near_any(located.T_base_object, self._empty_grips):
             raise NoGraspError(
                 f"the gripper closed on nothing at this located {self.config.model.name} "

@@ -166,9 +166,23 @@ def encode_reply(code: Code, numbers: Sequence[float] = (), *, size: int, text: 
     body = ",".join(_number(v) for v in values)
     line = f"({body})"
     if text:
-        clean = "".join(c if " " <= c <= "~" else "?" for c in text).replace("(", "[").replace(")", "]")
+        spelled = "".join(_ASCII.get(c, c) for c in text)
+        clean = "".join(c if " " <= c <= "~" else "?" for c in spelled).replace("(", "[").replace(")", "]")
         line += " " + (clean if len(clean) <= MAX_TEXT else clean[: MAX_TEXT - 3] + "...")
     return line.encode("ascii") + b"\r\n"
+
+
+#: binpick's messages' few non-ASCII characters, spelled in ASCII.
+_ASCII = {
+    "\u2014": "-",
+    "\u2013": "-",
+    "\u00b0": " deg",
+    "\u00d7": "x",
+    "\u2026": "...",
+    "\u03c3": "sigma",
+    "\u2264": "<=",
+    "\u2265": ">=",
+}
 
 
 def _number(v: float) -> str:

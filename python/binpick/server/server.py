@@ -1,9 +1,11 @@
 """The vision server's sockets: :class:`VisionServer` listens on TCP, serves one robot program
 at a time, and hands each request line to a :class:`~binpick.server.service.VisionService`.
 
-* One connection is served at a time; another one meanwhile gets a BUSY reply and is closed.
-  A robot controller that drops the connection (a program restart) reconnects and goes on:
-  the service keeps its state between connections.
+* One connection is served at a time; another one meanwhile gets a BUSY reply and is closed
+  (after a second's grace, for a program that closed and reconnected at once). A robot
+  controller that drops the connection (a program restart) reconnects and goes on: the service
+  keeps its state between connections. One that vanished without closing (a power cut) holds
+  its connection until ``idle_timeout_s``.
 * A connection silent for ``idle_timeout_s`` is closed; so is one whose line grows past
   :data:`~binpick.server.protocol.MAX_LINE_BYTES` without a line end (after a TOO_LONG reply).
 * Every other fault of a request is an error reply; the server keeps serving.
@@ -23,6 +25,8 @@ from .service import VisionService
 
 __all__ = ["VisionServer", "DEFAULT_PORT"]
 
+#: How long a new connection waits for the one being served to end before it is refused, s.
+_HANDOVER_S = 1.0
 #: A request's end: LF, CR or CR LF (an empty line between a CR and an LF is ignored).
 _LINE_END = re.compile(rb"\r\n?|\n")
 
@@ -103,7 +107,9 @@ class VisionServer:
                 continue
             except OSError:
                 return
-            if not self._busy.acquire(blocking=False):
+            # A program that closed and reconnects at once may find its old connection not yet
+            # wound up: it is given a moment before being refused as a second program.
+            if not self._busy.acquire(timeout=_HANDOVER_S):
                 self._refuse(conn, peer)
                 continue
             self.connections += 1
@@ -132,8 +138,8 @@ class VisionServer:
         except OSError as exc:
             why = f"connection lost ({exc})"
         finally:
+            self._busy.release()  # before the close the program sees: its reconnect is never refused as busy
             conn.close()
-            self._busy.release()
             self.progress("serve", f"robot program {peer[0]}:{peer[1]}: {why}")
 
     def _conversation(self, conn: socket.socket) -> str:
@@ -158,5 +164,26 @@ class VisionServer:
             if len(pending) >= MAX_LINE_BYTES:
                 text = f"a message is at most {MAX_LINE_BYTES - 1} bytes before its line end; closing"
                 conn.sendall(encode_reply(Code.TOO_LONG, size=1, text=text))
+                _drain(conn)
                 return "sent a line too long, closed"
         return "the server stopped"
+
+
+#: What is read and dropped of a connection closed for a line too long, bytes and seconds.
+_DRAIN_BYTES, _DRAIN_S = 1 << 20, 0.5
+
+
+def _drain(conn: socket.socket) -> None:
+    """Ends the sending side, then drops what the peer still sends (a bounded amount, briefly):
+    closing with unread bytes would reset the connection and lose the reply already sent."""
+    try:
+        conn.shutdown(socket.SHUT_WR)
+        conn.settimeout(_DRAIN_S)
+        dropped = 0
+        while dropped < _DRAIN_BYTES:
+            chunk = conn.recv(65536)
+            if not chunk:
+                return
+            dropped += len(chunk)
+    except OSError:
+        pass

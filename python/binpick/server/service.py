@@ -187,6 +187,7 @@ class VisionService:
             self.offer = None
         self.cell.robot.T_base_flange = T
         self.scan = None
+        self.cell.decline(None)  # a new look: the parts declined before may be pickable now
         t0 = time.perf_counter()
         scan = self.cell.scan([T])
         ms = (time.perf_counter() - t0) * 1e3
@@ -233,7 +234,7 @@ class VisionService:
         _, located, plan = self.offer
         self.offer = None
         if outcome == -1:  # the program passed it over: offer another part of the same scan
-            self.cell.pass_over(located)
+            self.cell.decline(located)
         else:
             self.cell.judge_pick(located, bool(outcome), None)  # remembers an empty grip, as the cell does
             self.picks += 1
