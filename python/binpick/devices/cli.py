@@ -30,8 +30,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "device",
-        choices=("robot", "motor", "gripper", "cell"),
+        choices=("robot", "motor", "gripper", "ur", "cell"),
         help="robot: MELFA controller (R3 protocol); motor: laser motor; gripper: Modbus RTU gripper; "
+        "ur: Universal Robots controller on TCP (RTDE, dashboard, URScript); "
         "cell: the digital twin (robot, laser motor and gripper on ptys, a pile with physics, a camera on a socket)",
     )
     p.add_argument(
@@ -51,6 +52,16 @@ def _parser() -> argparse.ArgumentParser:
         type=float,
         default=1.0,
         help="robot, cell: multiply every arm speed by this factor (default 1)",
+    )
+    u = p.add_argument_group("ur")
+    u.add_argument("--host", default="127.0.0.1", help="ur: the address to listen on (default 127.0.0.1)")
+    u.add_argument(
+        "--ports",
+        type=int,
+        nargs=3,
+        default=(30004, 29999, 30002),
+        metavar=("RTDE", "DASHBOARD", "SECONDARY"),
+        help="ur: the three ports (default the controller's: 30004 29999 30002; 0: any free one)",
     )
     c = p.add_argument_group("cell")
     c.add_argument("--out", default=None, help="cell: the folder for cell.toml, world.json and camera.sock (required)")
@@ -146,6 +157,38 @@ def _cell(args: argparse.Namespace) -> int:
     return 0
 
 
+def _ur(args: argparse.Namespace) -> int:
+    """``binpick emulate ur``: a UR controller on TCP until Ctrl-C or SIGTERM (exit 0)."""
+    from .emulators.ur import UREmulator
+
+    rtde_port, dashboard_port, secondary_port = args.ports
+    try:
+        emulator = UREmulator(
+            host=args.host,
+            rtde_port=rtde_port,
+            dashboard_port=dashboard_port,
+            secondary_port=secondary_port,
+            speed_scale=args.speed_scale,
+        )
+    except OSError as exc:
+        print(f"binpick emulate ur: cannot listen on {args.host} ({exc}); choose other --ports", file=sys.stderr)
+        return 2
+    _take_signals()
+    try:
+        with emulator:
+            a = emulator.addresses
+            print(
+                f"{a['rtde'][0]} rtde {a['rtde'][1]} dashboard {a['dashboard'][1]} secondary {a['secondary'][1]}",
+                flush=True,
+            )
+            print("binpick emulate: UR controller emulator serving; press Ctrl-C to stop", file=sys.stderr, flush=True)
+            while True:
+                time.sleep(0.2)
+    except KeyboardInterrupt:
+        pass
+    return 0
+
+
 def emulate_main(argv: Optional[list[str]] = None) -> int:
     """Runs ``binpick emulate`` with ``argv`` (without the program name); returns the exit code.
 
@@ -157,6 +200,8 @@ def emulate_main(argv: Optional[list[str]] = None) -> int:
         return int(exc.code or 0)
     if args.device == "cell":
         return _cell(args)
+    if args.device == "ur":
+        return _ur(args)
     try:
         emulator = _build(args)
     except BinpickError as exc:
