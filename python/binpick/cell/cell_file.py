@@ -425,6 +425,21 @@ def _gripper_geometry(f: CellFile, tool: np.ndarray) -> GripperGeometry:
 
 
 def _robot(f: CellFile, limits: safety.CellLimits) -> Callable[[], Robot]:
+    driver = f.text("robot", "driver", "melfa")
+    if driver == "ur":
+        from ..devices.ur import URConfig, URRobot
+
+        d = URConfig()
+        ur = URConfig(
+            rtde_port=f.integer("robot", "rtde_port", d.rtde_port),
+            dashboard_port=f.integer("robot", "dashboard_port", d.dashboard_port),
+            secondary_port=f.integer("robot", "secondary_port", d.secondary_port),
+            linear_speed_mm_s=f.number("robot", "linear_speed_mm_s", d.linear_speed_mm_s),
+        )
+        host = f.text("robot", "host")
+        return lambda: URRobot(host, limits=limits, config=ur)
+    if driver != "melfa":
+        raise InvalidInputError(f"{f.path}: [robot] driver = {driver!r:.40}; use 'melfa' or 'ur'")
     port = f.text("robot", "port")
     config = MelfaConfig(
         serial=SerialSettings(baudrate=f.integer("robot", "baudrate", 9600), parity="E", stopbits=2, timeout_s=2.0),

@@ -70,6 +70,12 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--count", type=int, default=12, help="cell: parts dropped into the bin (default 12)")
     c.add_argument("--seed", type=int, default=0, help="cell: seed of the pile and the sensor noise (default 0)")
     c.add_argument("--frames", type=int, default=90, help="cell: laser frames per scan in cell.toml (default 90)")
+    c.add_argument(
+        "--robot",
+        choices=("melfa", "ur"),
+        default="melfa",
+        help="cell: the arm — melfa (R3 over a pty, the paper's) or ur (a UR5e-class arm, its controller on TCP)",
+    )
     return p
 
 
@@ -131,6 +137,7 @@ def _cell(args: argparse.Namespace) -> int:
             seed=args.seed,
             frames=args.frames,
             speed_scale=args.speed_scale,
+            robot=args.robot,
         )
     except KeyboardInterrupt:
         return 0

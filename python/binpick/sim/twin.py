@@ -41,6 +41,7 @@ from ..devices import (
     safety,
 )
 from ..devices.emulators import ArmModel, DynamixelEmulator, GripperEmulator, RobotEmulator, RobotEmulatorConfig
+from ..devices.emulators.ur import URArm, UREmulator
 from ..devices.gripper import GTO
 from ..errors import InvalidInputError, NoObjectFound
 from ..models import Model
@@ -215,6 +216,8 @@ class TwinWorld:
         speed_scale: speeds up the emulated arm (1 = real time).
         progress: stage printer (see :class:`ProgressPrinter`).
         num_threads: rendering and pose-estimation threads, 0 = all cores.
+        robot: the arm: ``"melfa"`` (the paper's, R3 over a pty) or ``"ur"`` (a UR5e-class arm,
+            its controller on TCP: RTDE, dashboard, URScript).
         config_overrides: fields of :class:`CellConfig` to set (e.g. ``estimate_options``, ``limits``).
     """
 
@@ -233,6 +236,7 @@ class TwinWorld:
         speed_scale: float = 10.0,
         progress: Optional[Callable[[str, str], None]] = None,
         num_threads: int = 0,
+        robot: str = "melfa",
         **config_overrides: Any,
     ) -> None:
         if not isinstance(model, Model):
@@ -240,7 +244,8 @@ class TwinWorld:
         if layout is None:
             layout = Layout.for_part(model)
         self.layout, self.gripper_geometry = _layout_and_gripper(layout, gripper, model)
-        self.arm = sim_arm(self.layout, self.gripper_geometry)
+        self.robot = _validate.choice(robot, "robot", ("melfa", "ur"))
+        self.arm = sim_arm(self.layout, self.gripper_geometry) if self.robot == "melfa" else URArm()
         self.model = model
         self.seed = _validate.count(seed, "seed")
         self.num_threads = thread_count(num_threads)
@@ -300,16 +305,29 @@ class TwinWorld:
         # held up the emulator's reply past the driver's timeout (thousands of grasps, under load).
         self._matcher = None
         _ = self.grasp_matcher
-        self.robot_emulator = RobotEmulator(
-            config=RobotEmulatorConfig(arm=self.arm, speed_scale=self.speed_scale)
-        ).start()
+        if self.robot == "ur":  # a UR controller on TCP, free ports on loopback
+            self.robot_emulator = UREmulator(
+                rtde_port=0,
+                dashboard_port=0,
+                secondary_port=0,
+                arm=self.arm,
+                start_pose=self.layout.T_base_flange,
+                speed_scale=self.speed_scale,
+            ).start()
+            where = "UR controller on " + ", ".join(
+                f"{k} {h}:{p}" for k, (h, p) in self.robot_emulator.addresses.items()
+            )
+        else:
+            self.robot_emulator = RobotEmulator(
+                config=RobotEmulatorConfig(arm=self.arm, speed_scale=self.speed_scale)
+            ).start()
+            where = f"robot on {self.robot_emulator.slave_path}"
         self.robot_emulator.on_motion = self._on_motion
         self.motor_emulator = DynamixelEmulator().start()
         self.gripper_emulator = _SimGripperEmulator(self).start()
         self.progress(
             "emulate",
-            f"robot on {self.robot_emulator.slave_path}, laser motor on {self.motor_emulator.slave_path}, "
-            f"gripper on {self.gripper_emulator.slave_path}",
+            f"{where}, laser motor on {self.motor_emulator.slave_path}, gripper on {self.gripper_emulator.slave_path}",
         )
 
     @property
@@ -331,7 +349,7 @@ class TwinWorld:
             frames=self.frames,
             gripper=self.gripper_geometry,
             limits=limits,
-            reachable=_Reach(self.arm),
+            reachable=_Reach(self.arm) if self.robot == "melfa" else self.arm.reaches,
             num_threads=self.num_threads,
             **overrides,
         )

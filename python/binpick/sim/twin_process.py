@@ -230,11 +230,7 @@ class CellTwin:
 # binpick cell file written by `binpick emulate cell`: the digital twin's ports, camera and poses.
 # Lengths in mm; poses as [X, Y, Z, A, B, C] with A, B, C in degrees (MELFA: R = Rz(C)·Ry(B)·Rx(A)).
 
-[robot]
-port = "{w.robot_emulator.slave_path}"   # MELFA controller emulator, R3 protocol
-baudrate = 9600
-override_percent = {min(50.0, lim.max_override_percent):g}
-linear_speed_mm_s = {min(250.0, lim.max_linear_speed_mm_s):g}
+{self._robot_table()}
 
 [motor]
 port = "{w.motor_emulator.slave_path}"   # laser motor emulator
@@ -276,6 +272,25 @@ max_override_percent = {lim.max_override_percent:g}
 max_linear_speed_mm_s = {lim.max_linear_speed_mm_s:g}
 max_push_mm = {lim.max_push_mm:g}   # sideways travel of a nudge below the approach height
 """
+
+    def _robot_table(self) -> str:
+        """cell.toml's [robot]: the MELFA emulator's pty, or the UR controller's address and ports."""
+        w, lim = self.world, self.world.limits
+        speed = f"linear_speed_mm_s = {min(250.0, lim.max_linear_speed_mm_s):g}"
+        if w.robot == "ur":
+            a = w.robot_emulator.addresses
+            return f"""[robot]
+driver = "ur"                 # Universal Robots controller emulator: RTDE, dashboard, URScript
+host = "{a["rtde"][0]}"
+rtde_port = {a["rtde"][1]}
+dashboard_port = {a["dashboard"][1]}
+secondary_port = {a["secondary"][1]}
+{speed}"""
+        return f"""[robot]
+port = "{w.robot_emulator.slave_path}"   # MELFA controller emulator, R3 protocol
+baudrate = 9600
+override_percent = {min(50.0, lim.max_override_percent):g}
+{speed}"""
 
     def _gripper_shape(self) -> str:
         """cell.toml's [gripper] shape keys: the twin's gripper (see :func:`binpick.sim.sim_gripper`)."""

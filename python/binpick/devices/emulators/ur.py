@@ -316,10 +316,14 @@ class UREmulator:
             f = (s - times[k - 1]) / max(times[k] - times[k - 1], 1e-12)
             return qs[k - 1] + f * (qs[k] - qs[k - 1])
 
-    @property
     def pose(self) -> np.ndarray:
         """T_base_flange now."""
         return self.arm.forward(self.joints())
+
+    @property
+    def alarm(self) -> int:
+        """The active alarm's number: the emulated controller raises none (a stopped program is not one)."""
+        return 0
 
     @property
     def runtime_state(self) -> int:
