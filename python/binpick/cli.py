@@ -323,14 +323,21 @@ def _dry_run(cell: Any, out: Path) -> int:
 # --------------------------------------------------------------------------- estimate
 
 
+def _scan_folder(path: str) -> bool:
+    """Whether ``path`` is a scan folder (a folder, and not a ROS 2 bag's)."""
+    from .ros import is_rosbag
+
+    return os.path.isdir(path) and not is_rosbag(path)
+
+
 def _read_scene(path: str, unit: Optional[str] = None) -> tuple[Any, Any]:
-    """The scene cloud (N, 3) mm of ``path`` — a scene file (PLY, PCD, NPY, XYZ) or a scan folder,
+    """The scene cloud (N, 3) mm of ``path`` — a scene file (PLY, PCD, NPY, XYZ, a ROS 2 bag) or a scan folder,
     reconstructed — and the sensor's position in its frame where the file or the scan says it."""
     from .clouds import read_scene
 
     if not os.path.exists(path):
         raise _Usage(f"scene: {path} does not exist")
-    if os.path.isdir(path):
+    if _scan_folder(path):
         if unit is not None:
             raise _Usage("--scene-unit: a scan folder is reconstructed in mm; leave the option out")
         scan = _load_scan_folder(path)  # the camera where its first frame was grabbed: the viewpoint
@@ -376,7 +383,7 @@ def _estimate(args: argparse.Namespace) -> int:
     bin_box = None if args.bin is None else (tuple(args.bin[:3]), tuple(args.bin[3:]))
     viewpoint = _viewpoint_option(args, stated)
     # A scan folder is a swept laser scan: judged along up, as the cell asks (binpick.cell).
-    swept = os.path.isdir(args.scene) and args.viewpoint is None and not args.camera_frame
+    swept = _scan_folder(args.scene) and args.viewpoint is None and not args.camera_frame
     found = estimate_poses(
         scene,
         model,

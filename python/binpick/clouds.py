@@ -112,7 +112,7 @@ class SceneCloud:
 
 def read_scene(path: str | os.PathLike[str], *, unit: Optional[str] = None) -> SceneCloud:
     """Reads a scene cloud (PLY, PCD, NPY or XYZ; the format from the file's first bytes, else its
-    extension) into millimetres.
+    extension; or a ROS 2 bag's first PointCloud2 message, :mod:`binpick.ros`) into millimetres.
 
     ``unit`` (mm, cm, m, in) is the unit of the file's coordinates; None takes the unit the file
     declares, and mm when it declares none. Raises MeshFileNotFoundError for a missing file,
@@ -120,6 +120,10 @@ def read_scene(path: str | os.PathLike[str], *, unit: Optional[str] = None) -> S
     """
     name = os.fspath(path)
     scale = None if unit is None else unit_scale(unit)
+    from .ros import is_rosbag, read_rosbag  # a leaf above this module: it builds SceneClouds
+
+    if is_rosbag(name):  # its first PointCloud2 message, in metres unless ``unit`` says otherwise
+        return read_rosbag(name, unit="m" if unit is None else unit, max_messages=1)[0].cloud
     kind = _format_of(name)
     pts, declared, viewpoint = _READERS[kind](name)
     if scale is None:
