@@ -3,7 +3,7 @@ MODULE BinpickPick
     !
     ! Scans the bin, asks binpick for the next pick, moves through the four waypoints it sends,
     ! grips, drops the part and reports the result, until the bin is empty. Protocol version 1,
-    ! see docs/protocol.md: one ASCII line per message, LF-terminated; a reply is "(numbers)" and,
+    ! see docs/protocol.md: one ASCII line per message (a request ends with LF, a reply with CR LF); a reply is "(numbers)" and,
     ! for an error only, " text" after it.
     ! Brand `abb` ([server] brand = "abb"): a pose is x, y, z in mm and the quaternion q1..q4 (q1 the
     ! scalar, as RAPID's orient), the FLANGE (tool0) in wobj0 (the world frame: it must be the frame
@@ -26,8 +26,8 @@ MODULE BinpickPick
     VAR num pos := 1;        ! next character of chunk to parse
     VAR string text := "";   ! an error reply's text (its first 60 characters)
 
-    ! Sends one request line (LF-terminated) and reads its reply of n numbers into reply{}.
-    ! A reply can be ~370 characters, so it is parsed field by field from 80-character receives.
+    ! Sends one request line (ended with LF) and reads its reply of n numbers into reply{}.
+    ! A reply can be about 310 characters, so it is parsed field by field from 80-character receives.
     ! Returns the reply code. A reply shorter than n (e.g. "(21) busy") leaves the rest at 0.
     FUNC num Ask(string request, num n, num timeout)
         VAR string tok := "";
@@ -61,7 +61,7 @@ MODULE BinpickPick
             ENDIF
             pos := d + 1;
         ENDWHILE
-        ! The rest of the line, up to its LF: empty after a success, " text" after an error.
+        ! The rest of the line, up to its LF (after the CR): empty after a success, " text" after an error.
         WHILE NOT lineEnd DO
             IF pos > StrLen(chunk) Refill 5;
             d := StrFind(chunk, pos, "\0A");

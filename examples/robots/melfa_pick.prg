@@ -1,7 +1,7 @@
 1 ' melfa_pick.prg -- bin picking with binpick's vision server, Mitsubishi MELFA (MELFA-BASIC V).
 2 ' Scans the bin, asks binpick for the next pick, moves through the four waypoints it sends,
 3 ' grips, drops the part and reports the result, until the bin is empty.
-4 ' Protocol version 1, see docs/protocol.md: one ASCII line per message, ending with LF;
+4 ' Protocol version 1, see docs/protocol.md: one ASCII line per message (CR ends a request);
 5 ' a reply is "(numbers)" and, for an error only, " text" after it.
 6 ' Brand melfa ([server] brand = "melfa"): a pose is X, Y, Z in mm and A, B, C in degrees,
 7 ' R = Rz(C)*Ry(B)*Rx(A), as a MELFA POSE without its flags: the FLANGE (Tool P_NTool)
@@ -10,9 +10,9 @@
 10 '   NETIP = the robot's own address; COMDEV element 2 (COM2:) = OPT11;
 11 '   NETMODE(1) = 0 (client); NETHSTIP(1) = "127.0.0.1", the PC running binpick serve;
 12 '   NETPORT(2) = 50100 (the port of OPT11); CPRCE11 = 2 (data link: Open/Print/Input);
-13 '   end code CR+LF (CTERME11 = 1): MELFA ends a Print line with CR, binpick needs the LF.
-14 ' binpick ends its replies with LF alone: check that Input # ends a line on LF on your
-15 ' controller, and how long a string (CRP$) it holds: a NEXT reply is ~300 characters.
+13 '   MELFA ends a Print line with CR, which binpick takes as the end of a request.
+14 ' binpick ends its replies with CR LF: Input # ends at the CR. Check how long a string
+15 ' (CRP$) your controller holds: a NEXT reply is about 250 characters.
 16 ' Written from the MELFA-BASIC V manual; not run on a controller. Also check that your
 17 ' version allows assigning a position's components (PW.X = ...) and Print of several items.
 18 Dim MV(30)
