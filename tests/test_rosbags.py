@@ -62,12 +62,12 @@ def test_a_bag_of_pointclouds_reads_back_in_millimetres(tmp_path):
     _bag(tmp_path / "bag", {"/cam/points": [_cloud_msg(a, width=12, t=1), _cloud_msg(b, dtype=">f8", t=2)]})
     scans = read_rosbag(tmp_path / "bag")
     assert [s.topic for s in scans] == ["/cam/points"] * 2 and [s.stamp_ns for s in scans] == [1e9 + 5, 2e9 + 5]
-    assert scans[0].cloud.dropped == 1 and len(scans[0].cloud) == 119 and scans[0].frame_id == "camera_optical"
-    assert np.allclose(scans[0].cloud.points, np.delete(a, 7, axis=0).astype("f4") * 1000.0)
-    assert np.allclose(scans[1].cloud.points, b * 1000.0, atol=1e-9)  # big-endian float64
+    assert scans[0].dropped == 1 and len(scans[0]) == 119 and scans[0].frame_id == "camera_optical"
+    assert np.allclose(scans[0].points, np.delete(a, 7, axis=0).astype("f4") * 1000.0)
+    assert np.allclose(scans[1].points, b * 1000.0, atol=1e-9)  # big-endian float64
     first = binpick.read_scene(tmp_path / "bag")  # a scene: the first message
-    assert first.format == "rosbag2" and np.allclose(first.points, scans[0].cloud.points)
-    assert np.allclose(read_rosbag(tmp_path / "bag", unit="mm")[1].cloud.points, b, atol=1e-12)
+    assert first.format == "rosbag2" and np.allclose(first.points, scans[0].points)
+    assert np.allclose(read_rosbag(tmp_path / "bag", unit="mm")[1].points, b, atol=1e-12)
 
 
 def test_the_topic_is_chosen_and_a_wrong_one_is_named(tmp_path):
@@ -75,7 +75,7 @@ def test_the_topic_is_chosen_and_a_wrong_one_is_named(tmp_path):
     _bag(tmp_path / "bag", {"/left": [_cloud_msg(pts)], "/right": [_cloud_msg(2 * pts)]})
     with pytest.raises(InvalidInputError, match="/left"):
         read_rosbag(tmp_path / "bag")
-    assert np.allclose(read_rosbag(tmp_path / "bag", topic="/right")[0].cloud.points, 2000.0)
+    assert np.allclose(read_rosbag(tmp_path / "bag", topic="/right")[0].points, 2000.0)
     with pytest.raises(InvalidInputError, match="not a PointCloud2 topic"):
         read_rosbag(tmp_path / "bag", topic="/middle")
 

@@ -50,6 +50,7 @@ from .errors import (
     MeshFileNotFoundError,
     UnknownUnitError,
 )
+from .ros import is_rosbag, read_rosbag
 
 __all__ = ["SceneCloud", "SCENE_FORMATS", "read_scene", "write_scene", "write_pcd", "lzf_decompress"]
 
@@ -120,10 +121,9 @@ def read_scene(path: str | os.PathLike[str], *, unit: Optional[str] = None) -> S
     """
     name = os.fspath(path)
     scale = None if unit is None else unit_scale(unit)
-    from .ros import is_rosbag, read_rosbag  # a leaf above this module: it builds SceneClouds
-
     if is_rosbag(name):  # its first PointCloud2 message, in metres unless ``unit`` says otherwise
-        return read_rosbag(name, unit="m" if unit is None else unit, max_messages=1)[0].cloud
+        first = read_rosbag(name, unit="m" if unit is None else unit, max_messages=1)[0]
+        return SceneCloud(points=first.points, format="rosbag2", file_unit=unit or "m", dropped=first.dropped)
     kind = _format_of(name)
     pts, declared, viewpoint = _READERS[kind](name)
     if scale is None:

@@ -1,4 +1,5 @@
-"""Recorded ROS 2 bags as scenes: ``sensor_msgs/msg/PointCloud2`` messages read from rosbag2 files
+"""Recorded ROS 2 bags as scenes (:func:`binpick.read_scene` takes a bag; this leaf reads it):
+``sensor_msgs/msg/PointCloud2`` messages read from rosbag2 files
 (SQLite ``.db3`` or MCAP) with the pure-Python ``rosbags`` library — no ROS installation needed
 (``pip install "binpick[ros]"``).
 
@@ -19,7 +20,6 @@ from typing import Any, Optional
 import numpy as np
 
 from ._validate import unit_scale
-from .clouds import SceneCloud
 from .errors import InvalidInputError, MeshFileError, MeshFileNotFoundError
 
 __all__ = ["RosScan", "is_rosbag", "read_rosbag", "pointcloud2_points", "POINTCLOUD2"]
@@ -33,12 +33,17 @@ MAX_POINTS = 50_000_000
 
 @dataclass(frozen=True, eq=False)
 class RosScan:
-    """One PointCloud2 message: the cloud (mm), its topic, its header stamp (ns) and frame."""
+    """One PointCloud2 message: its points (N, 3) float64 in mm, the records dropped for a
+    non-finite coordinate, its topic, its header stamp (ns) and frame."""
 
-    cloud: SceneCloud
+    points: np.ndarray
+    dropped: int
     topic: str
     stamp_ns: int
     frame_id: str
+
+    def __len__(self) -> int:
+        return len(self.points)
 
 
 def is_rosbag(path: Any) -> bool:
@@ -119,8 +124,7 @@ def read_rosbag(
                 where = f"{p} {topic} message {len(out)}"
                 pts, dropped = pointcloud2_points(msg, where)
                 stamp = int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
-                cloud = SceneCloud(points=pts * scale, format="rosbag2", file_unit=unit, dropped=dropped)
-                out.append(RosScan(cloud=cloud, topic=topic, stamp_ns=stamp, frame_id=str(msg.header.frame_id)))
+                out.append(RosScan(pts * scale, dropped, topic, stamp, str(msg.header.frame_id)))
                 if max_messages is not None and len(out) >= max_messages:
                     break
     except (MeshFileError, InvalidInputError):
