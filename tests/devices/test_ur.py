@@ -44,26 +44,35 @@ def controller():
         assert proc.wait(timeout=10) == 0
 
 
-def test_ur_rtde_reads_the_state_at_500_hz_for_10_s_without_a_gap_over_10_ms(controller):
+def test_ur_rtde_reads_the_state_at_500_hz_for_10_s_without_a_gap_over_10_ms(controller, tmp_path):
     rtde_receive = pytest.importorskip("rtde_receive")
     r = rtde_receive.RTDEReceiveInterface(HOST)  # frequency -1: 500 Hz for an e-Series controller
     try:
         assert r.isConnected()
-        stamps = []
+        # ur-rtde's recorder writes the state as its receive thread takes it in: the emulator's clock as received.
+        r.startFileRecording(str(tmp_path / "rtde.csv"), ["timestamp", "actual_q"])
+        polled = []
         t0 = time.monotonic()
-        while time.monotonic() - t0 < 10.0:
+        while time.monotonic() - t0 < 10.0:  # and the state read as a 500 Hz control loop reads it
             start = r.initPeriod()
-            stamps.append(r.getTimestamp())
+            polled.append(r.getTimestamp())
             r.waitPeriod(start)
-        seen = np.unique(stamps)
-        print(f"\n{len(stamps)} reads, {len(seen)} distinct packages, largest gap {np.diff(seen).max() * 1e3:.1f} ms")
-        assert seen[-1] - seen[0] > 9.9 and len(seen) > 4000
-        assert np.diff(seen).max() <= 0.010 + 1e-9
-        assert np.allclose(np.round(seen / 0.002) * 0.002, seen)  # whole control cycles
+        r.stopFileRecording()
         pose = r.getActualTCPPose()
         assert len(pose) == 6 and len(r.getActualQ()) == 6
     finally:
         r.disconnect()
+    rows = np.loadtxt(tmp_path / "rtde.csv", delimiter=",", skiprows=1, ndmin=2)
+    stamps = rows[:, 0]
+    gaps = np.diff(stamps)
+    print(
+        f"\n{len(stamps)} states recorded over {stamps[-1] - stamps[0]:.2f} s, "
+        f"largest gap {gaps.max() * 1e3:.1f} ms; {len(polled)} reads by the 500 Hz loop"
+    )
+    assert stamps[-1] - stamps[0] > 9.9 and len(np.unique(stamps)) >= 0.95 * (stamps[-1] - stamps[0]) / 0.002
+    assert gaps.max() <= 0.010 + 1e-9 and gaps.min() >= 0  # the recorder may write a state twice
+    assert np.allclose(np.round(stamps / 0.002) * 0.002, stamps)  # whole 2 ms control cycles
+    assert len(polled) > 4000
 
 
 def test_ur_rtde_dashboard_client_gets_the_answers_of_a_real_controller(controller):

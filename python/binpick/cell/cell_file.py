@@ -90,7 +90,9 @@ body_length_mm = 60.0        # … this long
 preshape_clearance_mm = 5.0  # a gripper set to a width opens to the part's width plus this on each side (false: fully)
 
 [camera]                     # EDIT: the whole table
-source = "opencv"            # or "twin": the camera of `binpick emulate cell` (socket = "DIR/camera.sock"),
+source = "opencv"            # or "gige" (GigE Vision through Aravis: device = "Vendor-Model-Serial" or an IP,
+                             # exposure_us, trigger = "software" or "free"),
+                             # "twin": the camera of `binpick emulate cell` (socket = "DIR/camera.sock"),
 device = 0                   # "replay": a recorded scan folder (folder = "scan"), "simulated": a rendered pile;
                              # device: an index, a video device or file path (relative to this file), a URL
 
@@ -504,6 +506,13 @@ def _camera(f: CellFile, model: Model, num_threads: int) -> Callable[[], FrameSo
     if source == "replay":
         folder = os.path.join(here, f.text("camera", "folder"))
         return lambda: FolderReplay(folder)
+    if source == "gige":
+        from .gige import GigEVisionCamera  # Aravis loads only when a cell file asks for it
+
+        device = f.text("camera", "device") if f.get("camera", "device", None) is not None else None
+        exposure = f.number("camera", "exposure_us") if f.get("camera", "exposure_us", None) is not None else None
+        trigger = f.text("camera", "trigger", "software")
+        return lambda: GigEVisionCamera(device, exposure_us=exposure, trigger=trigger)
     raise InvalidInputError(
-        f"{f.path}: [camera] source = {source!r:.40}; use 'opencv', 'twin', 'replay' or 'simulated'"
+        f"{f.path}: [camera] source = {source!r:.40}; use 'opencv', 'gige', 'twin', 'replay' or 'simulated'"
     )
