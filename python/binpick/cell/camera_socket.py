@@ -8,7 +8,8 @@ Request, 8 bytes::
 
     magic   4s  b"BPCQ"
     version u8  1
-    op      u8  1 = FRAME: grab one frame as the camera sees the cell now
+    op      u8  1 = FRAME: grab one frame as the camera sees the cell now;
+                2 = DEPTH: one shot of the fixed 3-D camera (``emulate cell --camera fixed``)
     zero    u16 0
 
 Reply header, :data:`HEADER_SIZE` (= 168) bytes, then ``length`` payload bytes::
@@ -16,14 +17,15 @@ Reply header, :data:`HEADER_SIZE` (= 168) bytes, then ``length`` payload bytes::
     magic    4s   b"BPCR"
     version  u8   1
     status   u8   0 = a frame follows, 1 = an error: the payload is its UTF-8 message
-    dtype    u8   1 = uint8 (the only pixel type)
-    channels u8   3 (BGR)
+    dtype    u8   1 = uint8 (a FRAME's BGR pixels), 2 = float32 (a DEPTH shot's organised X, Y, Z
+                  in the camera's frame, mm, NaN at holes)
+    channels u8   3
     height   u32  rows, px
     width    u32  columns, px
     frame    u64  the frame counter (the sensor noise of frame k is seeded with seed + k)
     angle    f64  the laser motor's actual angle when the frame was exposed, rad
     pose     16 f64  the flange's actual pose T_base_flange (row-major 4×4, mm)
-    length   u64  payload bytes: height·width·channels for a frame, the message's for an error
+    length   u64  payload bytes: height·width·channels·(1 or 4) for a frame or a shot, the message's for an error
 
 Both sides check everything: the server answers a request it cannot read with an error reply
 and closes; the client refuses a header whose magic, version, status, type, shape or length is
@@ -45,6 +47,7 @@ from ..errors import DeviceTimeout, PortClosedError, ProtocolError, TruncatedRep
 __all__ = [
     "PROTOCOL_VERSION",
     "OP_FRAME",
+    "OP_DEPTH",
     "HEADER_SIZE",
     "REQUEST_SIZE",
     "MAX_ERROR_BYTES",
@@ -59,9 +62,12 @@ __all__ = [
 
 PROTOCOL_VERSION = 1
 OP_FRAME = 1
+OP_DEPTH = 2
 STATUS_FRAME = 0
 STATUS_ERROR = 1
 DTYPE_UINT8 = 1
+DTYPE_FLOAT32 = 2
+_ITEM_BYTES = {DTYPE_UINT8: 1, DTYPE_FLOAT32: 4}
 
 _REQUEST = struct.Struct("<4sBBH")
 _HEADER = struct.Struct("<4sBBBBIIQd16dQ")
@@ -76,8 +82,9 @@ MAX_ERROR_BYTES = 1 << 16
 
 @dataclass(frozen=True, eq=False)
 class Frame:
-    """One frame as the twin sent it: the image (uint8 BGR (H, W, 3)), its counter, and the
-    laser angle (rad) and flange pose ``T_base_flange`` (mm) at exposure."""
+    """One frame as the twin sent it: the image (uint8 BGR (H, W, 3); a depth shot's float32
+    X, Y, Z (H, W, 3), mm, camera frame), its counter, and the laser angle (rad) and flange pose
+    ``T_base_flange`` (mm) at exposure."""
 
     image: np.ndarray
     counter: int
@@ -99,18 +106,20 @@ def decode_request(data: bytes) -> int:
         raise ProtocolError(f"camera request: magic is {magic!r}, not {REQUEST_MAGIC!r}; not a binpick camera client")
     if version != PROTOCOL_VERSION:
         raise ProtocolError(f"camera request: protocol version {version}; this twin speaks version {PROTOCOL_VERSION}")
-    if op != OP_FRAME or zero != 0:
-        raise ProtocolError(f"camera request: unknown operation {op} (only {OP_FRAME} = FRAME exists)")
+    if op not in (OP_FRAME, OP_DEPTH) or zero != 0:
+        raise ProtocolError(f"camera request: unknown operation {op} ({OP_FRAME} = FRAME, {OP_DEPTH} = DEPTH)")
     return op
 
 
 def encode_frame(image: np.ndarray, counter: int, angle: float, T_base_flange: np.ndarray) -> bytes:
-    """The reply carrying ``image`` (uint8 (H, W, 3)), header then pixels."""
-    img = np.ascontiguousarray(image, dtype=np.uint8)
+    """The reply carrying ``image`` (uint8 (H, W, 3), or a depth shot's float32 (H, W, 3)), header then data."""
+    depth = np.asarray(image).dtype.kind == "f"
+    img = np.ascontiguousarray(image, dtype="<f4" if depth else np.uint8)
     h, w, c = img.shape
     pose = np.asarray(T_base_flange, dtype=np.float64).reshape(16)
+    dtype = DTYPE_FLOAT32 if depth else DTYPE_UINT8
     head = _HEADER.pack(
-        REPLY_MAGIC, PROTOCOL_VERSION, STATUS_FRAME, DTYPE_UINT8, c, h, w, int(counter), float(angle), *pose, img.nbytes
+        REPLY_MAGIC, PROTOCOL_VERSION, STATUS_FRAME, dtype, c, h, w, int(counter), float(angle), *pose, img.nbytes
     )
     return head + img.tobytes()
 
@@ -165,18 +174,21 @@ def read_reply(sock: socket.socket, *, where: str = "camera") -> Frame:
         raise ProtocolError(f"{where}: the twin refused: {text}")
     if status != STATUS_FRAME:
         raise ProtocolError(f"{where}: unknown reply status {status}")
-    if dtype != DTYPE_UINT8 or channels != 3:
-        raise ProtocolError(f"{where}: pixel type {dtype} with {channels} channels; expected uint8 BGR (1, 3)")
+    if dtype not in _ITEM_BYTES or channels != 3:
+        raise ProtocolError(
+            f"{where}: pixel type {dtype} with {channels} channels; expected uint8 BGR or float32 XYZ (1 or 2, 3)"
+        )
     if not (2 <= width and 2 <= height and width * height <= MAX_IMAGE_PIXELS):
         raise ProtocolError(f"{where}: the header declares a {width}×{height} frame, outside what binpick reads")
-    if length != width * height * channels:
+    expected = width * height * channels * _ITEM_BYTES[dtype]
+    if length != expected:
         raise ProtocolError(
             f"{where}: the header declares {length} payload bytes for a {width}×{height}×{channels} frame "
-            f"({width * height * channels} expected)"
+            f"({expected} expected)"
         )
     T = np.array(pose, dtype=np.float64).reshape(4, 4)
     if not (np.isfinite(T).all() and np.isfinite(angle)):
         raise ProtocolError(f"{where}: the header's pose or laser angle is not finite")
     data = recv_exact(sock, length, f"{where} frame {counter}")
-    image = np.frombuffer(data, dtype=np.uint8).reshape(height, width, channels)
+    image = np.frombuffer(data, dtype=np.uint8 if dtype == DTYPE_UINT8 else "<f4").reshape(height, width, channels)
     return Frame(image=image, counter=int(counter), angle=float(angle), T_base_flange=T)

@@ -506,13 +506,26 @@ def _camera(f: CellFile, model: Model, num_threads: int) -> Callable[[], FrameSo
     if source == "replay":
         folder = os.path.join(here, f.text("camera", "folder"))
         return lambda: FolderReplay(folder)
+    if source in ("twin_depth", "shots"):
+        from .shots import EyeToHand, ShotReplay, TwinDepthCamera
+
+        pose_file = os.path.join(here, f.text("camera", "eye_to_hand", "eye_to_hand.toml"))
+        if source == "twin_depth":
+            path, timeout = (
+                os.path.join(here, f.text("camera", "socket", "camera.sock")),
+                f.number("camera", "timeout_s", 60.0),
+            )
+            return lambda: TwinDepthCamera(path, EyeToHand.load(pose_file), timeout_s=timeout)
+        folder = os.path.join(here, f.text("camera", "folder"))
+        return lambda: ShotReplay(folder, EyeToHand.load(pose_file))
     if source == "gige":
         from .gige import GigEVisionCamera  # Aravis loads only when a cell file asks for it
 
         device = f.text("camera", "device") if f.get("camera", "device", None) is not None else None
-        exposure = f.number("camera", "exposure_us") if f.get("camera", "exposure_us", None) is not None else None
+        exposure = None if f.get("camera", "exposure_us", None) is None else f.number("camera", "exposure_us")
         trigger = f.text("camera", "trigger", "software")
         return lambda: GigEVisionCamera(device, exposure_us=exposure, trigger=trigger)
     raise InvalidInputError(
-        f"{f.path}: [camera] source = {source!r:.40}; use 'opencv', 'gige', 'twin', 'replay' or 'simulated'"
+        f"{f.path}: [camera] source = {source!r:.40}; use 'opencv', 'gige', 'twin', 'twin_depth', 'shots', "
+        "'replay' or 'simulated'"
     )

@@ -61,6 +61,7 @@ from .records import (
     located_line,
     pose_trust,
 )
+from .shots import DepthSource, depth_scan
 from .symmetry import continuous_near_axis
 from .views import deciding_views
 
@@ -162,8 +163,8 @@ class Cell:
     ) -> None:
         if not isinstance(config, CellConfig):
             raise InvalidInputError(f"config: expected a CellConfig, got {type(config).__name__}")
-        if not isinstance(camera, FrameSource):
-            raise InvalidInputError(f"camera: expected a binpick.cell.FrameSource, got {type(camera).__name__}")
+        if not isinstance(camera, (FrameSource, DepthSource)):
+            raise InvalidInputError(f"camera: expected a FrameSource or a DepthSource, got {type(camera).__name__}")
         if progress is not None and not callable(progress):
             raise InvalidTypeError(f"progress: expected a function (stage, message), got {type(progress).__name__}")
         if robot.limits is not None and robot.limits != config.limits:
@@ -243,6 +244,8 @@ class Cell:
         """Scans the bin from every scan pose (or from the flange poses ``poses``, each swept
         across the bin: a second look); returns the cloud in the base frame."""
         cfg = self.config
+        if isinstance(self.camera, DepthSource):  # a fixed 3-D camera: one shot, the arm parked
+            return depth_scan(self, poses)
         if poses is None:
             views = [(T, cfg.angles_for(i)) for i, T in enumerate(cfg.scan_poses)]
         else:
@@ -336,8 +339,11 @@ class Cell:
         # (along_rays=False): its lines, millimetres apart, alias a grid of the camera's rays.
         cameras = (np.asarray(scan.T_base_flanges) @ cfg.calibration.T_flange_camera)[:, :3, 3]
         camera = cameras[0] if np.ptp(cameras, axis=0).max() < 1.0 else None
+        fixed = getattr(scan.cloud, "viewpoint", None)  # a fixed camera's shot: judged along its rays
         defaults = dict(num_threads=cfg.num_threads, search_instances=cfg.max_candidates, viewpoint=camera)
-        options = {**defaults, "along_rays": False, **cfg.estimate_options}
+        if fixed is not None:
+            defaults["viewpoint"] = fixed
+        options = {**defaults, "along_rays": fixed is not None, **cfg.estimate_options}
         wanted = count(max_instances, "max_instances") or cfg.max_candidates
         c0 = time.process_time()
         results = estimate_poses(scan.points[keep], cfg.model, bin=cfg.bin_bounds, max_instances=wanted, **options)

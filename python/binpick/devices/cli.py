@@ -71,6 +71,12 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--seed", type=int, default=0, help="cell: seed of the pile and the sensor noise (default 0)")
     c.add_argument("--frames", type=int, default=90, help="cell: laser frames per scan in cell.toml (default 90)")
     c.add_argument(
+        "--camera",
+        choices=("arm", "fixed"),
+        default="arm",
+        help="cell: arm — the laser camera on the arm (the paper's); fixed — a 3-D camera above the bin (eye-to-hand)",
+    )
+    c.add_argument(
         "--robot",
         choices=("melfa", "ur"),
         default="melfa",
@@ -138,6 +144,7 @@ def _cell(args: argparse.Namespace) -> int:
             frames=args.frames,
             speed_scale=args.speed_scale,
             robot=args.robot,
+            camera=args.camera,
         )
     except KeyboardInterrupt:
         return 0

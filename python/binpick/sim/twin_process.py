@@ -36,14 +36,17 @@ import numpy as np
 from .._validate import write_atomic
 from ..cell import camera_socket as wire
 from ..cell.cell_file import GRIPPER_SHAPE_KEYS
+from ..cell.shots import EyeToHand
 from ..devices.xyzabc import xyzabc_from_transform
 from ..errors import BinpickError
 from ..models import Model
 from ..transforms import inverse
 from .camera import SimCamera
+from .render import World
+from .sensors import DepthCamera, render_depth
 from .twin import TwinWorld
 
-__all__ = ["CellTwin", "WORLD_VERSION"]
+__all__ = ["CellTwin", "WORLD_VERSION", "fixed_camera"]
 
 #: The version of world.json's layout.
 WORLD_VERSION = 1
@@ -62,12 +65,24 @@ def _pose_deg(T: np.ndarray) -> list[float]:
     return [*v[:3], *np.degrees(v[3:])]
 
 
+def fixed_camera(bin_bounds: Any) -> DepthCamera:
+    """The twin's fixed 3-D camera: an industrial structured-light camera on a stand beyond the
+    bin (``bin_bounds``: its (min, max) corners, mm), 900 mm from the floor's centre, looking down
+    at it 25° from vertical."""
+    lo, hi = np.asarray(bin_bounds, dtype=np.float64)
+    centre = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]]
+    return DepthCamera.structured_light().looking_at(centre, distance=900.0, tilt_deg=25.0, azimuth_deg=0.0)
+
+
 class _CameraServer:
     """Serves the twin's camera on a Unix-domain socket, one thread per connection; each frame
     is rendered under the world's lock from where the arm and the laser really are."""
 
-    def __init__(self, world: TwinWorld, path: Path, progress: Callable[[str, str], None]) -> None:
+    def __init__(
+        self, world: TwinWorld, path: Path, progress: Callable[[str, str], None], depth: Optional[DepthCamera] = None
+    ) -> None:
         self.world = world
+        self.depth = depth
         self.path = path
         self.progress = progress
         self.camera = SimCamera(world, seed=world.seed)
@@ -106,11 +121,11 @@ class _CameraServer:
                 except BinpickError:
                     return  # the client hung up (or sent a part of a request and hung up)
                 try:
-                    wire.decode_request(bytes(request))
+                    op = wire.decode_request(bytes(request))
                 except BinpickError as exc:
                     conn.sendall(wire.encode_error(str(exc)))
                     return  # the stream cannot be trusted past a bad request
-                conn.sendall(self._frame_reply())
+                conn.sendall(self._depth_reply() if op == wire.OP_DEPTH else self._frame_reply())
         except OSError:
             pass
         finally:
@@ -136,6 +151,28 @@ class _CameraServer:
                 image = self.camera.grab()
                 counter, self.frames = self.frames, self.frames + 1
             return wire.encode_frame(image, counter, angle, self._view_pose)
+        except BinpickError as exc:
+            return wire.encode_error(f"{type(exc).__name__}: {exc}")
+
+    def _depth_reply(self) -> bytes:
+        """One shot of the fixed depth camera: the pile as it lies now, its noise seeded by the shot's number."""
+        if self.depth is None:
+            return wire.encode_error(
+                "this twin's camera rides on the arm; start it with --camera fixed for depth shots"
+            )
+        try:
+            with self.world.lock:
+                self.world.settle_pending()
+                world = World.of_pile(self.world.pile)
+                pose = self.world.robot_emulator.pose()
+                counter, self.frames = self.frames, self.frames + 1
+            t0 = time.perf_counter()
+            shot = render_depth(world, self.depth, seed=self.world.seed + counter, num_threads=self.world.num_threads)
+            self.progress(
+                "camera",
+                f"depth shot {counter}: {int(shot.valid.sum())} points in {(time.perf_counter() - t0) * 1e3:.0f} ms",
+            )
+            return wire.encode_frame(shot.points.astype(np.float32), counter, 0.0, pose)
         except BinpickError as exc:
             return wire.encode_error(f"{type(exc).__name__}: {exc}")
 
@@ -172,6 +209,7 @@ class CellTwin:
         part_ref: str,
         unit: str = "mm",
         progress: Callable[[str, str], None],
+        camera: str = "arm",
         **world_options: Any,
     ) -> None:
         self.out = Path(out)
@@ -181,6 +219,7 @@ class CellTwin:
             if stale.exists() or stale.is_symlink():
                 stale.unlink()
         self.world = TwinWorld(model, progress=progress, **world_options)
+        self.fixed = fixed_camera(self.world.layout.bin.bounds) if camera == "fixed" else None
         self.camera: Optional[_CameraServer] = None
         self.collisions: list[dict] = []
         self._contact: set[str] = set()
@@ -206,9 +245,11 @@ class CellTwin:
         ``until [ -S DIR/camera.sock ]``)."""
         self.world.start()
         write_atomic(self.out / "true_calibration.toml", self.world.config.calibration.to_toml())
+        if self.fixed is not None:
+            EyeToHand(self.fixed.T_base_camera).save(self.out / "true_eye_to_hand.toml")
         write_atomic(self.cell_file, self.cell_toml())
         self.tick()
-        self.camera = _CameraServer(self.world, self.socket_path, self.progress)
+        self.camera = _CameraServer(self.world, self.socket_path, self.progress, self.fixed)
         return self
 
     def close(self) -> None:
@@ -245,9 +286,7 @@ slave = 9
 baudrate = 115200
 {self._gripper_shape()}
 
-[camera]
-source = "twin"
-socket = "camera.sock"        # relative to this file
+{self._camera_table()}
 
 [part]
 model = {part}
@@ -257,7 +296,7 @@ unit = "{self.unit}"
 calibration = "calibration.toml"   # the one you solve (binpick calibrate); the twin's own is true_calibration.toml
 bin_min_mm = {_toml_list(lo)}
 bin_max_mm = {_toml_list(hi)}
-scan_pose = {_toml_list(_pose_deg(w.layout.T_base_flange))}
+scan_pose = {_toml_list(_pose_deg(w.layout.T_base_flange if self.fixed is None else w.drop_pose))}
 drop_pose = {_toml_list(_pose_deg(w.drop_pose))}
 frames = {int(w.frames)}
 tool = {_toml_list(_pose_deg(w.gripper_geometry.T_flange_gripper))}
@@ -272,6 +311,17 @@ max_override_percent = {lim.max_override_percent:g}
 max_linear_speed_mm_s = {lim.max_linear_speed_mm_s:g}
 max_push_mm = {lim.max_push_mm:g}   # sideways travel of a nudge below the approach height
 """
+
+    def _camera_table(self) -> str:
+        """cell.toml's [camera]: the camera on the arm, or the fixed depth camera and its eye-to-hand file."""
+        if self.fixed is None:
+            return """[camera]
+source = "twin"
+socket = "camera.sock"        # relative to this file"""
+        return """[camera]
+source = "twin_depth"         # the fixed 3-D camera above the bin (eye-to-hand); scan_pose parks the arm
+socket = "camera.sock"        # relative to this file
+eye_to_hand = "eye_to_hand.toml"   # the one you solve; the twin's own is true_eye_to_hand.toml"""
 
     def _robot_table(self) -> str:
         """cell.toml's [robot]: the MELFA emulator's pty, or the UR controller's address and ports."""
