@@ -119,3 +119,15 @@ def test_a_pose_from_a_bag_of_a_simulated_pile(tmp_path):
     res = binpick.estimate_pose(scene.points, binpick.parts.tee(), bin=(lo, hi))
     errors = [binpick.parts.tee().pose_error(res.T_scene_model, T) for T in scan.pile.poses]
     assert any(deg < 5.0 and mm < 3.0 for deg, mm in errors)  # pick-grade against an instance
+
+
+def test_a_bag_replays_as_a_fixed_cameras_shots(tmp_path):
+    from binpick.cell.shots import BagShots, EyeToHand
+    from binpick.errors import DeviceError
+
+    a, b = np.ones((20, 3)), 2 * np.ones((30, 3))
+    _bag(tmp_path / "bag", {"/camera/depth/points": [_cloud_msg(a), _cloud_msg(b)]})
+    shots = BagShots(tmp_path / "bag", EyeToHand(np.eye(4)))
+    assert np.allclose(shots.shot(), 1000.0) and len(shots.shot()) == 30
+    with pytest.raises(DeviceError, match="all 2 messages"):
+        shots.shot()

@@ -487,8 +487,12 @@ def _calibrate_capture(cell_path: str, args: argparse.Namespace) -> int:
 
 
 def _calibrate_solve(folder: str, args: argparse.Namespace) -> int:
+    from .calibration import eye_to_hand
     from .calibration.solve import solve
 
+    if eye_to_hand.is_capture(folder):  # a fixed camera's: its pose in the base frame
+        print(eye_to_hand.solve_to_file(folder, args.out or "eye_to_hand.toml"))
+        return 0
     out = Path(args.out or "calibration.toml")
     solution = solve(folder)
     solution.save(out)
@@ -502,12 +506,19 @@ def _calibrate_compare(solved: str, truth: str) -> int:
     from .calibration import CellCalibration
     from .calibration.compare import captured_angles, compare_calibrations
 
-    captured = captured_angles(solved)
-    result = compare_calibrations(CellCalibration.load(solved), CellCalibration.load(truth), captured=captured)
-    print(result.table())
-    for failure in result.failures:
+    if "[eye_to_hand]" in Path(solved).read_text(errors="replace"):  # a fixed camera's pose
+        from .calibration.eye_to_hand import compare_files
+
+        table, failures = compare_files(solved, truth)
+        print(table)
+    else:
+        captured = captured_angles(solved)
+        result = compare_calibrations(CellCalibration.load(solved), CellCalibration.load(truth), captured=captured)
+        print(result.table())
+        failures = result.failures
+    for failure in failures:
         print(f"binpick calibrate compare: {failure}", file=sys.stderr)
-    return 1 if result.failures else 0
+    return 1 if failures else 0
 
 
 def _calibrate_folder(args: argparse.Namespace) -> int:

@@ -26,7 +26,19 @@ import numpy as np
 from .._validate import as_points, positive
 from ..errors import CalibrationError
 
-__all__ = ["fit_sphere", "sphere_points", "solve_eye_to_hand", "EyeToHandSolution", "sphere_mesh"]
+__all__ = [
+    "fit_sphere",
+    "sphere_points",
+    "solve_eye_to_hand",
+    "EyeToHandSolution",
+    "sphere_mesh",
+    "capture_plan",
+    "capture",
+    "solve_capture",
+    "compare_poses",
+    "solve_to_file",
+    "compare_files",
+]
 
 
 def sphere_mesh(radius: float, subdivisions: int = 3) -> tuple[np.ndarray, np.ndarray]:
@@ -169,3 +181,130 @@ def solve_eye_to_hand(T_base_flanges: Any, centres_camera: Any, *, iterations: i
     T = np.eye(4)
     T[:3, :3], T[:3, 3] = R, t
     return EyeToHandSolution(T, x, residuals, float(np.sqrt(np.mean(residuals**2))))
+
+
+# -- the commissioning flow: capture on the cell, solve, compare with a known pose
+
+#: The ball the twin mounts for calibration (``emulate cell --camera fixed --tool ball``): radius
+#: and where it sits on the flange (on a stalk in place of the gripper). The solver needs only the radius.
+BALL_RADIUS_MM = 25.0
+T_FLANGE_BALL = np.array([[1.0, 0, 0, 12.0], [0, 1.0, 0, -8.0], [0, 0, 1.0, 160.0], [0, 0, 0, 1.0]])
+#: Targets of a solved pose against a known one (issue 40): millimetres and degrees.
+TARGET_MM, TARGET_DEG = 0.5, 0.1
+
+
+def capture_plan(bin_bounds: Any, *, stations: int = 14, seed: int = 0) -> list[np.ndarray]:
+    """Flange poses that carry the ball over the bin for the camera: 150–300 mm above its rim's
+    middle, each turned 10–30° from pointing straight down about its own axis (two axes at least
+    among them, as the solver needs), seeded."""
+    from ..transforms import look_down, rotation_about
+
+    lo, hi = np.asarray(bin_bounds, dtype=np.float64)
+    rng = np.random.default_rng(seed)
+    centre, half = (lo + hi) / 2, (hi - lo) / 2
+    out = []
+    for _ in range(stations):
+        x, y = centre[:2] + rng.uniform(-0.5, 0.5, 2) * half[:2]
+        T = look_down(float(x), float(y), float(hi[2] + T_FLANGE_BALL[2, 3] + rng.uniform(150.0, 300.0)))
+        T[:3, :3] = rotation_about(rng.normal(size=3), math.radians(rng.uniform(10.0, 30.0))) @ T[:3, :3]
+        out.append(T)
+    return out
+
+
+def capture(robot: Any, camera: Any, plan: list, out_dir: Any, *, radius_mm: float, progress: Any = None) -> Any:
+    """Moves the arm through ``plan`` (each move checked by the driver against the cell's limits),
+    takes a depth shot at each station and saves it — the part nearest the camera, where the ball
+    is — with the flange pose read back: ``out_dir/shot_NN.npy`` and ``manifest.json`` (``kind =
+    "eye_to_hand"``). Returns the manifest's path."""
+    import json
+    from pathlib import Path
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    stations = []
+    for i, T in enumerate(plan):
+        robot.move_to(T, linear=False)
+        T_read = robot.read_pose()
+        shot = camera.shot()
+        np.save(out / f"shot_{i:02d}.npy", _nearest(shot, radius_mm).astype(np.float32))
+        stations.append({"T_base_flange": T_read.tolist(), "shot": f"shot_{i:02d}.npy"})
+        if progress is not None:
+            progress("capture", f"station {i + 1} of {len(plan)}: {len(shot)} points")
+    manifest = out / "manifest.json"
+    manifest.write_text(json.dumps({"kind": "eye_to_hand", "ball_radius_mm": radius_mm, "stations": stations}))
+    return manifest
+
+
+#: How deep behind the surface nearest the camera a saved shot reaches, in ball radii: the ball
+#: and a margin; the bin and the pile below it are left out (a whole shot is about 15 MB).
+_KEEP_RADII = 8.0
+
+
+def _nearest(shot: np.ndarray, radius_mm: float) -> np.ndarray:
+    p = shot[np.isfinite(shot).all(axis=1)]
+    if len(p) == 0:
+        return p
+    return p[p[:, 2] < np.quantile(p[:, 2], 0.0005) + _KEEP_RADII * radius_mm]
+
+
+def is_capture(folder: Any) -> bool:
+    """Whether ``folder`` holds an eye-to-hand capture (its manifest's ``kind``)."""
+    import json
+    from pathlib import Path
+
+    manifest = Path(folder) / "manifest.json"
+    try:
+        return json.loads(manifest.read_text()).get("kind") == "eye_to_hand"
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def solve_capture(folder: Any) -> EyeToHandSolution:
+    """The camera's pose from a capture :func:`capture` wrote: the ball fitted in every shot."""
+    import json
+    from pathlib import Path
+
+    root = Path(folder)
+    doc = json.loads((root / "manifest.json").read_text())
+    radius = float(doc["ball_radius_mm"])
+    poses, centres = [], []
+    for station in doc["stations"]:
+        shot = np.load(root / station["shot"], allow_pickle=False).astype(np.float64)
+        centre, _, _ = fit_sphere(sphere_points(shot[np.isfinite(shot).all(axis=1)], radius), radius)
+        centres.append(centre)
+        poses.append(np.array(station["T_base_flange"], dtype=np.float64))
+    return solve_eye_to_hand(np.array(poses), np.array(centres))
+
+
+def compare_poses(solved: np.ndarray, truth: np.ndarray) -> tuple[float, float, list[str]]:
+    """(mm, degrees, failures) of a solved camera pose against a known one, with the targets."""
+    from ..transforms import pose_error
+
+    deg, mm = pose_error(solved, truth)
+    failures = []
+    if mm > TARGET_MM:
+        failures.append(f"the camera's position is {mm:.3f} mm off, more than {TARGET_MM} mm")
+    if deg > TARGET_DEG:
+        failures.append(f"the camera's rotation is {deg:.4f}° off, more than {TARGET_DEG}°")
+    return mm, deg, failures
+
+
+def solve_to_file(folder: Any, out: Any) -> str:
+    """``binpick calibrate solve`` of an eye-to-hand capture: the pose written to ``out``; the summary line."""
+    from ..cell.shots import EyeToHand
+
+    found = solve_capture(folder)
+    EyeToHand(found.T_base_camera, found.rms_mm).save(out)
+    return f"eye-to-hand: {len(found.residuals_mm)} stations, rms {found.rms_mm:.3f} mm; wrote {out}"
+
+
+def compare_files(solved: Any, truth: Any) -> tuple[str, list[str]]:
+    """``binpick calibrate compare`` of two eye-to-hand files: the table and the targets missed."""
+    from ..cell.shots import EyeToHand
+
+    mm, deg, failures = compare_poses(EyeToHand.load(solved).T_base_camera, EyeToHand.load(truth).T_base_camera)
+    table = (
+        f"fixed camera's position  {mm:.3f} mm  (target {TARGET_MM} mm)  {'ok' if mm <= TARGET_MM else 'MISSED'}\n"
+        f"fixed camera's rotation  {deg:.4f}°  (target {TARGET_DEG}°)  {'ok' if deg <= TARGET_DEG else 'MISSED'}"
+    )
+    return table, failures

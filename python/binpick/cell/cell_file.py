@@ -337,6 +337,8 @@ def capture_calibration(
     from ..sim.cell import CalibrationBoard  # the defaults: the twin's board
 
     f = cell_file
+    if f.text("camera", "source", "opencv") in ("twin_depth", "shots"):
+        return _capture_eye_to_hand(f, out_dir, progress)
     board = CalibrationBoard()
     pattern = f.numbers("calibration_board", "pattern", 2, list(board.pattern))
     if (pattern != np.round(pattern)).any() or (pattern < 2).any():
@@ -368,6 +370,29 @@ def capture_calibration(
         if camera is not None:
             camera.close()
     return manifest, len(plan.stations)
+
+
+def _capture_eye_to_hand(f: CellFile, out_dir: Any, progress: Optional[Callable[[str, str], None]]) -> tuple[Path, int]:
+    """``calibrate capture`` for a fixed camera: the ball of ``[calibration_ball] radius_mm``
+    carried through :func:`binpick.calibration.eye_to_hand.capture_plan` over the bin."""
+    from ..calibration import eye_to_hand as e2h
+
+    limits = _limits(f)
+    radius = f.number("calibration_ball", "radius_mm", e2h.BALL_RADIUS_MM)
+    plan = e2h.capture_plan((f.numbers("cell", "bin_min_mm", 3), f.numbers("cell", "bin_max_mm", 3)))
+    robot = _robot(f, limits)()
+    camera = None
+    try:
+        camera = _camera(f, parts.tee(), 0)()
+        robot.open_session()
+        manifest = e2h.capture(robot, camera, plan, out_dir, radius_mm=radius, progress=progress)
+    finally:
+        for close in (robot.close_session, robot.close, *(() if camera is None else (camera.close,))):
+            try:
+                close()
+            except (BinpickError, OSError):
+                pass
+    return Path(manifest), len(plan)
 
 
 def _estimate_options(f: CellFile) -> dict:
@@ -507,7 +532,8 @@ def _camera(f: CellFile, model: Model, num_threads: int) -> Callable[[], FrameSo
         folder = os.path.join(here, f.text("camera", "folder"))
         return lambda: FolderReplay(folder)
     if source in ("twin_depth", "shots"):
-        from .shots import EyeToHand, ShotReplay, TwinDepthCamera
+        from ..ros import is_rosbag
+        from .shots import BagShots, EyeToHand, ShotReplay, TwinDepthCamera
 
         pose_file = os.path.join(here, f.text("camera", "eye_to_hand", "eye_to_hand.toml"))
         if source == "twin_depth":
@@ -515,9 +541,13 @@ def _camera(f: CellFile, model: Model, num_threads: int) -> Callable[[], FrameSo
                 os.path.join(here, f.text("camera", "socket", "camera.sock")),
                 f.number("camera", "timeout_s", 60.0),
             )
-            return lambda: TwinDepthCamera(path, EyeToHand.load(pose_file), timeout_s=timeout)
+            return lambda: TwinDepthCamera(path, EyeToHand.load_if_there(pose_file), timeout_s=timeout)
         folder = os.path.join(here, f.text("camera", "folder"))
-        return lambda: ShotReplay(folder, EyeToHand.load(pose_file))
+        if is_rosbag(folder):  # a ROS 2 bag of PointCloud2 shots
+            topic = f.text("camera", "topic") if f.get("camera", "topic", None) is not None else None
+            unit = f.text("camera", "unit", "m")
+            return lambda: BagShots(folder, EyeToHand.load_if_there(pose_file), topic=topic, unit=unit)
+        return lambda: ShotReplay(folder, EyeToHand.load_if_there(pose_file))
     if source == "gige":
         from .gige import GigEVisionCamera  # Aravis loads only when a cell file asks for it
 

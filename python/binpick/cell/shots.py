@@ -7,6 +7,7 @@ calibrated pose ``T_base_camera`` (:class:`EyeToHand`, solved by
 * :class:`TwinDepthCamera` — the digital twin's (``binpick emulate cell --camera fixed``), over
   its camera socket (:data:`binpick.cell.camera_socket.OP_DEPTH`);
 * :class:`ShotReplay` — recorded shots (PLY, PCD, NPY files, in name order), replayed;
+* :class:`BagShots` — a recorded ROS 2 bag's PointCloud2 messages, replayed;
 * :func:`depth_scan` — a scan with such a camera: the arm to its park pose (out of the camera's
   view), one shot, the cloud in the base frame with the camera's position as its viewpoint.
 """
@@ -28,7 +29,7 @@ from .._validate import as_transform, parse_toml, positive, read_text_file, writ
 from ..errors import CalibrationError, DeviceError, PortClosedError
 from . import camera_socket as wire
 
-__all__ = ["EyeToHand", "DepthSource", "TwinDepthCamera", "ShotReplay", "DepthCloud", "depth_scan"]
+__all__ = ["EyeToHand", "DepthSource", "TwinDepthCamera", "ShotReplay", "BagShots", "DepthCloud", "depth_scan"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,6 +53,11 @@ class EyeToHand:
         write_atomic(path, self.to_toml())
 
     @classmethod
+    def load_if_there(cls, path: Any) -> Optional[EyeToHand]:
+        """:meth:`load`, or None when the file does not exist yet (a camera being calibrated)."""
+        return cls.load(path) if os.path.exists(os.fspath(path)) else None
+
+    @classmethod
     def load(cls, path: Any) -> EyeToHand:
         """Reads a file :meth:`save` wrote; CalibrationError naming the file for a missing, damaged or
         non-rigid one."""
@@ -73,9 +79,10 @@ class EyeToHand:
 
 class DepthSource(abc.ABC):
     """A fixed 3-D camera: one shot at a time, an (N, 3) cloud in the camera's frame, mm, finite;
-    ``eye_to_hand`` its pose in the base frame."""
+    ``eye_to_hand`` its pose in the base frame (None before it is calibrated: shots are taken, no
+    scan is made)."""
 
-    eye_to_hand: EyeToHand
+    eye_to_hand: Optional[EyeToHand]
 
     @abc.abstractmethod
     def shot(self) -> np.ndarray:
@@ -88,7 +95,7 @@ class DepthSource(abc.ABC):
 class TwinDepthCamera(DepthSource):
     """The twin's fixed depth camera over its socket (``binpick emulate cell --camera fixed``)."""
 
-    def __init__(self, path: Any, eye_to_hand: EyeToHand, *, timeout_s: float = 60.0) -> None:
+    def __init__(self, path: Any, eye_to_hand: Optional[EyeToHand], *, timeout_s: float = 60.0) -> None:
         self.path = os.fspath(path)
         self.eye_to_hand = eye_to_hand
         self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -121,7 +128,7 @@ class ShotReplay(DepthSource):
     """Recorded depth shots (PLY, PCD, NPY files of a folder, in name order, camera frame, mm
     unless a file says its unit) replayed one per scan."""
 
-    def __init__(self, folder: Any, eye_to_hand: EyeToHand) -> None:
+    def __init__(self, folder: Any, eye_to_hand: Optional[EyeToHand]) -> None:
         from ..clouds import SCENE_FORMATS
 
         self.folder = Path(os.fspath(folder))
@@ -143,6 +150,27 @@ class ShotReplay(DepthSource):
         return read_scene(path).points
 
 
+class BagShots(DepthSource):
+    """A recorded ROS 2 bag's PointCloud2 messages (:func:`binpick.ros.read_rosbag`, camera frame,
+    metres unless ``unit`` says otherwise) replayed one per scan."""
+
+    def __init__(
+        self, bag: Any, eye_to_hand: Optional[EyeToHand], *, topic: Optional[str] = None, unit: str = "m"
+    ) -> None:
+        from ..ros import read_rosbag
+
+        self.bag = os.fspath(bag)
+        self.scans = read_rosbag(self.bag, topic=topic, unit=unit)
+        self.eye_to_hand = eye_to_hand
+        self._next = 0
+
+    def shot(self) -> np.ndarray:
+        if self._next >= len(self.scans):
+            raise DeviceError(f"camera: all {len(self.scans)} messages of {self.bag} were replayed")
+        self._next += 1
+        return self.scans[self._next - 1].points
+
+
 @dataclass(frozen=True, eq=False)
 class DepthCloud:
     """A depth shot in the base frame: ``points`` (N, 3) mm and the camera's ``viewpoint``."""
@@ -158,6 +186,11 @@ def depth_scan(cell: Any, poses: Optional[Any] = None) -> Any:
     from .records import ScanResult
 
     cfg, camera = cell.config, cell.camera
+    if camera.eye_to_hand is None:
+        raise CalibrationError(
+            "camera: the fixed camera's pose in the base frame is not known; solve its eye-to-hand calibration "
+            "(binpick calibrate capture / solve) and name the file in the cell file's [camera] eye_to_hand"
+        )
     T_park = cfg.scan_poses[0] if poses is None or not len(poses) else as_transform(poses[0], "poses[0]")
     t0 = time.perf_counter()
     cell._go_above_approach()

@@ -77,6 +77,12 @@ def _parser() -> argparse.ArgumentParser:
         help="cell: arm — the laser camera on the arm (the paper's); fixed — a 3-D camera above the bin (eye-to-hand)",
     )
     c.add_argument(
+        "--tool",
+        choices=("gripper", "ball"),
+        default="gripper",
+        help="cell: the tool on the flange — the gripper, or the eye-to-hand calibration ball (with --camera fixed)",
+    )
+    c.add_argument(
         "--robot",
         choices=("melfa", "ur"),
         default="melfa",
@@ -145,6 +151,7 @@ def _cell(args: argparse.Namespace) -> int:
             speed_scale=args.speed_scale,
             robot=args.robot,
             camera=args.camera,
+            tool=args.tool,
         )
     except KeyboardInterrupt:
         return 0

@@ -34,6 +34,7 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from .._validate import write_atomic
+from ..calibration.eye_to_hand import BALL_RADIUS_MM, T_FLANGE_BALL, sphere_mesh
 from ..cell import camera_socket as wire
 from ..cell.cell_file import GRIPPER_SHAPE_KEYS
 from ..cell.shots import EyeToHand
@@ -47,6 +48,9 @@ from .sensors import DepthCamera, render_depth
 from .twin import TwinWorld
 
 __all__ = ["CellTwin", "WORLD_VERSION", "fixed_camera"]
+
+#: The renderer's id of the calibration ball (a part id no pile uses).
+BALL_ID = 9999
 
 #: The version of world.json's layout.
 WORLD_VERSION = 1
@@ -79,10 +83,17 @@ class _CameraServer:
     is rendered under the world's lock from where the arm and the laser really are."""
 
     def __init__(
-        self, world: TwinWorld, path: Path, progress: Callable[[str, str], None], depth: Optional[DepthCamera] = None
+        self,
+        world: TwinWorld,
+        path: Path,
+        progress: Callable[[str, str], None],
+        depth: Optional[DepthCamera] = None,
+        *,
+        ball: bool = False,
     ) -> None:
         self.world = world
         self.depth = depth
+        self.ball = sphere_mesh(BALL_RADIUS_MM, 4) if ball else None
         self.path = path
         self.progress = progress
         self.camera = SimCamera(world, seed=world.seed)
@@ -165,6 +176,8 @@ class _CameraServer:
                 self.world.settle_pending()
                 world = World.of_pile(self.world.pile)
                 pose = self.world.robot_emulator.pose()
+                if self.ball is not None:  # the calibration ball the arm carries instead of its gripper
+                    world.add_instance(world.add_mesh(*self.ball), pose @ T_FLANGE_BALL, BALL_ID)
                 counter, self.frames = self.frames, self.frames + 1
             t0 = time.perf_counter()
             shot = render_depth(world, self.depth, seed=self.world.seed + counter, num_threads=self.world.num_threads)
@@ -210,6 +223,7 @@ class CellTwin:
         unit: str = "mm",
         progress: Callable[[str, str], None],
         camera: str = "arm",
+        tool: str = "gripper",
         **world_options: Any,
     ) -> None:
         self.out = Path(out)
@@ -220,6 +234,7 @@ class CellTwin:
                 stale.unlink()
         self.world = TwinWorld(model, progress=progress, **world_options)
         self.fixed = fixed_camera(self.world.layout.bin.bounds) if camera == "fixed" else None
+        self.tool = tool
         self.camera: Optional[_CameraServer] = None
         self.collisions: list[dict] = []
         self._contact: set[str] = set()
@@ -249,7 +264,7 @@ class CellTwin:
             EyeToHand(self.fixed.T_base_camera).save(self.out / "true_eye_to_hand.toml")
         write_atomic(self.cell_file, self.cell_toml())
         self.tick()
-        self.camera = _CameraServer(self.world, self.socket_path, self.progress, self.fixed)
+        self.camera = _CameraServer(self.world, self.socket_path, self.progress, self.fixed, ball=self.tool == "ball")
         return self
 
     def close(self) -> None:
