@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import os
 import re
+import signal
+import subprocess
 import sys
 from pathlib import Path
 
@@ -35,3 +37,36 @@ def command_shim(folder: Path) -> dict:
     env = dict(os.environ, PATH=f"{folder}{os.pathsep}{os.environ['PATH']}")
     env["PYTHONPATH"] = os.pathsep.join(p for p in (package_root, os.environ.get("PYTHONPATH")) if p)
     return env
+
+
+def run_block(marker: str, work: Path, *, timeout_s: float, setup=None) -> tuple[int, str]:
+    """Runs the README block after ``marker`` with ``bash -e`` in ``work`` (its `binpick` this
+    package); returns (exit code, output). The block's background jobs are stopped with it, also
+    when a step fails; a block past ``timeout_s`` fails the test with the output's end."""
+    import pytest
+
+    env = command_shim(work / ".bin")
+    if setup is not None:
+        setup(work)
+    script = work / "block.sh"
+    script.write_text(readme_block(marker))
+    log = work / "block.log"
+    with open(log, "w") as sink:
+        proc = subprocess.Popen(
+            ["bash", "-e", script.name],
+            cwd=work,
+            env=env,
+            stdout=sink,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
+        try:
+            proc.wait(timeout=timeout_s)
+        except subprocess.TimeoutExpired:
+            pytest.fail(f"the README block {marker} did not finish in {timeout_s} s:\n{log.read_text()[-4000:]}")
+        finally:
+            try:  # a failed step leaves the block's background jobs running: stop them with it
+                os.killpg(proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+    return proc.returncode, log.read_text()

@@ -6,14 +6,11 @@ examples/robots/ driving the twin's arm through every pick the server plans (iss
 from __future__ import annotations
 
 import json
-import os
-import signal
-import subprocess
 from pathlib import Path
 
 import pytest
 
-from _readme import command_shim, readme_block
+from _readme import run_block
 
 ROOT = Path(__file__).resolve().parents[2]
 MARKER = "<!-- serve-commands -->"
@@ -24,31 +21,11 @@ TIMEOUT_S = 240
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
     work = tmp_path_factory.mktemp("serve")
-    env = command_shim(work / ".bin")
-    (work / "examples").symlink_to(ROOT / "examples")  # the block runs from the repository root
-    script = work / "serve.sh"
-    script.write_text(readme_block(MARKER))
-    log = work / "serve.log"
-    with open(log, "w") as sink:
-        proc = subprocess.Popen(
-            ["bash", "-e", script.name],
-            cwd=work,
-            env=env,
-            stdout=sink,
-            stderr=subprocess.STDOUT,
-            start_new_session=True,
-        )
-        try:
-            proc.wait(timeout=TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            pytest.fail(f"the serve commands did not finish in {TIMEOUT_S} s:\n{log.read_text()[-4000:]}")
-        finally:
-            try:  # a failed step leaves the block's background jobs running: stop them with it
-                os.killpg(proc.pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-    out = log.read_text()
-    assert proc.returncode == 0, out[-6000:]
+    # the block runs from the repository root
+    code, out = run_block(
+        MARKER, work, timeout_s=TIMEOUT_S, setup=lambda w: (w / "examples").symlink_to(ROOT / "examples")
+    )
+    assert code == 0, out[-6000:]
     return work / "twin", out
 
 
