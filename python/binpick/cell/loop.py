@@ -707,7 +707,8 @@ class Cell:
         located: Optional[Located] = None
         skipped: list[Skipped] = []
         times: dict[str, float] = {}
-        views: list[Optional[tuple[np.ndarray, ...]]] = [None, *((T,) for T in self.config.look_again_poses)]
+        again = () if isinstance(self.camera, DepthSource) else self.config.look_again_poses  # a fixed camera: one view
+        views: list[Optional[tuple[np.ndarray, ...]]] = [None, *((T,) for T in again)]
         looks = 0
         try:
             for k, view in enumerate(views):
