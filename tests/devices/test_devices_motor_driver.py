@@ -217,3 +217,47 @@ def test_ai_motor_emulator_cannot_fake_a_crc(ai_emulator):
 def test_motor_range_validates():
     with pytest.raises(InvalidInputError, match="must exceed"):
         MotorRange(min_angle_rad=0.5, max_angle_rad=0.1)
+
+
+def test_a_late_status_of_an_earlier_read_is_dropped_and_the_read_sent_again():
+    # A loaded machine: the status of an earlier read (2 bytes, the Moving flags) arrives after the
+    # driver gave up on it, just when the next read (4 bytes) waits. A status carries no
+    # instruction: its length is what tells it apart. The driver drops it and sends the read again.
+    # The device is played here, byte for byte, on a real pty.
+    import os
+    import select
+    import threading
+    import tty
+
+    from binpick.devices.dynamixel import INST_STATUS, DynamixelBus, encode_packet
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    bus = DynamixelBus(os.ttyname(slave), settings=SerialSettings(baudrate=57600, timeout_s=0.5))
+    got: list = []
+
+    def read() -> None:
+        try:
+            got.append(bus.read(1, 132, 4))
+        except ProtocolError as exc:
+            got.append(exc)
+
+    reader = threading.Thread(target=read)
+    reader.start()
+    late = encode_packet(1, INST_STATUS, b"\x00\x01\x00")
+    answer = encode_packet(1, INST_STATUS, b"\x00\x10\x08\x00\x00")
+    try:
+        requests = []
+        for reply in (late, answer):  # first the late 2-byte status, then, to the read sent again, its answer
+            ready, _, _ = select.select([master], [], [], 2.0)
+            assert ready, f"the driver sent no request {len(requests) + 1} (it gave up: {got})"
+            requests.append(os.read(master, 64))
+            os.write(master, reply)
+        reader.join(timeout=5)
+        assert got == [b"\x10\x08\x00\x00"]
+        assert len(requests) == 2 and requests[0] == requests[1]  # the same read, sent twice
+    finally:
+        reader.join(timeout=5)
+        bus.close()
+        os.close(master)
+        os.close(slave)

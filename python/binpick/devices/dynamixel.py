@@ -322,10 +322,15 @@ class DynamixelBus:
             raise ProtocolError(f"dynamixel: status packet announces LEN {length}, outside 3–{MAX_LENGTH}")
         return HEADER + head + self.link.read_exact(length, deadline, what="status packet", got=HEADER + head)
 
-    def transact(self, motor_id: int, instruction: int, params: bytes = b"", *, retry: bool) -> StatusPacket:
+    def transact(
+        self, motor_id: int, instruction: int, params: bytes = b"", *, retry: bool, expect: Optional[int] = None
+    ) -> StatusPacket:
         """Sends one instruction and returns the matching status; DeviceFault when its error byte is set.
 
         ``retry`` resends after a timeout or unusable status: only for instructions that change nothing.
+        ``expect``: the status's parameter bytes. A status carries no instruction, so one of another
+        length is a late answer to an earlier request (its timeout passed under load): unusable, and
+        the request is sent again like any other unusable reply.
         """
         check_int(motor_id, "motor_id", 0, 0xFD)
         packet = encode_packet(motor_id, instruction, params)
@@ -336,6 +341,11 @@ class DynamixelBus:
             status = decode_status(self._read_raw(self.link.deadline()))
             if status.motor_id != motor_id:
                 raise UnknownReplyError(f"dynamixel: asked ID {motor_id}, status came from ID {status.motor_id}")
+            if expect is not None and len(status.params) != expect and not status.error:
+                raise ProtocolError(
+                    f"dynamixel: asked ID {motor_id} for {expect} bytes, got a status of {len(status.params)} "
+                    "(a late answer to an earlier request)"
+                )
             return status
 
         status = with_retries(self.link.settings.retries if retry else 0, once)
@@ -356,7 +366,7 @@ class DynamixelBus:
         """``length`` bytes of ``motor_id``'s control table from ``address``."""
         check_int(address, "address", 0, 0xFFFF)
         check_int(length, "length", 1, MAX_LENGTH - 4)
-        st = self.transact(motor_id, INST_READ, struct.pack("<HH", address, length), retry=True)
+        st = self.transact(motor_id, INST_READ, struct.pack("<HH", address, length), retry=True, expect=length)
         if len(st.params) != length:
             raise ProtocolError(f"dynamixel: asked {length} bytes at {address} of ID {motor_id}, got {len(st.params)}")
         return st.params
