@@ -5,31 +5,14 @@ the pick loop unchanged above a depth shot per scan — every part picked, then 
 from __future__ import annotations
 
 import json
-import os
-import shutil
-import signal
-import subprocess
-import sys
 import time
 
+from _twin import twin_process
 from binpick.cli import main
 
 
 def test_binpick_pick_empties_the_bin_with_a_fixed_camera(tmp_path, capsys):
-    out = tmp_path / "twin"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "binpick", "emulate", "cell", "--out", str(out), "--count", "3", "--camera", "fixed"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-    )
-    try:
-        deadline = time.monotonic() + 120
-        while not (out / "camera.sock").exists():
-            assert proc.poll() is None and time.monotonic() < deadline, "the twin did not start"
-            time.sleep(0.2)
-        shutil.copy(out / "true_calibration.toml", out / "calibration.toml")
-        shutil.copy(out / "true_eye_to_hand.toml", out / "eye_to_hand.toml")
+    with twin_process(tmp_path / "twin", "--count", "3", "--camera", "fixed") as out:
         code = main(["pick", str(out / "cell.toml"), "--picks", "4", "--out", str(tmp_path / "run")])
         printed = capsys.readouterr()
         assert code == 0, printed.err[-3000:]
@@ -39,6 +22,3 @@ def test_binpick_pick_empties_the_bin_with_a_fixed_camera(tmp_path, capsys):
         time.sleep(0.5)  # the twin writes world.json on its next tick
         world = json.loads((out / "world.json").read_text())
         assert sorted(world["removed"]) == [0, 1, 2] and world["in_bin"] == []
-    finally:
-        os.killpg(proc.pid, signal.SIGTERM)
-        proc.wait(timeout=30)

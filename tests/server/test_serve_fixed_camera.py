@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -20,25 +19,13 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "examples" / "robots"))
 from twin_program import run  # noqa: E402
 
+from _twin import twin_process  # noqa: E402
+
 
 @pytest.fixture(scope="module")
 def twin(tmp_path_factory):
-    out = tmp_path_factory.mktemp("fixed")
-    cmd = [sys.executable, "-m", "binpick", "emulate", "cell", "--out", str(out), "--count", "5"]
-    proc = subprocess.Popen(
-        [*cmd, "--speed-scale", "10", "--robot", "ur", "--camera", "fixed"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-    )
-    server = None
-    try:
-        deadline = time.monotonic() + 120
-        while not (out / "camera.sock").exists():
-            assert proc.poll() is None and time.monotonic() < deadline, "the twin did not start"
-            time.sleep(0.2)
-        shutil.copy(out / "true_calibration.toml", out / "calibration.toml")
-        shutil.copy(out / "true_eye_to_hand.toml", out / "eye_to_hand.toml")
+    options = ("--count", "5", "--robot", "ur", "--camera", "fixed")
+    with twin_process(tmp_path_factory.mktemp("fixed"), *options) as out:
         server = subprocess.Popen(
             [sys.executable, "-m", "binpick", "serve", str(out / "cell.toml"), "--brand", "abb", "--port", "0"],
             stdout=subprocess.PIPE,
@@ -46,15 +33,13 @@ def twin(tmp_path_factory):
             text=True,
             start_new_session=True,
         )
-        first = server.stdout.readline()
-        assert first.startswith("binpick serve: listening on 127.0.0.1:"), first
-        port = int(first.split("127.0.0.1:")[1].split()[0])
-        yield out, port
-    finally:
-        for p in (server, proc):
-            if p is not None:
-                os.killpg(p.pid, signal.SIGTERM)
-                p.wait(timeout=30)
+        try:
+            first = server.stdout.readline()
+            assert first.startswith("binpick serve: listening on 127.0.0.1:"), first
+            yield out, int(first.split("127.0.0.1:")[1].split()[0])
+        finally:
+            os.killpg(server.pid, signal.SIGTERM)
+            server.wait(timeout=30)
 
 
 def test_a_fixed_camera_cell_empties_the_bin_through_the_server(twin):

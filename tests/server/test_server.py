@@ -7,11 +7,7 @@ messages after which the server still serves."""
 
 from __future__ import annotations
 
-import os
-import shutil
-import signal
 import socket
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -26,29 +22,16 @@ from binpick.server import Code, ProgramGripper, ProgramRobot, VisionServer, Vis
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "examples" / "robots"))
 from twin_program import VisionClient, pose_matrix, pose_numbers  # noqa: E402
 
+from _twin import twin_process  # noqa: E402
+
 BRAND = "abb"
 N = 7  # numbers per ABB pose
 
 
 @pytest.fixture(scope="module")
 def twin(tmp_path_factory):
-    out = tmp_path_factory.mktemp("twin")
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "binpick", "emulate", "cell", "--out", str(out), "--count", "4", "--speed-scale", "10"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-    )
-    try:
-        deadline = time.monotonic() + 120
-        while not (out / "camera.sock").exists():
-            assert proc.poll() is None and time.monotonic() < deadline, "the twin did not start"
-            time.sleep(0.2)
-        shutil.copy(out / "true_calibration.toml", out / "calibration.toml")
+    with twin_process(tmp_path_factory.mktemp("twin"), "--count", "4") as out:
         yield out
-    finally:
-        os.killpg(proc.pid, signal.SIGTERM)
-        proc.wait(timeout=30)
 
 
 @pytest.fixture(scope="module")

@@ -58,6 +58,8 @@ __all__ = [
     "encode_error",
     "read_reply",
     "recv_exact",
+    "connect",
+    "request",
 ]
 
 PROTOCOL_VERSION = 1
@@ -192,3 +194,27 @@ def read_reply(sock: socket.socket, *, where: str = "camera") -> Frame:
     data = recv_exact(sock, length, f"{where} frame {counter}")
     image = np.frombuffer(data, dtype=np.uint8 if dtype == DTYPE_UINT8 else "<f4").reshape(height, width, channels)
     return Frame(image=image, counter=int(counter), angle=float(angle), T_base_flange=T)
+
+
+def connect(path: str, timeout_s: float, start_hint: str) -> socket.socket:
+    """A connection to the twin's camera socket ``path``; PortClosedError saying how to start
+    the twin (``start_hint``) when nothing listens there."""
+    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    sock.settimeout(timeout_s)
+    try:
+        sock.connect(path)
+    except OSError as exc:
+        sock.close()
+        raise PortClosedError(
+            f"camera: cannot connect to the twin's camera socket {path} ({exc}); {start_hint}"
+        ) from None
+    return sock
+
+
+def request(sock: socket.socket, op: int, path: str) -> Frame:
+    """Sends one request of operation ``op`` and reads its reply (:func:`read_reply`)."""
+    try:
+        sock.sendall(encode_request(op))
+    except OSError as exc:
+        raise PortClosedError(f"camera: cannot send to {path} ({exc}); is the twin still running?") from None
+    return read_reply(sock, where=f"camera {path}")

@@ -9,14 +9,13 @@ from __future__ import annotations
 import abc
 import math
 import os
-import socket
 from pathlib import Path
 from typing import Any, Optional
 
 import numpy as np
 
 from .._validate import as_transform, count, instance_of, positive
-from ..errors import DeviceError, InvalidInputError, PortClosedError
+from ..errors import DeviceError, InvalidInputError
 from . import camera_socket as wire
 
 __all__ = ["FrameSource", "OpenCVCamera", "TwinCamera", "FolderReplay", "ReplayMismatchError", "ScanRecorder"]
@@ -109,23 +108,12 @@ class TwinCamera(FrameSource):
         self.path = os.fspath(path)
         self.timeout_s = positive(timeout_s, "timeout_s", "s")
         self.last: Optional[wire.Frame] = None
-        self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        self._sock.settimeout(self.timeout_s)
-        try:
-            self._sock.connect(self.path)
-        except OSError as exc:
-            self._sock.close()
-            raise PortClosedError(
-                f"camera: cannot connect to the twin's camera socket {self.path} ({exc}); "
-                "start `binpick emulate cell --out DIR` first and give DIR/camera.sock"
-            ) from None
+        self._sock = wire.connect(
+            self.path, self.timeout_s, "start `binpick emulate cell --out DIR` first and give DIR/camera.sock"
+        )
 
     def grab(self) -> np.ndarray:
-        try:
-            self._sock.sendall(wire.encode_request(wire.OP_FRAME))
-        except OSError as exc:
-            raise PortClosedError(f"camera: cannot send to {self.path} ({exc}); is the twin still running?") from None
-        self.last = wire.read_reply(self._sock, where=f"camera {self.path}")
+        self.last = wire.request(self._sock, wire.OP_FRAME, self.path)
         return self.last.image
 
     def close(self) -> None:

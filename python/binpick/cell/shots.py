@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import abc
 import os
-import socket
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,7 +25,7 @@ from typing import Any, Optional
 import numpy as np
 
 from .._validate import as_transform, parse_toml, positive, read_text_file, write_atomic
-from ..errors import CalibrationError, DeviceError, PortClosedError
+from ..errors import CalibrationError, DeviceError
 from . import camera_socket as wire
 
 __all__ = ["EyeToHand", "DepthSource", "TwinDepthCamera", "ShotReplay", "BagShots", "DepthCloud", "depth_scan"]
@@ -98,23 +97,14 @@ class TwinDepthCamera(DepthSource):
     def __init__(self, path: Any, eye_to_hand: Optional[EyeToHand], *, timeout_s: float = 60.0) -> None:
         self.path = os.fspath(path)
         self.eye_to_hand = eye_to_hand
-        self._sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-        self._sock.settimeout(positive(timeout_s, "timeout_s", "s"))
-        try:
-            self._sock.connect(self.path)
-        except OSError as exc:
-            self._sock.close()
-            raise PortClosedError(
-                f"camera: cannot connect to the twin's camera socket {self.path} ({exc}); "
-                "start `binpick emulate cell --camera fixed --out DIR` first"
-            ) from None
+        self._sock = wire.connect(
+            self.path,
+            positive(timeout_s, "timeout_s", "s"),
+            "start `binpick emulate cell --camera fixed --out DIR` first",
+        )
 
     def shot(self) -> np.ndarray:
-        try:
-            self._sock.sendall(wire.encode_request(wire.OP_DEPTH))
-        except OSError as exc:
-            raise PortClosedError(f"camera: cannot send to {self.path} ({exc}); is the twin still running?") from None
-        reply = wire.read_reply(self._sock, where=f"camera {self.path}")
+        reply = wire.request(self._sock, wire.OP_DEPTH, self.path)
         if reply.image.dtype.kind != "f":
             raise DeviceError(f"camera {self.path}: sent an image, not a depth shot; is the twin's camera fixed?")
         pts = reply.image.reshape(-1, 3).astype(np.float64)

@@ -29,7 +29,10 @@ import struct
 from collections.abc import Sequence
 from typing import Any
 
+import numpy as np
+
 from ..errors import ProtocolError, TruncatedReplyError
+from ..transforms import rotation_about, rotation_vector
 
 __all__ = [
     "PROTOCOL_VERSION",
@@ -40,6 +43,8 @@ __all__ = [
     "pack_data",
     "unpack_data",
     "MAX_PACKAGE",
+    "ur_pose",
+    "transform_from_ur_pose",
 ]
 
 PROTOCOL_VERSION = 2
@@ -230,3 +235,20 @@ def unpack_data(payload: bytes, types: Sequence[str]) -> tuple[int, list[Any]]:
         out.append(tuple(flat[:n]) if t.startswith("VECTOR") else flat[0])
         del flat[:n]
     return payload[0], out
+
+
+def ur_pose(T: Any) -> tuple[float, ...]:
+    """A pose (4×4, mm) as UR's controller carries it in RTDE and URScript: x, y, z in metres and
+    the rotation vector in radians."""
+    T = np.asarray(T, dtype=np.float64)
+    return (*(T[:3, 3] / 1000.0), *rotation_vector(T[:3, :3]))
+
+
+def transform_from_ur_pose(v: Any) -> np.ndarray:
+    """The 4×4 pose (mm) of UR's six numbers (:func:`ur_pose`'s inverse)."""
+    T = np.eye(4)
+    T[:3, 3] = np.asarray(v[:3], dtype=np.float64) * 1000.0
+    angle = float(np.linalg.norm(v[3:6]))
+    if angle > 1e-12:
+        T[:3, :3] = rotation_about(v[3:6], angle)
+    return T

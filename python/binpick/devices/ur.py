@@ -27,7 +27,7 @@ import numpy as np
 
 from .._validate import as_transform, flag
 from ..errors import DeviceError, DeviceFault, DeviceTimeout, ProtocolError
-from ..transforms import pose_error, rotation_about, rotation_vector
+from ..transforms import pose_error
 from . import rtde
 from .robot import Robot
 from .safety import CellLimits, check_linear_speed, check_move, check_pose
@@ -71,17 +71,7 @@ class URConfig:
 
 
 def _ur_pose(T: np.ndarray) -> str:
-    v = [*(T[:3, 3] / 1000.0), *rotation_vector(T[:3, :3])]
-    return "p[" + ", ".join(f"{x:.7f}" for x in v) + "]"
-
-
-def _transform(v: Any) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, 3] = np.asarray(v[:3], dtype=np.float64) * 1000.0
-    angle = float(np.linalg.norm(v[3:6]))
-    if angle > 1e-12:
-        T[:3, :3] = rotation_about(v[3:6], angle)
-    return T
+    return "p[" + ", ".join(f"{x:.7f}" for x in rtde.ur_pose(T)) + "]"
 
 
 class URRobot(Robot):
@@ -227,7 +217,7 @@ class URRobot(Robot):
         self._run_and_wait()
 
     def read_pose(self) -> np.ndarray:
-        return _transform(self._wait_state(lambda s: True, "state")["actual_TCP_pose"])
+        return rtde.transform_from_ur_pose(self._wait_state(lambda s: True, "state")["actual_TCP_pose"])
 
     def move_to(self, T_base_flange: Any, *, linear: bool = False) -> None:
         """Moves the flange to ``T_base_flange`` (``movel`` when ``linear``, else ``movej``),

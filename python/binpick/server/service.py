@@ -27,7 +27,7 @@ from ..devices.gripper import Gripper
 from ..devices.robot import Robot
 from ..errors import BinpickError, DeviceError, InvalidInputError, NoObjectFound, SafetyError
 from ..transforms import pose_error
-from .conventions import PoseConvention
+from .conventions import CONVENTIONS, PoseConvention
 from .protocol import (
     NEXT_POSES,
     PROTOCOL_VERSION,
@@ -42,8 +42,8 @@ from .protocol import (
 
 __all__ = ["VisionService", "ProgramRobot", "ProgramGripper", "BRAND_IDS"]
 
-#: The brand's number in HELLO's reply (the order of :data:`binpick.server.conventions.CONVENTIONS`).
-BRAND_IDS = {"ur": 1, "abb": 2, "kuka": 3, "fanuc": 4, "yaskawa": 5, "melfa": 6}
+#: The brand's number in HELLO's reply: its place in :data:`binpick.server.conventions.CONVENTIONS`, from 1.
+BRAND_IDS = {brand: i + 1 for i, brand in enumerate(CONVENTIONS)}
 #: How far the arm may be from where the robot program said it is for binpick to sweep the laser
 #: from there (mm, degrees): the scan's own pose is the only one binpick is ever asked to be at.
 AT_POSE_MM, AT_POSE_DEG = 0.01, 0.001
@@ -133,7 +133,7 @@ class VisionService:
         t0 = time.perf_counter()
         self.compute_ms = 0.0
         try:
-            request = self._parse(line)
+            request = parse_request(line, self.convention.size)
             verb = request.verb
             return self._answer(request)
         except RequestError as exc:
@@ -150,9 +150,6 @@ class VisionService:
             return self._error(Code.INTERNAL, f"{type(exc).__name__}: {exc}", verb)
         finally:
             self.progress("serve", f"{line[:40]!r} answered in {(time.perf_counter() - t0) * 1e3:.1f} ms")
-
-    def _parse(self, line: bytes) -> Request:
-        return parse_request(line, self.convention.size)
 
     def _error(self, code: Code, text: str, verb: Optional[Verb]) -> bytes:
         self.last_error = code

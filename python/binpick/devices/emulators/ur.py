@@ -113,19 +113,6 @@ class URArm:
         return True
 
 
-def _pose_from_ur(v: Any) -> np.ndarray:
-    T = np.eye(4)
-    T[:3, 3] = np.asarray(v[:3], dtype=np.float64) * 1000.0
-    angle = float(np.linalg.norm(v[3:6]))
-    if angle > 1e-12:
-        T[:3, :3] = rotation_about(v[3:6], angle)
-    return T
-
-
-def _pose_to_ur(T: np.ndarray) -> tuple[float, ...]:
-    return (*(T[:3, 3] / 1000.0), *rotation_vector(T[:3, :3]))
-
-
 class _Compile(Exception):
     """A URScript statement outside the emulated subset, or malformed."""
 
@@ -382,7 +369,7 @@ class UREmulator:
             kind = statement[0]
             if kind == "set_tcp":
                 with self.lock:
-                    self.T_flange_tcp = _pose_from_ur(statement[1])
+                    self.T_flange_tcp = rtde.transform_from_ur_pose(statement[1])
             elif kind == "digital_out":
                 bit = 1 << statement[1]
                 with self.lock:
@@ -412,14 +399,14 @@ class UREmulator:
         try:
             if kind == "movej":
                 q1 = (
-                    self.arm.inverse(_pose_from_ur(values) @ np.linalg.inv(self.T_flange_tcp), q0)
+                    self.arm.inverse(rtde.transform_from_ur_pose(values) @ np.linalg.inv(self.T_flange_tcp), q0)
                     if is_pose
                     else np.array(values)
                 )
                 qs = np.linspace(q0, q1, 20)
                 duration = float(np.abs(q1 - q0).max()) / v
             else:
-                T0, T1 = self.arm.forward(q0), _pose_from_ur(values) @ np.linalg.inv(self.T_flange_tcp)
+                T0, T1 = self.arm.forward(q0), rtde.transform_from_ur_pose(values) @ np.linalg.inv(self.T_flange_tcp)
                 steps = 20
                 qs = [q0]
                 for s in np.linspace(0.0, 1.0, steps)[1:]:
@@ -618,7 +605,7 @@ class UREmulator:
     def _state(self, clock: float) -> dict[str, Any]:
         q = self.joints()
         T = self.arm.forward(q) @ self.T_flange_tcp
-        pose = _pose_to_ur(T)
+        pose = rtde.ur_pose(T)
         powered = self.robot_mode >= 5
         running = self.runtime_state == RUNTIME_PLAYING
         return {
