@@ -116,6 +116,8 @@ def run_pile(make, seed: int, count: int, frames: int, threads: int = 1, orienta
         "wrong_pose": sum(r.failure == "wrong pose" for r in recs),
         "empty_grip": sum(r.failure == "empty grip" for r in recs),
         "floor_contacts": sum(g <= 0.0 for g in gaps + nudge_gaps),
+        # Contacts of the gripper with another part or the bin, as the simulator's physics saw them.
+        "collisions": [c["with"] for r in recs for c in r.collisions],
         "nudges": len(nudge_gaps),
         "cycles": len(recs),
         "stages_ms": {s: float(np.mean([r.timings.get(s, 0.0) for r in recs])) for s in STAGES + CPU},

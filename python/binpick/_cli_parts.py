@@ -53,3 +53,22 @@ def run_bench(args: Any) -> int:
         print(f"== {s.stem}", flush=True)
         status |= subprocess.call([sys.executable, str(s)])
     return 1 if status else 0
+
+
+#: The exit code of a pick run in which the gripper touched something other than the part it
+#: grasped (the simulator's or the twin's physics saw it): the run finished, but it is not clean.
+EXIT_COLLISION = 4
+
+
+def collision_exit(report: Any, command: str) -> int | None:
+    """EXIT_COLLISION, with a line on stderr naming the picks, when any pick of ``report`` (a
+    :class:`binpick.cell.RunReport`) collided; None otherwise."""
+    hit = [str(r.index) for r in report.records if r.failure == "collision"]
+    if not hit:
+        return None
+    print(
+        f"binpick {command}: the gripper collided in pick{'s' if len(hit) > 1 else ''} {', '.join(hit)} "
+        "(see the table and failure_pick*.png)",
+        file=sys.stderr,
+    )
+    return EXIT_COLLISION

@@ -26,7 +26,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Optional
 
-from ._cli_parts import _model, _Usage, run_bench
+from ._cli_parts import _model, _Usage, collision_exit, run_bench
 from .errors import BinpickError, InvalidInputError, NoObjectFound
 
 __all__ = ["main"]
@@ -130,6 +130,7 @@ def _failure_pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> li
                 located=r.T_base_object,
                 bin_bounds=bin_bounds,
                 title=title if len(title) < 140 else title[:137] + "...",
+                collisions=r.collisions,
             )
         )
     return written
@@ -239,8 +240,8 @@ def _demo(args: argparse.Namespace) -> int:
             "binpick demo: no part was picked — " + (report.stopped or "every pick failed (see the table)"),
             file=sys.stderr,
         )
-        return 1
-    return 0
+        return collision_exit(report, "demo") or 1
+    return collision_exit(report, "demo") or 0
 
 
 def _estimate_options(args: argparse.Namespace) -> dict:
@@ -285,8 +286,8 @@ def _pick(args: argparse.Namespace) -> int:
     print(f"{report.successes} of {len(report.records)} picks succeeded in {time.perf_counter() - t0:.1f} s")
     if report.successes == 0:
         print("binpick pick: no part was picked — " + (report.stopped or "see the table"), file=sys.stderr)
-        return 1
-    return 0
+        return collision_exit(report, "pick") or 1
+    return collision_exit(report, "pick") or 0
 
 
 def _dry_run(cell: Any, out: Path) -> int:
@@ -752,7 +753,8 @@ def _add_bench(sub: Any) -> None:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Runs ``binpick`` with ``argv`` (without the program name; default ``sys.argv[1:]``); returns the exit code:
-    0 done, 1 a fault, a safety refusal or another error, 2 bad input, 3 no object found, 130 interrupted."""
+    0 done, 1 a fault, a safety refusal or another error, 2 bad input, 3 no object found, 4 a pick run in
+    which the gripper collided, 130 interrupted."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] in _FORWARDED:
         module, entry = _FORWARDED[argv[0]]

@@ -280,13 +280,15 @@ def save_failure(
     located: Any = None,
     bin_bounds: Any = None,
     title: str = "",
+    collisions: Sequence[Any] = (),
 ) -> Path:
     """Writes the picture of a failed pick: the cloud (N, 3, mm) from above and from the side,
     each part passed over (:class:`binpick.cell.records.Skipped`: the model at its located pose,
     numbered, with its reason; once, however many looks passed it over) and the gripper poses
     refused for it, one colour per reason (a dot at the TCP and a line 30 mm back along the
     approach); ``located`` (a pose ``T_base_object``) adds the part the failed attempt went for,
-    in black."""
+    in black; each of ``collisions`` (:attr:`binpick.cell.PickRecord.collisions`) the gripper where
+    it first touched something, in red (a cross at the TCP, a line 60 mm back along the approach)."""
     from .cell.records import Skipped
 
     pts, box = _scene(points, bin_bounds, title)
@@ -328,8 +330,20 @@ def save_failure(
             for ax, (i, j) in ((top, (0, 1)), (side, (0, 2))):
                 ax.plot(np.stack([tcp[:, i], back[:, i]]), np.stack([tcp[:, j], back[:, j]]), color=color, lw=0.8)
                 ax.scatter(tcp[:, i], tcp[:, j], s=6, color=color)
+    top.scatter([], [], s=8, c="tab:green", label="scan points (colour: height)")
+    if any(n for n, *_ in parts):
+        top.scatter([], [], s=8, c="tab:orange", label="parts passed over (numbered, why below)")
+    if located is not None:
+        top.scatter([], [], s=8, c="black", label="the part this pick went for")
     for why, color in colors.items():
         top.plot([], [], color=color, label=f"refused grasps: {why}")
+    for c in collisions:
+        T = as_transform(c["T_base_gripper"], "collisions.T_base_gripper")
+        tcp, back = T[:3, 3], T[:3, 3] - 60.0 * T[:3, 2]
+        for ax, (i, j) in ((top, (0, 1)), (side, (0, 2))):
+            ax.plot([tcp[i], back[i]], [tcp[j], back[j]], color="red", lw=1.5)
+            ax.scatter([tcp[i]], [tcp[j]], s=60, marker="x", color="red")
+        top.plot([], [], color="red", marker="x", label=f"gripper at its first touch of {c['with']}")
     if box is not None:
         (x0, y0, z0), (x1, y1, z1) = box
         top.plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], "k--", linewidth=0.8, label="bin")
@@ -339,8 +353,7 @@ def save_failure(
         ax.set_xlabel("x (mm)")
         ax.set_ylabel(ylabel)
         ax.set_title(name)
-    if colors or box is not None:
-        top.legend(loc="upper right", fontsize=7)
+    top.legend(loc="upper right", fontsize=7)  # every colour of the picture is named
     if notes:
         fig.text(0.01, 0.01, "\n".join(notes[:8]), fontsize=8, va="bottom", family="monospace")
     fig.suptitle(title or "failed pick")

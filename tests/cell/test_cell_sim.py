@@ -27,6 +27,8 @@ def test_simulated_pick_removes_the_located_part(tee):
         report = sim.cell.run(3)
         assert sim.emulator_failures == []
         after = set(int(i) for i in sim.pile.ids)
+        # The planner's checks and the physics agree: no pick touched anything but its part.
+        assert sim.collisions == [], sim.collisions
     picked = [r for r in report.records if r.success]
     assert picked, f"no pick succeeded: {[r.error for r in report.records]}"
     for r in picked:

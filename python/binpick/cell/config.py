@@ -94,24 +94,24 @@ class GripperGeometry:
             return float(self.open_width_mm)
         return float(min(self.open_width_mm, width_mm + 2.0 * self.preshape_clearance_mm))
 
-    def occupied(self, points_gripper: np.ndarray, opening_mm: Any = None) -> np.ndarray:
+    def occupied(self, points_gripper: np.ndarray, opening_mm: Any = None, margin_mm: float = 0.0) -> np.ndarray:
         """Which points (N, 3, in the gripper frame; or any shape (..., 3)) lie inside the gripper
         (fingers or body), the fingers ``opening_mm`` apart (a number, or an array that
-        broadcasts against the points' leading shape; ``open_width_mm`` by default)."""
+        broadcasts against the points' leading shape; ``open_width_mm`` by default); with
+        ``margin_mm``, more than that far inside (a surface grazing the gripper is not in it)."""
         x, y, z = np.moveaxis(points_gripper, -1, 0)
+        m = float(margin_mm)
         top = self.tip_depth_mm - self.finger_length_mm
-        in_z = (z <= self.tip_depth_mm) & (z >= top)
+        in_z = (z <= self.tip_depth_mm - m) & (z >= top + m)
         gap = self.open_width_mm if opening_mm is None else np.asarray(opening_mm, dtype=np.float64)
         offset = gap / 2 + self.finger_thickness_mm / 2
+        half = self.finger_thickness_mm / 2 - m
         finger = (
             in_z
-            & (np.abs(y) <= self.finger_width_mm / 2)
-            & (
-                (np.abs(x - offset) <= self.finger_thickness_mm / 2)
-                | (np.abs(x + offset) <= self.finger_thickness_mm / 2)
-            )
+            & (np.abs(y) <= self.finger_width_mm / 2 - m)
+            & ((np.abs(x - offset) <= half) | (np.abs(x + offset) <= half))
         )
-        body = (z < top) & (z >= top - self.body_length_mm) & (np.hypot(x, y) <= self.body_radius_mm)
+        body = (z < top - m) & (z >= top - self.body_length_mm + m) & (np.hypot(x, y) <= self.body_radius_mm - m)
         return finger | body
 
     def outline(self, opening_mm: Optional[float] = None, *, sides: int = 16) -> np.ndarray:
@@ -197,8 +197,9 @@ class CellConfig:
         limits: the cell's motion limits (also given to the robot driver).
         approach_distance_mm: the straight approach along the gripper axis before the grasp, mm.
         clearance_z_mm: flange height for travelling over the bin, mm; None = the approach height + 20 mm.
-        max_collision_points: a grasp is refused when more scene points than this lie inside the open gripper
-            (fingers or body), or more points of the located part's own model (at the located pose).
+        max_collision_points: a grasp is refused when more scene points than this (stray points)
+            lie inside the open gripper (fingers or body); the located part's own model (at the
+            located pose) may not lie inside it at all (more than ``binpick.cell.grasp.GRAZE_MM``).
         floor_clearance_mm: how far above the bin's floor every point of the gripper (fingers at
             the planned opening, palm, flange) must stay along approach, grasp and retreat, mm; a
             plan closer to the floor, or crossing the bin's walls below the rim, is refused.

@@ -349,7 +349,57 @@ def _near(points: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
     return points[np.einsum("ij,ij->i", points - centre, points - centre) <= radius * radius]
 
 
-def _hits_many(gripper: GripperGeometry, points: np.ndarray, T_bg: np.ndarray, openings: np.ndarray) -> np.ndarray:
+def line_step(cloud: Any) -> Optional[np.ndarray]:
+    """The step (3,) from one laser line to the next on the scanned surfaces of a swept scan
+    (``cloud`` a :class:`binpick.vision.Cloud`, whose ``frame`` numbers each point's line): the
+    median shift between the centres of consecutive lines, horizontal. None for a cloud that is
+    not a sweep of lines (one depth shot, a file), whose points lie a pixel apart.
+
+    What lies between two lines is not seen: an edge a line did not catch can stand out up to a
+    step beyond the last line that saw its part, and a finger there would come down on it."""
+    frame = np.asarray(getattr(cloud, "frame", ()), dtype=np.int64).reshape(-1)
+    points = np.asarray(getattr(cloud, "points", np.zeros((0, 3))), dtype=np.float64)
+    if len(frame) != len(points) or len(frame) == 0:
+        return None
+    ids, inverse_, counts = np.unique(frame, return_inverse=True, return_counts=True)
+    if len(ids) < 3:
+        return None
+    centres = np.stack([np.bincount(inverse_, weights=points[:, k]) / counts for k in range(2)], axis=1)
+    consecutive = np.flatnonzero((np.diff(ids) == 1) & (counts[:-1] >= 10) & (counts[1:] >= 10))
+    if len(consecutive) < 2:
+        return None
+    steps = centres[consecutive + 1] - centres[consecutive]
+    direction = np.median(steps, axis=0)
+    norm = float(np.linalg.norm(direction))
+    if norm <= 1e-9:
+        return None
+    u = direction / norm
+    size = float(np.median(np.abs(steps @ u)))
+    return np.array([u[0] * size, u[1] * size, 0.0])
+
+
+def _unseen(points: np.ndarray, step: Optional[np.ndarray]) -> np.ndarray:
+    """The scene points, each standing for the surface it lies on out to (not onto) the next
+    laser line either side (``step`` of :func:`line_step`): copies of every point along the step,
+    at most 2 mm apart, so that a finger coming down where an unseen edge may stand meets them."""
+    if step is None or len(points) == 0:
+        return points
+    size = float(np.linalg.norm(step))
+    k = int(math.ceil(size / _UNSEEN_SPACING_MM))
+    if size <= 2.0 * GRAZE_MM or k < 1:
+        return points
+    offsets = np.arange(-k, k + 1)[:, None] * (np.asarray(step, dtype=np.float64) / size * (size / (k + 1)))
+    return (points[None, :, :] + offsets[:, None, :]).reshape(-1, 3)
+
+
+#: The spacing (mm) of the copies :func:`_unseen` spreads between laser lines: under a
+#: quarter of a finger's thickness, so that an unseen edge reaching that far into a finger is met.
+_UNSEEN_SPACING_MM = 2.0
+
+
+def _hits_many(
+    gripper: GripperGeometry, points: np.ndarray, T_bg: np.ndarray, openings: np.ndarray, margin_mm: float = 0.0
+) -> np.ndarray:
     """:func:`points_in_gripper` for each of the gripper poses ``T_bg`` (K, 4, 4), its fingers
     ``openings`` (K,) apart: the distances of every point to each pose's bounding sphere in one
     matrix product (single precision, the sphere 1 mm larger to cover its rounding), then the
@@ -367,7 +417,7 @@ def _hits_many(gripper: GripperGeometry, points: np.ndarray, T_bg: np.ndarray, o
     hits = np.zeros(len(T_bg), dtype=np.int64)
     for j in np.flatnonzero(np.diff(bounds)):
         local = (points[i[bounds[j] : bounds[j + 1]]] - t[j]) @ R[j]
-        hits[j] = np.count_nonzero(gripper.occupied(local, openings[j]))
+        hits[j] = np.count_nonzero(gripper.occupied(local, openings[j], margin_mm))
     return hits
 
 
@@ -378,7 +428,7 @@ def _refusal(
     the scene points and the part's own model points inside its gripper."""
     if hits > config.max_collision_points:
         return "collision"
-    if self_hits > config.max_collision_points:
+    if self_hits > 0:
         return "self-collision"
     if config.reachable is not None and not all(config.reachable(T) for _, T, _ in waypoints):
         return "reach"
@@ -528,7 +578,8 @@ def _first_usable(
     counted in ``rejected`` (a few kept in ``samples``). None when none is usable."""
     clear = [c for c, h in batch if h <= config.max_collision_points]
     poses = np.array([c[2] for c in clear]).reshape(-1, 4, 4)
-    own = dict(zip((id(c) for c in clear), _hits_many(config.gripper, part, poses, [c[5] for c in clear])))
+    own = _hits_many(config.gripper, part, poses, np.array([c[5] for c in clear]), GRAZE_MM)
+    own = dict(zip((id(c) for c in clear), own))
     for c, hits in batch:
         tilt, name, T_bg, T_bf, waypoints, opening = c
         why = _refusal(config, waypoints, hits, int(own.get(id(c), 0)), here)
@@ -547,17 +598,22 @@ def plan_grasp(
     here: np.ndarray,
     accept: Optional[Callable[[np.ndarray], bool]] = None,
     free_turn: bool = False,
+    unseen_step: Optional[np.ndarray] = None,
 ) -> tuple[PickPlan, int]:
     """The declared grasp of the part at ``T_base_object`` that is within the tilt limit,
     reachable, clear of the ``scene`` points (base frame, the part's own left out) and of the
-    part's own model at that pose (up to ``config.max_collision_points`` inside the gripper),
+    part's own model at that pose (none more than :data:`GRAZE_MM` inside the gripper),
     whose whole motion from the flange pose ``here`` passes the safety rules, and which ``accept``
     (``T_base_gripper → bool``, see :func:`grasp_filter`) accepts — of those, the one with the
     fewest scene points inside its gripper, the most vertical among equals; with that number of
     points. NoGraspError when none is. ``free_turn``: the part's turn about its continuous
     near-symmetry axis is open (the result's ``free_axis``): the grasps turn to the most upright
     about it, and the fingers' opening and the part's own collisions are checked against the part
-    at every turn (:func:`swept_points`)."""
+    at every turn (:func:`swept_points`). ``unseen_step``: the step between the scan's laser
+    lines (:func:`line_step`); each scene point then stands for its surface out to the next line
+    either side, which the scan did not see. The part's own model may not lie more than
+    :data:`GRAZE_MM` inside the gripper anywhere (the physics' measure of a touch); the scene may,
+    by up to ``config.max_collision_points`` (stray points)."""
     T_base_object, scene, here = plan_inputs(config, T_base_object, scene, here, "here")
     if accept is not None and not callable(accept):
         raise InvalidTypeError(f"accept: expected a function T_base_gripper → bool, got {type(accept).__name__}")
@@ -580,7 +636,7 @@ def plan_grasp(
     z_mid, radius = _occupied_sphere(config.gripper)
     centre = part.mean(axis=0)
     reach = abs(z_mid) + radius + float(np.linalg.norm(part - centre, axis=1).max())
-    scene = _near(scene, centre, reach)
+    scene = _unseen(_near(scene, centre, reach), unseen_step)
     samples: dict[str, list] = {}
     candidates = _candidates(config, T_base_object, rejected, samples, own is not None)
     # The grasps with scene points inside the gripper (up to max_collision_points: stray points,

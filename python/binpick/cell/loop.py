@@ -47,7 +47,7 @@ from ..poses import estimate_poses
 from ..vision import LaserWindow, triangulate
 from .config import CellConfig, check_static_poses
 from .frames import FrameSource
-from .grasp import NoGraspError, plan_bin_clash, plan_grasp, staked_filter
+from .grasp import NoGraspError, line_step, plan_bin_clash, plan_grasp, staked_filter
 from .nudge import nudge_blocked
 from .records import (
     Located,
@@ -60,10 +60,11 @@ from .records import (
     failed_record,
     located_line,
     pose_trust,
+    with_collisions,
 )
 from .shots import DepthSource, depth_scan
 from .symmetry import continuous_near_axis
-from .views import deciding_views
+from .views import deciding_first
 
 __all__ = ["Cell", "PICK_MOVES", "ProgressPrinter", "quiet"]
 
@@ -476,7 +477,13 @@ class Cell:
         try:
             free = getattr(res, "free_axis", None) is not None
             plan, hits = plan_grasp(
-                self.config, located.T_base_object, pts[others], self.robot.read_pose(), accept, free
+                self.config,
+                located.T_base_object,
+                pts[others],
+                self.robot.read_pose(),
+                accept,
+                free,
+                line_step(located.scan.cloud),
             )
         except NoGraspError as exc:
             if accept is not None and exc.reason.startswith("none") and "ambiguous" in exc.reason:
@@ -661,6 +668,7 @@ class Cell:
         for i in range(1, n + 1):
             self.progress("pick", f"— pick {i} of {n} —")
             record, stopped = self._cycle(i)
+            record = with_collisions(record, self.truth, self._last[0])
             self._passed_over += [k.T_base_object for k in record.skipped]
             records.append(record)
             if stopped is not None:
@@ -735,7 +743,7 @@ class Cell:
                     if k == len(views) - 1 or (k >= 1 and not skipped and not self._something_in_bin(scan)):
                         raise
                     if k == 0:
-                        views[1:] = self._deciding_first(views[1:], skipped)
+                        views[1:] = deciding_first(self.config, views[1:], skipped, self.progress)
                     continue
                 finally:
                     times["locate+plan"] = times.get("locate+plan", 0.0) + _ms_since(t1)
@@ -774,25 +782,3 @@ class Cell:
             np.all(p[:, :2] > lo[:2] + m, axis=1) & np.all(p[:, :2] < hi[:2] - m, axis=1) & (p[:, 2] > lo[2] + m)
         ]
         return len(inside) >= 10 and float(np.linalg.norm(np.ptp(inside, axis=0))) >= 0.2 * self.config.model.diameter
-
-    def _deciding_first(self, views: list, skipped: list[Skipped]) -> list:
-        """The look-again views, the one that best shows what tells the first ambiguous part
-        passed over from its alternatives first (:func:`binpick.cell.views.deciding_views`)."""
-        ambiguous = next((k for k in skipped if k.alternatives), None)
-        if ambiguous is None or len(views) < 2:
-            return views
-        order = deciding_views(
-            self.config.model,
-            ambiguous.T_base_object,
-            ambiguous.alternatives,
-            [v[0] for v in views],
-            self.config.calibration.T_flange_camera,
-            tolerance_mm=self.config.ambiguity_tolerance_mm,
-        )
-        T = views[order[0]][0]
-        self.progress(
-            "look",
-            f"the ambiguous {self.config.model.name} is best told apart from flange "
-            f"({T[0, 3]:.1f}, {T[1, 3]:.1f}, {T[2, 3]:.1f}) mm: looking from there first",
-        )
-        return [views[i] for i in order]

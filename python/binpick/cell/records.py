@@ -4,7 +4,7 @@ a pick plan, a pick record and a run report. Lengths in mm, transforms 4×4 ``T_
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any, Optional
 
@@ -12,7 +12,17 @@ import numpy as np
 
 from ..transforms import inverse
 
-__all__ = ["ScanResult", "PoseTruth", "Located", "Skipped", "PickPlan", "PickRecord", "RunReport", "FAILURE_KINDS"]
+__all__ = [
+    "ScanResult",
+    "PoseTruth",
+    "Located",
+    "Skipped",
+    "PickPlan",
+    "PickRecord",
+    "RunReport",
+    "FAILURE_KINDS",
+    "with_collisions",
+]
 
 #: What a failed pick attempt can have gone wrong with, in the order a pick meets them.
 FAILURE_KINDS: tuple[str, ...] = (
@@ -22,6 +32,7 @@ FAILURE_KINDS: tuple[str, ...] = (
     "nothing lifted",  # the gripper held, but no part left the bin
     "wrong pose",  # a part left the bin, but the located pose was not pick-grade or not that part's
     "fault",  # a device fault or safety refusal stopped the arm
+    "collision",  # the gripper touched a part other than the one it grasped, or the bin
 )
 
 
@@ -181,7 +192,10 @@ class PickRecord:
     the located pose and under each alternative the scan left open, one of which is the part's;
     ``free_axis_gripper``, the unit axis (gripper frame, through the part's symmetry centre)
     about which its turn is open, or None. A check at the station (a camera, a probe, a fixture
-    that only one of them fits) decides among them.
+    that only one of them fits) decides among them. ``collisions``: every contact of the gripper
+    with something other than the part it grasped during the pick's cycle, as the ground truth
+    saw it (``with``, ``points``, ``opening_mm``, the flange pose at the first touch); any makes
+    the pick a ``"collision"`` failure.
     """
 
     index: int
@@ -208,6 +222,7 @@ class PickRecord:
     nudges: tuple[Any, ...] = ()
     T_gripper_object_options: tuple[np.ndarray, ...] = ()
     free_axis_gripper: Optional[np.ndarray] = None
+    collisions: tuple[Mapping[str, Any], ...] = ()
 
     def as_dict(self) -> dict:
         """A JSON-ready summary."""
@@ -236,6 +251,7 @@ class PickRecord:
             "looks": self.looks,
             "skipped": [k.as_dict() for k in self.skipped],
             "nudges": [n.as_dict() for n in self.nudges],
+            "collisions": [dict(c) for c in self.collisions],
         }
 
 
@@ -294,6 +310,28 @@ class RunReport:
         """Failed attempts per kind of :data:`FAILURE_KINDS` (the kinds that occurred, in that order)."""
         counts = {kind: sum(r.failure == kind for r in self.records) for kind in FAILURE_KINDS}
         return {kind: n for kind, n in counts.items() if n}
+
+
+def with_collisions(record: PickRecord, truth: Any, scan: Optional[ScanResult]) -> PickRecord:
+    """``record`` with the contacts the ground truth saw during its cycle (``truth.take_collisions()``:
+    the simulator's and the twin's physics; none without one): a pick whose gripper touched
+    anything but the part it grasped failed with a ``"collision"`` whatever else it did (the
+    part may have left the bin; a failure found before is kept in the error), with the cycle's
+    last ``scan`` for its picture."""
+    take = getattr(truth, "take_collisions", None)
+    touched = tuple(MappingProxyType(dict(c)) for c in (take() if take is not None else ()))
+    if not touched:
+        return record
+    what = "; ".join(f"{c['with']} ({c['points']} points inside the gripper)" for c in touched)
+    before = f"; and {record.failure}: {record.error}" if record.failure else ""
+    return replace(
+        record,
+        success=False,
+        failure="collision",
+        error=f"the gripper touched {what}{before}",
+        collisions=touched,
+        scan=record.scan if record.scan is not None else scan,
+    )
 
 
 def failed_record(

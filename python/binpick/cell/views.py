@@ -18,7 +18,7 @@ from ..transforms import rotation_about
 if TYPE_CHECKING:  # annotations only: config imports this module
     from .config import CellConfig
 
-__all__ = ["turned_scan_poses", "deciding_views"]
+__all__ = ["turned_scan_poses", "deciding_views", "deciding_first"]
 
 
 def turned_scan_poses(config: CellConfig, *, tilt_deg: float = 20.0) -> tuple[np.ndarray, ...]:
@@ -87,3 +87,28 @@ def deciding_views(
         to_cam /= np.linalg.norm(to_cam, axis=1, keepdims=True)
         scores.append(float(np.clip((n * to_cam).sum(axis=1), 0.0, None).sum()))
     return sorted(range(len(views)), key=lambda i: -scores[i])
+
+
+def deciding_first(config: CellConfig, views: list, skipped: Sequence, progress) -> list:
+    """The look-again ``views`` (each a tuple whose first item is the flange pose), the one that
+    best shows what tells the first ambiguous part of ``skipped`` (the parts passed over, see
+    :class:`binpick.cell.records.Skipped`) from its alternatives first (:func:`deciding_views`);
+    ``progress(stage, text)`` says which."""
+    ambiguous = next((k for k in skipped if k.alternatives), None)
+    if ambiguous is None or len(views) < 2:
+        return views
+    order = deciding_views(
+        config.model,
+        ambiguous.T_base_object,
+        ambiguous.alternatives,
+        [v[0] for v in views],
+        config.calibration.T_flange_camera,
+        tolerance_mm=config.ambiguity_tolerance_mm,
+    )
+    T = views[order[0]][0]
+    progress(
+        "look",
+        f"the ambiguous {config.model.name} is best told apart from flange "
+        f"({T[0, 3]:.1f}, {T[1, 3]:.1f}, {T[2, 3]:.1f}) mm: looking from there first",
+    )
+    return [views[i] for i in order]

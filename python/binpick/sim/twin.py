@@ -48,6 +48,7 @@ from ..models import Model
 from ..transforms import inverse, look_down, rotation_angle_deg
 from .camera import SimCamera
 from .cell import Cell as Layout
+from .contacts import contacts_along
 from .pile import Pile, PushReport
 
 #: The gripper counts as closed (a pushing tool) when its fingers are at most this far apart, mm.
@@ -55,6 +56,10 @@ CLOSED_OPENING_MM = 10.0
 #: A part's surface more than this far inside a finger (mm) means the finger came down on the
 #: part instead of beside it: no grip. Twice the planner's :data:`binpick.cell.grasp.GRAZE_MM`.
 FINGER_LANDING_MM = 1.0
+
+#: Most model points per part the contact check uses (evenly thinned): their spacing on the
+#: part's surface is well under a finger's thickness.
+CONTACT_POINTS = 3000
 
 #: Fastest sweep the physics is asked to run, mm/s: faster motions are pushed at this speed.
 MAX_SWEEP_SPEED = 1000.0
@@ -273,7 +278,17 @@ class TwinWorld:
         self._held: Optional[int] = None
         self._release_pending: Optional[int] = None
         self._picked: Optional[int] = None
-        self._pushes: list[tuple[np.ndarray, float, float]] = []
+        # Motions queued for the physics, in order: (gripper path, opening, push speed or -1 for
+        # a contact check, first flange pose, the part not checked).
+        self._pushes: list[tuple] = []
+        #: Every contact of the gripper with a part other than the one held, or with the bin
+        #: (:mod:`binpick.sim.contacts`), in order: ``with``, ``points``, ``opening_mm``,
+        #: ``T_base_flange`` and ``T_base_gripper`` (at the first touch), ``T_base_flange_start``
+        #: (the motion's start).
+        self.collisions: list[dict] = []
+        self._new_collisions: list[dict] = []
+        pts = np.asarray(model.points, dtype=np.float64)
+        self._contact_points = pts[:: max(1, len(pts) // CONTACT_POINTS)]
         #: Every sweep of the closed, empty gripper through the bin the physics ran, in order.
         self.pushes: list[PushReport] = []
         self.config = self._config(self.limits)
@@ -409,8 +424,9 @@ class TwinWorld:
         """The part between the fingers now, if any, and its width across them (mm): the part
         nearest the TCP whose pose in the gripper is within the grip tolerance of a declared grasp,
         and which fits between the fingers as they are open now — a part wider than the opening,
-        or off to one side of it, had a finger land on it on the way in and is not held."""
-        self.settle_pending()
+        or off to one side of it, had a finger land on it on the way in and is not held. (The
+        contact checks of the motions since the last push wait: the gripper's reply must not.)"""
+        self.settle_pending(contacts=False)
         matcher = self.grasp_matcher
         T_bg = self.T_base_tcp()
         T_gb = inverse(T_bg)
@@ -459,14 +475,21 @@ class TwinWorld:
 
     def _on_motion(self, T_base_flange: np.ndarray, speed: float) -> None:
         """The robot emulator's motion hook (its serving thread, its lock held: nothing here may
-        call back into it): a motion of the closed, empty gripper that sweeps any of its points
-        through the bin's inner volume is queued to push the pile (run by :meth:`settle_pending`)."""
-        if self._held is not None or self.gripper_emulator is None or speed <= 0:
+        call back into it). A motion of the closed, empty gripper that sweeps any of its points
+        through the bin's inner volume is queued to push the pile; any other motion is queued to
+        be checked for contacts (:mod:`binpick.sim.contacts`). Both run in order, against the
+        pile as the motions before left it, in :meth:`settle_pending`."""
+        if self.gripper_emulator is None:
             return
         opening = self.finger_opening_mm()
-        if opening > CLOSED_OPENING_MM:
-            return
         path = T_base_flange @ self.gripper_geometry.T_flange_gripper
+        if self._held is not None or opening > CLOSED_OPENING_MM:
+            # The part held (or let go and not yet out of the pile) is where the fingers are.
+            skip = self._held if self._held is not None else self._release_pending
+            self._pushes.append((path, opening, -1.0, T_base_flange[0], skip))
+            return
+        if speed <= 0:
+            return
         outline = self.gripper_geometry.outline(max(opening, 1.0))
         pts = np.einsum("kij,mj->kmi", path[:, :3, :3], outline) + path[:, None, :3, 3]
         lo, hi = self.layout.bin.bounds
@@ -482,16 +505,56 @@ class TwinWorld:
             angles = np.radians(rotation_angle_deg(turns))
             travel = float((np.linalg.norm(np.diff(path[:, :3, 3], axis=0), axis=1) + angles * reach).sum())
             tool_speed = travel * speed / flange
-            self._pushes.append((path, opening, min(max(tool_speed, 1.0), MAX_SWEEP_SPEED)))
+            self._pushes.append((path, opening, min(max(tool_speed, 1.0), MAX_SWEEP_SPEED), None, None))
 
-    def _run_pushes(self) -> None:
-        """Runs the queued sweeps; sweeps that follow on from each other (one ends where the next
-        starts, same opening and speed) run as one push, as the arm makes them without a pause
-        long enough for the pile to settle."""
+    def _check_contacts(self, path: np.ndarray, opening: float, T_start: np.ndarray, skip: Optional[int]) -> None:
+        """Records every contact of the open (or holding) gripper along ``path`` (gripper poses)."""
+        T_bf = path @ inverse(self.gripper_geometry.T_flange_gripper)
+        for c in contacts_along(
+            self.gripper_geometry,
+            path,
+            opening,
+            zip(self.pile.ids, np.asarray(self.pile.poses)),
+            self._contact_points,
+            bounds=self.layout.bin.bounds,
+            wall_mm=self.layout.bin.wall_thickness,
+            held=skip,
+        ):
+            event = {
+                "with": c.what,
+                "points": c.points,
+                "opening_mm": round(float(opening), 2),
+                "T_base_flange": np.round(T_bf[c.first], 6).tolist(),
+                "T_base_gripper": np.round(path[c.first], 6).tolist(),
+                "T_base_flange_start": np.round(T_start, 6).tolist(),
+            }
+            self.collisions.append(event)
+            self._new_collisions.append(event)
+            self.progress("COLLISION", f"the gripper touches {c.what} ({c.points} points inside it)")
+
+    def _run_pushes(self, contacts: bool = True) -> None:
+        """Runs the queued motions in order: contact checks, and sweeps of the closed gripper
+        through the pile; sweeps that follow on from each other (one ends where the next starts,
+        same opening and speed) run as one push, as the arm makes them without a pause long
+        enough for the pile to settle. ``contacts=False``: only up to the last sweep queued
+        (the contact checks after it need nothing that happens before they run)."""
+        if not contacts:  # only as far as the last push: the checks after it wait for the pile as it is
+            pushes = [k for k, item in enumerate(self._pushes) if item[2] >= 0]
+            if not pushes:
+                return
+            later, self._pushes = self._pushes[pushes[-1] + 1 :], self._pushes[: pushes[-1] + 1]
+            try:
+                self._run_pushes()
+            finally:
+                self._pushes = later + self._pushes
+            return
         while self._pushes:
-            path, opening, speed = self._pushes.pop(0)
+            path, opening, speed, T_start, skip = self._pushes.pop(0)
+            if speed < 0:
+                self._check_contacts(path, opening, T_start, skip)
+                continue
             while self._pushes:
-                nxt, o2, v2 = self._pushes[0]
+                nxt, o2, v2, _, _ = self._pushes[0]
                 if abs(o2 - opening) > 0.5 or abs(v2 - speed) > 0.05 * speed or np.abs(nxt[0] - path[-1]).max() > 1e-3:
                     break
                 self._pushes.pop(0)
@@ -505,12 +568,13 @@ class TwinWorld:
                 f"({report.push_steps} steps, settled in {time.perf_counter() - t0:.1f} s)",
             )
 
-    def settle_pending(self) -> None:
+    def settle_pending(self, contacts: bool = True) -> None:
         """Runs the gripper's queued sweeps through the pile, takes a released part out of the
         pile and lets the rest settle (done lazily: by the camera before it renders, the judge, or
-        the twin process's world ticks)."""
+        the twin process's world ticks); the queued contact checks too, unless ``contacts`` is
+        False (then those after the last sweep wait)."""
         with self.lock:
-            self._run_pushes()
+            self._run_pushes(contacts)
             pid = self._release_pending
             if pid is not None:
                 self._release_pending = None
@@ -551,6 +615,13 @@ class TwinWorld:
         self.settle_pending()
         pid, self._picked = self._picked, None
         return pid
+
+    def take_collisions(self) -> list[dict]:
+        """The gripper's contacts (:attr:`collisions` entries) since the last call."""
+        self.settle_pending()
+        with self.lock:
+            new, self._new_collisions = self._new_collisions, []
+        return new
 
 
 class SimulatedCell(TwinWorld):

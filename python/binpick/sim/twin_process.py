@@ -41,7 +41,6 @@ from ..cell.shots import EyeToHand
 from ..devices.xyzabc import xyzabc_from_transform
 from ..errors import BinpickError
 from ..models import Model
-from ..transforms import inverse
 from .camera import SimCamera
 from .render import World
 from .sensors import DepthCamera, render_depth
@@ -54,9 +53,6 @@ BALL_ID = 9999
 
 #: The version of world.json's layout.
 WORLD_VERSION = 1
-
-#: Most model points checked against the gripper per part and tick (evenly thinned).
-_CONTACT_POINTS = 400
 
 
 def _toml_list(values: Any) -> str:
@@ -236,11 +232,10 @@ class CellTwin:
         self.fixed = fixed_camera(self.world.layout.bin.bounds) if camera == "fixed" else None
         self.tool = tool
         self.camera: Optional[_CameraServer] = None
-        self.collisions: list[dict] = []
-        self._contact: set[str] = set()
+        self.alarms: list[dict] = []
+        self._alarm: Optional[str] = None
         self._last_world = ""
         self._t0 = time.time()
-        self._points = model.points[:: max(1, len(model.points) // _CONTACT_POINTS)]
 
     @property
     def cell_file(self) -> Path:
@@ -403,48 +398,23 @@ center_mm = {_toml_list(board.center)}   # the centre of the corner grid, base f
             ],
             "removed": [int(i) for i in w.removed],
             "held": w.held,
-            "collisions": list(self.collisions),
+            "collisions": list(w.collisions) + list(self.alarms),
             "T_base_flange": w.robot_emulator.pose().tolist(),
             "laser_angle": w.laser_angle(),
             "frames_served": 0 if self.camera is None else self.camera.frames,
         }
 
     def _check_contacts(self) -> None:
-        """Records each new contact: a robot alarm, the gripper (fingers open as far as the
-        emulator has them, palm, flange) inside a bin wall or under its floor, a finger or the
-        palm inside a part other than the one held."""
-        w = self.world
-        now: dict[str, int] = {}
-        alarm = w.robot_emulator.alarm
-        if alarm:
-            now[f"robot alarm {alarm}"] = 0
-        T_bg = w.T_base_tcp()
-        opening = w.finger_opening_mm()
-        g = w.gripper_geometry
-        outline = g.outline(max(opening, 1.0)) @ T_bg[:3, :3].T + T_bg[:3, 3]
-        lo, hi = w.layout.bin.bounds
-        t = w.layout.bin.wall_thickness
-        in_outer = ((outline[:, :2] >= lo[:2] - t) & (outline[:, :2] <= hi[:2] + t)).all(axis=1)
-        in_outer &= (outline[:, 2] >= lo[2] - t) & (outline[:, 2] <= hi[2])
-        in_inner = ((outline >= lo) & (outline <= hi)).all(axis=1)
-        n_bin = int((in_outer & ~in_inner).sum())
-        if n_bin:
-            now["bin"] = n_bin
-        T_gb = inverse(T_bg)
-        for pid, T_bo in zip(w.pile.ids, np.asarray(w.pile.poses)):
-            if int(pid) == w.held:
-                continue
-            T_go = T_gb @ T_bo
-            inside = int(g.occupied(self._points @ T_go[:3, :3].T + T_go[:3, 3]).sum())
-            if inside:
-                now[f"part {int(pid)}"] = inside
-        for what, n in now.items():
-            if what not in self._contact:
-                event = {"time_s": round(time.time() - self._t0, 3), "with": what, "points": n}
-                event["T_base_flange"] = w.robot_emulator.pose().tolist()
-                self.collisions.append(event)
-                self.progress("COLLISION", f"the gripper touches {what} ({n} points)")
-        self._contact = set(now)
+        """Records each new robot alarm (the world records the gripper's contacts along every
+        motion itself: :attr:`TwinWorld.collisions`)."""
+        alarm = self.world.robot_emulator.alarm
+        what = f"robot alarm {alarm}" if alarm else None
+        if what is not None and what != self._alarm:
+            event = {"time_s": round(time.time() - self._t0, 3), "with": what, "points": 0}
+            event["T_base_flange"] = self.world.robot_emulator.pose().tolist()
+            self.alarms.append(event)
+            self.progress("ALARM", f"the robot reports {what}")
+        self._alarm = what
 
     def run(self, stop: threading.Event, *, tick_s: float = 0.1) -> None:
         """Ticks the world until ``stop`` is set."""
