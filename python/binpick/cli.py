@@ -11,7 +11,8 @@
     binpick calibrate  camera intrinsics from a folder of checkerboard images
     binpick bench      run the benchmarks of a source checkout
 
-Exit codes: 0 done, 1 failed (the message says why), 2 bad usage or input.
+Exit codes: 0 done, 1 failed (the message says why), 2 bad usage or input (checkerboard images that
+cannot give intrinsics to trust included: ``binpick calibrate`` names each cause and its flag).
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, Optional
 
+from ._cli_calibrate import _add_calibrate
 from ._cli_parts import _model, _Usage, collision_exit, run_bench
 from .errors import BinpickError, InvalidInputError, NoObjectFound
 
@@ -444,116 +446,6 @@ def _viewpoint_option(args: argparse.Namespace, stated: Any) -> Any:
     return stated
 
 
-# --------------------------------------------------------------------------- calibrate
-
-
-def _calibrate(args: argparse.Namespace) -> int:
-    target = args.target
-    if target[0] == "capture":
-        if len(target) != 2:
-            raise _Usage("calibrate capture: give one cell file, e.g. `binpick calibrate capture cell.toml --out DIR`")
-        return _calibrate_capture(target[1], args)
-    if target[0] == "solve":
-        if len(target) != 2:
-            raise _Usage(
-                "calibrate solve: give one capture folder, e.g. `binpick calibrate solve DIR --out calibration.toml`"
-            )
-        return _calibrate_solve(target[1], args)
-    if target[0] == "compare":
-        if len(target) != 3:
-            raise _Usage(
-                "calibrate compare: give the solved and the true calibration, e.g. "
-                "`binpick calibrate compare calibration.toml true_calibration.toml`"
-            )
-        return _calibrate_compare(target[1], target[2])
-    if len(target) != 1:
-        raise _Usage(
-            "calibrate: give one folder of checkerboard images, or `capture CELL.toml`, `solve DIR` "
-            "or `compare CALIBRATION TRUTH`"
-        )
-    if args.out is not None:
-        raise _Usage("--out: applies to `calibrate capture` and `calibrate solve`; FOLDER's intrinsics print as JSON")
-    return _calibrate_folder(args)
-
-
-def _calibrate_capture(cell_path: str, args: argparse.Namespace) -> int:
-    from .cell import ProgressPrinter, load_cell_file
-    from .cell.cell_file import capture_calibration
-
-    if args.out is None:
-        raise _Usage("calibrate capture: --out DIR is required (the folder the frames and manifest go to)")
-    manifest, stations = capture_calibration(load_cell_file(cell_path), args.out, progress=ProgressPrinter())
-    print(f"wrote {manifest} ({stations} stations)", file=sys.stderr)
-    return 0
-
-
-def _calibrate_solve(folder: str, args: argparse.Namespace) -> int:
-    from .calibration import eye_to_hand
-    from .calibration.solve import solve
-
-    if eye_to_hand.is_capture(folder):  # a fixed camera's: its pose in the base frame
-        print(eye_to_hand.solve_to_file(folder, args.out or "eye_to_hand.toml"))
-        return 0
-    out = Path(args.out or "calibration.toml")
-    solution = solve(folder)
-    solution.save(out)
-    print(solution.summary())
-    print(f"wrote {out} and {out.with_name(out.stem + '_residuals.png')}", file=sys.stderr)
-    return 0
-
-
-def _calibrate_compare(solved: str, truth: str) -> int:
-    """``binpick calibrate compare``: the errors against the targets; exit 1 when one is missed."""
-    from .calibration import CellCalibration
-    from .calibration.compare import captured_angles, compare_calibrations
-
-    if "[eye_to_hand]" in Path(solved).read_text(errors="replace"):  # a fixed camera's pose
-        from .calibration.eye_to_hand import compare_files
-
-        table, failures = compare_files(solved, truth)
-        print(table)
-    else:
-        captured = captured_angles(solved)
-        result = compare_calibrations(CellCalibration.load(solved), CellCalibration.load(truth), captured=captured)
-        print(result.table())
-        failures = result.failures
-    for failure in failures:
-        print(f"binpick calibrate compare: {failure}", file=sys.stderr)
-    return 1 if failures else 0
-
-
-def _calibrate_folder(args: argparse.Namespace) -> int:
-    import cv2
-
-    from .calibration import calibrate_camera
-
-    folder = Path(args.target[0])
-    if not folder.is_dir():
-        raise _Usage(f"folder: {folder} is not a folder of checkerboard images")
-    try:
-        cols, rows = (int(v) for v in args.pattern.lower().split("x"))
-    except ValueError:
-        raise _Usage(f"--pattern: {args.pattern!r} is not COLSxROWS of inner corners, e.g. 9x6") from None
-    paths = sorted(
-        p for p in folder.iterdir() if p.suffix.lower() in (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
-    )
-    images = [cv2.imread(str(p), cv2.IMREAD_COLOR) for p in paths]
-    res = calibrate_camera([im for im in images if im is not None], (cols, rows), args.square)
-    cam = res.camera
-    doc = {
-        "width": cam.width,
-        "height": cam.height,
-        "K": cam.K.tolist(),
-        "dist": cam.dist.tolist(),
-        "rms_px": res.rms,
-        "views": [paths[i].name for i in res.views],
-        "per_view_rms_px": res.per_view_rms.tolist(),
-    }
-    print(json.dumps(doc, indent=1))
-    print(f"{len(res.views)} of {len(paths)} images used, reprojection RMS {res.rms:.3f} px", file=sys.stderr)
-    return 0
-
-
 # --------------------------------------------------------------------------- parser
 
 
@@ -723,26 +615,6 @@ def _add_reconstruct(sub: Any) -> None:
     r.set_defaults(run=_reconstruct_command)
 
 
-def _add_calibrate(sub: Any) -> None:
-    """``binpick calibrate``."""
-    c = sub.add_parser(
-        "calibrate",
-        help="calibrate the cell (capture, solve) or a camera from checkerboard images",
-        description="binpick calibrate FOLDER: finds the checkerboard in every image of FOLDER and prints the "
-        "intrinsics as JSON. binpick calibrate capture CELL.toml --out DIR: drives the cell through the calibration "
-        "plan (board views, laser sweeps over the board; the board from the cell file's [calibration_board] table) "
-        "and saves frames, poses and angles. binpick calibrate solve DIR --out calibration.toml: solves intrinsics, "
-        "hand-eye (all five OpenCV methods) and the laser sheet, writes the calibration and a PNG of the residuals. "
-        "binpick calibrate compare CALIBRATION TRUTH: prints a solved calibration's errors against a known one (a "
-        "twin's true_calibration.toml) and the commissioning targets; exit 1 when one is missed.",
-    )
-    c.add_argument("target", nargs="+", metavar="FOLDER | capture CELL.toml | solve DIR | compare CALIBRATION TRUTH")
-    c.add_argument("--out", default=None, help="capture: the folder to write; solve: the calibration file")
-    c.add_argument("--pattern", default="9x6", help="inner corners COLSxROWS (default 9x6)")
-    c.add_argument("--square", type=float, default=20.0, help="square size, mm (default 20)")
-    c.set_defaults(run=_calibrate)
-
-
 def _add_bench(sub: Any) -> None:
     """``binpick bench``."""
     b = sub.add_parser("bench", help="run the benchmarks of a source checkout")
@@ -753,8 +625,9 @@ def _add_bench(sub: Any) -> None:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Runs ``binpick`` with ``argv`` (without the program name; default ``sys.argv[1:]``); returns the exit code:
-    0 done, 1 a fault, a safety refusal or another error, 2 bad input, 3 no object found, 4 a pick run in
-    which the gripper collided, 130 interrupted."""
+    0 done, 1 a fault, a safety refusal or another error, 2 bad input (checkerboard images that cannot give
+    intrinsics to trust included), 3 no object found, 4 a pick run in which the gripper collided, 130
+    interrupted."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] in _FORWARDED:
         module, entry = _FORWARDED[argv[0]]

@@ -21,6 +21,7 @@ __all__ = [
     "MeshFileNotFoundError",
     "FileWriteError",
     "CalibrationError",
+    "UntrustedCalibrationError",
     "NoObjectFound",
     "DeviceError",
     "DeviceTimeout",
@@ -33,6 +34,7 @@ __all__ = [
     "ScanFormatError",
     "SingularGeometryError",
     "DegenerateModelWarning",
+    "UntrustedCalibrationWarning",
 ]
 
 
@@ -86,6 +88,17 @@ class FileWriteError(BinpickError, OSError):
 
 class CalibrationError(InvalidInputError):
     """A calibration file or calibration data is missing, inconsistent or insufficient."""
+
+
+class UntrustedCalibrationError(CalibrationError):
+    """A calibration was made but cannot be trusted (too few views, too alike, too little of the
+    image covered, a large residual or an uncertain focal length); the message names each cause
+    and its fix. ``quality`` holds the figures, ``calibration`` the result refused."""
+
+    def __init__(self, message: str, calibration: object = None) -> None:
+        super().__init__(message)
+        self.calibration = calibration
+        self.quality = getattr(calibration, "quality", None)
 
 
 class NoObjectFound(BinpickError):
@@ -142,6 +155,11 @@ class UnknownReplyError(ProtocolError):
 
 
 __all__ += ["TruncatedReplyError", "UnknownReplyError"]
+
+
+class UntrustedCalibrationWarning(UserWarning):
+    """A calibration that cannot be trusted was kept on request (``accept_untrusted=True``);
+    the warning names each cause."""
 
 
 class DegenerateModelWarning(UserWarning):

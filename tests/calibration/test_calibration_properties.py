@@ -10,6 +10,7 @@ InvalidInputError naming the argument)."""
 from __future__ import annotations
 
 import math
+import warnings
 
 import cv2
 import numpy as np
@@ -20,6 +21,7 @@ from hypothesis import strategies as st
 from _properties import PROPERTY, anything, finite, ints, mostly, outcome, reals, rigid, transforms, vectors
 from binpick import errors
 from binpick.calibration import (
+    CalibrationLimits,
     CellCalibration,
     axis_depth,
     board_object_points,
@@ -110,11 +112,20 @@ def test_property_board_pose(corners, which, camera, pattern, square):
     square=reals(-1, 50),
     flags=ints(-1, 2**20),
     min_views=ints(-1, 5),
+    accept=st.one_of(st.booleans(), anything),
 )
-def test_property_calibrate_camera(imgs, pattern, square, flags, min_views):
-    cal = outcome(lambda: calibrate_camera(imgs, pattern, square, flags=flags, min_views=min_views), "calibrate_camera")
+def test_property_calibrate_camera(imgs, pattern, square, flags, min_views, accept):
+    def call():
+        limits = CalibrationLimits(min_views=min_views)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", errors.UntrustedCalibrationWarning)
+            return calibrate_camera(imgs, pattern, square, flags=flags, limits=limits, accept_untrusted=accept)
+
+    cal = outcome(call, "calibrate_camera")
     if cal is not None:
-        assert finite(cal.camera.K) and cal.rms >= 0 and len(cal.views) >= max(1, min_views)
+        assert finite(cal.camera.K) and cal.rms >= 0 and len(cal.views) >= 1
+        assert cal.trusted or accept is True  # an untrusted result only when asked for
+        assert cal.trusted == (len(cal.views) >= min_views and not cal.quality.problems)
 
 
 def _stations(n, seed=1):
@@ -262,11 +273,11 @@ FOUND = [
     (lambda: board_pose(np.zeros((12, 2)), None, PATTERN, 10.0), "camera"),
     (lambda: find_checkerboard(BOARD, (10**5, 10**5)), "pattern"),
     (lambda: calibrate_camera([BOARD] * 3, PATTERN, 10.0, flags=-1), "flags"),
-    (lambda: calibrate_camera([BOARD] * 3, PATTERN, 10.0, min_views="3"), "min_views"),
+    (lambda: calibrate_camera([BOARD] * 3, PATTERN, 10.0, limits=CalibrationLimits(min_views="3")), "min_views"),
     (lambda: calibrate_camera([BOARD] * 3, PATTERN, 10.0, flags=cv2.CALIB_RATIONAL_MODEL), "flags"),
     (lambda: calibrate_camera([BOARD] * 3, PATTERN, 10.0, flags=cv2.CALIB_USE_INTRINSIC_GUESS), "flags"),
     (lambda: calibrate_camera([BOARD] * 3, PATTERN, 10.0, flags=2**40), "flags"),
-    (lambda: calibrate_camera([BOARD] * 3, PATTERN, 10.0, min_views=0), "min_views"),
+    (lambda: calibrate_camera([BOARD] * 3, PATTERN, 10.0, limits=CalibrationLimits(min_views=0)), "min_views"),
     (lambda: fit_plane(PLANE, seed=-1), "seed"),
     (lambda: fit_plane(PLANE, seed=1.5), "seed"),
     (lambda: fit_plane(PLANE, iterations=10**9), "iterations"),
@@ -297,9 +308,14 @@ def test_board_pose_of_a_small_board_finds_the_rendered_pose(corners):
 
 
 def test_calibrate_camera_with_allowed_flags_keeps_them():
-    """A fixed principal point stays at the image centre the guess starts from."""
+    """A fixed principal point stays at the image centre the guess starts from. Three copies of
+    one view cannot be trusted (and are refused by default); they are kept here knowingly, to
+    see the flags passed on."""
     flags = cv2.CALIB_FIX_PRINCIPAL_POINT | cv2.CALIB_ZERO_TANGENT_DIST
-    cal = calibrate_camera([BOARD] * 3, PATTERN, 10.0, flags=flags)
+    with pytest.raises(errors.UntrustedCalibrationError, match="planes differ by at most 0.0°"):
+        calibrate_camera([BOARD] * 3, PATTERN, 10.0, flags=flags)
+    with pytest.warns(errors.UntrustedCalibrationWarning, match="found in only 3 views"):
+        cal = calibrate_camera([BOARD] * 3, PATTERN, 10.0, flags=flags, accept_untrusted=True)
     assert cal.camera.dist[2] == 0.0 and cal.camera.dist[3] == 0.0
     assert abs(cal.camera.cx - 79.5) < 1.0 and abs(cal.camera.cy - 59.5) < 1.0
 

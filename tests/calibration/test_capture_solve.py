@@ -12,6 +12,7 @@ from contextlib import ExitStack
 import numpy as np
 import pytest
 
+from binpick._validate import parse_toml
 from binpick.calibration import CellCalibration
 from binpick.calibration.capture import calibration_plan, capture
 from binpick.calibration.solve import load_capture, solve
@@ -97,6 +98,13 @@ def test_saved_calibration_loads_and_has_residuals(captured, tmp_path):
     text = path.read_text()
     for table in ("[residuals.camera]", "[residuals.hand_eye]", "[residuals.laser]"):
         assert table in text
+    # How far the intrinsics can be trusted, with the limits they were judged by: the plan's 32
+    # board frames (28 board views, 4 laser stations) pass the default limits with room to spare.
+    quality = parse_toml(text, str(path), CalibrationError)["quality"]["camera"]
+    assert quality["trusted"] is True and quality["warnings"] == [] and quality["views"] == quality["images"] == 32
+    assert quality["coverage"] > 0.4 and quality["tilt_spread_deg"] > 40 and quality["focal_sigma_pct"] < 0.1
+    assert quality["limits"]["min_views"] == 8 and quality["limits"]["max_rms_px"] == 0.5
+    assert "focal 1-sigma" in solution.summary() and "trusted" in solution.summary()
     assert (tmp_path / "calibration_residuals.png").stat().st_size > 10_000
     assert "daniilidis" in solution.summary()
 
@@ -150,6 +158,26 @@ def test_cli_solve_prints_the_table_and_writes_the_files(captured, tmp_path, cap
     assert (tmp_path / "calibration_residuals.png").exists()
     for word in ("fx", "tsai", "park", "horaud", "andreff", "daniilidis", "laser", "table 1"):
         assert word in printed.out
+
+
+def test_cli_solve_refuses_untrusted_intrinsics_and_keeps_them_on_request(captured, tmp_path, capsys):
+    """The capture's 32 views judged against a limit they miss (33 views): refused, exit 2 and
+    nothing written; with --accept-untrusted solved, the warning on stderr and in the file."""
+    from binpick.cli import main
+
+    out = tmp_path / "calibration.toml"
+    args = ["calibrate", "solve", str(captured[0]), "--out", str(out), "--min-views", "33"]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "found in only 32 views; at least 33 are needed" in err and "--accept-untrusted" in err
+    assert not out.exists()
+    assert main([*args, "--accept-untrusted"]) == 0
+    printed = capsys.readouterr()
+    assert "WARNING: this camera calibration CANNOT BE TRUSTED" in printed.err and "NOT TRUSTED" in printed.out
+    quality = parse_toml(out.read_text(), str(out), CalibrationError)["quality"]["camera"]
+    assert quality["trusted"] is False and quality["limits"]["min_views"] == 33
+    assert len(quality["warnings"]) == 1 and "at least 33 are needed" in quality["warnings"][0]
+    assert CellCalibration.load(out).camera.width == captured[3].camera.width
 
 
 def test_cli_capture_refuses_a_plan_outside_the_cell_file_limits(tmp_path, capsys):

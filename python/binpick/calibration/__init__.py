@@ -5,7 +5,15 @@ from __future__ import annotations
 
 from ..camera import CameraIntrinsics
 from ._file import FORMAT_VERSION, CellCalibration
-from .camera import CameraCalibration, board_object_points, board_pose, calibrate_camera, find_checkerboard
+from .camera import (
+    CalibrationLimits,
+    CalibrationQuality,
+    CameraCalibration,
+    board_object_points,
+    board_pose,
+    calibrate_camera,
+    find_checkerboard,
+)
 from .hand_eye import HAND_EYE_METHODS, HandEyeCalibration, calibrate_hand_eye
 from .laser import LaserCalibration, fit_plane, laser_points_on_board
 from .projector import ProjectorCalibration, axis_depth, calibrate_projector
@@ -13,6 +21,8 @@ from .projector import ProjectorCalibration, axis_depth, calibrate_projector
 __all__ = [
     "FORMAT_VERSION",
     "HAND_EYE_METHODS",
+    "CalibrationLimits",
+    "CalibrationQuality",
     "CameraCalibration",
     "CameraIntrinsics",
     "CellCalibration",

@@ -2,17 +2,28 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Optional
 
 import cv2
 import numpy as np
 
-from .._validate import as_float_array, as_image, as_points, count, instance_of, positive
+from .._validate import as_float_array, as_image, as_points, count, flag, instance_of, positive
 from ..camera import CameraIntrinsics
-from ..errors import CalibrationError, InvalidInputError
+from ..errors import CalibrationError, InvalidInputError, UntrustedCalibrationError, UntrustedCalibrationWarning
+from .quality import CalibrationLimits, CalibrationQuality, assess
 
-__all__ = ["CameraCalibration", "board_object_points", "board_pose", "calibrate_camera", "find_checkerboard"]
+__all__ = [
+    "CalibrationLimits",
+    "CalibrationQuality",
+    "CameraCalibration",
+    "board_object_points",
+    "board_pose",
+    "calibrate_camera",
+    "find_checkerboard",
+]
 
 
 #: Most inner corners a checkerboard may have along one side: printed boards have tens, and
@@ -159,7 +170,8 @@ class CameraCalibration:
     ``camera``: the intrinsics; ``rms``: the RMS reprojection error over all corners (pixels);
     ``per_view_rms``: that error per used view; ``views``: indices of the images where the
     board was found; ``T_camera_boards``: the board pose in each used view; ``corners``: the
-    corners found in each used view, (N, 2) px.
+    corners found in each used view, (N, 2) px; ``quality``: how far it can be trusted (figures,
+    limits, problems; see :class:`CalibrationQuality`).
     """
 
     camera: CameraIntrinsics
@@ -168,9 +180,16 @@ class CameraCalibration:
     views: np.ndarray
     T_camera_boards: tuple[np.ndarray, ...]
     corners: tuple[np.ndarray, ...] = ()
+    quality: Optional[CalibrationQuality] = None
+
+    @property
+    def trusted(self) -> bool:
+        """Whether every quality figure is within its limit."""
+        return self.quality is not None and self.quality.trusted
 
     def __repr__(self) -> str:
-        return f"CameraCalibration({self.camera!r}, rms={self.rms:.3f} px over {len(self.views)} views)"
+        trust = "" if self.quality is None else (", trusted" if self.quality.trusted else ", NOT TRUSTED")
+        return f"CameraCalibration({self.camera!r}, rms={self.rms:.3f} px over {len(self.views)} views{trust})"
 
 
 def calibrate_camera(
@@ -179,18 +198,32 @@ def calibrate_camera(
     square: float,
     *,
     flags: int = 0,
-    min_views: int = 3,
     orient: bool = False,
+    limits: Optional[CalibrationLimits] = None,
+    accept_untrusted: bool = False,
 ) -> CameraCalibration:
-    """Intrinsics and distortion ``[k1, k2, p1, p2, k3]`` from checkerboard images.
+    """Intrinsics and distortion ``[k1, k2, p1, p2, k3]`` from checkerboard images, judged.
 
     ``pattern`` is (columns, rows) of inner corners, ``square`` the square size in mm. Images
-    where the board is not found are skipped; fewer than ``min_views`` usable views is an error.
-    The reprojection error is reported overall and per view. ``orient``: see :func:`find_checkerboard`
-    (needed when the board poses are used together, as hand-eye does).
+    where the board is not found are skipped. The reprojection error is reported overall and per
+    view. ``orient``: see :func:`find_checkerboard` (needed when the board poses are used
+    together, as hand-eye does).
+
+    The result is judged against ``limits`` (default :class:`CalibrationLimits`: at least 8
+    views and the board in half of the images, 25 % of the image covered, board planes 20° apart,
+    reprojection RMS 0.5 px, focal length 1-sigma 0.5 %; the reasons are in its doc). When one is
+    missed, :class:`~binpick.errors.UntrustedCalibrationError` names each cause and its fix
+    (``exc.calibration`` is the result refused); with ``accept_untrusted=True`` the result is
+    returned with an :class:`~binpick.errors.UntrustedCalibrationWarning` instead. Either way
+    ``result.quality`` holds the figures.
     """
     flags = _flags(flags)
-    min_views = count(min_views, "min_views", 1)
+    limits = (
+        CalibrationLimits()
+        if limits is None
+        else instance_of(limits, CalibrationLimits, "limits", "CalibrationLimits(min_views=8)")
+    )
+    accept_untrusted = flag(accept_untrusted, "accept_untrusted")
     imgs = list(images)
     if not imgs:
         raise CalibrationError("images: no checkerboard images given")
@@ -205,33 +238,56 @@ def calibrate_camera(
         if c is not None:
             corners.append(c.astype(np.float32).reshape(-1, 1, 2))
             views.append(i)
-    if len(views) < min_views:
-        raise CalibrationError(
-            f"images: the {pattern} checkerboard was found in {len(views)} of {len(imgs)} images, "
-            f"at least {min_views} are needed; check the pattern size (inner corners) and the lighting"
-        )
+    found = f"the {pattern} checkerboard was found in {len(views)} of {len(imgs)} images"
+    if not views:
+        raise CalibrationError(f"images: {found}; check the pattern size (inner corners) and the lighting")
     try:
-        rms, K, dist, rvecs, tvecs = cv2.calibrateCamera(
+        rms, K, dist, rvecs, tvecs, std, _, _ = cv2.calibrateCameraExtended(
             [obj] * len(views), corners, (width, height), None, None, flags=flags
         )
     except cv2.error as exc:
         raise CalibrationError(
-            f"images: OpenCV could not calibrate from these views ({str(exc).strip()[-120:]}); "
-            "use views of the board at several tilts"
+            f"images: OpenCV could not calibrate from these views ({found}: {str(exc).strip()[-120:]}); "
+            f"use at least {limits.min_views} views of the board at several tilts"
         ) from None
     if not (np.isfinite(K).all() and np.isfinite(dist).all() and np.isfinite(rms)):
-        raise CalibrationError("images: the calibration diverged; use views of the board at several tilts")
+        raise CalibrationError(
+            f"images: the calibration diverged ({found}); use at least {limits.min_views} views of the board at "
+            "several tilts"
+        )
     per_view = []
     for c, r, t in zip(corners, rvecs, tvecs):
         proj, _ = cv2.projectPoints(obj, r, t, K, dist)
         per_view.append(float(np.sqrt(np.mean(np.sum((proj - c).reshape(-1, 2) ** 2, axis=1)))))
-    camera = CameraIntrinsics(width=width, height=height, K=K, dist=np.ravel(dist)[:5])
     poses = tuple(_pose(r, t) for r, t in zip(rvecs, tvecs))
-    return CameraCalibration(
-        camera=camera,
+    quality = assess(
+        images=len(imgs),
+        corners=[c.reshape(-1, 2) for c in corners],
+        size=(width, height),
+        rotations=[T[:3, :3] for T in poses],
+        rms=float(rms),
+        K=K,
+        std_intrinsics=std,
+        per_view_rms=np.array(per_view),
+        view_ids=np.array(views),
+        limits=limits,
+    )
+    result = CameraCalibration(
+        camera=CameraIntrinsics(width=width, height=height, K=K, dist=np.ravel(dist)[:5]),
         rms=float(rms),
         per_view_rms=np.array(per_view),
         views=np.array(views),
         T_camera_boards=poses,
         corners=tuple(c.reshape(-1, 2).astype(np.float64) for c in corners),
+        quality=quality,
     )
+    if not quality.trusted:
+        if not accept_untrusted:
+            raise UntrustedCalibrationError(quality.message(), result)
+        warnings.warn(
+            "kept on request (accept_untrusted=True), this camera calibration cannot be trusted: "
+            + "; ".join(quality.problems),
+            UntrustedCalibrationWarning,
+            stacklevel=2,
+        )
+    return result

@@ -22,7 +22,7 @@ from .._validate import check_rigid
 from ..camera import CameraIntrinsics
 from ..errors import BinpickError, CalibrationError, FileWriteError, InvalidInputError
 from ._file import CellCalibration, _toml_row
-from .camera import CameraCalibration, board_object_points, board_pose, calibrate_camera
+from .camera import CalibrationLimits, CameraCalibration, board_object_points, board_pose, calibrate_camera
 from .capture import MANIFEST_VERSION
 from .hand_eye import HandEyeCalibration, calibrate_hand_eye
 from .laser import LaserCalibration, laser_points_on_board
@@ -163,6 +163,8 @@ class Solution:
             f"views = [{', '.join(repr(n) for n in self.view_names)}]",
             f"per_view_rms_px = {_toml_row(self.camera.per_view_rms)}",
             "",
+            "# how far the intrinsics (before the bundle adjustment) can be trusted: figures, limits, warnings",
+            self.camera.quality.toml("quality.camera"),
             "[residuals.hand_eye]",
             f'method = "{self.hand_eye.method}"',
         ]
@@ -194,6 +196,7 @@ class Solution:
             f"cx {cam.K[0, 2]:.2f}  cy {cam.K[1, 2]:.2f}  dist {np.round(cam.dist, 5).tolist()}",
             f"         reprojection RMS {self.camera.rms:.3f} px over {len(self.view_names)} views, free board poses "
             f"(worst {self.camera.per_view_rms.max():.3f} px)",
+            f"         {self.camera.quality.summary()}",
             "hand-eye (board stillness in the base frame):",
             *("  " + line for line in self.hand_eye.residual_table().splitlines()),
             f"refined  intrinsics and hand-eye together from {self.hand_eye.method} (eye-in-hand bundle "
@@ -284,9 +287,13 @@ def _principal_crossing(samples: list[tuple[float, np.ndarray]], camera: CameraI
     return float(roots[0]) if roots else float(a[k] + (a[k + 1] - a[k]) * (cx - u[k]) / (u[k + 1] - u[k]))
 
 
-def solve(capture_dir: str | os.PathLike) -> Solution:
+def solve(
+    capture_dir: str | os.PathLike, *, limits: Optional[CalibrationLimits] = None, accept_untrusted: bool = False
+) -> Solution:
     """Solves the capture in ``capture_dir`` (see the module doc). CalibrationError when the
-    capture is incomplete or corrupt, or when too few views found the board or saw the line."""
+    capture is incomplete or corrupt, or when too few views found the board or saw the line;
+    UntrustedCalibrationError when the intrinsics cannot be trusted by ``limits`` (see
+    :func:`~binpick.calibration.calibrate_camera`, which also says what ``accept_untrusted`` does)."""
     import time
 
     from ..vision import extract_line
@@ -294,7 +301,9 @@ def solve(capture_dir: str | os.PathLike) -> Solution:
     t0 = time.perf_counter()
     cap = load_capture(capture_dir)
     images = [_read(p) for p in cap.board_frames]
-    cam = calibrate_camera(images, cap.pattern, cap.square, min_views=6, orient=True)
+    cam = calibrate_camera(
+        images, cap.pattern, cap.square, orient=True, limits=limits, accept_untrusted=accept_untrusted
+    )
     t1 = time.perf_counter()
     used = [int(v) for v in cam.views]
     view_names = tuple(cap.names[v] for v in used)
