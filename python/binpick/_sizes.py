@@ -229,7 +229,7 @@ def check_scene(points: Any, model: Any, *, unit: Optional[str] = None, fix: Fix
         return
     extent = small if ratio < SCENE_MIN_SHARE else large
     problem = f"the scene is {_mm(extent)} mm across but the part {model.name!r} is {_mm(diameter)} mm: " + (
-        f"a scene less than {SCENE_MIN_SHARE:g} of its part cannot show it"
+        f"a scene less than {SCENE_MIN_SHARE:g} times its part's size cannot show it"
         if ratio < SCENE_MIN_SHARE
         else f"no sensor resolves a part {SCENE_MAX_RATIO:g} times smaller than its view"
     )
