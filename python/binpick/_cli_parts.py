@@ -1,5 +1,6 @@
 """What the ``binpick`` commands share about the part: the built-in names, a part by name or
-mesh file, and the usage error (exit code 2); and ``binpick bench``. A leaf of the command modules, so that
+mesh file (its size checked before any work), the usage error (exit code 2) and the message an
+error shows on the command line; and ``binpick bench``. A leaf of the command modules, so that
 ``binpick.cli`` and ``binpick.devices.cli`` need not import each other."""
 
 from __future__ import annotations
@@ -18,14 +19,31 @@ class _Usage(Exception):
 
 
 def _model(part: str, unit: str = "mm") -> Any:
-    from . import parts
+    """The part ``part`` names: a built-in part, or a mesh file read in ``unit`` whose size a
+    bin-picking cell can mean (binpick._sizes.check_part: UnitError naming ``--unit``). A built-in
+    part is in mm: ``--unit`` other than mm with it is refused, as it means nothing there (it says
+    the unit of a mesh file; scaling a built-in part by it would make a part no cell holds)."""
+    from . import _sizes, parts
+    from ._validate import unit_scale
     from .models import Model
 
     if part in PARTS:
+        if unit_scale(unit) != 1.0:
+            raise _Usage(
+                f"--unit {unit}: the built-in part {part!r} is in mm; --unit is the unit of a mesh file: leave it out"
+            )
         return getattr(parts, part)()
     if not os.path.exists(part):
         raise _Usage(f"--part: {part!r} is neither a built-in part ({', '.join(PARTS)}) nor a mesh file")
-    return Model.from_mesh(part, unit=unit)
+    model = Model.from_mesh(part, unit=unit)
+    _sizes.check_part(model, unit=unit)
+    return model
+
+
+def error_text(exc: BaseException) -> str:
+    """An error's message as the command shows it: the flag that fixes it where the message names
+    a Python keyword (BinpickError.cli_message)."""
+    return getattr(exc, "cli_message", None) or str(exc)
 
 
 def run_bench(args: Any) -> int:

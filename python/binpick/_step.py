@@ -22,7 +22,7 @@ import numpy as np
 
 from . import _core
 from ._validate import edge_use_counts, unit_scale
-from .errors import InvalidInputError, MeshFileError, MeshFileNotFoundError
+from .errors import MeshFileError, MeshFileNotFoundError, UnitError
 
 __all__ = ["STEP_SUFFIXES", "read_step", "declared_length_unit"]
 
@@ -104,8 +104,11 @@ def _scale(path: str, unit: str, declared: Optional[tuple[str, Optional[float]]]
     if mm is None or abs(mm / scale - 1.0) <= 1e-6:
         return 1.0
     known = [u for u in ("mm", "cm", "m", "in") if abs(unit_scale(u) / mm - 1.0) <= 1e-6]
-    fix = f"pass unit={known[0]!r}" if known else "export the part in mm, cm, m or inches"
-    raise InvalidInputError(f"unit: {path} declares its lengths in {name} ({mm:g} mm), not {unit!r}; {fix}")
+    problem = f"unit: {path} declares its lengths in {name} ({mm:g} mm), not {unit!r}; "
+    error = UnitError(problem + (f"pass unit={known[0]!r}" if known else "export the part in mm, cm, m or inches"))
+    if known:
+        error.cli_message = f'{problem}pass `--unit {known[0]}` (in a cell file: unit = "{known[0]}" in [part])'
+    raise error
 
 
 def _convert(path: str, obj: str) -> str:

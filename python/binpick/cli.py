@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from ._cli_calibrate import _add_calibrate
-from ._cli_parts import _model, _Usage, collision_exit, run_bench
+from ._cli_parts import _model, _Usage, collision_exit, error_text, run_bench
 from .errors import BinpickError, InvalidInputError, NoObjectFound
 
 __all__ = ["main"]
@@ -333,9 +333,10 @@ def _scan_folder(path: str) -> bool:
     return os.path.isdir(path) and not is_rosbag(path)
 
 
-def _read_scene(path: str, unit: Optional[str] = None) -> tuple[Any, Any]:
+def _read_scene(path: str, unit: Optional[str] = None) -> tuple[Any, Any, Optional[str]]:
     """The scene cloud (N, 3) mm of ``path`` — a scene file (PLY, PCD, NPY, XYZ, a ROS 2 bag) or a scan folder,
-    reconstructed — and the sensor's position in its frame where the file or the scan says it."""
+    reconstructed — the sensor's position in its frame where the file or the scan says it, and the unit
+    the file was read in (None for a scan folder, reconstructed in mm by its calibration)."""
     from .clouds import read_scene
 
     if not os.path.exists(path):
@@ -344,9 +345,9 @@ def _read_scene(path: str, unit: Optional[str] = None) -> tuple[Any, Any]:
         if unit is not None:
             raise _Usage("--scene-unit: a scan folder is reconstructed in mm; leave the option out")
         scan = _load_scan_folder(path)  # the camera where its first frame was grabbed: the viewpoint
-        return _reconstruct(scan).points, (scan.T_base_flanges[0] @ scan.calibration.T_flange_camera)[:3, 3]
+        return _reconstruct(scan).points, (scan.T_base_flanges[0] @ scan.calibration.T_flange_camera)[:3, 3], None
     cloud = read_scene(path, unit=unit)
-    return cloud.points, cloud.viewpoint
+    return cloud.points, cloud.viewpoint, unit or cloud.file_unit or "mm"
 
 
 def _load_scan_folder(folder: str) -> Any:
@@ -378,11 +379,13 @@ def _reconstruct_command(args: argparse.Namespace) -> int:
 
 
 def _estimate(args: argparse.Namespace) -> int:
-    from . import viz
+    from . import _sizes, viz
     from .poses import estimate_poses
 
-    scene, stated = _read_scene(args.scene, args.scene_unit)
+    scene, stated, scene_unit = _read_scene(args.scene, args.scene_unit)
     model = _model(args.model, args.unit)
+    if scene_unit is not None:  # a scene file: its size against the part's, before any work (binpick._sizes)
+        _sizes.check_scene(scene, model, unit=scene_unit)
     bin_box = None if args.bin is None else (tuple(args.bin[:3]), tuple(args.bin[3:]))
     viewpoint = _viewpoint_option(args, stated)
     # A scan folder is a swept laser scan: judged along up, as the cell asks (binpick.cell).
@@ -642,18 +645,12 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         return 2
     try:
         return int(args.run(args))
-    except _Usage as exc:
-        print(f"binpick {args.command}: {exc}", file=sys.stderr)
+    except (_Usage, InvalidInputError) as exc:
+        print(f"binpick {args.command}: {error_text(exc)}", file=sys.stderr)
         return 2
-    except InvalidInputError as exc:
-        print(f"binpick {args.command}: {exc}", file=sys.stderr)
-        return 2
-    except NoObjectFound as exc:
-        print(f"binpick {args.command}: {type(exc).__name__}: {exc}", file=sys.stderr)
-        return 3
-    except BinpickError as exc:
-        print(f"binpick {args.command}: {type(exc).__name__}: {exc}", file=sys.stderr)
-        return 1
+    except BinpickError as exc:  # no object found: 3; a fault, a safety refusal or another error: 1
+        print(f"binpick {args.command}: {type(exc).__name__}: {error_text(exc)}", file=sys.stderr)
+        return 3 if isinstance(exc, NoObjectFound) else 1
     except KeyboardInterrupt:
         print(f"binpick {args.command}: interrupted", file=sys.stderr)
         return 130  # as a shell reports SIGINT

@@ -7,6 +7,8 @@ motion outside the cell's limits raises ``SafetyError`` before anything is sent.
 
 from __future__ import annotations
 
+from typing import Optional
+
 __all__ = [
     "BinpickError",
     "InvalidInputError",
@@ -17,6 +19,7 @@ __all__ = [
     "TooFewPointsError",
     "DegenerateCloudError",
     "UnknownUnitError",
+    "UnitError",
     "MeshFileError",
     "MeshFileNotFoundError",
     "FileWriteError",
@@ -40,6 +43,11 @@ __all__ = [
 
 class BinpickError(Exception):
     """Base class of every error binpick raises on purpose."""
+
+    #: The message as a user of the ``binpick`` command reads it, where it names a Python fix
+    #: (``unit="m"``) that the command spells as a flag (``--unit m``); None: ``str(error)`` reads
+    #: the same to both. The commands print it in place of the message.
+    cli_message: Optional[str] = None
 
 
 class InvalidInputError(BinpickError, ValueError):
@@ -72,6 +80,13 @@ class DegenerateCloudError(InvalidInputError):
 
 class UnknownUnitError(InvalidInputError):
     """A length unit binpick does not know; use mm, cm, m or in."""
+
+
+class UnitError(InvalidInputError):
+    """A length no bin-picking cell can mean as given, most often a file read in the wrong unit: a
+    part in metres read as millimetres is a fraction of a millimetre across, a scene in metres is a
+    speck beside its part. The message says which size is off, against what, and, where a unit
+    explains it, that unit and how to pass it (:mod:`binpick._sizes`)."""
 
 
 class MeshFileError(InvalidInputError):

@@ -15,7 +15,8 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from .. import parts
-from .._validate import instance_of, parse_toml, read_text_file
+from .._sizes import check_cell
+from .._validate import instance_of, parse_toml, read_text_file, unit_scale
 from ..calibration import CellCalibration
 from ..devices import (
     AiMotor,
@@ -283,12 +284,20 @@ def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig
     """The :class:`CellConfig` of a cell file: part, calibration, bin, poses, tool and limits."""
     f = instance_of(cell_file, CellFile, "cell_file", "load_cell_file(path)")
     here = os.path.dirname(os.path.abspath(f.path))
-    name = f.text("part", "model")
-    model = (
-        getattr(parts, name)()
-        if name in ("tee", "elbow", "cross")
-        else Model.from_mesh(os.path.join(here, name), unit=f.text("part", "unit", "mm"))
-    )
+    name, unit = f.text("part", "model"), f.text("part", "unit", "mm")
+    if name not in ("tee", "elbow", "cross"):
+        model = Model.from_mesh(os.path.join(here, name), unit=unit)
+    elif unit_scale(unit) == 1.0:
+        model = getattr(parts, name)()
+    else:  # a built-in part is in mm: the unit of a mesh file means nothing for it
+        raise InvalidInputError(
+            f"{f.path}: [part] unit = {unit!r:.40}: the built-in part {name!r} is in mm; leave unit out"
+        )
+    bin_bounds = (f.numbers("cell", "bin_min_mm", 3), f.numbers("cell", "bin_max_mm", 3))
+    gripper = _gripper_geometry(f, f.pose("cell", "tool", [0, 0, 150, 0, 0, 0]))
+    # Before the calibration is read and any port opened: the part, the bin and the gripper in
+    # sizes one cell can mean together (a mesh, a bin or a gripper written in metres is named).
+    check_cell(f.path, model, unit=unit, bin_bounds=bin_bounds, opening_mm=gripper.open_width_mm)
     calibration_path = os.path.join(here, f.text("cell", "calibration"))
     if not os.path.exists(calibration_path):
         raise CalibrationError(
@@ -296,17 +305,16 @@ def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig
             "(binpick calibrate) and write it there"
         )
     calibration = CellCalibration.load(calibration_path)
-    tool = f.pose("cell", "tool", [0, 0, 150, 0, 0, 0])
     return CellConfig(
         calibration=calibration,
         model=model,
-        bin_bounds=(f.numbers("cell", "bin_min_mm", 3), f.numbers("cell", "bin_max_mm", 3)),
+        bin_bounds=bin_bounds,
         scan_poses=(f.pose("cell", "scan_pose"),),
         drop_pose=f.pose("cell", "drop_pose"),
         frames=f.integer("cell", "frames", 90),
         scan_height_mm=None if f.get("cell", "scan_height_mm", None) is None else f.number("cell", "scan_height_mm"),
         **_stake(f),
-        gripper=_gripper_geometry(f, tool),
+        gripper=gripper,
         limits=_limits(f),
         num_threads=num_threads,
         estimate_options=_estimate_options(f),

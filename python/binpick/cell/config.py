@@ -333,13 +333,27 @@ class CellConfig:
             # Generated here, rigid by construction: thousands of them need no check one by one.
             object.__setattr__(self, "grasps", MappingProxyType(self._generated_grasps()))
             if not self.grasps:
-                raise InvalidInputError(
-                    f"grasps: the part {self.model.name!r} has no grasps; declare some with model.add_grasp"
-                )
+                raise self._no_grasps()
             return
         object.__setattr__(
             self, "grasps", MappingProxyType({str(k): as_transform(v, f"grasps[{k!r}]") for k, v in given.items()})
         )
+
+    def _no_grasps(self) -> InvalidInputError:
+        """The part has no grasps and none could be made (:func:`mesh_grasps`: no pair of facing
+        sides fits between the open fingers): the Python fix, and the command's (a cell file's key)."""
+        opening = self.gripper.open_width_mm
+        problem = (
+            f"grasps: the part {self.model.name!r} ({self.model.diameter:.1f} mm across) has no grasps: it declares "
+            f"none and no cylindrical branches, and no two facing sides of it lie 1 to {opening - 2.0:g} mm apart, "
+            f"where the gripper's {opening:g} mm opening can close on them"
+        )
+        error = InvalidInputError(
+            f"{problem}; declare grasps with model.add_grasp(name, T_gripper_object), or give the gripper a "
+            "wider opening (GripperGeometry.open_width_mm)"
+        )
+        error.cli_message = f"{problem}; a gripper that opens wider may hold it (a cell file's [gripper] open_width_mm)"
+        return error
 
     def _generated_grasps(self) -> dict:
         """Branch grasps for a part with cylindrical branches, else grasps sampled from its mesh."""

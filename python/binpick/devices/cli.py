@@ -135,7 +135,7 @@ def _cell(args: argparse.Namespace) -> int:
     _take_signals()
     stop = threading.Event()
     try:
-        from .._cli_parts import _model, _Usage
+        from .._cli_parts import _model, _Usage, error_text
 
         model = _model(args.part, args.unit)
         ref = args.part if args.part in ("tee", "elbow", "cross") else os.path.abspath(args.part)
@@ -156,7 +156,7 @@ def _cell(args: argparse.Namespace) -> int:
     except KeyboardInterrupt:
         return 0
     except (_Usage, BinpickError) as exc:
-        print(f"binpick emulate cell: {exc}", file=sys.stderr)
+        print(f"binpick emulate cell: {error_text(exc)}", file=sys.stderr)
         return 2
     try:
         twin.start()

@@ -6,11 +6,10 @@ import argparse
 import sys
 import time
 
+from .._cli_parts import _model, _Usage, error_text
 from ..errors import BinpickError
 
 __all__ = ["simulate_main"]
-
-PARTS = ("tee", "elbow", "cross")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -36,12 +35,10 @@ def simulate_main(argv: list[str]) -> int:
     try:
         from dataclasses import replace
 
-        from .. import parts
-        from ..models import Model
         from .cell import Cell
         from .dataset import simulate_scan, write_scan
 
-        model = getattr(parts, args.part)() if args.part in PARTS else Model.from_mesh(args.part, unit=args.unit)
+        model = _model(args.part, args.unit)
         cell = Cell()
         cell = replace(cell, noise=replace(cell.noise, speckle=args.speckle, reflections=args.reflections))
         t0 = time.perf_counter()
@@ -49,8 +46,8 @@ def simulate_main(argv: list[str]) -> int:
         t1 = time.perf_counter()
         root = write_scan(scan, args.out)
         t2 = time.perf_counter()
-    except BinpickError as exc:
-        print(f"binpick simulate: {exc}", file=sys.stderr)
+    except (_Usage, BinpickError) as exc:
+        print(f"binpick simulate: {error_text(exc)}", file=sys.stderr)
         return 2
     print(
         f"{len(scan.pile)} {args.part} parts, {len(scan.frames)} frames "

@@ -9,6 +9,7 @@ from typing import Optional
 
 import numpy as np
 
+from .._sizes import check_part
 from .._validate import MAX_IMAGE_SIDE, MAX_SHEET_TILES, count, instance_of, non_negative, thread_count
 from ..errors import FileWriteError, InvalidInputError
 from ..models import Model
@@ -67,6 +68,8 @@ def simulate_scan(
     that ``binpick simulate --reflections`` shows them."""
     cell = Cell() if cell is None else instance_of(cell, Cell, "cell", "binpick.sim.Cell()")
     thread_count(num_threads)
+    # Before the pile drops: a part the bin holds, of a size a cell picks (binpick._sizes).
+    check_part(instance_of(model, Model, "model", "binpick.parts.tee()"), bin_bounds=cell.bin.bounds)
     if part_specular is None:
         part_specular = GLOSSY_PART_SPECULAR if cell.noise.reflections > 0 else 0.0
     pile = Pile(model, count_, bin=cell.bin, seed=seed)

@@ -23,6 +23,7 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from .. import _validate, parts
+from .._sizes import check_part
 from .._validate import instance_of, positive, thread_count
 from ..cell.config import CellConfig, GripperGeometry
 from ..cell.grasp import GraspMatcher, continuous_symmetry, grip_width, symmetry_maps
@@ -246,9 +247,18 @@ class TwinWorld:
     ) -> None:
         if not isinstance(model, Model):
             raise InvalidInputError(f"model: expected a binpick.Model, got {type(model).__name__}")
+        given = layout is not None
         if layout is None:
             layout = Layout.for_part(model)
         self.layout, self.gripper_geometry = _layout_and_gripper(layout, gripper, model)
+        # Before the arm is sized and the pile dropped: a part no cell holds (a mesh read in the
+        # wrong unit) is named, not met as an arm that reaches no bin or a part with no grasps. A
+        # layout made for the part holds it by construction; a given one must.
+        check_part(
+            model,
+            bin_bounds=self.layout.bin.bounds if given else None,
+            opening_mm=self.gripper_geometry.open_width_mm,
+        )
         self.robot = _validate.choice(robot, "robot", ("melfa", "ur"))
         self.arm = sim_arm(self.layout, self.gripper_geometry) if self.robot == "melfa" else URArm()
         self.model = model
