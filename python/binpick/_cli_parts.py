@@ -4,11 +4,14 @@ mesh file, and the usage error (exit code 2); and ``binpick bench``. A leaf of t
 
 from __future__ import annotations
 
+import difflib
 import os
 import subprocess
 import sys
 from pathlib import Path
 from typing import Any
+
+from ._paths import close_match, no_such_file
 
 PARTS = ("tee", "elbow", "cross")
 
@@ -17,15 +20,31 @@ class _Usage(Exception):
     """A usage error found after parsing (exit code 2)."""
 
 
-def _model(part: str, unit: str = "mm") -> Any:
+def _model(part: str, unit: str = "mm", flag: str = "--part") -> Any:
+    """The built-in part ``part`` names, or the part of the mesh file ``part`` (in ``unit``); a
+    usage error naming ``flag`` for a name that is neither (with the close one meant, if any)."""
     from . import parts
     from .models import Model
 
     if part in PARTS:
         return getattr(parts, part)()
-    if not os.path.exists(part):
-        raise _Usage(f"--part: {part!r} is neither a built-in part ({', '.join(PARTS)}) nor a mesh file")
+    if not os.path.lexists(part):
+        meant = difflib.get_close_matches(part.lower(), PARTS, n=1) or [close_match(part)]
+        raise _Usage(
+            f"{flag}: {part!r} is neither a built-in part ({', '.join(PARTS)}) nor a mesh file (no such file)"
+            + (f"; did you mean {meant[0]}?" if meant[0] else "")
+        )
     return Model.from_mesh(part, unit=unit)
+
+
+def _existing(path: str, flag: str, what: str, *, folder: bool = False, fix: str = "") -> str:
+    """``path``, or a usage error naming ``flag`` when it is not there (with ``fix`` and the close
+    name meant, :func:`binpick._paths.no_such_file`) or is not a folder (``folder``) or a file."""
+    if not os.path.lexists(path):
+        raise _Usage(f"{flag}: {no_such_file(path, what, folder=folder, fix=fix)}")
+    if folder != os.path.isdir(path):
+        raise _Usage(f"{flag}: {path} is {'not a folder' if folder else 'a folder'}; give the {what}")
+    return path
 
 
 def run_bench(args: Any) -> int:
