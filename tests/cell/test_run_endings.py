@@ -71,7 +71,7 @@ def test_sigint_to_the_demo_process_keeps_the_first_pick(tmp_path):
 def test_a_demo_that_empties_the_bin_ends_bin_empty_not_failed(tmp_path, capsys):
     # One tee: the first pick removes it, the second attempt finds the bin empty.
     out = tmp_path / "run"
-    code = main([*DEMO, "--count", "1", "--picks", "2", "--out", str(out)])
+    code = main([*DEMO, "--count", "1", "--picks", "2", "--frames", "30", "--out", str(out)])
     text = capsys.readouterr().out
     assert code == 0, text
     table = text[text.index("pick  result") :].splitlines()
