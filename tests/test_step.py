@@ -291,7 +291,7 @@ def test_a_converter_that_hangs_is_stopped(l_file, tmp_path, monkeypatch):
     [
         ("truncated", "unexpected end of file"),
         ("garbage", "Incorrect syntax"),
-        ("empty", "unexpected end of file"),
+        ("empty", r"the mesh file is empty \(0 bytes\); export the part from CAD again"),
         ("no geometry", "transfer"),
     ],
 )
@@ -311,7 +311,7 @@ def test_a_damaged_file_is_a_mesh_file_error_naming_it(l_file, tmp_path, damage,
 
 
 def test_a_missing_file_is_named(tmp_path):
-    with pytest.raises(MeshFileNotFoundError, match="nowhere.stp: the STEP file does not exist"):
+    with pytest.raises(MeshFileNotFoundError, match="nowhere.stp: no such file, the mesh file does not exist"):
         binpick.Model.from_mesh(tmp_path / "nowhere.stp")
 
 

@@ -14,7 +14,7 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from ._cli_parts import _Usage
+from ._cli_parts import _existing, _Usage
 from .errors import InvalidInputError, UntrustedCalibrationError, UntrustedCalibrationWarning
 
 
@@ -33,14 +33,16 @@ def _calibrate(args: argparse.Namespace) -> int:
             raise _Usage(
                 "calibrate solve: give one capture folder, e.g. `binpick calibrate solve DIR --out calibration.toml`"
             )
-        return _calibrate_solve(target[1], args)
+        return _calibrate_solve(_existing(target[1], "DIR", "capture folder", folder=True), args)
     if target[0] == "compare":
         if len(target) != 3:
             raise _Usage(
                 "calibrate compare: give the solved and the true calibration, e.g. "
                 "`binpick calibrate compare calibration.toml true_calibration.toml`"
             )
-        return _calibrate_compare(target[1], target[2])
+        return _calibrate_compare(
+            _existing(target[1], "CALIBRATION", "calibration file"), _existing(target[2], "TRUTH", "calibration file")
+        )
     if len(target) != 1:
         raise _Usage(
             "calibrate: give one folder of checkerboard images, or `capture CELL.toml`, `solve DIR` "
@@ -152,7 +154,7 @@ def _calibrate_folder(args: argparse.Namespace) -> int:
 
     from .calibration import calibrate_camera
 
-    folder = Path(args.target[0])
+    folder = Path(_existing(args.target[0], "FOLDER", "folder of checkerboard images", folder=True))
     if not folder.is_dir():
         raise _Usage(f"folder: {folder} is not a folder of checkerboard images")
     try:

@@ -5,11 +5,14 @@ error shows on the command line; and ``binpick bench``. A leaf of the command mo
 
 from __future__ import annotations
 
+import difflib
 import os
 import subprocess
 import sys
 from pathlib import Path
 from typing import Any
+
+from ._paths import close_match, no_such_file
 
 PARTS = ("tee", "elbow", "cross")
 
@@ -18,9 +21,10 @@ class _Usage(Exception):
     """A usage error found after parsing (exit code 2)."""
 
 
-def _model(part: str, unit: str = "mm") -> Any:
+def _model(part: str, unit: str = "mm", flag: str = "--part") -> Any:
     """The part ``part`` names: a built-in part, or a mesh file read in ``unit`` whose size a
-    bin-picking cell can mean (binpick._sizes.check_part: UnitError naming ``--unit``). A built-in
+    bin-picking cell can mean (binpick._sizes.check_part: UnitError naming ``--unit``); a usage
+    error naming ``flag`` for a name that is neither (with the close one meant, if any). A built-in
     part is in mm: ``--unit`` other than mm with it is refused, as it means nothing there (it says
     the unit of a mesh file; scaling a built-in part by it would make a part no cell holds)."""
     from . import _sizes, parts
@@ -33,8 +37,12 @@ def _model(part: str, unit: str = "mm") -> Any:
                 f"--unit {unit}: the built-in part {part!r} is in mm; --unit is the unit of a mesh file: leave it out"
             )
         return getattr(parts, part)()
-    if not os.path.exists(part):
-        raise _Usage(f"--part: {part!r} is neither a built-in part ({', '.join(PARTS)}) nor a mesh file")
+    if not os.path.lexists(part):
+        meant = difflib.get_close_matches(part.lower(), PARTS, n=1) or [close_match(part)]
+        raise _Usage(
+            f"{flag}: {part!r} is neither a built-in part ({', '.join(PARTS)}) nor a mesh file (no such file)"
+            + (f"; did you mean {meant[0]}?" if meant[0] else "")
+        )
     model = Model.from_mesh(part, unit=unit)
     _sizes.check_part(model, unit=unit)
     return model
@@ -44,6 +52,16 @@ def error_text(exc: BaseException) -> str:
     """An error's message as the command shows it: the flag that fixes it where the message names
     a Python keyword (BinpickError.cli_message)."""
     return getattr(exc, "cli_message", None) or str(exc)
+
+
+def _existing(path: str, flag: str, what: str, *, folder: bool = False, fix: str = "") -> str:
+    """``path``, or a usage error naming ``flag`` when it is not there (with ``fix`` and the close
+    name meant, :func:`binpick._paths.no_such_file`) or is not a folder (``folder``) or a file."""
+    if not os.path.lexists(path):
+        raise _Usage(f"{flag}: {no_such_file(path, what, folder=folder, fix=fix)}")
+    if folder != os.path.isdir(path):
+        raise _Usage(f"{flag}: {path} is {'not a folder' if folder else 'a folder'}; give the {what}")
+    return path
 
 
 def run_bench(args: Any) -> int:

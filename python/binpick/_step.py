@@ -63,8 +63,6 @@ def read_step(path: str, unit: str) -> tuple[np.ndarray, np.ndarray]:
     try:
         with open(path, "rb") as f:
             data = f.read()
-    except FileNotFoundError:
-        raise MeshFileNotFoundError(f"{path}: the STEP file does not exist") from None
     except OSError as exc:
         raise MeshFileNotFoundError(f"{path}: cannot read the STEP file ({exc.strerror or exc})") from None
     scale = _scale(path, unit, declared_length_unit(data))

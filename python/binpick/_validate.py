@@ -14,6 +14,7 @@ try:
 except ModuleNotFoundError:  # Python < 3.11
     import tomli as tomllib  # type: ignore[no-redef]
 
+from ._paths import no_such_file
 from .errors import (
     CalibrationError,
     DTypeError,
@@ -478,14 +479,14 @@ def write_atomic(path: Any, data: bytes | str) -> None:
 
 def read_text_file(path: Any, what: str, error: type, *, max_bytes: int, missing: str = "") -> str:
     """The UTF-8 text of the file ``path``, or ``error`` naming the file: when it cannot be read
-    (``missing`` is appended when it does not exist), when it is larger than ``max_bytes`` (a
-    ceiling well above any real file, so a wrong or hostile file is not read whole), or when it
-    is not UTF-8 (naming the first bad byte)."""
+    (when it does not exist: :func:`binpick._paths.no_such_file`, with ``missing`` as its fix),
+    when it is larger than ``max_bytes`` (a ceiling well above any real file, so a wrong or
+    hostile file is not read whole), or when it is not UTF-8 (naming the first bad byte)."""
     try:
         with open(path, "rb") as f:
             data = f.read(max_bytes + 1)
     except FileNotFoundError:
-        raise error(f"{path}: the {what} does not exist{missing}") from None
+        raise error(no_such_file(path, what, fix=missing)) from None
     except (OSError, ValueError) as exc:  # ValueError: a NUL byte in the path
         raise error(f"{path}: cannot read the {what} ({getattr(exc, 'strerror', None) or exc})") from None
     if len(data) > max_bytes:

@@ -28,170 +28,11 @@ from pathlib import Path
 from typing import Any, Optional
 
 from ._cli_calibrate import _add_calibrate
-from ._cli_parts import _model, _Usage, collision_exit, error_text, run_bench
+from ._cli_parts import _existing, _model, _Usage, collision_exit, error_text, run_bench
+from ._cli_report import _pictures, _print_table, interrupted, outcome_line, run_keeping_picks
 from .errors import BinpickError, InvalidInputError, NoObjectFound
 
 __all__ = ["main"]
-
-
-def _plural(n: int, word: str) -> str:
-    return f"{n} {word}{'s' if n != 1 else ''}"
-
-
-def _removed_text(report: Any) -> str:
-    """What left the bin: the parts removed with ground truth; without it (real drivers) the
-    count is not known, and the picks whose gripper reported holding a part (and those it could
-    not tell) are named instead."""
-    removed = report.removed
-    if removed is not None:
-        return f"removed {_plural(len(removed), 'part')}" + (f" ({', '.join(map(str, removed))})" if removed else "")
-    lifted = report.lifted
-    text = "removed: not known (no ground truth); lifted a part: " + _plural(len(lifted), "pick")
-    text += f" ({', '.join(map(str, lifted))})" if lifted else ""
-    unsure = [r.index for r in report.records if r.success and r.held is None]
-    if unsure:
-        text += f", the gripper could not tell: {_plural(len(unsure), 'pick')} ({', '.join(map(str, unsure))})"
-    return text
-
-
-def _removed_cell(report: Any, r: Any) -> str:
-    """A pick's "removed" column: the part (ground truth), "?" where something may have left the
-    bin but nothing tells which part, "-" where nothing did."""
-    if r.picked_instance is not None:
-        return f"part {r.picked_instance}"
-    return "?" if not report.ground_truth and r.success else "-"
-
-
-_TABLE_HEADER = tuple(
-    "pick|result|removed|failure|score|confidence|orientation|rmse mm|rot err °|pos err mm|grasp|time s".split("|")
-)
-
-
-def _print_table(report: Any, out: Any = None) -> None:
-    """The picks as a table (one row each: result, part removed, kind of failure, pose quality),
-    a line of totals (parts removed, failures by kind) and one line per failed pick."""
-    out = out or sys.stdout
-    rows = [_TABLE_HEADER]
-    for r in report.records:
-        rows.append(
-            (
-                str(r.index),
-                "picked" if r.success else "failed",
-                _removed_cell(report, r),
-                r.failure or "-",
-                "-" if r.score is None else f"{r.score:.2f}",
-                _confidence_cell(r),
-                "-" if r.orientation_decided is None else ("decided" if r.orientation_decided else "open"),
-                "-" if r.rmse is None else f"{r.rmse:.2f}",
-                "-" if r.truth is None else f"{r.truth.rotation_error_deg:.2f}",
-                "-" if r.truth is None else f"{r.truth.translation_error_mm:.2f}",
-                r.grasp or "-",
-                f"{r.timings.get('total', 0.0) / 1e3:.1f}",
-            )
-        )
-    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
-    for k, row in enumerate(rows):
-        print("  ".join(c.ljust(w) for c, w in zip(row, widths)).rstrip(), file=out)
-        if k == 0:
-            print("  ".join("-" * w for w in widths), file=out)
-    failures = report.failures_by_kind()
-    print(
-        _removed_text(report)
-        + "; failures: "
-        + (", ".join(f"{n} {kind}" for kind, n in failures.items()) if failures else "none"),
-        file=out,
-    )
-    for r in report.records:
-        if r.error:
-            print(f"pick {r.index}: {r.error}", file=out)
-
-
-def _confidence_cell(r: Any) -> str:
-    """The pose's confidence, and with open alternatives the confidence that one of them is right."""
-    if r.confidence is None:
-        return "-"
-    extra = f" (any {r.confidence_any:.2f})" if r.orientation_decided is False and r.confidence_any else ""
-    return f"{r.confidence:.2f}{extra}"
-
-
-def _failure_pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> list[Path]:
-    """A picture per failed pick: its last scan, the parts passed over and why, the part it went for."""
-    from . import viz
-
-    written = []
-    for r in report.records:
-        if r.success or r.scan is None or not len(r.scan.points):
-            continue
-        title = f"pick {r.index}: {r.failure} — {r.error or ''}"
-        written.append(
-            viz.save_failure(
-                out / f"failure_pick{r.index}.png",
-                r.scan.points,
-                model=model,
-                skipped=r.skipped,
-                located=r.T_base_object,
-                bin_bounds=bin_bounds,
-                title=title if len(title) < 140 else title[:137] + "...",
-                collisions=r.collisions,
-            )
-        )
-    return written
-
-
-def _pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> list[Path]:
-    from . import viz
-
-    written: list[Path] = []
-    scan = report.last_scan
-    if scan is not None and scan.frames:
-        numbers = sorted(scan.frames)
-        written.append(
-            viz.save_contact_sheet(out / "scan_contact_sheet.png", [scan.frames[k] for k in numbers], numbers=numbers)
-        )
-    loc = report.last_located
-    if loc is not None:
-        scan = loc.scan  # the picture shows the last part found, over the scan it was found in
-    if scan is not None and len(scan.points):
-        if loc is not None:
-            title = f"{len(scan.points)} points; {model.name} found with score {loc.result.score:.2f}"
-            if loc.truth is not None:
-                title += (
-                    f", {loc.truth.rotation_error_deg:.2f}° / {loc.truth.translation_error_mm:.2f} mm from the truth"
-                )
-            written.append(
-                viz.save_cloud(
-                    out / "cloud.png",
-                    scan.points,
-                    model=model,
-                    T_base_object=loc.T_base_object,
-                    highlight=loc.indices,
-                    bin_bounds=bin_bounds,
-                    title=title,
-                )
-            )
-        else:
-            written.append(
-                viz.save_cloud(
-                    out / "cloud.png", scan.points, bin_bounds=bin_bounds, title=f"{len(scan.points)} points"
-                )
-            )
-    if report.records:
-        title = f"{report.successes} of {_plural(len(report.records), 'pick')} succeeded; {_removed_text(report)}"
-        written.append(viz.save_pick_summary(out / "summary.png", report.records, title=title))
-    written += _failure_pictures(out, report, model, bin_bounds)
-    (out / "picks.json").write_text(
-        json.dumps(
-            {
-                "picks": [r.as_dict() for r in report.records],
-                "stopped": report.stopped,
-                "removed": None if report.removed is None else list(report.removed),
-                "lifted": list(report.lifted),
-            },
-            indent=1,
-        )
-    )
-    written.append(out / "picks.json")
-    return written
 
 
 # --------------------------------------------------------------------------- demo
@@ -220,8 +61,8 @@ def _demo(args: argparse.Namespace) -> int:
         progress=progress,
         estimate_options=_estimate_options(args),
     ) as sim:
-        report = sim.cell.run(args.picks)
         bin_bounds = sim.cell.config.bin_bounds
+        report, stopped_by_user = run_keeping_picks(sim.cell, args.picks)
         failures = sim.emulator_failures
     written = _pictures(out, report, model, bin_bounds)
     print()
@@ -231,12 +72,10 @@ def _demo(args: argparse.Namespace) -> int:
         print(f"wrote {p}")
     if failures:
         print("emulator failures (a bug): " + "; ".join(failures), file=sys.stderr)
+    if stopped_by_user:
+        return interrupted("demo", report, out)
     picked = report.successes
-    last = report.records[-1]
-    print(
-        f"{picked} of {len(report.records)} picks succeeded in {time.perf_counter() - t0:.1f} s"
-        + (f"; stopped at pick {last.index} ({last.failure or 'see above'})" if report.stopped else "")
-    )
+    print(outcome_line(report, time.perf_counter() - t0))
     if picked == 0:
         print(
             "binpick demo: no part was picked — " + (report.stopped or "every pick failed (see the table)"),
@@ -280,12 +119,14 @@ def _pick(args: argparse.Namespace) -> int:
     with cell:
         if args.dry_run:
             return _dry_run(cell, out)
-        report = cell.run(args.picks)
+        report, stopped_by_user = run_keeping_picks(cell, args.picks)
     written = _pictures(out, report, cell.config.model, cell.config.bin_bounds)
     _print_table(report)
     for p in written + ([] if recorder is None else recorder.saved):
         print(f"wrote {p}")
-    print(f"{report.successes} of {len(report.records)} picks succeeded in {time.perf_counter() - t0:.1f} s")
+    if stopped_by_user:
+        return interrupted("pick", report, out)
+    print(outcome_line(report, time.perf_counter() - t0))
     if report.successes == 0:
         print("binpick pick: no part was picked — " + (report.stopped or "see the table"), file=sys.stderr)
         return collision_exit(report, "pick") or 1
@@ -339,8 +180,6 @@ def _read_scene(path: str, unit: Optional[str] = None) -> tuple[Any, Any, Option
     the file was read in (None for a scan folder, reconstructed in mm by its calibration)."""
     from .clouds import read_scene
 
-    if not os.path.exists(path):
-        raise _Usage(f"scene: {path} does not exist")
     if _scan_folder(path):
         if unit is not None:
             raise _Usage("--scene-unit: a scan folder is reconstructed in mm; leave the option out")
@@ -369,8 +208,7 @@ def _reconstruct(scan: Any) -> Any:
 def _reconstruct_command(args: argparse.Namespace) -> int:
     from .clouds import write_scene
 
-    if not os.path.isdir(args.scan):
-        raise _Usage(f"SCAN_DIR: {args.scan} is not a folder; give a scan folder (binpick simulate writes one)")
+    _existing(args.scan, "SCAN_DIR", "scan folder", folder=True, fix="binpick simulate writes one")
     t0 = time.perf_counter()
     cloud = _reconstruct(_load_scan_folder(args.scan))
     out = write_scene(args.out, cloud.points)
@@ -383,7 +221,7 @@ def _estimate(args: argparse.Namespace) -> int:
     from .poses import estimate_poses
 
     scene, stated, scene_unit = _read_scene(args.scene, args.scene_unit)
-    model = _model(args.model, args.unit)
+    model = _model(args.model, args.unit, "MODEL")
     if scene_unit is not None:  # a scene file: its size against the part's, before any work (binpick._sizes)
         _sizes.check_scene(scene, model, unit=scene_unit)
     bin_box = None if args.bin is None else (tuple(args.bin[:3]), tuple(args.bin[3:]))
@@ -402,15 +240,20 @@ def _estimate(args: argparse.Namespace) -> int:
         noise_mm=args.noise_mm,
         **_estimate_options(args),
     )
+    noise, source = _judge_noise(scene, args, viewpoint, along_rays=not swept)
     docs = [
         {
             "T_scene_model": r.T_scene_model.tolist(),
             "confidence": r.confidence,
+            "confidence_any": r.confidence_any,
             "ambiguous": r.ambiguous,
             "alternatives": [a.T_scene_model.tolist() for a in r.alternatives],
+            "free_axis": None if r.free_axis is None else [float(v) for v in r.free_axis],
             "score": r.score,
             "rmse_mm": r.rmse,
             "fit": r.fit,
+            "noise_mm": noise,
+            "noise_source": source,
             "points": int(len(r.indices)),
             "method": r.method,
             "pickability": r.pickability,
@@ -420,19 +263,40 @@ def _estimate(args: argparse.Namespace) -> int:
         for r in found
     ]
     print(json.dumps(docs[0] if args.instances == 1 else docs, indent=1))
-    res = found[0]
-    png = Path(args.png)
-    viz.save_cloud(
-        png,
+    png = viz.save_instances(
+        Path(args.png),
         scene,
-        model=model,
-        T_base_object=res.T_scene_model,
-        highlight=res.indices,
+        model,
+        [r.T_scene_model for r in found],
+        labels=[_instance_label(r) for r in found],
+        highlights=[r.indices for r in found],
         bin_bounds=bin_box,
-        title=f"{model.name}: score {res.score:.2f}, rmse {res.rmse:.2f} mm",
+        title=f"{model.name}: {len(found)} of {args.instances} instances asked for found; "
+        f"1: score {found[0].score:.2f}, rmse {found[0].rmse:.2f} mm",
     )
     print(f"wrote {png}", file=sys.stderr)
     return 0
+
+
+def _instance_label(r: Any) -> str:
+    """An instance's legend entry in estimate's picture: its confidence and whether it is ambiguous."""
+    n = len(r.alternatives)
+    alternatives = f" ({n} alternative{'s' if n != 1 else ''})" if n else ""
+    return f"confidence {r.confidence:.2f}" + (f", ambiguous{alternatives}" if r.ambiguous else ", decided")
+
+
+def _judge_noise(scene: Any, args: argparse.Namespace, viewpoint: Any, *, along_rays: bool) -> tuple[Any, str]:
+    """The sensor's depth noise σ (mm) every tolerance of the estimate's judge derived from, and
+    where it came from: ``--noise-mm``, else read from the scan as the judge reads it
+    (:func:`binpick.scan_noise` along the sensor's rays from the viewpoint, else along up); None
+    where the scan is too sparse to tell."""
+    from .models import scan_noise
+
+    if args.noise_mm is not None:
+        return float(args.noise_mm), "declared (--noise-mm)"
+    if viewpoint is not None and along_rays:
+        return scan_noise(scene, viewpoint=viewpoint), "read from the scan"
+    return scan_noise(scene, direction=(0.0, 0.0, 1.0) if args.up is None else tuple(args.up)), "read from the scan"
 
 
 def _viewpoint_option(args: argparse.Namespace, stated: Any) -> Any:

@@ -41,6 +41,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ._paths import check_file
 from ._validate import MAX_UNSIGNED, as_float_array, as_points, as_vector, choice, count, unit_scale
 from .errors import (
     FileWriteError,
@@ -206,13 +207,10 @@ def write_pcd(path: str | os.PathLike[str], points: Any, *, encoding: str = "bin
 
 def _format_of(path: str) -> str:
     """The scene format: the file's magic bytes (PLY, NPY, PCD), else its extension."""
+    check_file(path, "scene file", give="a PLY, PCD, NPY or XYZ file")
     try:
         with open(path, "rb") as f:
             head = f.read(256)
-    except FileNotFoundError:
-        raise MeshFileNotFoundError(f"{path}: the scene file does not exist") from None
-    except IsADirectoryError:
-        raise MeshFileError(f"{path}: is a folder, not a scene file; give a PLY, PCD, NPY or XYZ file") from None
     except (OSError, ValueError) as exc:
         raise MeshFileNotFoundError(
             f"{path}: cannot open the scene file ({getattr(exc, 'strerror', None) or exc})"

@@ -2,7 +2,8 @@
 
 ``BinpickError`` is the base of all of them. Invalid input raises a subclass of both
 ``BinpickError`` and ``ValueError``; device faults raise ``DeviceError`` and its subclasses;
-motion outside the cell's limits raises ``SafetyError`` before anything is sent.
+motion outside the cell's limits raises ``SafetyError`` before anything is sent. Ctrl-C during a
+pick run raises ``RunInterrupted``, a KeyboardInterrupt that keeps the picks finished.
 """
 
 from __future__ import annotations
@@ -169,7 +170,17 @@ class UnknownReplyError(ProtocolError):
     """A device answered with a well-formed reply that the protocol does not define for the request."""
 
 
-__all__ += ["TruncatedReplyError", "UnknownReplyError"]
+class RunInterrupted(KeyboardInterrupt):
+    """Ctrl-C stopped :meth:`binpick.cell.Cell.run`: a KeyboardInterrupt (so that it stops a program
+    as Ctrl-C does) carrying the :class:`~binpick.cell.RunReport` of the picks finished before it
+    (``report``), for the caller to keep."""
+
+    def __init__(self, report: object) -> None:
+        super().__init__("interrupted (Ctrl-C)")
+        self.report = report
+
+
+__all__ += ["TruncatedReplyError", "UnknownReplyError", "RunInterrupted"]
 
 
 class UntrustedCalibrationWarning(UserWarning):

@@ -13,6 +13,7 @@ from typing import Any, Optional
 import numpy as np
 
 from . import _core, _step
+from ._paths import check_file, no_such_file
 from ._validate import (
     MAX_UNSIGNED,
     as_faces,
@@ -26,7 +27,7 @@ from ._validate import (
     unit_scale,
     write_atomic,
 )
-from .errors import DegenerateModelWarning, InvalidInputError, InvalidTypeError
+from .errors import DegenerateModelWarning, InvalidInputError, InvalidTypeError, MeshFileNotFoundError
 from .transforms import pose_error, rotation_about
 
 __all__ = [
@@ -238,11 +239,18 @@ class Model:
         path = os.fspath(path)
         unit_scale(unit)  # an unknown unit is refused before the file is read
         label = name if name is not None else os.path.splitext(os.path.basename(path))[0]
-        if path.lower().endswith(_step.STEP_SUFFIXES):
-            vertices, faces = _step.read_step(path, unit)
-            unit = "mm"
-        else:
-            vertices, faces = _core.read_mesh(path, "mm")
+        if os.path.lexists(path):  # a missing file's name is judged first (its extension), then told missing
+            check_file(path, "mesh file", fix_empty="export the part from CAD again")
+        try:
+            if path.lower().endswith(_step.STEP_SUFFIXES):
+                vertices, faces = _step.read_step(path, unit)
+                unit = "mm"
+            else:
+                vertices, faces = _core.read_mesh(path, "mm")
+        except MeshFileNotFoundError:
+            if os.path.lexists(path):
+                raise
+            raise MeshFileNotFoundError(no_such_file(path, "mesh file")) from None
         return cls.from_arrays(vertices, faces, unit=unit, spacing=spacing, count=count, seed=seed, name=label)
 
     @classmethod

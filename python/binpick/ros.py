@@ -19,6 +19,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ._paths import no_such_file
 from ._validate import unit_scale
 from .errors import InvalidInputError, MeshFileError, MeshFileNotFoundError
 
@@ -105,7 +106,7 @@ def read_rosbag(
         ) from None
     p = Path(os.fspath(path))
     if not p.exists():
-        raise MeshFileNotFoundError(f"{p}: the bag does not exist")
+        raise MeshFileNotFoundError(no_such_file(p, "ROS 2 bag"))
     scale = unit_scale(unit)
     try:
         with AnyReader([p]) as reader:

@@ -256,7 +256,7 @@ def load_scan(directory: str | os.PathLike) -> Scan:
     """
     root = Path(directory)
     meta_path = root / "scan.json"
-    doc = _read_json(meta_path, "scan.json", missing=f"; {root} is not a scan folder")
+    doc = _read_json(meta_path, "scan.json", missing=f"{root} is not a scan folder")
     if not isinstance(doc, dict) or type(doc.get("version")) is not int or doc.get("version") != SCAN_VERSION:
         got = doc.get("version") if isinstance(doc, dict) else None
         raise ScanFormatError(

@@ -2,6 +2,7 @@
 
 * :func:`save_cloud` — a scanned cloud from above and in 3-D, coloured by height, with the
   estimated part (the model's points at the found pose) overlaid in red.
+* :func:`save_instances` — the same with every instance found drawn, numbered and labelled.
 * :func:`save_pick_summary` — per pick: score, pose error against ground truth (when known)
   and where the time went.
 * :func:`save_contact_sheet` — a few frames of a scan side by side.
@@ -34,7 +35,7 @@ from ._validate import (
 from .errors import FileWriteError, InvalidInputError
 from .models import Model
 
-__all__ = ["save_cloud", "save_pick_summary", "save_contact_sheet", "save_failure"]
+__all__ = ["save_cloud", "save_instances", "save_pick_summary", "save_contact_sheet", "save_failure", "error_axis_top"]
 
 _MAX_POINTS = 60_000
 _CLIP = 20.0
@@ -110,25 +111,95 @@ def save_cloud(
     points the estimate used; ``bin_bounds`` outlines the bin. Returns the path.
     """
     pts, box = _scene(points, bin_bounds, title)
-    overlay = None
+    overlays = []
     if model is not None:
         instance_of(model, Model, "model", "binpick.parts.tee()")
         if T_base_object is None:
             raise InvalidInputError("T_base_object: give the pose at which to draw the model")
-        T = as_transform(T_base_object, "T_base_object")
-        overlay = _thin(np.asarray(model.points) @ T[:3, :3].T + T[:3, 3], 4000)
-    idx = None if highlight is None else as_indices(highlight, "highlight")
+        overlays = [(_posed(model, T_base_object, "T_base_object"), "red", "estimated part")]
+    idx = [] if highlight is None else [as_indices(highlight, "highlight")]
+    return _save(_cloud_figure(pts, overlays, idx, box, title), path)
+
+
+def save_instances(
+    path: str | os.PathLike[str],
+    points: Any,
+    model: Any,
+    poses: Sequence[Any],
+    *,
+    labels: Sequence[str] = (),
+    highlights: Sequence[Any] = (),
+    bin_bounds: Any = None,
+    title: str = "",
+) -> Path:
+    """Writes the cloud (N, 3, mm) as :func:`save_cloud` does with every instance found of
+    ``model`` drawn at its pose (``poses``, 4×4 ``T_scene_model`` each) in a colour of its own,
+    numbered from 1 at its centre in the top view and named in the legend with its ``labels``
+    entry (one per pose, e.g. its confidence); ``highlights`` (indices into ``points``, one array
+    per pose) marks the points each used. Returns the path."""
+    return _save(_instances_figure(points, model, poses, labels, highlights, bin_bounds, title), path)
+
+
+def _instances_figure(
+    points: Any,
+    model: Any,
+    poses: Sequence[Any],
+    labels: Sequence[str],
+    highlights: Sequence[Any],
+    bin_bounds: Any,
+    title: str,
+) -> Any:
+    """The figure of :func:`save_instances`."""
+    pts, box = _scene(points, bin_bounds, title)
+    poses, labels, highlights = list(poses), list(labels), list(highlights)
+    if not poses:
+        raise InvalidInputError("poses: give the pose of at least one instance to draw")
+    for name, given in (("labels", labels), ("highlights", highlights)):
+        if given and len(given) != len(poses):
+            raise InvalidInputError(f"{name}: expected one per pose ({len(poses)}), got {len(given)}")
+    overlays = [
+        (_posed(model, T, f"poses[{i}]"), _INSTANCE_COLORS[i % len(_INSTANCE_COLORS)], f"{i + 1}: {label}".rstrip(": "))
+        for i, (T, label) in enumerate(zip(poses, labels or [""] * len(poses)))
+    ]
+    idx = [as_indices(h, f"highlights[{i}]") for i, h in enumerate(highlights)]
+    return _cloud_figure(pts, overlays, idx, box, title, numbered=True)
+
+
+_INSTANCE_COLORS = ("red", "magenta", "cyan", "blue", "lime", "black", "gold", "brown")
+"""The colours of the instances :func:`save_instances` draws (orange marks the points used)."""
+
+
+def _posed(model: Any, T: Any, name: str) -> np.ndarray:
+    """Up to 4000 of ``model``'s surface points at the pose ``T``."""
+    instance_of(model, Model, "model", "binpick.parts.tee()")
+    T = as_transform(T, name)
+    return _thin(np.asarray(model.points) @ T[:3, :3].T + T[:3, 3], 4000)
+
+
+def _cloud_figure(
+    pts: np.ndarray,
+    overlays: Sequence[tuple[np.ndarray, str, str]],
+    highlights: Sequence[np.ndarray],
+    box: Any,
+    title: str,
+    *,
+    numbered: bool = False,
+) -> Any:
+    """The cloud from above and in 3-D with ``overlays`` (model points, colour, legend label)
+    drawn over it, numbered at their centres when ``numbered``, and the points ``highlights``."""
     plt = _pyplot()
     fig = plt.figure(figsize=(13, 5.6))
     shown = _thin(pts, _MAX_POINTS)
     top = fig.add_subplot(1, 2, 1)
     sc = top.scatter(shown[:, 0], shown[:, 1], c=shown[:, 2], s=0.6, cmap="viridis", linewidths=0)
-    if idx is not None:
-        idx = idx[(idx >= 0) & (idx < len(pts))]
-        h = _thin(pts[idx], 8000)
-        top.scatter(h[:, 0], h[:, 1], s=0.8, c="orange", linewidths=0, label="points used")
-    if overlay is not None:
-        top.scatter(overlay[:, 0], overlay[:, 1], s=0.8, c="red", linewidths=0, label="estimated part")
+    for k, idx in enumerate(highlights):
+        h = _thin(pts[idx[(idx >= 0) & (idx < len(pts))]], 8000)
+        top.scatter(h[:, 0], h[:, 1], s=0.8, c="orange", linewidths=0, label=None if k else "points used")
+    for number, (body, color, label) in enumerate(overlays, 1):
+        top.scatter(body[:, 0], body[:, 1], s=0.8, c=color, linewidths=0, label=label)
+        if numbered:
+            x, y = body[:, :2].mean(axis=0)
+            top.annotate(str(number), (x, y), fontsize=11, weight="bold", color="black", ha="center", va="center")
     if box is not None:
         (x0, y0, _), (x1, y1, _) = box
         top.plot([x0, x1, x1, x0, x0], [y0, y0, y1, y1, y0], "k--", linewidth=0.8, label="bin")
@@ -137,13 +208,13 @@ def save_cloud(
     top.set_ylabel("y (mm)")
     top.set_title("from above, coloured by height")
     fig.colorbar(sc, ax=top, label="z (mm)", shrink=0.8)
-    if overlay is not None or idx is not None or box is not None:
+    if overlays or highlights or box is not None:
         top.legend(loc="upper right", markerscale=8, fontsize=8)
     ax = fig.add_subplot(1, 2, 2, projection="3d")
     s3 = _thin(pts, 25_000)
     ax.scatter(s3[:, 0], s3[:, 1], s3[:, 2], c=s3[:, 2], s=0.4, cmap="viridis", linewidths=0)
-    if overlay is not None:
-        ax.scatter(overlay[:, 0], overlay[:, 1], overlay[:, 2], c="red", s=0.6, linewidths=0)
+    for body, color, _ in overlays:
+        ax.scatter(body[:, 0], body[:, 1], body[:, 2], c=color, s=0.6, linewidths=0)
     span = np.ptp(s3, axis=0)
     ax.set_box_aspect((max(span[0], 1), max(span[1], 1), max(span[2], 1)))
     ax.view_init(elev=35, azim=-60)
@@ -153,13 +224,26 @@ def save_cloud(
     ax.set_title("3-D")
     fig.suptitle(title or f"{len(pts)} points")
     fig.tight_layout()
-    return _save(fig, path)
+    return fig
+
+
+def error_axis_top(errors: Sequence[float]) -> float:
+    """The top of the pose-error axis of :func:`save_pick_summary` for ``errors`` (° and mm; NaN
+    where a pick has no ground truth): a quarter above the tallest bar (bars are cut at
+    :data:`_CLIP`) and never below the pick-grade limits' lines, which are drawn on it."""
+    from .cell.records import PICK_GRADE_DEG, PICK_GRADE_MM
+
+    values = np.asarray(errors, dtype=np.float64)
+    values = values[np.isfinite(values)]
+    tallest = min(float(values.max()), _CLIP) if len(values) else 0.0
+    return 1.25 * max(tallest, PICK_GRADE_DEG, PICK_GRADE_MM)
 
 
 def save_pick_summary(path: str | os.PathLike[str], records: Sequence[Any], *, title: str = "") -> Path:
     """Writes a per-pick summary of :class:`binpick.cell.PickRecord` s: score, pose error against
-    ground truth where known (with the pick-grade limits 5° and 3 mm), and the time per stage."""
-    from .cell.records import PickRecord
+    ground truth where known (with the pick-grade limits 5° and 3 mm; the axis as tall as
+    :func:`error_axis_top` says), and the time per stage."""
+    from .cell.records import PICK_GRADE_DEG, PICK_GRADE_MM, PickRecord
 
     recs = list(records)
     if not recs:
@@ -170,14 +254,16 @@ def save_pick_summary(path: str | os.PathLike[str], records: Sequence[Any], *, t
     plt = _pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.4))
     x = np.arange(1, len(recs) + 1)
-    colors = ["tab:green" if r.success else "tab:red" for r in recs]
+    colors = ["tab:green" if r.success else "tab:gray" if r.bin_empty else "tab:red" for r in recs]
     scores = [r.score if r.score is not None else 0.0 for r in recs]
     axes[0].bar(x, scores, color=colors)
     axes[0].set_ylim(0, 1.05)
     axes[0].set_xticks(x)
     axes[0].set_xlabel("pick")
     axes[0].set_ylabel("score")
-    axes[0].set_title("pose score (green: picked, red: failed)")
+    axes[0].set_title(
+        "pose score (green: picked, red: failed" + (", grey: bin empty)" if any(r.bin_empty for r in recs) else ")")
+    )
     rot = [r.truth.rotation_error_deg if r.truth is not None else np.nan for r in recs]
     tra = [r.truth.translation_error_mm if r.truth is not None else np.nan for r in recs]
     if np.isfinite(rot).any():
@@ -190,9 +276,9 @@ def save_pick_summary(path: str | os.PathLike[str], records: Sequence[Any], *, t
             for xi, v in zip(x, vals):
                 if np.isfinite(v) and v > _CLIP:  # the bar is cut at the top: say how tall it is
                     axes[1].text(xi + offset, _CLIP, f"{v:.0f}", ha="center", va="bottom", fontsize=7, rotation=90)
-        axes[1].set_ylim(0, _CLIP * 1.25)
-        axes[1].axhline(5.0, color="tab:blue", linestyle="--", linewidth=0.8)
-        axes[1].axhline(3.0, color="tab:orange", linestyle="--", linewidth=0.8)
+        axes[1].set_ylim(0, error_axis_top(rot + tra))
+        axes[1].axhline(PICK_GRADE_DEG, color="tab:blue", linestyle="--", linewidth=0.8)
+        axes[1].axhline(PICK_GRADE_MM, color="tab:orange", linestyle="--", linewidth=0.8)
         axes[1].set_title("pose error vs ground truth (dashed: pick-grade limits)")
         axes[1].legend(fontsize=8)
     else:

@@ -106,7 +106,7 @@ def test_a_table_that_is_not_a_table_is_named(cell_dir, table):
 
 
 def test_unreadable_cell_files_are_clear(cell_dir):
-    with pytest.raises(MeshFileNotFoundError, match="cell file not found"):
+    with pytest.raises(MeshFileNotFoundError, match="no such file, the cell file does not exist; write one after"):
         load_cell_file(cell_dir / "nowhere.toml")
     with pytest.raises(InvalidInputError, match=r"byte \d+ of the cell file is not UTF-8"):
         _config(cell_dir, raw=CELL_FILE_EXAMPLE.encode() + b"\n# \xff\n")

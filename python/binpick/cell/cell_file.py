@@ -15,6 +15,7 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from .. import parts
+from .._paths import no_such_file
 from .._sizes import check_cell
 from .._validate import instance_of, parse_toml, read_text_file, unit_scale
 from ..calibration import CellCalibration
@@ -221,7 +222,7 @@ def load_cell_file(path: Any) -> CellFile:
     is too large, is not UTF-8 or is not valid TOML."""
     p = os.fspath(path)
     if not os.path.exists(p):
-        raise MeshFileNotFoundError(f"{p}: cell file not found; write one after `binpick pick --example`")
+        raise MeshFileNotFoundError(no_such_file(p, "cell file", fix="write one after `binpick pick --example`"))
     text = read_text_file(p, "cell file", InvalidInputError, max_bytes=MAX_FILE_BYTES)
     return CellFile(path=p, doc=parse_toml(text, p, InvalidInputError))
 

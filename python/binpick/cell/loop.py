@@ -28,12 +28,11 @@ Lengths in mm, angles in radians; transforms are 4×4 ``T_to_from``.
 from __future__ import annotations
 
 import math
-import sys
 import time
 from collections.abc import Sequence
 from dataclasses import replace
 from types import MappingProxyType
-from typing import Any, Callable, Optional, TextIO
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -42,13 +41,22 @@ from ..devices import safety
 from ..devices.gripper import Gripper
 from ..devices.motor import LaserMotor
 from ..devices.robot import Robot
-from ..errors import BinpickError, DeviceError, InvalidInputError, InvalidTypeError, NoObjectFound, SafetyError
+from ..errors import (
+    BinpickError,
+    DeviceError,
+    InvalidInputError,
+    InvalidTypeError,
+    NoObjectFound,
+    RunInterrupted,
+    SafetyError,
+)
 from ..poses import estimate_poses
 from ..vision import LaserWindow, triangulate
 from .config import CellConfig, check_static_poses
 from .frames import FrameSource
 from .grasp import NoGraspError, line_step, plan_bin_clash, plan_grasp, staked_filter
 from .nudge import nudge_blocked
+from .progress import ProgressPrinter, quiet
 from .records import (
     Located,
     PickPlan,
@@ -57,6 +65,7 @@ from .records import (
     RunReport,
     ScanResult,
     Skipped,
+    emptied_record,
     failed_record,
     located_line,
     pose_trust,
@@ -67,23 +76,6 @@ from .symmetry import continuous_near_axis
 from .views import deciding_first
 
 __all__ = ["Cell", "PICK_MOVES", "ProgressPrinter", "quiet"]
-
-
-class ProgressPrinter:
-    """Prints one line per stage: elapsed time, the pick, the stage and what it did."""
-
-    def __init__(self, stream: Optional[TextIO] = None) -> None:
-        self.stream = stream
-        self._t0 = time.perf_counter()
-
-    def __call__(self, stage: str, message: str) -> None:
-        stream = self.stream if self.stream is not None else sys.stdout
-        print(f"[{time.perf_counter() - self._t0:7.2f} s] {stage:<10} {message}", file=stream, flush=True)
-
-
-def quiet(stage: str, message: str) -> None:
-    """A progress callback that prints nothing."""
-    return None
 
 
 #: The moves of one pick in the order :meth:`Cell.pick` makes them: the waypoint, and its
@@ -136,8 +128,9 @@ class Cell:
         gripper: the gripper driver.
         camera: where frames come from.
         progress: called with (stage, message) as the work goes on; None = silent.
-        truth: optional ground truth (the simulator) with ``judge(T_base_object) -> PoseTruth`` and
-            ``take_picked() -> Optional[int]`` (the instance that left the bin since the last call).
+        truth: optional ground truth (the simulator) with ``judge(T_base_object) -> PoseTruth``,
+            ``take_picked() -> Optional[int]`` (the instance that left the bin since the last call)
+            and ``parts_left() -> int`` (the parts in the bin).
     """
 
     EMPTY_GRIP_RADIUS_MM = 15.0
@@ -658,29 +651,30 @@ class Cell:
 
     # -- run
     def run(self, n_picks: int) -> RunReport:
-        """Up to ``n_picks`` picks; stops early when nothing is found, no grasp fits, or a device
-        faults (the arm is stopped)."""
+        """Up to ``n_picks`` picks; stops early when the bin is empty, nothing is found, no grasp
+        fits, or a device faults (the arm is stopped). Ctrl-C raises :class:`binpick.RunInterrupted`
+        carrying the report of the picks finished before it."""
         n = count(n_picks, "n_picks", 1)
         self._empty_grips, self._passed_over = [], []
         records: list[PickRecord] = []
         self._last: tuple[Optional[ScanResult], Optional[Located]] = (None, None)
         stopped: Optional[str] = None
-        for i in range(1, n + 1):
-            self.progress("pick", f"— pick {i} of {n} —")
-            record, stopped = self._cycle(i)
-            record = with_collisions(record, self.truth, self._last[0])
-            self._passed_over += [k.T_base_object for k in record.skipped]
-            records.append(record)
-            if stopped is not None:
-                break
+        try:
+            for i in range(1, n + 1):
+                self.progress("pick", f"— pick {i} of {n} —")
+                record, stopped = self._cycle(i)
+                record = with_collisions(record, self.truth, self._last[0])
+                self._passed_over += [k.T_base_object for k in record.skipped]
+                records.append(record)
+                if stopped is not None:
+                    break
+        except KeyboardInterrupt:
+            raise RunInterrupted(self._report(records, f"interrupted (Ctrl-C) in pick {len(records) + 1}")) from None
+        return self._report(records, stopped)
+
+    def _report(self, records: list[PickRecord], stopped: Optional[str]) -> RunReport:
         last_scan, last_located = self._last
-        return RunReport(
-            records=tuple(records),
-            stopped=stopped,
-            last_scan=last_scan,
-            last_located=last_located,
-            ground_truth=self.truth is not None,
-        )
+        return RunReport(tuple(records), stopped, last_scan, last_located, ground_truth=self.truth is not None)
 
     def _cycle(self, i: int) -> tuple[PickRecord, Optional[str]]:
         """One pick of :meth:`run` (:meth:`_look_and_pick`); at a dead end (parts located, none
@@ -768,8 +762,15 @@ class Cell:
                 why = f"pick {i}: none of the {len(skipped)} parts located in {looks} looks could be picked — {exc}"
             times.update(self._cpu)
             times["total"] = _ms_since(t0)
+            if failure == "nothing found" and scan is not None and not self._parts_left(scan):
+                return emptied_record(i, scan, times, looks), f"pick {i}: the bin is empty ({exc})"
             record = failed_record(i, scan, located, exc, times, failure=failure)
             return replace(record, skipped=tuple(skipped), looks=looks, scan=scan), why
+
+    def _parts_left(self, scan: ScanResult) -> bool:
+        """Whether parts are left in the bin: the ground truth's word where the cell has one, else
+        whether ``scan`` shows something standing in it (:meth:`_something_in_bin`)."""
+        return self.truth.parts_left() > 0 if self.truth is not None else self._something_in_bin(scan)
 
     def _something_in_bin(self, scan: ScanResult) -> bool:
         """Whether the scan shows something standing in the bin: at least 10 points more than

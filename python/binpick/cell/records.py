@@ -22,6 +22,8 @@ __all__ = [
     "RunReport",
     "FAILURE_KINDS",
     "with_collisions",
+    "PICK_GRADE_DEG",
+    "PICK_GRADE_MM",
 ]
 
 #: What a failed pick attempt can have gone wrong with, in the order a pick meets them.
@@ -34,6 +36,13 @@ FAILURE_KINDS: tuple[str, ...] = (
     "fault",  # a device fault or safety refusal stopped the arm
     "collision",  # the gripper touched a part other than the one it grasped, or the bin
 )
+
+
+#: A pose is pick-grade within this rotation error (degrees) and :data:`PICK_GRADE_MM` of
+#: translation error of the true one, modulo the part's symmetries (the BOP-style measure).
+PICK_GRADE_DEG = 5.0
+#: A pose is pick-grade within this translation error (mm) and :data:`PICK_GRADE_DEG`.
+PICK_GRADE_MM = 3.0
 
 
 @dataclass(frozen=True, eq=False)
@@ -80,7 +89,8 @@ class ScanResult:
 @dataclass(frozen=True)
 class PoseTruth:
     """A located pose judged against ground truth: the nearest true instance, the errors
-    (minimised over the part's symmetries) and whether they are pick-grade (< 5°, < 3 mm)."""
+    (minimised over the part's symmetries) and whether they are pick-grade (under
+    :data:`PICK_GRADE_DEG` and :data:`PICK_GRADE_MM`)."""
 
     instance: int
     rotation_error_deg: float
@@ -89,7 +99,7 @@ class PoseTruth:
     @property
     def pick_grade(self) -> bool:
         """Rotation error under 5° and translation error under 3 mm."""
-        return self.rotation_error_deg < 5.0 and self.translation_error_mm < 3.0
+        return self.rotation_error_deg < PICK_GRADE_DEG and self.translation_error_mm < PICK_GRADE_MM
 
 
 def located_line(result: Any, T: np.ndarray, truth: Optional[PoseTruth]) -> str:
@@ -183,7 +193,10 @@ class PickRecord:
     parts passed over on the way (no usable grasp, low confidence, …); ``looks``: how many scans
     the attempt took (more than one when the first showed nothing pickable); ``scan``: the last
     of them (for the picture of a failure); ``nudges``: the :class:`~binpick.cell.nudge.NudgePlan`
-    s run before it, when every part located was blocked. ``confidence`` and ``confidence_any``:
+    s run before it, when every part located was blocked. ``bin_empty``: the attempt found the bin
+    empty (no part left in it by the ground truth; without it, nothing standing above its floor) —
+    the end of the run, neither a pick nor a failure (``success`` and ``failure`` say so: False,
+    None). ``confidence`` and ``confidence_any``:
     the located pose's (:class:`binpick.PoseResult`); ``orientation_decided``: False when the scan
     could not rule out alternatives (a hidden keyway, a flip the feature of which is out of sight)
     and the part was picked with a grasp the same on all of them — its orientation in the gripper
@@ -223,6 +236,7 @@ class PickRecord:
     T_gripper_object_options: tuple[np.ndarray, ...] = ()
     free_axis_gripper: Optional[np.ndarray] = None
     collisions: tuple[Mapping[str, Any], ...] = ()
+    bin_empty: bool = False
 
     def as_dict(self) -> dict:
         """A JSON-ready summary."""
@@ -247,6 +261,7 @@ class PickRecord:
             "picked_instance": self.picked_instance,
             "error": self.error,
             "failure": self.failure,
+            "bin_empty": self.bin_empty,
             "timings_ms": dict(self.timings),
             "looks": self.looks,
             "skipped": [k.as_dict() for k in self.skipped],
@@ -300,6 +315,11 @@ class RunReport:
         if not self.ground_truth:
             return None
         return tuple(r.picked_instance for r in self.records if r.picked_instance is not None)
+
+    @property
+    def bin_empty(self) -> bool:
+        """Whether the run ended finding the bin empty (its last record's :attr:`PickRecord.bin_empty`)."""
+        return bool(self.records) and self.records[-1].bin_empty
 
     @property
     def lifted(self) -> tuple[int, ...]:
@@ -358,4 +378,17 @@ def failed_record(
         fault=failure == "fault",
         failure=failure,
         timings=MappingProxyType(dict(times)),
+    )
+
+
+def emptied_record(i: int, scan: ScanResult, times: dict[str, float], looks: int) -> PickRecord:
+    """The record of attempt ``i`` that found the bin empty in ``scan`` after ``looks`` looks."""
+    return PickRecord(
+        index=i,
+        success=False,
+        points=len(scan.points),
+        timings=MappingProxyType(dict(times)),
+        looks=looks,
+        scan=scan,
+        bin_empty=True,
     )

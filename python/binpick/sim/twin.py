@@ -203,7 +203,8 @@ class TwinWorld:
     """The digital twin's physical world: a settled pile, the robot, laser-motor and gripper
     emulators serving their protocols on ptys (the gripper's fingers stop on a part only when the
     part lies between them, and a held part leaves the bin when let go outside it), and the
-    ground truth (:meth:`judge`, :meth:`take_picked`). :class:`binpick.sim.SimCamera` renders it.
+    ground truth (:meth:`judge`, :meth:`take_picked`, :meth:`parts_left`). :class:`binpick.sim.SimCamera`
+    renders it.
 
     Use as a context manager (starts and stops the emulators). Its state is changed under
     :attr:`lock` (the gripper emulator's thread, the camera and the caller share it).
@@ -619,6 +620,11 @@ class TwinWorld:
         if best is None:
             raise NoObjectFound("the simulated bin is empty")
         return best
+
+    def parts_left(self) -> int:
+        """How many parts are in the bin."""
+        self.settle_pending()
+        return len(self.pile)
 
     def take_picked(self) -> Optional[int]:
         """The part that left the bin since the last call, or None."""
