@@ -62,6 +62,9 @@ def sample_mesh(
 def read_ply(path: _Path) -> tuple[_F64, _F64 | None]:
     """A PLY point cloud: (points, normals or None)."""
 
+def lzf_decompress(data: bytes, size: int) -> tuple[bytes | None, str | None]:
+    """LZF-decompresses ``data`` to exactly ``size`` bytes: (bytes, None), or (None, why) for a corrupt stream."""
+
 def write_ply(path: _Path, points_in: _F64, normals: _F64 | None, ascii: bool) -> None:
     """Writes a PLY point cloud (binary little-endian unless ``ascii``)."""
 

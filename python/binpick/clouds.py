@@ -41,6 +41,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from . import _core
 from ._paths import check_file
 from ._validate import MAX_UNSIGNED, as_float_array, as_points, as_vector, choice, count, unit_scale
 from .errors import (
@@ -585,43 +586,11 @@ def lzf_decompress(data: bytes, size: int, *, source: str = "data") -> bytes:
     """
     if not isinstance(data, (bytes, bytearray, memoryview)):
         raise InvalidTypeError(f"data: expected bytes, got {type(data).__name__}")
-    data = bytes(data)
     size = count(size, "size", 0, MAX_UNSIGNED)
-    out = bytearray()
-    n, i = len(data), 0
-    while i < n:
-        c = data[i]
-        i += 1
-        if c < 32:
-            run = c + 1
-            if i + run > n or len(out) + run > size:
-                raise _lzf_error(source, f"a literal run of {run} bytes at input byte {i - 1} runs past the data")
-            out += data[i : i + run]
-            i += run
-            continue
-        length = c >> 5
-        if length == 7:
-            if i >= n:
-                raise _lzf_error(source, f"the back-reference at input byte {i - 1} stops before its length byte")
-            length += data[i]
-            i += 1
-        if i >= n:
-            raise _lzf_error(source, f"the back-reference at input byte {i - 1} stops before its offset byte")
-        back = ((c & 31) << 8) + data[i] + 1
-        i += 1
-        length += 2
-        start = len(out) - back
-        if start < 0:
-            raise _lzf_error(source, f"a back-reference {back} bytes back at output byte {len(out)} is out of range")
-        if len(out) + length > size:
-            raise _lzf_error(source, f"the data unpacks to more than the {size} bytes declared")
-        if back >= length:
-            out += out[start : start + length]
-        else:  # overlapping: the last `back` bytes repeat
-            out += (out[start:] * (length // back + 1))[:length]
-    if len(out) != size:
-        raise _lzf_error(source, f"the data unpacks to {len(out)} bytes, not the {size} declared")
-    return bytes(out)
+    plain, why = _core.lzf_decompress(bytes(data), size)  # the GIL released while it unpacks
+    if why is not None:
+        raise _lzf_error(source, why)
+    return plain
 
 
 def _lzf_error(source: str, problem: str) -> MeshFileError:

@@ -47,6 +47,7 @@ pub use cancel::{scope as cancel_scope, CancelFlag, Token as CancelToken};
 pub use error::{Error, Result};
 pub use geometry::{centroid, isometry_from_matrix, transform_points, BinBox, Camera, Plane, Point, RayTable};
 pub use mesh::io::{read_mesh, read_ply, write_ply, PlyData};
+pub use mesh::lzf::{lzf_decompress, LZF_MAX_RATIO};
 pub use mesh::parts::{self, Part};
 pub use mesh::{sample_surface, unit_scale, Density, SurfaceSamples, TriMesh};
 pub use noise::scan_noise;

@@ -11,6 +11,7 @@ use binpick_core::{Density, KdIndex, Point};
 use nalgebra::Vector3;
 use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
+use pyo3::types::PyBytes;
 use std::path::PathBuf;
 
 type Arr<'py> = Bound<'py, PyArray2<f64>>;
@@ -127,6 +128,16 @@ fn read_ply<'py>(py: Python<'py>, path: PathBuf) -> PyResult<(Arr<'py>, Option<A
     ))
 }
 
+/// LZF-decompresses `data` to exactly `size` bytes (PCL's `binary_compressed`): (bytes, None), or
+/// (None, why) for a corrupt stream, which the caller names with its file.
+#[pyfunction]
+fn lzf_decompress<'py>(py: Python<'py>, data: &[u8], size: usize) -> (Option<Bound<'py, PyBytes>>, Option<String>) {
+    match py.detach(|| binpick_core::lzf_decompress(data, size)) {
+        Ok(plain) => (Some(PyBytes::new(py, &plain)), None),
+        Err(why) => (None, Some(why)),
+    }
+}
+
 /// Writes a PLY point cloud.
 #[pyfunction]
 #[pyo3(signature = (path, points_in, normals, ascii))]
@@ -199,6 +210,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(sample_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(read_ply, m)?)?;
     m.add_function(wrap_pyfunction!(write_ply, m)?)?;
+    m.add_function(wrap_pyfunction!(lzf_decompress, m)?)?;
     m.add_function(wrap_pyfunction!(part_tee, m)?)?;
     m.add_function(wrap_pyfunction!(part_fitting, m)?)?;
     Ok(())

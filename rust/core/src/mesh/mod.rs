@@ -3,6 +3,7 @@
 //! parts ([`parts`]).
 
 pub mod io;
+pub mod lzf;
 pub mod parts;
 pub mod sample;
 pub mod sdf;
