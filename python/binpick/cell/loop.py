@@ -51,7 +51,7 @@ from ..errors import (
     SafetyError,
 )
 from ..poses import estimate_poses
-from ..vision import LaserWindow, triangulate
+from ..vision import LaserWindow, describe_frames, triangulate
 from .config import CellConfig, check_static_poses
 from .frames import FrameSource
 from .grasp import NoGraspError, line_step, plan_bin_clash, plan_grasp, staked_filter
@@ -321,7 +321,8 @@ class Cell:
         cfg = self.config
         keep = np.arange(len(scan.points)) if exclude is None else np.flatnonzero(~np.asarray(exclude, dtype=bool))
         if len(keep) < 10:
-            raise NoObjectFound(f"the scan holds {len(keep)} usable points; is the laser on and the bin in view?")
+            seen = describe_frames(scan.frames.values())
+            raise NoObjectFound(f"the scan holds {len(keep)} usable points ({seen}; see scan_contact_sheet.png)")
         span = float(np.linalg.norm(np.ptp(scan.points[keep], axis=0)))
         if span < 0.2 * cfg.model.diameter:  # the estimator's own floor for a scene of this part
             raise NoObjectFound(

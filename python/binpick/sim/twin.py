@@ -15,6 +15,7 @@ Lengths in mm, angles in radians; transforms are 4×4 ``T_to_from``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -271,19 +272,20 @@ class TwinWorld:
         self.progress = progress or quiet
         self.frames = frames
         self.count = count
-        self.limits = config_overrides.pop("limits", None) or sim_limits(self.layout, self.gripper_geometry)
+        given = config_overrides.pop("limits", None)
+        self.limits = given or sim_limits(self.layout, self.gripper_geometry)
         self.config_overrides = config_overrides
+        self.lock = threading.RLock()
+        t0 = time.perf_counter()
+        self.pile = self._fitting_pile(count, seed, raise_approach=given is None)
+        self.progress(
+            "pile", f"{len(self.pile)} {model.name} parts dropped and settled in {time.perf_counter() - t0:.1f} s"
+        )
         lo, hi = self.layout.bin.bounds
-        # Beside the bin, 350 mm up (higher when the approach height of a deep bin asks for it).
+        # Beside the bin, 350 mm up (higher when the approach height of a deep bin or a high pile asks for it).
         drop_z = max(350.0, float(self.limits.approach_height_mm) + 20.0)
         self.drop_pose = (
             drop_pose if drop_pose is not None else look_down(float(lo[0] + hi[0]) / 2, float(lo[1]) - 150.0, drop_z)
-        )
-        self.lock = threading.RLock()
-        t0 = time.perf_counter()
-        self.pile = Pile(model, count, bin=self.layout.bin, seed=seed)
-        self.progress(
-            "pile", f"{len(self.pile)} {model.name} parts dropped and settled in {time.perf_counter() - t0:.1f} s"
         )
         self.removed: list[int] = []
         self._held: Optional[int] = None
@@ -308,6 +310,55 @@ class TwinWorld:
         self._grasp_reach = math.inf
         self._gripper_config = GripperConfig(serial=SerialSettings(baudrate=115200, timeout_s=0.3), speed=255)
         self.robot_emulator = self.motor_emulator = self.gripper_emulator = None
+
+    def _fitting_pile(self, count: int, seed: int, raise_approach: bool) -> Pile:
+        """The pile of ``count`` parts, or of as many as the cell can work over. The gripper's tips
+        pass over the bin at the approach height less the gripper's reach; a pile heaped above
+        that gets the approach height raised to clear it by the same margin (``raise_approach``,
+        the cell's own limits: an integrator sets the approach over the highest part), up to
+        where the tips would come within that margin of where they are at the scan pose (whose
+        camera must see the pile from above); with the caller's limits, the pass height is the
+        ceiling. A pile above the ceiling is dropped again with as many parts as lay below it (at
+        least one fewer), and says so (:attr:`heaped`: how many were left out); a part that stands
+        above it alone is refused (InvalidInputError)."""
+        g = self.gripper_geometry
+        reach = float(g.T_flange_gripper[2, 3]) + g.tip_depth_mm
+        pass_z = float(self.limits.approach_height_mm) - reach
+        margin = pass_z - float(self.layout.bin.bounds[1][2])  # the approach's clearance over the rim
+        ceiling = float(self.layout.T_base_flange[2, 3]) - reach - 2.0 * margin if raise_approach else pass_z
+        vertices = np.asarray(self.model.vertices, dtype=np.float64)
+        n = count
+        while True:
+            pile = Pile(self.model, n, bin=self.layout.bin, seed=seed)
+            poses = np.asarray(pile.poses)
+            tops = (vertices @ poses[:, 2, :3].T).max(axis=0) + poses[:, 2, 3] if n else np.zeros(1)
+            if tops.max() <= ceiling:
+                break
+            if n == 1:
+                raise InvalidInputError(
+                    f"model: one {self.model.name} alone stands {tops.max() - float(self.layout.bin.bounds[0][2]):.0f}"
+                    f" mm above the bin's floor, above the {ceiling:.0f} mm the cell can pass over; pass a layout "
+                    "with a deeper bin"
+                )
+            n = max(1, min(n - 1, int((tops <= ceiling).sum())))
+        #: How many of the parts asked for were left out, as they heaped too high.
+        self.heaped = count - n
+        if self.heaped:
+            self.progress(
+                "pile",
+                f"{count} {self.model.name} parts heap above z = {ceiling:.0f} mm, as high as the gripper can pass "
+                f"over the bin and the camera still see it: {n} dropped instead",
+            )
+        top = float(tops.max())
+        if top > pass_z:
+            approach = top + margin + reach
+            self.limits = dataclasses.replace(self.limits, approach_height_mm=approach)
+            self.progress(
+                "pile",
+                f"the pile stands {top - float(self.layout.bin.bounds[1][2]):.0f} mm above the rim: the arm's approach "
+                f"height over the bin is raised to {approach:.0f} mm",
+            )
+        return pile
 
     # -- life cycle
     def __enter__(self) -> TwinWorld:

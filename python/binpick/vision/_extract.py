@@ -35,6 +35,34 @@ def laser_mask(image: np.ndarray, threshold: float = 30.0) -> np.ndarray:
     return red_excess(image) > _threshold(threshold)
 
 
+def describe_frames(frames: Any, threshold: float = 30.0) -> str:
+    """What a scan's frames (BGR or grey images) show, in words, for a scan that gave no points:
+    dark (the lens covered, the light off), overexposed (the line drowned), no pixel red enough
+    for the line (the laser off or out of the view), or red pixels the extraction could not follow
+    as a line."""
+    images = [as_image(im, "frames") for im in frames]
+    if not images:
+        return "the scan kept no frame to look at"
+    grey = [im if im.ndim == 2 else cv2.cvtColor(im, cv2.COLOR_BGR2GRAY) for im in images]
+    brightness = float(np.median([float(g.mean()) for g in grey]))
+    saturated = float(np.median([float((g >= 250).mean()) for g in grey]))
+    red = [int((red_excess(im) > threshold).sum()) for im in images]
+    seen = f"{len(images)} frames kept: median brightness {brightness:.0f} of 255"
+    if brightness < 15.0:
+        return f"{seen}; the images are dark: is the lens covered, the light off or the exposure too short?"
+    if saturated > 0.25:
+        return f"{seen}, {saturated:.0%} of the pixels saturated; the line drowns in it: lower the exposure or gain"
+    if max(red) == 0:
+        return (
+            f"{seen}; no pixel is red enough for the laser line (Cr more than {threshold:g} over grey) in any of "
+            "them: is the laser on, and does its line fall in the camera's view?"
+        )
+    return (
+        f"{seen}; up to {max(red)} pixels per frame are red enough for the line, but none could be followed as a "
+        "line across the image: is the view blocked close to the camera?"
+    )
+
+
 def _threshold(value: Any) -> float:
     t = number(value, "threshold", unit="grey levels")
     if not 0 <= t < 255:
