@@ -88,9 +88,12 @@ def _flat_elbow_between_neighbours(sim, gap_mm: float):
 
 
 def test_preshaped_fingers_pick_a_flat_elbow_that_open_fingers_cannot(sim):
-    T_bo, scene = _flat_elbow_between_neighbours(sim, gap_mm=15.0)
+    # The neighbours 18 mm off: the narrow fingers' outer faces 13 mm from the pipe's axis keep
+    # more than the planner's 3 mm clearance against the scan from them.
+    T_bo, scene = _flat_elbow_between_neighbours(sim, gap_mm=18.0)
     here = sim.robot_emulator.pose()
     narrow = _flat_elbow_config(sim, 5.0)
+    assert narrow.scan_clearance_mm == 3.0
     wide = _flat_elbow_config(sim, None)
     with pytest.raises(NoGraspError):
         plan_grasp(wide, T_bo, scene, here)  # 50 mm apart the fingers land on the neighbours or the floor

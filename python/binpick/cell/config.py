@@ -94,24 +94,31 @@ class GripperGeometry:
             return float(self.open_width_mm)
         return float(min(self.open_width_mm, width_mm + 2.0 * self.preshape_clearance_mm))
 
-    def occupied(self, points_gripper: np.ndarray, opening_mm: Any = None, margin_mm: float = 0.0) -> np.ndarray:
+    def occupied(
+        self, points_gripper: np.ndarray, opening_mm: Any = None, margin_mm: float = 0.0, grow_mm: float = 0.0
+    ) -> np.ndarray:
         """Which points (N, 3, in the gripper frame; or any shape (..., 3)) lie inside the gripper
         (fingers or body), the fingers ``opening_mm`` apart (a number, or an array that
         broadcasts against the points' leading shape; ``open_width_mm`` by default); with
-        ``margin_mm``, more than that far inside (a surface grazing the gripper is not in it)."""
+        ``margin_mm``, more than that far inside (a surface grazing the gripper is not in it);
+        with ``grow_mm``, the gripper grown by that much on every side but below the fingertips
+        (a clearance round it; what lies under the tips is the floor's business)."""
         x, y, z = np.moveaxis(points_gripper, -1, 0)
         m = float(margin_mm)
+        side = m - float(grow_mm)
         top = self.tip_depth_mm - self.finger_length_mm
-        in_z = (z <= self.tip_depth_mm - m) & (z >= top + m)
+        in_z = (z <= self.tip_depth_mm - m) & (z >= top + side)
         gap = self.open_width_mm if opening_mm is None else np.asarray(opening_mm, dtype=np.float64)
         offset = gap / 2 + self.finger_thickness_mm / 2
-        half = self.finger_thickness_mm / 2 - m
+        half = self.finger_thickness_mm / 2 - side
         finger = (
             in_z
-            & (np.abs(y) <= self.finger_width_mm / 2 - m)
+            & (np.abs(y) <= self.finger_width_mm / 2 - side)
             & ((np.abs(x - offset) <= half) | (np.abs(x + offset) <= half))
         )
-        body = (z < top - m) & (z >= top - self.body_length_mm + m) & (np.hypot(x, y) <= self.body_radius_mm - m)
+        body = (
+            (z < top - side) & (z >= top - self.body_length_mm + side) & (np.hypot(x, y) <= self.body_radius_mm - side)
+        )
         return finger | body
 
     def outline(self, opening_mm: Optional[float] = None, *, sides: int = 16) -> np.ndarray:
@@ -197,6 +204,11 @@ class CellConfig:
         limits: the cell's motion limits (also given to the robot driver).
         approach_distance_mm: the straight approach along the gripper axis before the grasp, mm.
         clearance_z_mm: flange height for travelling over the bin, mm; None = the approach height + 20 mm.
+        scan_clearance_mm: how far the gripper is grown sideways and up (not below the fingertips,
+            where the floor is the floor clearance's) against the scan's points, not against the
+            located part's exact model: a neighbour's flank bulges out unseen past the last line
+            or pixel that caught it (by up to about a line's spacing, 3.3 mm in the default sweep),
+            and the pose's error and the arm's repeatability add to it, mm.
         max_collision_points: a grasp is refused when more scene points than this (stray points)
             lie inside the open gripper (fingers or body); the located part's own model (at the
             located pose) may not lie inside it at all (more than ``binpick.cell.grasp.GRAZE_MM``).
@@ -251,6 +263,7 @@ class CellConfig:
     approach_distance_mm: float = 40.0
     clearance_z_mm: Optional[float] = None
     max_collision_points: int = 15
+    scan_clearance_mm: float = 3.0
     floor_clearance_mm: float = 0.0
     min_confidence: float = 0.3
     orientation_needed: bool = False
@@ -276,6 +289,7 @@ class CellConfig:
         if self.clearance_z_mm is None:
             object.__setattr__(self, "clearance_z_mm", float(self.limits.approach_height_mm) + 20.0)
         count(self.max_collision_points, "max_collision_points")
+        non_negative(self.scan_clearance_mm, "scan_clearance_mm", "mm")
         count(self.max_candidates, "max_candidates", 1)
         count(self.max_nudges, "max_nudges", 0, 20)
         non_negative(self.floor_clearance_mm, "floor_clearance_mm", "mm")

@@ -381,14 +381,16 @@ def line_step(cloud: Any) -> Optional[np.ndarray]:
 def _unseen(points: np.ndarray, step: Optional[np.ndarray]) -> np.ndarray:
     """The scene points, each standing for the surface it lies on out to (not onto) the next
     laser line either side (``step`` of :func:`line_step`): copies of every point along the step,
-    at most 2 mm apart, so that a finger coming down where an unseen edge may stand meets them."""
+    at most :data:`_UNSEEN_SPACING_MM` apart, out to :data:`GRAZE_MM` short of the next line, so
+    that a finger coming down where an unseen edge may stand meets them."""
     if step is None or len(points) == 0:
         return points
     size = float(np.linalg.norm(step))
-    k = int(math.ceil(size / _UNSEEN_SPACING_MM))
-    if size <= 2.0 * GRAZE_MM or k < 1:
+    reach = size - GRAZE_MM
+    if reach <= GRAZE_MM:
         return points
-    offsets = np.arange(-k, k + 1)[:, None] * (np.asarray(step, dtype=np.float64) / size * (size / (k + 1)))
+    k = int(math.ceil(reach / _UNSEEN_SPACING_MM))
+    offsets = np.linspace(-reach, reach, 2 * k + 1)[:, None] * (np.asarray(step, dtype=np.float64) / size)
     return (points[None, :, :] + offsets[:, None, :]).reshape(-1, 3)
 
 
@@ -398,12 +400,18 @@ _UNSEEN_SPACING_MM = 2.0
 
 
 def _hits_many(
-    gripper: GripperGeometry, points: np.ndarray, T_bg: np.ndarray, openings: np.ndarray, margin_mm: float = 0.0
+    gripper: GripperGeometry,
+    points: np.ndarray,
+    T_bg: np.ndarray,
+    openings: np.ndarray,
+    margin_mm: float = 0.0,
+    grow_mm: float = 0.0,
 ) -> np.ndarray:
     """:func:`points_in_gripper` for each of the gripper poses ``T_bg`` (K, 4, 4), its fingers
     ``openings`` (K,) apart: the distances of every point to each pose's bounding sphere in one
     matrix product (single precision, the sphere 1 mm larger to cover its rounding), then the
-    piece-by-piece test, pose by pose, on the points inside its sphere."""
+    piece-by-piece test, pose by pose, on the points inside its sphere. ``margin_mm`` and
+    ``grow_mm``: see :meth:`GripperGeometry.occupied`."""
     if len(points) == 0 or len(T_bg) == 0:
         return np.zeros(len(T_bg), dtype=np.int64)
     z_mid, radius = _occupied_sphere(gripper)
@@ -411,13 +419,14 @@ def _hits_many(
     C = (t + z_mid * R[:, :, 2]).astype(np.float32)
     p32 = points.astype(np.float32)
     d2 = np.einsum("ij,ij->i", C, C)[:, None] - 2.0 * (C @ p32.T) + np.einsum("ij,ij->i", p32, p32)[None]
-    k, i = np.nonzero(d2 <= np.float32((radius + 1.0) ** 2))  # pose-major: each pose's points together
+    reach = radius + 1.0 + max(0.0, float(grow_mm))
+    k, i = np.nonzero(d2 <= np.float32(reach**2))  # pose-major: each pose's points together
     bounds = np.searchsorted(k, np.arange(len(T_bg) + 1))
     openings = np.asarray(openings, dtype=np.float64)
     hits = np.zeros(len(T_bg), dtype=np.int64)
     for j in np.flatnonzero(np.diff(bounds)):
         local = (points[i[bounds[j] : bounds[j + 1]]] - t[j]) @ R[j]
-        hits[j] = np.count_nonzero(gripper.occupied(local, openings[j], margin_mm))
+        hits[j] = np.count_nonzero(gripper.occupied(local, openings[j], margin_mm, grow_mm))
     return hits
 
 
@@ -458,6 +467,7 @@ _PLANNER_FIELDS = (
     "clearance_z_mm",
     "floor_clearance_mm",
     "max_collision_points",
+    "scan_clearance_mm",
     "reachable",
 )
 
@@ -657,7 +667,13 @@ def plan_grasp(
             batch = kept
         if not batch:
             continue
-        scene_hits = _hits_many(config.gripper, scene, np.stack([c[2] for c in batch]), [c[5] for c in batch])
+        scene_hits = _hits_many(
+            config.gripper,
+            scene,
+            np.stack([c[2] for c in batch]),
+            np.array([c[5] for c in batch]),
+            grow_mm=float(config.scan_clearance_mm),
+        )
         now = []
         for c, h in zip(batch, scene_hits.tolist()):
             if 0 < h <= config.max_collision_points:

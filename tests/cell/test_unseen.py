@@ -1,0 +1,68 @@
+"""What lies between two laser lines is not seen: the planner lets each scene point stand for its
+surface out to the next line either side, so that a finger does not come down on an edge the
+lines missed (issue 38: the physics saw a finger corner touch a neighbour the planner counted 0
+points of)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import binpick
+from binpick.cell.grasp import GRAZE_MM, _unseen, line_step, plan_grasp
+from binpick.sim import SimulatedCell
+
+
+def _lines(step, n=10, x0=300.0):
+    """A swept scan of a flat floor: line k at x = x0 + k·step, points 0.5 mm apart along y."""
+    ys = np.arange(-40.0, 40.0, 0.5)
+    pts = np.concatenate([np.column_stack([np.full_like(ys, x0 + k * step), ys, np.zeros_like(ys)]) for k in range(n)])
+    frame = np.repeat(np.arange(n), len(ys))
+    return SimpleNamespace(points=pts, frame=frame)
+
+
+def test_the_line_step_is_the_spacing_of_the_lines_along_the_sweep():
+    step = line_step(_lines(4.0))
+    assert step == pytest.approx([4.0, 0.0, 0.0], abs=1e-9)
+    # A depth shot (one frame) or a cloud without lines has no step.
+    one = _lines(4.0, n=1)
+    assert line_step(one) is None
+    assert line_step(SimpleNamespace(points=np.zeros((0, 3)), frame=np.zeros(0))) is None
+
+
+def test_each_point_stands_for_its_surface_up_to_the_next_line():
+    p = np.array([[0.0, 0.0, 10.0]])
+    spread = _unseen(p, np.array([4.0, 0.0, 0.0]))
+    assert spread[:, 0].max() == pytest.approx(4.0 - GRAZE_MM)
+    assert spread[:, 0].min() == pytest.approx(-(4.0 - GRAZE_MM))
+    assert np.diff(np.sort(spread[:, 0])).max() <= 2.0 + 1e-9
+    assert (spread[:, 1:] == p[0, 1:]).all()
+    assert _unseen(p, None) is p
+
+
+def test_a_finger_is_not_planned_onto_an_edge_between_two_lines():
+    tee = binpick.parts.tee(resolution=2.0)
+    with SimulatedCell(tee, count=1, seed=0, frames=4) as sim:
+        cfg = sim.cell.config
+        here = sim.robot_emulator.pose()
+        T = sim.pile.poses[0]
+        plan, hits = plan_grasp(cfg, T, np.zeros((0, 3)), here)
+        assert hits == 0
+        # A neighbour's edge the lines missed: its last seen line 2 mm beyond the clearance the
+        # planner keeps round the finger (along the sweep, the gripper's closing axis), the next
+        # line 4 mm on, past the finger's far side, seeing nothing of it.
+        g, T_bg = cfg.gripper, plan.T_base_gripper
+        outer = plan.opening_mm / 2 + g.finger_thickness_mm
+        z = g.tip_depth_mm - 15.0
+        out = outer + cfg.scan_clearance_mm + 2.0
+        edge_g = np.array([[out, y, z] for y in np.linspace(-5.0, 5.0, 11)])
+        assert not g.occupied(edge_g, plan.opening_mm, grow_mm=cfg.scan_clearance_mm).any()
+        edge = edge_g @ T_bg[:3, :3].T + T_bg[:3, 3]
+        step = -4.0 * T_bg[:3, 0]  # toward the finger
+        step[2] = 0.0
+        same, _ = plan_grasp(cfg, T, edge, here)
+        assert same.grasp == plan.grasp, "seen as points only, the edge is outside the finger's clearance"
+        moved, _ = plan_grasp(cfg, T, edge, here, unseen_step=step)
+        assert moved.grasp != plan.grasp, "the edge may stand in the finger's way: another grasp"
