@@ -1,7 +1,7 @@
 """`binpick pick` with a fixed 3-D camera (eye-to-hand): the twin with its structured-light camera
 on a stand (`binpick emulate cell --camera fixed`, the MELFA arm), its true eye-to-hand pose, and
 the pick loop unchanged above a depth shot per scan — every part picked, then the bin found empty
-(nothing above its floor: the run ends "bin empty", not failed)."""
+(the twin's ground truth says so: the run ends "bin empty: 3 of 3 removed", not failed)."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ def test_binpick_pick_empties_the_bin_with_a_fixed_camera(tmp_path, capsys):
         assert code == 0, printed.err[-3000:]
         assert (
             "3 of 3 picks succeeded" in printed.out
-            and "then bin empty (nothing found above the floor): 3 removed" in printed.out
+            and "then bin empty: 3 of 3 removed" in printed.out
         )
         picks = json.loads((tmp_path / "run" / "picks.json").read_text())["picks"]
         assert [p["success"] for p in picks] == [True, True, True, False]

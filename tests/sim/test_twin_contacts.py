@@ -21,6 +21,22 @@ from binpick.transforms import inverse, look_down
 ESTIMATE = {"d_star": 12.0, "min_points": 500}
 
 
+def _shifted(planned, gripper):
+    """``locate_and_plan`` with its plan moved sideways by half the fingers' opening and half a
+    finger, after every check passed: the finger comes down on the part it went for."""
+
+    def shifted(*args, **kwargs):
+        located, plan = planned(*args, **kwargs)
+        d = np.eye(4)
+        d[:3, 3] = (plan.opening_mm / 2 + gripper.finger_thickness_mm / 2) * plan.T_base_gripper[:3, 0]
+        waypoints = tuple((n, d @ T, lin) for n, T, lin in plan.waypoints)
+        return located, replace(
+            plan, waypoints=waypoints, T_base_gripper=d @ plan.T_base_gripper, T_base_flange=d @ plan.T_base_flange
+        )
+
+    return shifted
+
+
 def _centre(sim, k=0):
     T = sim.pile.poses[k]
     return T[:3, :3] @ sim.model.vertices.mean(axis=0) + T[:3, 3]
@@ -81,19 +97,7 @@ def collided():
     tee = binpick.parts.tee()
     with SimulatedCell(tee, count=3, seed=1, frames=60, estimate_options=ESTIMATE) as sim:
         cell = sim.cell
-        planned = cell.locate_and_plan
-
-        def shifted(*args, **kwargs):
-            located, plan = planned(*args, **kwargs)
-            x = plan.T_base_gripper[:3, 0]
-            d = np.eye(4)
-            d[:3, 3] = (plan.opening_mm / 2 + cell.config.gripper.finger_thickness_mm / 2) * x
-            waypoints = tuple((n, d @ T, lin) for n, T, lin in plan.waypoints)
-            return located, replace(
-                plan, waypoints=waypoints, T_base_gripper=d @ plan.T_base_gripper, T_base_flange=d @ plan.T_base_flange
-            )
-
-        cell.locate_and_plan = shifted
+        cell.locate_and_plan = _shifted(cell.locate_and_plan, cell.config.gripper)
         report = cell.run(1)
         assert sim.emulator_failures == []
         yield sim, report
@@ -123,3 +127,26 @@ def test_the_table_pictures_and_exit_status_show_the_collision(collided, tmp_pat
     assert picks[0]["failure"] == "collision" and picks[0]["collisions"], picks[0]
     assert collision_exit(report, "demo") == EXIT_COLLISION == 4
     assert "collided in pick 1" in capsys.readouterr().err
+
+
+def test_binpick_pick_on_the_twin_records_the_collision_its_physics_saw(tmp_path, capsys, monkeypatch):
+    """The commissioning case of issue 38: the twin saw the gripper touch a part while the pick
+    report said nothing. `binpick pick` on the twin now asks the twin's ground truth (its camera
+    socket's WORLD), and the touch is a collision in the table and picks.json, and exit 4."""
+    from _twin import twin_process
+    from binpick.cell import Cell
+
+    planned = Cell.locate_and_plan
+    monkeypatch.setattr(
+        Cell, "locate_and_plan", lambda self, *a, **k: _shifted(planned.__get__(self), self.config.gripper)(*a, **k)
+    )
+    with twin_process(tmp_path / "twin", "--count", "3") as out:
+        code = cli.main(["pick", str(out / "cell.toml"), "--picks", "1", "--out", str(tmp_path / "run")])
+        printed = capsys.readouterr()
+        world = json.loads((out / "world.json").read_text())
+    assert code == EXIT_COLLISION, printed.out[-2000:] + printed.err[-2000:]
+    picks = json.loads((tmp_path / "run" / "picks.json").read_text())["picks"]
+    assert picks[0]["failure"] == "collision" and picks[0]["collisions"][0]["with"].startswith("part "), picks[0]
+    assert "failures: 1 collision" in printed.out
+    assert "collided in pick 1" in printed.err
+    assert any(c["with"] == picks[0]["collisions"][0]["with"] for c in world["collisions"])

@@ -401,11 +401,14 @@ def test_the_printed_example_picks_from_the_twin_with_only_its_ports_and_camera_
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     picks = json.loads((out / "picks.json").read_text())
     assert [p["success"] for p in picks["picks"]] == [True] and picks["lifted"] == [1]
-    assert "removed: not known (no ground truth); lifted a part: 1 pick (1); failures: none" in done.stdout
     time.sleep(0.5)  # the twin's world tick
     after = twin.world()
     removed = set(after["removed"]) - set(before["removed"])
     assert len(removed) == 1 and removed <= {p["id"] for p in before["in_bin"]}, (before, after)
+    # The twin's ground truth (its camera socket's WORLD) names the part the pick removed.
+    (pid,) = removed
+    assert f"removed 1 part ({pid}); failures: none" in done.stdout, done.stdout[-2000:]
+    assert picks["picks"][0]["picked_instance"] == pid and picks["picks"][0]["truth"]["instance"] == pid
     assert after["held"] is None
     twin.picked += 1
 

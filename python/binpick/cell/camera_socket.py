@@ -9,14 +9,18 @@ Request, 8 bytes::
     magic   4s  b"BPCQ"
     version u8  1
     op      u8  1 = FRAME: grab one frame as the camera sees the cell now;
-                2 = DEPTH: one shot of the fixed 3-D camera (``emulate cell --camera fixed``)
+                2 = DEPTH: one shot of the fixed 3-D camera (``emulate cell --camera fixed``);
+                3 = WORLD: the twin's ground truth now (world.json's document, after the world
+                settled: the parts in the bin, those removed, the gripper's collisions), for a
+                rehearsal's report
     zero    u16 0
 
 Reply header, :data:`HEADER_SIZE` (= 168) bytes, then ``length`` payload bytes::
 
     magic    4s   b"BPCR"
     version  u8   1
-    status   u8   0 = a frame follows, 1 = an error: the payload is its UTF-8 message
+    status   u8   0 = a frame follows, 1 = an error: the payload is its UTF-8 message, 2 = a
+                  document (WORLD): the payload is UTF-8 JSON, at most MAX_DOCUMENT_BYTES
     dtype    u8   1 = uint8 (a FRAME's BGR pixels), 2 = float32 (a DEPTH shot's organised X, Y, Z
                   in the camera's frame, mm, NaN at holes)
     channels u8   3
@@ -35,6 +39,7 @@ subclasses naming what was wrong).
 
 from __future__ import annotations
 
+import json
 import socket
 import struct
 from dataclasses import dataclass
@@ -48,6 +53,7 @@ __all__ = [
     "PROTOCOL_VERSION",
     "OP_FRAME",
     "OP_DEPTH",
+    "OP_WORLD",
     "HEADER_SIZE",
     "REQUEST_SIZE",
     "MAX_ERROR_BYTES",
@@ -56,6 +62,8 @@ __all__ = [
     "decode_request",
     "encode_frame",
     "encode_error",
+    "encode_document",
+    "request_document",
     "read_reply",
     "recv_exact",
     "connect",
@@ -65,8 +73,10 @@ __all__ = [
 PROTOCOL_VERSION = 1
 OP_FRAME = 1
 OP_DEPTH = 2
+OP_WORLD = 3
 STATUS_FRAME = 0
 STATUS_ERROR = 1
+STATUS_DOCUMENT = 2
 DTYPE_UINT8 = 1
 DTYPE_FLOAT32 = 2
 _ITEM_BYTES = {DTYPE_UINT8: 1, DTYPE_FLOAT32: 4}
@@ -80,6 +90,8 @@ REPLY_MAGIC = b"BPCR"
 
 #: Longest error message read, bytes.
 MAX_ERROR_BYTES = 1 << 16
+#: Longest document (WORLD) read, bytes: a bin of thousands of parts with their poses.
+MAX_DOCUMENT_BYTES = 16 << 20
 
 
 @dataclass(frozen=True, eq=False)
@@ -108,8 +120,10 @@ def decode_request(data: bytes) -> int:
         raise ProtocolError(f"camera request: magic is {magic!r}, not {REQUEST_MAGIC!r}; not a binpick camera client")
     if version != PROTOCOL_VERSION:
         raise ProtocolError(f"camera request: protocol version {version}; this twin speaks version {PROTOCOL_VERSION}")
-    if op not in (OP_FRAME, OP_DEPTH) or zero != 0:
-        raise ProtocolError(f"camera request: unknown operation {op} ({OP_FRAME} = FRAME, {OP_DEPTH} = DEPTH)")
+    if op not in (OP_FRAME, OP_DEPTH, OP_WORLD) or zero != 0:
+        raise ProtocolError(
+            f"camera request: unknown operation {op} ({OP_FRAME} = FRAME, {OP_DEPTH} = DEPTH, {OP_WORLD} = WORLD)"
+        )
     return op
 
 
@@ -132,6 +146,43 @@ def encode_error(message: str) -> bytes:
     return (
         _HEADER.pack(REPLY_MAGIC, PROTOCOL_VERSION, STATUS_ERROR, 0, 0, 0, 0, 0, 0.0, *([0.0] * 16), len(text)) + text
     )
+
+
+def encode_document(doc: dict) -> bytes:
+    """The reply carrying a JSON document (WORLD)."""
+    text = json.dumps(doc).encode("utf-8")
+    if len(text) > MAX_DOCUMENT_BYTES:
+        return encode_error(f"the document is {len(text)} bytes, more than the protocol's {MAX_DOCUMENT_BYTES}")
+    return (
+        _HEADER.pack(REPLY_MAGIC, PROTOCOL_VERSION, STATUS_DOCUMENT, 0, 0, 0, 0, 0, 0.0, *([0.0] * 16), len(text))
+        + text
+    )
+
+
+def request_document(sock: socket.socket, op: int, path: str) -> dict:
+    """Sends one request of operation ``op`` (WORLD) and reads its document reply; ProtocolError
+    for anything else (the twin's error message, a frame, a document that is not a JSON object)."""
+    where = f"camera {path}"
+    try:
+        sock.sendall(encode_request(op))
+    except OSError as exc:
+        raise PortClosedError(f"camera: cannot send to {path} ({exc}); is the twin still running?") from None
+    head = recv_exact(sock, HEADER_SIZE, f"{where} reply header")
+    magic, version, status, *_, length = _HEADER.unpack(head)
+    if magic != REPLY_MAGIC or version != PROTOCOL_VERSION:
+        raise ProtocolError(f"{where}: the reply is not a twin camera's (magic {magic!r}, version {version})")
+    if status == STATUS_ERROR and length <= MAX_ERROR_BYTES:
+        text = recv_exact(sock, length, f"{where} error message").decode("utf-8", "replace")
+        raise ProtocolError(f"{where}: the twin refused: {text}")
+    if status != STATUS_DOCUMENT or length > MAX_DOCUMENT_BYTES:
+        raise ProtocolError(f"{where}: expected a document of at most {MAX_DOCUMENT_BYTES} bytes, got status {status}")
+    try:
+        doc = json.loads(bytes(recv_exact(sock, length, f"{where} document")).decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ProtocolError(f"{where}: the document is not JSON ({exc})") from None
+    if not isinstance(doc, dict):
+        raise ProtocolError(f"{where}: the document is a {type(doc).__name__}, not a JSON object")
+    return doc
 
 
 def recv_exact(sock: socket.socket, n: int, what: str) -> bytearray:

@@ -261,7 +261,8 @@ def cell_from_file(
         opened.append(hand.close_port)
         camera = open_camera()
         opened.append(camera.close)
-        return Cell(config, robot=arm, motor=motor, gripper=hand, camera=camera, progress=progress)
+        truth = _twin_truth(cell_file, config.model) if robot is None else None
+        return Cell(config, robot=arm, motor=motor, gripper=hand, camera=camera, progress=progress, truth=truth)
     except BaseException:  # nothing opened is left open
         for close in reversed(opened):
             try:
@@ -269,6 +270,20 @@ def cell_from_file(
             except (BinpickError, OSError):
                 pass
         raise
+
+
+def _twin_truth(cell_file: CellFile, model: Any) -> Any:
+    """The digital twin's ground truth (:class:`~binpick.cell.twin_truth.TwinTruth`) when the
+    file's camera is the twin's (``source = "twin"`` or ``"twin_depth"``): a rehearsal on the twin
+    reports the part each pick removed, the located poses' errors and the gripper's collisions."""
+    f = cell_file
+    if f.text("camera", "source", "opencv") not in ("twin", "twin_depth"):
+        return None
+    from .twin_truth import TwinTruth
+
+    here = os.path.dirname(os.path.abspath(f.path))
+    path = os.path.join(here, f.text("camera", "socket", "camera.sock"))
+    return TwinTruth(path, model, timeout_s=f.number("camera", "timeout_s", 60.0))
 
 
 def robot_from_file(cell_file: CellFile) -> Robot:

@@ -86,8 +86,10 @@ class _CameraServer:
         depth: Optional[DepthCamera] = None,
         *,
         ball: bool = False,
+        state: Optional[Callable[[], dict]] = None,
     ) -> None:
         self.world = world
+        self.state = state
         self.depth = depth
         self.ball = sphere_mesh(BALL_RADIUS_MM, 4) if ball else None
         self.path = path
@@ -132,12 +134,27 @@ class _CameraServer:
                 except BinpickError as exc:
                     conn.sendall(wire.encode_error(str(exc)))
                     return  # the stream cannot be trusted past a bad request
-                conn.sendall(self._depth_reply() if op == wire.OP_DEPTH else self._frame_reply())
+                if op == wire.OP_WORLD:
+                    conn.sendall(self._world_reply())
+                else:
+                    conn.sendall(self._depth_reply() if op == wire.OP_DEPTH else self._frame_reply())
         except OSError:
             pass
         finally:
             conn.close()
             self.progress("camera", "a client disconnected")
+
+    def _world_reply(self) -> bytes:
+        """The twin's ground truth now (world.json's document), the world settled first."""
+        if self.state is None:
+            return wire.encode_error("this twin serves no ground truth")
+        try:
+            with self.world.lock:
+                self.world.settle_pending()
+                doc = self.state()
+            return wire.encode_document(doc)
+        except BinpickError as exc:
+            return wire.encode_error(f"{type(exc).__name__}: {exc}")
 
     def _frame_reply(self) -> bytes:
         try:
@@ -259,7 +276,9 @@ class CellTwin:
             EyeToHand(self.fixed.T_base_camera).save(self.out / "true_eye_to_hand.toml")
         write_atomic(self.cell_file, self.cell_toml())
         self.tick()
-        self.camera = _CameraServer(self.world, self.socket_path, self.progress, self.fixed, ball=self.tool == "ball")
+        self.camera = _CameraServer(
+            self.world, self.socket_path, self.progress, self.fixed, ball=self.tool == "ball", state=self.world_state
+        )
         return self
 
     def close(self) -> None:
