@@ -17,10 +17,7 @@ def test_binpick_pick_empties_the_bin_with_a_fixed_camera(tmp_path, capsys):
         code = main(["pick", str(out / "cell.toml"), "--picks", "4", "--out", str(tmp_path / "run")])
         printed = capsys.readouterr()
         assert code == 0, printed.err[-3000:]
-        assert (
-            "3 of 3 picks succeeded" in printed.out
-            and "then bin empty: 3 of 3 removed" in printed.out
-        )
+        assert "3 of 3 picks succeeded" in printed.out and "then bin empty: 3 of 3 removed" in printed.out
         picks = json.loads((tmp_path / "run" / "picks.json").read_text())["picks"]
         assert [p["success"] for p in picks] == [True, True, True, False]
         assert picks[3]["bin_empty"] and picks[3]["failure"] is None  # the bin emptied: not a failure
