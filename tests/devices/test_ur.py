@@ -187,3 +187,31 @@ def test_a_program_the_controller_stops_short_is_a_fault(arm):
         stopper.join()
     finally:
         slow.close()
+
+
+def test_a_controller_slow_to_start_a_program_is_waited_for(monkeypatch):
+    """A controller under load may take longer than a package or two to start a program: a move
+    is not taken for one that already ended (it was, under CI load: 'stopped the program 291 mm
+    from the target' on a move that then ran), but waited for until it plays and ends."""
+    from binpick.devices.emulators.ur import UREmulator
+
+    start = UREmulator._run_script
+
+    def slow(self, text):
+        time.sleep(0.4)  # 200 packages at 500 Hz before the program plays
+        start(self, text)
+
+    monkeypatch.setattr(UREmulator, "_run_script", slow)
+    emulator = UREmulator(host="127.0.0.42", rtde_port=0, dashboard_port=0, secondary_port=0, speed_scale=10.0).start()
+    ports = {name: port for name, (_, port) in emulator.addresses.items()}
+    config = URConfig(rtde_port=ports["rtde"], dashboard_port=ports["dashboard"], secondary_port=ports["secondary"])
+    robot = URRobot("127.0.0.42", limits=LIMITS, config=config)
+    try:
+        robot.open_session()
+        target = look_down(400.0, 100.0, 600.0)
+        robot.move_to(target)
+        deg, mm = pose_error(target, robot.read_pose())
+        assert mm < 0.1 and deg < 0.01
+    finally:
+        robot.close()
+        emulator.close()

@@ -41,6 +41,10 @@ RUNTIME_PLAYING = 2
 SAFETY_NORMAL, SAFETY_REDUCED = 1, 2
 
 
+#: How long (controller time, s) a program without motion may go unseen before it counts as run.
+_START_GRACE_S = 2.0
+
+
 @dataclass(frozen=True)
 class URConfig:
     """Settings of a :class:`URRobot`.
@@ -242,7 +246,7 @@ class URRobot(Robot):
             if linear
             else f"movej({_ur_pose(target)}, a={c.joint_acceleration_rad_s2:.4f}, v={c.joint_speed_rad_s:.4f})"
         )
-        self._run_and_wait(move)
+        self._run_and_wait(move, moves=True)
         deg, mm = pose_error(target, self.read_pose())
         if mm > c.arrive_mm or deg > c.arrive_deg:
             raise DeviceFault(
@@ -250,12 +254,15 @@ class URRobot(Robot):
                 "(a protective stop, an unreachable target or a stop from the pendant; see PolyScope's log)"
             )
 
-    def _run_and_wait(self, *statements: str) -> None:
+    def _run_and_wait(self, *statements: str, moves: bool = False) -> None:
         sent = self._send_program(*statements)
-        # The program runs (PLAYING), then ends (not PLAYING); a short one may end between two
-        # packages, so its end is also seen as a later timestamp with the program not running.
+        # The program runs (PLAYING), then ends (not PLAYING). One that moves the arm plays for
+        # many packages and must be seen PLAYING; one without motion may end between two
+        # packages, so its end is also seen as a package _START_GRACE_S later with nothing
+        # playing — long enough that a controller slow to start a program (under load) is not
+        # taken for one that already ran.
         started = self._wait_state(
-            lambda s: s["runtime_state"] == RUNTIME_PLAYING or s["timestamp"] > sent + 0.1,
+            lambda s: s["runtime_state"] == RUNTIME_PLAYING or (not moves and s["timestamp"] > sent + _START_GRACE_S),
             "program start",
         )
         if started["runtime_state"] == RUNTIME_PLAYING:

@@ -46,6 +46,8 @@ CONTROLLER_VERSION = (5, 11, 1, 108318)
 #: robot_mode values (RTDE and the dashboard's names).
 ROBOT_MODES = {3: "POWER_OFF", 4: "POWER_ON", 5: "IDLE", 7: "RUNNING"}
 RUNTIME_STOPPED, RUNTIME_PLAYING = 1, 2
+#: The shortest a program plays, s: four 2 ms controller cycles.
+_MIN_PROGRAM_S = 0.008
 SAFETY_NORMAL = 1
 #: The control cycle, s (500 Hz).
 CYCLE_S = 0.002
@@ -363,6 +365,10 @@ class UREmulator:
             self._program.start()
 
     def _execute(self, program: list[tuple], abort: threading.Event) -> None:
+        # A controller's program lives a few of its cycles at least (a real one takes tens of
+        # milliseconds to start one): a client sees it PLAYING before it ends, even when its
+        # first move is refused at once.
+        abort.wait(_MIN_PROGRAM_S)
         for statement in program:
             if abort.is_set():
                 break
