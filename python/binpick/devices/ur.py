@@ -246,7 +246,7 @@ class URRobot(Robot):
             if linear
             else f"movej({_ur_pose(target)}, a={c.joint_acceleration_rad_s2:.4f}, v={c.joint_speed_rad_s:.4f})"
         )
-        self._run_and_wait(move, moves=True)
+        self._run_and_wait(move, target=target)
         deg, mm = pose_error(target, self.read_pose())
         if mm > c.arrive_mm or deg > c.arrive_deg:
             raise DeviceFault(
@@ -254,21 +254,27 @@ class URRobot(Robot):
                 "(a protective stop, an unreachable target or a stop from the pendant; see PolyScope's log)"
             )
 
-    def _run_and_wait(self, *statements: str, moves: bool = False) -> None:
+    def _run_and_wait(self, *statements: str, target: Optional[np.ndarray] = None) -> None:
+        """Sends a program and returns once it ran. It runs (PLAYING), then ends (not PLAYING).
+        A program without motion may end between two packages: its end is also seen as a package
+        _START_GRACE_S later with nothing playing. One that moves the arm to ``target`` has run
+        when it was seen playing and then not, or when the arm stands at ``target`` with nothing
+        playing (it ran between packages the controller sent late, under load); a controller slow
+        to start it is waited for, not taken for one that already ran."""
         sent = self._send_program(*statements)
-        # The program runs (PLAYING), then ends (not PLAYING). One that moves the arm plays for
-        # many packages and must be seen PLAYING; one without motion may end between two
-        # packages, so its end is also seen as a package _START_GRACE_S later with nothing
-        # playing — long enough that a controller slow to start a program (under load) is not
-        # taken for one that already ran.
-        started = self._wait_state(
-            lambda s: s["runtime_state"] == RUNTIME_PLAYING or (not moves and s["timestamp"] > sent + _START_GRACE_S),
-            "program start",
-        )
+        c = self.config
+
+        def ran(s: dict[str, Any]) -> bool:
+            if s["runtime_state"] == RUNTIME_PLAYING:
+                return True
+            if target is None:
+                return s["timestamp"] > sent + _START_GRACE_S
+            deg, mm = pose_error(target, rtde.transform_from_ur_pose(s["actual_TCP_pose"]))
+            return mm <= c.arrive_mm and deg <= c.arrive_deg
+
+        started = self._wait_state(ran, "program start")
         if started["runtime_state"] == RUNTIME_PLAYING:
-            self._wait_state(
-                lambda s: s["runtime_state"] != RUNTIME_PLAYING, "program end", self.config.motion_timeout_s
-            )
+            self._wait_state(lambda s: s["runtime_state"] != RUNTIME_PLAYING, "program end", c.motion_timeout_s)
 
     def stop(self) -> None:
         """Stops the running program (the Dashboard's ``stop``)."""

@@ -609,11 +609,14 @@ class UREmulator:
             cycle += 1
 
     def _state(self, clock: float) -> dict[str, Any]:
+        # The program's state first, then the arm's: a program that ends between the two reads
+        # shows as still playing with the arm where it ended, never as ended with the arm short.
+        runtime = self.runtime_state
         q = self.joints()
         T = self.arm.forward(q) @ self.T_flange_tcp
         pose = rtde.ur_pose(T)
         powered = self.robot_mode >= 5
-        running = self.runtime_state == RUNTIME_PLAYING
+        running = runtime == RUNTIME_PLAYING
         return {
             "timestamp": clock,
             "actual_q": tuple(q),
@@ -623,7 +626,7 @@ class UREmulator:
             "robot_mode": self.robot_mode,
             "safety_mode": SAFETY_NORMAL,
             "safety_status": SAFETY_NORMAL,
-            "runtime_state": self.runtime_state,
+            "runtime_state": runtime,
             "joint_mode": (253,) * 6 if self.robot_mode == 7 else (236,) * 6,
             "speed_scaling": 1.0,
             "target_speed_fraction": 1.0,
