@@ -148,6 +148,10 @@ def test_cycles_end_with_the_pile_that_reaches_them_in_seed_order():
     done[8] = {"cycles": 1}  # run beyond the count by a worker: not the run's
     assert plan.chosen(done) == [5, 6, 7]
     assert [s for s, _ in zip(plan.todo({5: {}, 7: {}}), range(3))] == [6, 8, 9]
+    # No more piles are started once those finished hold the cycles and every earlier seed is finished or running.
+    assert not plan.enough({5: {"cycles": 2}, 7: {"cycles": 3}}, running=[])
+    assert plan.enough({5: {"cycles": 2}, 7: {"cycles": 3}}, running=[6])
+    assert not plan.enough({5: {"cycles": 2}}, running=[6, 7])
 
 
 def test_the_report_figures_of_handcrafted_records():
@@ -253,3 +257,56 @@ def test_the_readme_run_works_word_for_word(tmp_path):
     lines = (tmp_path / "validate-tee" / "records.jsonl").read_text().splitlines()
     assert report["piles"] == 2 and report["cycles"] == len(lines) >= 3
     assert 0.0 <= report["success_rate_95"][0] <= report["success_rate"] <= report["success_rate_95"][1] <= 1.0
+
+
+class _Backwards:
+    """A stand-in for the worker pool that finishes its piles out of order (as parallel workers
+    may: the newest and the oldest in turn), each pile made up from its seed: two cycles, the
+    second an "empty grip" on odd seeds, with its picture."""
+
+    name = "backwards"
+
+    def __init__(self, workers, model):
+        self.slots, self.queue, self.waits = workers, [], 0
+
+    def submit(self, spec):
+        self.queue.append(spec)
+        return spec.seed
+
+    def wait(self, handles):
+        self.waits += 1
+        return [max(handles) if self.waits % 2 else min(handles)]
+
+    def result(self, seed):
+        spec = next(s for s in self.queue if s.seed == seed)
+        outcomes = ["picked", "empty grip" if seed % 2 else "picked"]
+        records = [
+            {"seed": seed, "cycle": i + 1, "outcome": o, "cycle_time_s": 1.0, "cpu_s": 1.0, "binpick_cpu_s": 0.1}
+            for i, o in enumerate(outcomes)
+        ]
+        pictures = (
+            {"empty grip": {"cycle": 2, "png": b"png of seed %d" % seed}} if "empty grip" in spec.pictures else {}
+        )
+        pile = {"seed": seed, "dropped": 2, "removed": 1 + (seed % 2 == 0), "emptied": seed % 2 == 0, "cycles": 2}
+        pile.update(picked=outcomes.count("picked"), stopped=None, cpu_s=2.5, emulator_failures=[])
+        return {"pile": pile, "records": records, "pictures": pictures if seed % 2 else {}}
+
+    def close(self, cancel=False):
+        pass
+
+
+def test_piles_finished_out_of_order_give_the_records_and_pictures_in_seed_order(tmp_path, monkeypatch):
+    monkeypatch.setattr(v, "Pool", _Backwards)
+    out = tmp_path / "run"
+    report = binpick.validate("tee", seeds=4, first_seed=0, count=2, workers=4, out=out)
+    assert [(r["seed"], r["cycle"]) for r in report.records] == [(s, c) for s in range(4) for c in (1, 2)]
+    # seed 3 finished first and drew the picture; seed 1's, the first by seed, replaced it
+    assert report.summary["failure_pictures"] == {
+        "empty grip": {"seed": 1, "cycle": 2, "file": "failure_empty_grip.png"}
+    }
+    assert (out / "failure_empty_grip.png").read_bytes() == b"png of seed 1"
+    assert report.summary["failures"] == {"empty grip": 2} and report.summary["bins_emptied"] == 2
+    # cycles: seeds in order up to the one that reaches 5 (2 + 2 + 2); seed 3, run alongside, is not the run's
+    five = binpick.validate("tee", cycles=5, count=2, workers=2, out=tmp_path / "five")
+    assert [p["seed"] for p in five.piles] == [0, 1, 2] and five.summary["cycles"] == 6
+    assert [json.loads(x)["seed"] for x in (tmp_path / "five" / "piles.jsonl").read_text().splitlines()] == [0, 1, 2]

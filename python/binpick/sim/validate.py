@@ -34,7 +34,7 @@ import json
 import os
 import pickle
 import time
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Callable, Optional
@@ -246,6 +246,17 @@ class _Plan:
             total += done[s]["cycles"]
         return chosen
 
+    def enough(self, done: Mapping[int, dict], running: Iterable[int]) -> bool:
+        """Whether no more piles need starting: the run is complete, or (``cycles``) every seed
+        up to the last one finished is finished or ``running`` and the piles finished hold the
+        cycles asked for — so that once those running finish, the seeds in order reach them."""
+        if self.cycles is None or self.complete(done):
+            return self.complete(done)
+        below = set(done) | set(running)
+        top = max(done, default=self.first_seed - 1)
+        gapless = all(s in below for s in range(self.first_seed, top + 1))
+        return gapless and sum(p["cycles"] for p in done.values()) >= self.cycles
+
     def complete(self, done: Mapping[int, dict]) -> bool:
         """Whether the piles finished make the whole run."""
         if self.cycles is None:
@@ -456,7 +467,7 @@ def _run(
     t0, piles, cycles_run = time.perf_counter(), 0, 0
     try:
         while True:
-            while len(inflight) < backend.slots and not plan.complete(done):
+            while len(inflight) < backend.slots and not plan.enough(done, inflight.values()):
                 seed = next(seeds, None)
                 if seed is None:
                     break

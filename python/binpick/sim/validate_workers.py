@@ -316,12 +316,13 @@ class Pool:
     def close(self, cancel: bool = False) -> None:
         if cancel:
             # Stop the piles under way too: the finished ones are on disk, and the same call resumes.
-            self._executor.shutdown(wait=False, cancel_futures=True)
             terminate = getattr(self._executor, "terminate_workers", None)  # Python 3.14
             if terminate is not None:
                 terminate()
             else:
-                for p in list(getattr(self._executor, "_processes", {}).values()):
+                processes = list((getattr(self._executor, "_processes", None) or {}).values())
+                self._executor.shutdown(wait=False, cancel_futures=True)
+                for p in processes:
                     p.terminate()
         self._executor.shutdown(wait=True)
 
