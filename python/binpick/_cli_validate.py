@@ -71,7 +71,7 @@ def _add_validate(sub: Any) -> None:
         "validate",
         help="the success rate and picks per hour of a part over many simulated piles",
         description="Runs seeded pick cycles of a part over many simulated piles (the whole simulated cell, "
-        "one pile per worker process, or on Ray) and reports the success rate with its 95 %% interval, bins "
+        "one pile per worker process, or on Ray) and reports the success rate with its 95 % interval, bins "
         "emptied, failures by kind with a picture of each, the cycle time and picks per hour. Writes "
         "OUT/records.jsonl (a line per cycle), OUT/piles.jsonl, OUT/report.json and OUT/summary.png as piles "
         "finish: run the same command again to resume a run that was stopped.",
