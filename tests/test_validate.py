@@ -196,6 +196,27 @@ def test_a_failed_cycle_has_its_kind_and_its_picture():
     assert result["pictures"]["no grasp"]["png"][:8] == b"\x89PNG\r\n\x1a\n"
 
 
+def test_a_picture_that_cannot_be_drawn_loses_no_record(monkeypatch):
+    def broken(*args, **kwargs):
+        raise InvalidInputError("collisions.T_base_gripper: not a rotation")
+
+    monkeypatch.setattr(binpick.viz, "save_failure", broken)
+    spec = PileSpec(
+        seed=0,
+        pile_size=1,
+        frames=30,
+        estimate_options=ESTIMATE,
+        overrides={"min_confidence": 1.0, "look_again_poses": (), "max_nudges": 0},
+        pictures=frozenset({"no grasp"}),
+    )
+    result = run_pile(binpick.parts.tee(), spec)
+    assert [r["outcome"] for r in result["records"]] == ["no grasp"] and result["pictures"] == {}
+    assert result["pile"]["picture_errors"] == [
+        "seed 0 cycle 1 (no grasp): InvalidInputError: collisions.T_base_gripper: not a rotation"
+    ]
+    assert summarize(result["records"], [result["pile"]])["picture_errors"] == result["pile"]["picture_errors"]
+
+
 def test_a_cell_file_gives_its_frames_estimate_options_and_gripper(tmp_path):
     cell = tmp_path / "cell.toml"
     cell.write_text(

@@ -53,6 +53,9 @@ def _validate(args: argparse.Namespace) -> int:
     failures = report.summary["emulator_failures"]
     if failures:
         print("emulator failures (a bug): " + "; ".join(failures[:5]), file=sys.stderr)
+    missing = report.summary["picture_errors"]
+    if missing:
+        print("failure pictures not drawn (a bug): " + "; ".join(missing[:5]), file=sys.stderr)
     return 0
 
 

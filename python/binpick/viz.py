@@ -227,6 +227,23 @@ def _cloud_figure(
     return fig
 
 
+#: How far from a rotation (|RᵀR − I|) a pose read back from JSON may be and still be drawn.
+_JSON_ROUNDING = 1e-4
+
+
+def _json_pose(T: Any, name: str) -> np.ndarray:
+    """A pose to draw, as :func:`as_transform` checks it, once its rotation block is snapped to the
+    nearest rotation when it is within :data:`_JSON_ROUNDING` of one: a pose rounded as the
+    records keep it (6 decimals) is a rotation only to about 1e-6, the checks' own tolerance."""
+    arr = np.array(T, dtype=np.float64) if isinstance(T, (list, tuple, np.ndarray)) else T
+    if isinstance(arr, np.ndarray) and arr.shape == (4, 4) and np.isfinite(arr).all():
+        R = arr[:3, :3]
+        if float(np.abs(R.T @ R - np.eye(3)).max()) < _JSON_ROUNDING and np.linalg.det(R) > 0:
+            u, _, vt = np.linalg.svd(R)
+            arr[:3, :3] = u @ vt
+    return as_transform(arr, name)
+
+
 def error_axis_top(errors: Sequence[float]) -> float:
     """The top of the pose-error axis of :func:`save_pick_summary` for ``errors`` (° and mm; NaN
     where a pick has no ground truth): a quarter above the tallest bar (bars are cut at
@@ -424,7 +441,7 @@ def save_failure(
     for why, color in colors.items():
         top.plot([], [], color=color, label=f"refused grasps: {why}")
     for c in collisions:
-        T = as_transform(c["T_base_gripper"], "collisions.T_base_gripper")
+        T = _json_pose(c["T_base_gripper"], "collisions.T_base_gripper")
         tcp, back = T[:3, 3], T[:3, 3] - 60.0 * T[:3, 2]
         for ax, (i, j) in ((top, (0, 1)), (side, (0, 2))):
             ax.plot([tcp[i], back[i]], [tcp[j], back[j]], color="red", lw=1.5)

@@ -48,3 +48,28 @@ def test_a_failure_picture_shows_the_parts_passed_over_and_the_refused_grasps(tm
     rgb = image[:, :, ::-1].reshape(-1, 3).astype(int)
     for color in ((214, 39, 40), (148, 103, 189)):
         assert (np.abs(rgb - color).sum(axis=1) < 30).any(), color
+
+
+def test_a_collision_is_drawn_at_its_pose_as_the_records_round_it(tmp_path):
+    # The twin records a collision's gripper pose to 6 decimals: a tilted one is then a rotation
+    # only to about 1e-6 (this one to 1.05e-6), which the pose checks refuse; the picture draws it.
+    from binpick.transforms import rotation_about
+
+    R = rotation_about((0.3, -0.8, 0.52), 0.9)
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, (400.0, 10.0, 40.0)
+    rounded = np.round(T, 6)
+    assert np.abs(rounded[:3, :3].T @ rounded[:3, :3] - np.eye(3)).max() > 1e-6
+    touch = {"with": "part 2", "points": 5, "T_base_gripper": rounded.tolist()}
+    tee = binpick.parts.tee()
+    path = viz.save_failure(
+        tmp_path / "c.png", np.asarray(tee.points) + (400.0, 0.0, 13.0), model=tee, collisions=[touch]
+    )
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(InvalidInputError, match="collisions.T_base_gripper"):  # far from a rotation: still refused
+        viz.save_failure(
+            tmp_path / "d.png",
+            np.asarray(tee.points),
+            model=tee,
+            collisions=[{**touch, "T_base_gripper": (2 * T).tolist()}],
+        )

@@ -96,6 +96,7 @@ def summarize(
         "cpu_s_total": pile_cpu,
         "cycles_per_core_hour": 3600.0 * n / pile_cpu if pile_cpu > 0 else None,
         "emulator_failures": [f for p in piles for f in p.get("emulator_failures", [])],
+        "picture_errors": [f for p in piles for f in p.get("picture_errors", [])],
         "measured": "cycle_time_s, picks_per_hour and the CPU figures are measurements (they vary with the machine "
         "and its load); cycle_time_s is the emulated stages' time, the arm's scaled back by the speed scale "
         "(binpick.sim.validate.physical_stage_s), until the simulated cell keeps a virtual clock",

@@ -21,7 +21,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ..errors import InvalidInputError
+from ..errors import BinpickError, InvalidInputError
 
 __all__ = [
     "ATTEMPTS_PER_PART",
@@ -220,11 +220,15 @@ def run_pile(model: Any, spec: PileSpec) -> dict:
         )
         for r in cycles
     ]
-    pictures = {}
+    pictures: dict[str, dict] = {}
+    picture_errors: list[str] = []
     for r in cycles:
         kind = r.failure
         if kind in spec.pictures and kind not in pictures and r.scan is not None:
-            pictures[kind] = {"cycle": r.index, "png": _failure_png(model, r, bin_bounds, spec.seed)}
+            try:
+                pictures[kind] = {"cycle": r.index, "png": _failure_png(model, r, bin_bounds, spec.seed)}
+            except BinpickError as exc:  # a picture is not worth the pile's records: say why it is missing
+                picture_errors.append(f"seed {spec.seed} cycle {r.index} ({kind}): {type(exc).__name__}: {exc}")
     pile = {
         "seed": spec.seed,
         "pile_size": spec.pile_size,
@@ -238,6 +242,7 @@ def run_pile(model: Any, spec: PileSpec) -> dict:
         },
         "stopped": report.stopped,
         "emulator_failures": emulator_failures,
+        "picture_errors": picture_errors,
         "setup_cpu_s": round(setup_cpu, 4),
         "cpu_s": round(time.process_time() - cpu0, 4),
         "wall_s": round(time.perf_counter() - wall0, 4),
