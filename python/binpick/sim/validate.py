@@ -418,7 +418,8 @@ def validate(
     t0 = time.perf_counter()
     cpu0 = _cpu_here()
     backend, cycles_run = _run(plan, workers, ray, files, done, records, pictures, progress or (lambda line: None))
-    cpu_here = None if cpu0 is None or ray not in (None, "local") else _cpu_here() - cpu0
+    # Ray's worker processes are not this process's children: only the local pool is counted.
+    cpu_here = None if cpu0 is None or ray is not None else _cpu_here() - cpu0
     chosen = plan.chosen(done)
     kept = set(chosen)
     records = sorted((r for r in records if r["seed"] in kept), key=lambda r: (r["seed"], r["cycle"]))
@@ -429,8 +430,8 @@ def validate(
         "backend": backend,
         "wall_s": round(time.perf_counter() - t0, 3),
         "cycles_run": cycles_run,
-        # Everything this run cost on this machine: this process and every worker process (and
-        # a local Ray's own), their start-up included.
+        # Everything this run cost on this machine: this process and every worker process, their
+        # start-up included (the local worker processes only).
         "cpu_s_here": None if cpu_here is None else round(cpu_here, 3),
     }
     summary = _report.summarize(records, piles, settings, pictures, run)
@@ -472,7 +473,9 @@ def _run(
                 if seed is None:
                     break
                 inflight[backend.submit(plan.spec(seed, pictures))] = seed
-            if not inflight:
+            # Done: the piles still running (with ``cycles``, seeds past the one that reached
+            # the count) are not the run's, and are stopped.
+            if not inflight or plan.complete(done):
                 break
             for handle in backend.wait(inflight):
                 seed = inflight.pop(handle)
@@ -496,7 +499,7 @@ def _run(
     except BaseException:
         backend.close(cancel=True)
         raise
-    backend.close()
+    backend.close(cancel=bool(inflight))
     return backend.name, cycles_run
 
 

@@ -329,6 +329,8 @@ class Pool:
                 self._executor.shutdown(wait=False, cancel_futures=True)
                 for p in processes:
                     p.terminate()
+                for p in processes:  # reaped, so that their CPU time counts in the run's
+                    p.join()
         self._executor.shutdown(wait=True)
 
 
