@@ -60,8 +60,8 @@ def test_a_run_records_every_cycle_and_writes_its_files(one_worker):
     assert saved["success_rate"] == sum(r["outcome"] == "picked" for r in recs) / len(recs)
     assert (out / "summary.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert json.loads((out / "run.json").read_text())["count"] == [1, 2]
-    # one progress line per pile after the opening one
-    assert len(lines) == 3 and lines[1].startswith("seed 0: ") and "ETA" in lines[2]
+    # one progress line per pile after the opening one, the larger pile first
+    assert len(lines) == 3 and lines[1].startswith("seed 1: ") and lines[2].startswith("seed 0: ") and "ETA" in lines[2]
 
 
 def test_the_parquet_table_holds_the_records(one_worker):
@@ -99,10 +99,11 @@ def test_a_killed_run_resumed_finishes_with_the_records_of_an_uninterrupted_one(
     finally:
         os.killpg(proc.pid, signal.SIGKILL)  # the command and its worker process, at once
         proc.wait()
-    assert [json.loads(x)["seed"] for x in piles.read_text().splitlines()] == [0], "killed after its first pile"
+    # the larger pile, seed 1's, runs first
+    assert [json.loads(x)["seed"] for x in piles.read_text().splitlines()] == [1], "killed after its first pile"
     resumed = binpick.validate("tee", **RUN, workers=1, out=out)
-    first = [r for r in one_worker[0].records if r["seed"] == 0]
-    assert resumed.summary["run"]["cycles_run"] == len(one_worker[0].records) - len(first)  # seed 1 alone ran
+    first = [r for r in one_worker[0].records if r["seed"] == 1]
+    assert resumed.summary["run"]["cycles_run"] == len(one_worker[0].records) - len(first)  # seed 0 alone ran
     assert v.identical(resumed.records, one_worker[0].records)
     assert [json.loads(x) for x in (out / "records.jsonl").read_text().splitlines()] == list(resumed.records)
     assert [json.loads(x)["seed"] for x in piles.read_text().splitlines()] == [0, 1]
@@ -148,6 +149,8 @@ def test_cycles_end_with_the_pile_that_reaches_them_in_seed_order():
     done[8] = {"cycles": 1}  # run beyond the count by a worker: not the run's
     assert plan.chosen(done) == [5, 6, 7]
     assert [s for s, _ in zip(plan.todo({5: {}, 7: {}}), range(3))] == [6, 8, 9]
+    # Seeds: the largest piles first (sizes 1 and 2 by turns), the seeds of one size in order.
+    assert list(v._plan("tee", "mm", 5, 10, None, (1, 2), None, None, None).todo({12: {}})) == [11, 13, 10, 14]
     # No more piles are started once those finished hold the cycles and every earlier seed is finished or running.
     assert not plan.enough({5: {"cycles": 2}, 7: {"cycles": 3}}, running=[])
     assert plan.enough({5: {"cycles": 2}, 7: {"cycles": 3}}, running=[6])

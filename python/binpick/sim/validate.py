@@ -229,9 +229,13 @@ class _Plan:
         )
 
     def todo(self, done: Mapping[int, dict]) -> Iterator[int]:
-        """The seeds not finished, in order (with ``cycles``: as many as it may take)."""
-        stop = self.first_seed + (self.seeds if self.cycles is None else MAX_SEEDS)
-        return (s for s in range(self.first_seed, stop) if s not in done)
+        """The seeds not finished, in the order they are started: with ``cycles`` in seed order
+        (as many as it may take), else the largest piles first, so that the last pile to finish,
+        running while the other workers have none left, is a small one."""
+        if self.cycles is not None:
+            return (s for s in range(self.first_seed, self.first_seed + MAX_SEEDS) if s not in done)
+        seeds = [s for s in range(self.first_seed, self.first_seed + self.seeds) if s not in done]
+        return iter(sorted(seeds, key=lambda s: -pile_size(s, self.sizes)))
 
     def chosen(self, done: Mapping[int, dict]) -> list[int]:
         """The run's seeds among those finished: all asked for (``seeds``), or those in seed order
