@@ -2,21 +2,22 @@
 an hour — seeded pick cycles over many simulated piles, each pile the whole simulated cell
 (:class:`binpick.sim.SimulatedCell`) in a worker process of its own, on this machine or on Ray.
 
-Vocabulary. A *pile* is one seed: a :class:`~binpick.sim.SimulatedCell` of ``pile_size`` parts
-(:func:`pile_size`: from the seed, within the ``count`` range) run until the bin is empty, the
-cell stops (nothing pickable, a fault) or :data:`ATTEMPTS_PER_PART` attempts per part were made.
-A *cycle* is one pick attempt of a pile (one :class:`binpick.cell.PickRecord`); the look that
-finds the bin empty ends the pile and is not a cycle.
+Vocabulary (the names are those of :mod:`binpick.sim.validate_workers`). A *pile* is one seed:
+a :class:`~binpick.sim.SimulatedCell` of ``pile_size`` parts (``pile_size()``: from the seed,
+within the ``count`` range) run until the bin is empty, the cell stops (nothing pickable, a
+fault) or ``ATTEMPTS_PER_PART`` attempts per part were made. A *cycle* is one pick attempt of a
+pile (one :class:`binpick.cell.PickRecord`); the look that finds the bin empty ends the pile and
+is not a cycle.
 
-Records. Every cycle is a JSON object (:func:`cycle_record`): ``seed``, ``pile_size``, ``cycle``
+Records. Every cycle is a JSON object (``cycle_record()``): ``seed``, ``pile_size``, ``cycle``
 (1, 2, … within the pile), ``outcome`` (``"picked"`` or the failure's kind, one of
 :data:`binpick.cell.FAILURE_KINDS`), the pose error against the truth, confidence, grasp, … —
 all of them decided by the seed alone, identical with one worker, N workers or Ray — and the
 measurements, which vary from run to run and machine to machine (:data:`MEASURED`):
-``cycle_time_s`` and ``stage_s`` (see :func:`physical_stage_s`), ``cpu_s`` (the worker process's
+``cycle_time_s`` and ``stage_s`` (see ``physical_stage_s()``), ``cpu_s`` (the worker process's
 CPU time over the cycle: the simulator's renderer, physics and emulators with binpick's own
 compute), ``binpick_cpu_s`` (binpick's own compute: line extraction, pose, planning) and
-``wall_s``. Every pile is a JSON object too (:func:`run_pile`'s ``pile``).
+``wall_s``. Every pile is a JSON object too (``run_pile()``'s ``pile``).
 
 Files (``out``): ``run.json`` (the settings), ``records.jsonl`` (a line per cycle),
 ``piles.jsonl`` (a line per pile), written as piles finish, so a run that is killed keeps every

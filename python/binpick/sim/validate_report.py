@@ -8,7 +8,7 @@ Definitions (over the run's cycles: pick attempts; the look that finds a bin emp
   at 95 % (:func:`wilson`);
 * bins emptied — piles whose every part left the bin;
 * failures by kind — the cycles of each :data:`binpick.cell.FAILURE_KINDS`;
-* cycle time — each cycle's ``cycle_time_s`` (see :func:`binpick.sim.validate.physical_stage_s`):
+* cycle time — each cycle's ``cycle_time_s`` (see :func:`binpick.sim.validate_workers.physical_stage_s`):
   mean, median, 90th percentile;
 * picks per hour — 3600 × picked cycles / the sum of every cycle's time, failed ones included:
   the rate parts come out of the bin;
@@ -99,7 +99,7 @@ def summarize(
         "picture_errors": [f for p in piles for f in p.get("picture_errors", [])],
         "measured": "cycle_time_s, picks_per_hour and the CPU figures are measurements (they vary with the machine "
         "and its load); cycle_time_s is the emulated stages' time, the arm's scaled back by the speed scale "
-        "(binpick.sim.validate.physical_stage_s), until the simulated cell keeps a virtual clock",
+        "(binpick.sim.validate_workers.physical_stage_s), until the simulated cell keeps a virtual clock",
         "settings": dict(settings or {}),
         "run": dict(run or {}),
     }
