@@ -56,6 +56,7 @@ _LAZY_NAMES = {
     "CellConfig": "cell",
     "PickRecord": "cell",
     "simulated_cell": "sim",
+    "validate": "sim.validate",
 }
 
 

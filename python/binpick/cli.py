@@ -9,6 +9,7 @@
                        and a picture
     binpick reconstruct  a scan folder → a scene cloud file (PLY/PCD/XYZ/NPY)
     binpick calibrate  camera intrinsics from a folder of checkerboard images
+    binpick validate   the success rate and picks per hour of a part over many simulated piles
     binpick bench      run the benchmarks of a source checkout
 
 Exit codes: 0 done, 1 failed (the message says why), 2 bad usage or input (checkerboard images that
@@ -30,6 +31,7 @@ from typing import Any, Optional
 from ._cli_calibrate import _add_calibrate
 from ._cli_parts import _existing, _model, _Usage, collision_exit, error_text, run_bench
 from ._cli_report import _pictures, _print_table, interrupted, outcome_line, run_keeping_picks
+from ._cli_validate import _add_validate
 from .errors import BinpickError, InvalidInputError, NoObjectFound
 
 __all__ = ["main"]
@@ -322,7 +324,16 @@ def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="binpick", description="Eye-in-hand laser-line bin picking.")
     p.add_argument("--version", action="version", version=f"binpick {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
-    for add in (_add_demo, _add_pick, _add_forwarded, _add_estimate, _add_reconstruct, _add_calibrate, _add_bench):
+    for add in (
+        _add_demo,
+        _add_pick,
+        _add_forwarded,
+        _add_estimate,
+        _add_reconstruct,
+        _add_calibrate,
+        _add_validate,
+        _add_bench,
+    ):
         add(sub)
     return p
 

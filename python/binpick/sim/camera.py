@@ -95,12 +95,16 @@ class _BoardLayer:
         return np.where(self.mask[:, :, None], img, rgb)
 
 
-def _frame(view: View, board: Optional[_BoardLayer], angle: float, seed: int) -> np.ndarray:
-    """The BGR frame of ``view`` (and the board, if seen) with the laser at ``angle``."""
-    rgb = view.frame(angle, seed=seed)
+def _frame(view: View, board: Optional[_BoardLayer], angle: float, seed: int, num_threads: int = 0) -> np.ndarray:
+    """The BGR frame of ``view`` (and the board, if seen) with the laser at ``angle``, rendered on
+    ``num_threads`` threads (0: all cores)."""
+    import cv2
+
+    rgb = view.frames([angle], seed=seed, num_threads=num_threads)[0]
     if board is not None:
         rgb = board.over(rgb, angle, seed)
-    return np.ascontiguousarray(rgb[:, :, ::-1])
+    # OpenCV swaps the channels in a fifth of the time numpy's strided copy takes (a full frame per grab).
+    return cv2.cvtColor(np.ascontiguousarray(rgb), cv2.COLOR_RGB2BGR)
 
 
 class SimCamera(FrameSource):
@@ -126,7 +130,7 @@ class SimCamera(FrameSource):
             raise InvalidInputError(
                 "camera: call begin(T_base_flange) before grab(); the cell does this at each scan pose"
             )
-        img = _frame(self._view, self._board, self.sim.laser_angle(), self.seed + self._frame)
+        img = _frame(self._view, self._board, self.sim.laser_angle(), self.seed + self._frame, self.sim.num_threads)
         self._frame += 1
         return img
 
@@ -161,6 +165,6 @@ class RenderedCamera(FrameSource):
             raise InvalidInputError(
                 "camera: call begin(T_base_flange) before grab(); the cell does this at each scan pose"
             )
-        img = _frame(self._view, self._board, self._angle, self.seed + self._frame)
+        img = _frame(self._view, self._board, self._angle, self.seed + self._frame, self.num_threads)
         self._frame += 1
         return img
