@@ -6,7 +6,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
-from typing import Any
+from typing import Any, Optional
 
 __all__ = ["_pictures", "_print_table", "_removed_text", "run_keeping_picks", "outcome_line", "interrupted"]
 
@@ -77,7 +77,7 @@ def _print_table(report: Any, out: Any = None) -> None:
                 "-" if r.truth is None else f"{r.truth.rotation_error_deg:.2f}",
                 "-" if r.truth is None else f"{r.truth.translation_error_mm:.2f}",
                 r.grasp or "-",
-                f"{r.timings.get('total', 0.0) / 1e3:.1f}",
+                f"{r.cycle_time_s if r.cycle_time_s is not None else r.timings.get('total', 0.0) / 1e3:.1f}",
             )
         )
     widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
@@ -92,9 +92,32 @@ def _print_table(report: Any, out: Any = None) -> None:
         + (", ".join(f"{n} {kind}" for kind, n in failures.items()) if failures else "none"),
         file=out,
     )
+    cycle = _cycle_line(report)
+    if cycle:
+        print(cycle, file=out)
     for r in report.records:
         if r.error:
             print(f"pick {r.index}: {r.error}", file=out)
+
+
+def _cycle_line(report: Any) -> Optional[str]:
+    """The physical cycle time and picks per hour of a cell that keeps a hardware clock (a
+    simulated cell, the twin): its mean stages; None for a real cell (its time column is the wall clock's)."""
+    from .cell.records import CYCLE_STAGES, cycle_stages_s, picks_per_hour
+    from .sim.validate_report import stage_text
+
+    cycles = [r for r in report.records if not r.bin_empty and r.cycle_time_s is not None]
+    if not cycles:
+        return None
+    stages = [cycle_stages_s(r.timings) or {} for r in cycles]
+    mean = {k: sum(st.get(k, 0.0) for st in stages) / len(stages) for k in CYCLE_STAGES}
+    times = [r.cycle_time_s for r in cycles]
+    rate = picks_per_hour(sum(r.success for r in cycles), times)
+    return (
+        f"cycle time (the cell's hardware clock, and binpick's compute): mean {sum(times) / len(times):.1f} s — "
+        + stage_text(mean)
+        + ("" if rate is None else f"; {rate:.0f} picks per hour")
+    )
 
 
 def _confidence_cell(r: Any) -> str:

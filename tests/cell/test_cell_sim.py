@@ -8,6 +8,7 @@ import pytest
 
 import binpick
 from binpick.cell import CellConfig, check_static_poses
+from binpick.cell.records import cycle_stages_s
 from binpick.errors import SafetyError
 from binpick.sim import SimulatedCell, sim_limits
 
@@ -29,6 +30,16 @@ def test_simulated_pick_removes_the_located_part(tee):
         after = set(int(i) for i in sim.pile.ids)
         # The planner's checks and the physics agree: no pick touched anything but its part.
         assert sim.collisions == [], sim.collisions
+        # The hardware clock: each frame the camera gave took a frame period at 15 fps.
+        assert sim.clock.by_device["camera"] == pytest.approx(sim.cell.camera._frame / sim.layout.camera_fps)
+        hardware = sim.clock.now()
+    # Every cycle's physical time is its stages', the hardware's on the clock (which holds them all).
+    cycles = [r for r in report.records if not r.bin_empty]
+    for r in cycles:
+        stages = cycle_stages_s(r.timings)
+        assert r.cycle_time_s == pytest.approx(sum(stages.values()))
+        assert stages["scan.sweep"] >= 60 / 15.0 and stages["motion"] > 1.0 and stages["compute"] > 0.0
+    assert sum(r.cycle_time_s - cycle_stages_s(r.timings)["compute"] for r in cycles) <= hardware + 1e-9
     picked = [r for r in report.records if r.success]
     assert picked, f"no pick succeeded: {[r.error for r in report.records]}"
     for r in picked:

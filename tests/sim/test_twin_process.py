@@ -28,6 +28,7 @@ import binpick
 from binpick.cell import FolderReplay, ReplayMismatchError, ScanRecorder, cell_from_file, load_cell_file
 from binpick.cell import camera_socket as wire
 from binpick.cell.cell_file import GRIPPER_SHAPE_KEYS
+from binpick.devices.emulators.clock import PhysicalClock
 from binpick.errors import CalibrationError, DeviceTimeout, PortClosedError, ProtocolError, TruncatedReplyError
 from binpick.scan import load_scan
 from binpick.sim import Cell as Layout
@@ -156,6 +157,7 @@ class _Snapshot:
         self.pile = SimpleNamespace(bin=self.layout.bin, model=binpick.parts.tee(), ids=ids, poses=poses)
         self.robot_emulator = SimpleNamespace(pose=lambda: frame.T_base_flange)
         self._angle = frame.angle
+        self.clock = PhysicalClock()
 
     def settle_pending(self) -> None:
         pass

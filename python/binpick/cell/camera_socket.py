@@ -12,7 +12,10 @@ Request, 8 bytes::
                 2 = DEPTH: one shot of the fixed 3-D camera (``emulate cell --camera fixed``);
                 3 = WORLD: the twin's ground truth now (world.json's document, after the world
                 settled: the parts in the bin, those removed, the gripper's collisions), for a
-                rehearsal's report
+                rehearsal's report;
+                4 = CLOCK: the twin's hardware time (a document ``{"clock_s": …}``, the seconds
+                its emulated arm, laser motor, gripper and camera have taken), for a
+                rehearsal's physical cycle time
     zero    u16 0
 
 Reply header, :data:`HEADER_SIZE` (= 168) bytes, then ``length`` payload bytes::
@@ -54,6 +57,7 @@ __all__ = [
     "OP_FRAME",
     "OP_DEPTH",
     "OP_WORLD",
+    "OP_CLOCK",
     "HEADER_SIZE",
     "REQUEST_SIZE",
     "MAX_ERROR_BYTES",
@@ -74,6 +78,7 @@ PROTOCOL_VERSION = 1
 OP_FRAME = 1
 OP_DEPTH = 2
 OP_WORLD = 3
+OP_CLOCK = 4
 STATUS_FRAME = 0
 STATUS_ERROR = 1
 STATUS_DOCUMENT = 2
@@ -120,9 +125,10 @@ def decode_request(data: bytes) -> int:
         raise ProtocolError(f"camera request: magic is {magic!r}, not {REQUEST_MAGIC!r}; not a binpick camera client")
     if version != PROTOCOL_VERSION:
         raise ProtocolError(f"camera request: protocol version {version}; this twin speaks version {PROTOCOL_VERSION}")
-    if op not in (OP_FRAME, OP_DEPTH, OP_WORLD) or zero != 0:
+    if op not in (OP_FRAME, OP_DEPTH, OP_WORLD, OP_CLOCK) or zero != 0:
         raise ProtocolError(
-            f"camera request: unknown operation {op} ({OP_FRAME} = FRAME, {OP_DEPTH} = DEPTH, {OP_WORLD} = WORLD)"
+            f"camera request: unknown operation {op} ({OP_FRAME} = FRAME, {OP_DEPTH} = DEPTH, {OP_WORLD} = WORLD, "
+            f"{OP_CLOCK} = CLOCK)"
         )
     return op
 

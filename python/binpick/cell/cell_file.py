@@ -109,6 +109,7 @@ bin_max_mm = [550.0, 100.0, 80.0]
 scan_pose = [400.0, 0.0, 620.0, 180.0, 0.0, 0.0]
 drop_pose = [400.0, -250.0, 350.0, 180.0, 0.0, 0.0]
 frames = 90
+sweep = "steps"              # or "continuous": the motor turns while the camera streams (it must time its frames)
 tool = [0.0, 0.0, 195.0, 0.0, 0.0, 0.0]   # the gripper's TCP in the flange frame
 # scan_height_mm = 120.0     # how far above the rim parts are looked for (default: the bin's depth or the part's size)
 orientation_needed = false   # true: parts are placed by their orientation, an undecided pose is not picked
@@ -262,7 +263,16 @@ def cell_from_file(
         camera = open_camera()
         opened.append(camera.close)
         truth = _twin_truth(cell_file, config.model) if robot is None else None
-        return Cell(config, robot=arm, motor=motor, gripper=hand, camera=camera, progress=progress, truth=truth)
+        return Cell(
+            config,
+            robot=arm,
+            motor=motor,
+            gripper=hand,
+            camera=camera,
+            progress=progress,
+            truth=truth,
+            clock=None if truth is None else truth.clock,  # the twin's hardware time
+        )
     except BaseException:  # nothing opened is left open
         for close in reversed(opened):
             try:
@@ -328,6 +338,7 @@ def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig
         scan_poses=(f.pose("cell", "scan_pose"),),
         drop_pose=f.pose("cell", "drop_pose"),
         frames=f.integer("cell", "frames", 90),
+        sweep=f.text("cell", "sweep", "steps"),
         scan_height_mm=None if f.get("cell", "scan_height_mm", None) is None else f.number("cell", "scan_height_mm"),
         **_stake(f),
         gripper=gripper,

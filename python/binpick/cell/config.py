@@ -21,6 +21,7 @@ from .._validate import (
     MAX_COORDINATE,
     as_box,
     as_transform,
+    choice,
     count,
     flag,
     instance_of,
@@ -37,7 +38,10 @@ from .grasp import branch_grasps, grasp_openings, mesh_grasps, swept_points
 from .symmetry import GraspMatcher, continuous_near_axis, continuous_symmetry
 from .views import turned_scan_poses
 
-__all__ = ["CellConfig", "GripperGeometry", "check_static_poses", "sweep_angles", "turned_scan_poses"]
+__all__ = ["CellConfig", "GripperGeometry", "SWEEPS", "check_static_poses", "sweep_angles", "turned_scan_poses"]
+
+#: How the laser can turn through a scan (:attr:`CellConfig.sweep`).
+SWEEPS = ("steps", "continuous")
 
 
 @dataclass(frozen=True)
@@ -196,6 +200,12 @@ class CellConfig:
         scan_poses: the flange poses ``T_base_flange`` to scan from (one or more).
         drop_pose: the flange pose where a picked part is released.
         frames: laser frames per scan pose.
+        sweep: how the laser turns through them: ``"steps"`` (the motor stops at each angle and
+            a frame is taken at rest) or ``"continuous"`` (the paper's: the motor turns at a set
+            speed while the camera streams, ``frames`` frames over the sweep at the camera's
+            rate; each frame's angle is the motor's reported position interpolated to the
+            middle of its exposure). Continuous needs a motor whose speed can be set and a
+            camera that reports its rate and each frame's time on the cell's clock.
         scan_angles: motor angles (rad) per scan pose; None = computed from the calibration to sweep the bin.
         grasps: name → ``T_gripper_object``; None = the model's declared grasps, or
             :func:`~binpick.cell.branch_grasps` for a model with branches and no declared grasps,
@@ -256,6 +266,7 @@ class CellConfig:
     scan_poses: Sequence[Any]
     drop_pose: Any
     frames: int = 90
+    sweep: str = "steps"
     scan_angles: Optional[Sequence[Sequence[float]]] = None
     grasps: Optional[Mapping[str, Any]] = None
     gripper: GripperGeometry = field(default_factory=GripperGeometry)
@@ -333,6 +344,9 @@ class CellConfig:
         object.__setattr__(self, "scan_poses", tuple(as_transform(T, f"scan_poses[{i}]") for i, T in enumerate(poses)))
         object.__setattr__(self, "drop_pose", as_transform(self.drop_pose, "drop_pose"))
         count(self.frames, "frames", 1)
+        choice(self.sweep, "sweep", SWEEPS)
+        if self.sweep == "continuous" and self.frames < 2:
+            raise InvalidInputError("frames: a continuous sweep takes at least 2 frames a scan pose")
         if self.scan_angles is not None:
             angles = tuple(np.asarray(a, dtype=np.float64).ravel() for a in self.scan_angles)
             if len(angles) != len(self.scan_poses) or any(len(a) == 0 or not np.isfinite(a).all() for a in angles):

@@ -18,13 +18,21 @@ from .._validate import as_transform, count, instance_of, positive
 from ..errors import DeviceError, InvalidInputError
 from . import camera_socket as wire
 
-__all__ = ["FrameSource", "OpenCVCamera", "TwinCamera", "FolderReplay", "ReplayMismatchError", "ScanRecorder"]
+__all__ = ["FrameSource", "OpenCVCamera", "TwinCamera", "FolderReplay", "ReplayMismatchError", "ScanRecorder", "Sweep"]
 
 
 class FrameSource(abc.ABC):
     """The camera as the pick loop sees it: told where the robot is before a sweep, then asked
     for one frame per laser angle (after the motor has stopped; the frame is tagged with the
-    angle read at rest)."""
+    angle read at rest).
+
+    A source that streams at a known rate while the laser turns (a continuous sweep,
+    ``CellConfig.sweep = "continuous"``) says so: :attr:`fps`, its frame rate, and after each
+    grab :attr:`frame_time_s`, the middle of that frame's exposure on the cell's clock
+    (:attr:`binpick.cell.Cell.clock`); None where it cannot tell."""
+
+    fps: Optional[float] = None
+    frame_time_s: Optional[float] = None
 
     def begin(self, T_base_flange: np.ndarray) -> None:
         """Called before a sweep with the flange pose read back from the robot."""
@@ -260,3 +268,23 @@ class ScanRecorder(FrameSource):
             self.flush()
         finally:
             self.source.close()
+
+
+class Sweep:
+    """The frames of one scan as they come in: line pixels, frame index, motor angle, flange pose."""
+
+    def __init__(self) -> None:
+        self.pixels: list[np.ndarray] = []
+        self.frame_of: list[np.ndarray] = []
+        self.angles: list[float] = []
+        self.poses: list[np.ndarray] = []
+        self.kept: dict[int, np.ndarray] = {}
+
+    def add(self, uv: np.ndarray, angle: float, T_base_flange: np.ndarray, image: Optional[np.ndarray]) -> None:
+        index = len(self.angles)
+        self.pixels.append(uv)
+        self.frame_of.append(np.full(len(uv), index, dtype=np.int64))
+        self.angles.append(angle)
+        self.poses.append(T_base_flange)
+        if image is not None:
+            self.kept[index] = image

@@ -51,9 +51,9 @@ from ..errors import (
     SafetyError,
 )
 from ..poses import estimate_poses
-from ..vision import LaserWindow, describe_frames, triangulate
+from ..vision import describe_frames, triangulate
 from .config import CellConfig, check_static_poses
-from .frames import FrameSource
+from .frames import FrameSource, Sweep
 from .grasp import NoGraspError, line_step, plan_bin_clash, plan_grasp, staked_filter
 from .nudge import nudge_blocked
 from .progress import ProgressPrinter, quiet
@@ -72,6 +72,7 @@ from .records import (
     with_collisions,
 )
 from .shots import DepthSource, depth_scan
+from .sweeps import sweep_laser
 from .symmetry import continuous_near_axis
 from .views import deciding_first
 
@@ -98,24 +99,9 @@ def _ms_since(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
 
 
-class _Sweep:
-    """The frames of one scan as they come in: line pixels, frame index, motor angle, flange pose."""
-
-    def __init__(self) -> None:
-        self.pixels: list[np.ndarray] = []
-        self.frame_of: list[np.ndarray] = []
-        self.angles: list[float] = []
-        self.poses: list[np.ndarray] = []
-        self.kept: dict[int, np.ndarray] = {}
-
-    def add(self, uv: np.ndarray, angle: float, T_base_flange: np.ndarray, image: Optional[np.ndarray]) -> None:
-        index = len(self.angles)
-        self.pixels.append(uv)
-        self.frame_of.append(np.full(len(uv), index, dtype=np.int64))
-        self.angles.append(angle)
-        self.poses.append(T_base_flange)
-        if image is not None:
-            self.kept[index] = image
+def _phys_ms(clock: Optional[Callable[[], float]], since: Optional[float]) -> float:
+    """The hardware time since ``since`` on ``clock``, ms (0 without a clock)."""
+    return 0.0 if clock is None or since is None else (clock() - since) * 1e3
 
 
 class Cell:
@@ -131,6 +117,10 @@ class Cell:
         truth: optional ground truth (the simulator) with ``judge(T_base_object) -> PoseTruth``,
             ``take_picked() -> Optional[int]`` (the instance that left the bin since the last call)
             and ``parts_left() -> int`` (the parts in the bin).
+        clock: the cell's hardware time, s (a function of no arguments; a simulated cell's
+            emulators keep it: :class:`binpick.devices.emulators.clock.PhysicalClock`), read at
+            the edges of each stage into the ``phys.*`` timings of every record; None: the
+            timings are the wall clock's alone, as on a real cell.
     """
 
     EMPTY_GRIP_RADIUS_MM = 15.0
@@ -154,6 +144,7 @@ class Cell:
         camera: FrameSource,
         progress: Optional[Callable[[str, str], None]] = None,
         truth: Any = None,
+        clock: Optional[Callable[[], float]] = None,
     ) -> None:
         if not isinstance(config, CellConfig):
             raise InvalidInputError(f"config: expected a CellConfig, got {type(config).__name__}")
@@ -175,6 +166,9 @@ class Cell:
         self.camera = camera
         self.progress = progress or quiet
         self.truth = truth
+        if clock is not None and not callable(clock):
+            raise InvalidTypeError(f"clock: expected a function returning seconds, got {type(clock).__name__}")
+        self.clock = clock
         self._empty_grips: list[np.ndarray] = []
         self._passed_over: list[np.ndarray] = []  # where parts were passed over earlier in the run
         self._declined: list[np.ndarray] = []  # parts the robot program would not try (the vision server)
@@ -245,16 +239,19 @@ class Cell:
         else:
             views = [(T, cfg.sweep_from(T)) for T in (as_transform(T, f"poses[{i}]") for i, T in enumerate(poses))]
         timings: dict[str, float] = {"move": 0.0, "sweep": 0.0, "extract": 0.0, "cpu.extract": 0.0}
-        sweep = _Sweep()
+        sweep = Sweep()
         for T_scan, wanted in views:
-            t0 = time.perf_counter()
+            t0, c0 = time.perf_counter(), self.clock and self.clock()
             self._go_above_approach()
             self._move(T_scan, linear=False)
             T_bf = self.robot.read_pose()
-            t1 = time.perf_counter()
+            t1, c1 = time.perf_counter(), self.clock and self.clock()
             timings["move"] += (t1 - t0) * 1e3
-            extract_s, extract_cpu = self._sweep_laser(sweep, wanted, T_bf)
+            extract_s, extract_cpu = sweep_laser(self, sweep, wanted, T_bf)
             timings["sweep"] += (time.perf_counter() - t1 - extract_s) * 1e3
+            if self.clock is not None:  # the hardware's time (a simulated cell's)
+                timings["phys.move"] = timings.get("phys.move", 0.0) + (c1 - c0) * 1e3
+                timings["phys.sweep"] = timings.get("phys.sweep", 0.0) + _phys_ms(self.clock, c1)
             timings["extract"] += extract_s * 1e3
             timings["cpu.extract"] += extract_cpu * 1e3
             done = sweep.angles[-len(wanted) :]
@@ -284,25 +281,6 @@ class Cell:
             frames=MappingProxyType(sweep.kept),
             timings=MappingProxyType(timings),
         )
-
-    def _sweep_laser(self, sweep: _Sweep, wanted: np.ndarray, T_bf: np.ndarray) -> tuple[float, float]:
-        """Turns the laser through ``wanted`` at flange pose ``T_bf``, a frame per angle into
-        ``sweep``; returns the seconds (wall clock, and this thread's CPU) spent extracting lines."""
-        n_keep = min(self.config.keep_frames, len(wanted))
-        keep = set(np.linspace(0, len(wanted) - 1, n_keep).round().astype(int).tolist())
-        self.camera.begin(T_bf)
-        extract_s = extract_cpu = 0.0
-        window = LaserWindow(self.config.calibration, T_bf, self.config.scan_volume)
-        for k, a in enumerate(wanted):
-            reached = float(self.motor.move_to(float(a), wait=True))
-            self.camera.laser_at(reached)
-            img = self.camera.grab()
-            te, ce = time.perf_counter(), time.thread_time()
-            uv = window.extract(img, reached)
-            extract_s += time.perf_counter() - te
-            extract_cpu += time.thread_time() - ce
-            sweep.add(uv, reached, T_bf, img if k in keep else None)
-        return extract_s, extract_cpu
 
     # -- locate and plan
     def locate(self, scan: Optional[ScanResult] = None, *, exclude: Optional[np.ndarray] = None) -> Located:
@@ -503,9 +481,11 @@ class Cell:
         located, plan = self._located_and_planned(located, plan, times)
         res = located.result
         times.update({f"estimate.{k}": float(v) for k, v in dict(getattr(res, "timings", {})).items()})
-        t3 = time.perf_counter()
+        t3, c3 = time.perf_counter(), self.clock and self.clock()
         held = self._execute(plan)
         times["motion"] = _ms_since(t3)
+        if self.clock is not None:
+            times["phys.motion"] = _phys_ms(self.clock, c3)
         picked = self.truth.take_picked() if self.truth is not None else None
         failure, error = self.judge_pick(located, held, picked)
         ok = failure is None
@@ -704,7 +684,7 @@ class Cell:
         """Scan, locate and plan — looking again from each of ``config.look_again_poses`` while
         nothing is pickable (from one only when neither look finds any part), each look judged
         together with the first — then pick; the record, and why the run stops (None to go on)."""
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), self.clock and self.clock()
         self._cpu = {}
         scan = first = None  # the look now, and the first look each later one is judged with
         located: Optional[Located] = None
@@ -748,6 +728,8 @@ class Cell:
             times.update(record.timings)
             times.update(self._cpu)
             times["total"] = _ms_since(t0)
+            if self.clock is not None:
+                times["phys.cycle"] = _phys_ms(self.clock, c0)
             return replace(record, timings=MappingProxyType(times), skipped=tuple(skipped), looks=looks), None
         except (NoObjectFound, NoGraspError, BinpickError) as exc:
             failure = (
@@ -763,6 +745,8 @@ class Cell:
                 why = f"pick {i}: none of the {len(skipped)} parts located in {looks} looks could be picked — {exc}"
             times.update(self._cpu)
             times["total"] = _ms_since(t0)
+            if self.clock is not None:
+                times["phys.cycle"] = _phys_ms(self.clock, c0)
             if failure == "nothing found" and scan is not None and not self._parts_left(scan):
                 return emptied_record(i, scan, times, looks), f"pick {i}: the bin is empty ({exc})"
             record = failed_record(i, scan, located, exc, times, failure=failure)

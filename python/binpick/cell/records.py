@@ -3,7 +3,7 @@ a pick plan, a pick record and a run report. Lengths in mm, transforms 4×4 ``T_
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any, Optional
@@ -24,6 +24,9 @@ __all__ = [
     "with_collisions",
     "PICK_GRADE_DEG",
     "PICK_GRADE_MM",
+    "CYCLE_STAGES",
+    "cycle_stages_s",
+    "picks_per_hour",
 ]
 
 #: What a failed pick attempt can have gone wrong with, in the order a pick meets them.
@@ -182,6 +185,39 @@ class PickPlan:
         raise KeyError(name)
 
 
+#: The stages of a cycle's physical time (:func:`cycle_stages_s`), in the order they run.
+CYCLE_STAGES = ("scan.move", "scan.sweep", "compute", "motion", "other")
+
+
+def cycle_stages_s(timings: Mapping[str, float]) -> Optional[dict[str, float]]:
+    """The physical time of a cycle's stages, s, from a record's timings (ms), or None when the
+    cell kept no hardware clock (:attr:`binpick.cell.Cell.clock`: a real cell, whose wall clock
+    is its physical time): ``scan.move`` (the arm to each scan pose), ``scan.sweep`` (the laser
+    motor's steps and the camera's frames), ``motion`` (the pick: approach, grasp, lift, carry,
+    release), ``other`` (what else the hardware did in the cycle: nudges), all from the clock;
+    and ``compute``, binpick's own compute as measured (the CPU time of line extraction, pose,
+    planning and the wall time of triangulation), which the cell waits for between them."""
+    if "phys.cycle" not in timings:
+        return None
+    ms = {k: float(timings.get(k, 0.0)) for k in ("scan.phys.move", "scan.phys.sweep", "phys.motion")}
+    compute = sum(float(v) for k, v in timings.items() if k.startswith(("cpu.", "scan.cpu.")))
+    compute += float(timings.get("scan.triangulate", 0.0))
+    return {
+        "scan.move": ms["scan.phys.move"] / 1e3,
+        "scan.sweep": ms["scan.phys.sweep"] / 1e3,
+        "compute": compute / 1e3,
+        "motion": ms["phys.motion"] / 1e3,
+        "other": max(0.0, float(timings["phys.cycle"]) - sum(ms.values())) / 1e3,
+    }
+
+
+def picks_per_hour(picked: int, cycle_times_s: Sequence[float]) -> Optional[float]:
+    """3600 × ``picked`` / the sum of every cycle's time, failed ones included: the rate parts
+    come out of the bin (None without time)."""
+    total = float(sum(cycle_times_s))
+    return 3600.0 * picked / total if total > 0 else None
+
+
 @dataclass(frozen=True, eq=False)
 class PickRecord:
     """What one pick attempt did.
@@ -238,6 +274,12 @@ class PickRecord:
     collisions: tuple[Mapping[str, Any], ...] = ()
     bin_empty: bool = False
 
+    @property
+    def cycle_time_s(self) -> Optional[float]:
+        """The cycle's physical time, s (the sum of :func:`cycle_stages_s`), or None without a hardware clock."""
+        stages = cycle_stages_s(self.timings)
+        return None if stages is None else sum(stages.values())
+
     def as_dict(self) -> dict:
         """A JSON-ready summary."""
         return {
@@ -263,6 +305,8 @@ class PickRecord:
             "failure": self.failure,
             "bin_empty": self.bin_empty,
             "timings_ms": dict(self.timings),
+            "cycle_time_s": self.cycle_time_s,
+            "stage_s": cycle_stages_s(self.timings),
             "looks": self.looks,
             "skipped": [k.as_dict() for k in self.skipped],
             "nudges": [n.as_dict() for n in self.nudges],

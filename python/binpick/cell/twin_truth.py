@@ -24,7 +24,7 @@ _HINT = "start the twin first: binpick emulate cell --out DIR"
 class TwinTruth:
     """The ground truth of the twin serving the camera socket ``path``, for the part ``model``;
     the pick loop's ``truth`` (:class:`binpick.cell.Cell`): :meth:`judge`, :meth:`take_picked`,
-    :meth:`take_collisions`, :meth:`parts_left`. Connects on first use."""
+    :meth:`take_collisions`, :meth:`parts_left`; and its ``clock`` (:meth:`clock`). Connects on first use."""
 
     def __init__(self, path: str, model: Any, *, timeout_s: float = 60.0) -> None:
         self.path, self.model, self.timeout_s = str(path), model, float(timeout_s)
@@ -39,12 +39,23 @@ class TwinTruth:
             self._sock.close()
             self._sock = None
 
-    def world(self) -> dict:
-        """The twin's world now (world.json's document, the world settled first)."""
+    def _document(self, op: int) -> dict:
         with self._lock:
             if self._sock is None:
                 self._sock = wire.connect(self.path, self.timeout_s, _HINT)
-            doc = wire.request_document(self._sock, wire.OP_WORLD, self.path)
+            return wire.request_document(self._sock, op, self.path)
+
+    def clock(self) -> float:
+        """The twin's hardware time, s: what its emulated arm, laser motor, gripper and camera
+        have taken (the pick loop's ``clock``, for the physical cycle time)."""
+        t = self._document(wire.OP_CLOCK).get("clock_s")
+        if not isinstance(t, (int, float)) or not t >= 0:
+            raise InvalidInputError(f"the twin's clock: expected seconds ≥ 0, got {t!r:.40}")
+        return float(t)
+
+    def world(self) -> dict:
+        """The twin's world now (world.json's document, the world settled first)."""
+        doc = self._document(wire.OP_WORLD)
         if self._removed_seen is None:  # what happened before this run is not this run's
             self._removed_seen = len(doc.get("removed", []))
             self._collisions_seen = len(doc.get("collisions", []))

@@ -453,6 +453,13 @@ class DynamixelMotor(LaserMotor):
         self.bus.write(self.config.motor_id, ADDR_PROFILE_VELOCITY, struct.pack("<I", units))
         self.bus.write(self.config.motor_id, ADDR_TORQUE_ENABLE, b"\x01")
 
+    def set_speed(self, speed_rad_s: float) -> float:
+        """The profile velocity for the moves that follow (see :meth:`LaserMotor.set_speed`)."""
+        v = check_number(speed_rad_s, "speed_rad_s", low=1e-6, high=self.range.max_speed_rad_s, unit="rad/s")
+        units = max(1, round(v * 60.0 / (2 * math.pi) / self.config.velocity_unit_rpm))
+        self.bus.write(self.config.motor_id, ADDR_PROFILE_VELOCITY, struct.pack("<I", units))
+        return units * self.config.velocity_unit_rpm * 2 * math.pi / 60.0
+
     def disable(self) -> None:
         """Turns torque off."""
         self.bus.write(self.config.motor_id, ADDR_TORQUE_ENABLE, b"\x00")

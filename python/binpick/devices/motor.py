@@ -90,6 +90,15 @@ class LaserMotor(abc.ABC):
         """Sends the goal (already checked against the range) to the motor."""
 
     @property
+    def set_speed(self, speed_rad_s: float) -> float:
+        """Turns the moves that follow at ``speed_rad_s`` (at most ``range.max_speed_rad_s``; a
+        continuous sweep turns at a set speed); returns the speed the motor was set to, as its
+        protocol's units round it. InvalidInputError where the protocol sends no speed."""
+        raise InvalidInputError(
+            f"laser motor: the {type(self).__name__} protocol sets no speed, which a continuous sweep needs; "
+            'sweep the laser in steps (the cell file\'s [cell] sweep = "steps")'
+        )
+
     def goal_angle(self) -> Optional[float]:
         """The last goal sent, radians (None before the first)."""
         return self._goal

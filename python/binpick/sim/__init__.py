@@ -23,10 +23,11 @@ from __future__ import annotations
 from .camera import RenderedCamera, SimCamera
 from .cell import Bin, Camera, Cell, Laser, Lighting, SensorNoise, look_down, rot_y
 from .dataset import GLOSSY_PART_SPECULAR, SimulatedScan, contact_sheet, simulate_scan, write_scan
+from .hardware import SIM_ARM, sim_arm, sim_gripper, sim_limits
 from .pile import Pile, PushReport, SettleReport, convex_decomposition, max_interpenetration
 from .render import BIN_ID, NO_SURFACE, TABLE_ID, Surfaces, View, World, render_checkerboard
 from .sensors import DepthCamera, DepthFrame, DepthNoise, render_depth
-from .twin import SIM_ARM, SimulatedCell, TwinWorld, sim_arm, sim_gripper, sim_limits, simulated_cell
+from .twin import SimulatedCell, TwinWorld, simulated_cell
 
 __all__ = [
     "BIN_ID",

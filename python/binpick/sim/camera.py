@@ -130,9 +130,20 @@ class SimCamera(FrameSource):
             raise InvalidInputError(
                 "camera: call begin(T_base_flange) before grab(); the cell does this at each scan pose"
             )
+        # A frame takes 1 / fps of the cell's time; the laser is drawn where the motor stands at
+        # the middle of it (where it turns during the frame: a continuous sweep).
+        clock, half = self.sim.clock, 0.5 / self.sim.layout.camera_fps
+        clock.spend(half, "camera")
+        self.frame_time_s = clock.now()
         img = _frame(self._view, self._board, self.sim.laser_angle(), self.seed + self._frame, self.sim.num_threads)
+        clock.spend(half, "camera")
         self._frame += 1
         return img
+
+    @property
+    def fps(self) -> float:  # type: ignore[override]
+        """The simulated camera's frame rate (``layout.camera_fps``)."""
+        return float(self.sim.layout.camera_fps)
 
 
 class RenderedCamera(FrameSource):

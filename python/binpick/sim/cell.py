@@ -220,7 +220,9 @@ class CalibrationBoard:
 @dataclass(frozen=True)
 class Cell:
     """The whole simulated cell: camera, laser, hand-eye ``T_flange_camera``, bin, lighting and noise,
-    the robot pose ``T_base_flange`` it scans from, and the calibration ``board`` lying in it (None: no board)."""
+    the robot pose ``T_base_flange`` it scans from, the calibration ``board`` lying in it (None: no
+    board), and the camera's frame rate ``camera_fps`` (a triggered frame, exposed and read out,
+    takes 1 / ``camera_fps`` of the cell's time: the paper's 15 fps camera)."""
 
     camera: CameraIntrinsics = field(default_factory=Camera)
     laser: Laser = field(default_factory=Laser)
@@ -230,8 +232,10 @@ class Cell:
     noise: SensorNoise = field(default_factory=SensorNoise)
     T_base_flange: np.ndarray = field(default_factory=lambda: _scan_flange())
     board: Optional[CalibrationBoard] = field(default_factory=CalibrationBoard)
+    camera_fps: float = 15.0
 
     def __post_init__(self) -> None:
+        positive(self.camera_fps, "camera_fps", "frames/s")
         instance_of(self.camera, CameraIntrinsics, "camera", "binpick.sim.Camera()")
         for name, kind in (("laser", Laser), ("bin", Bin), ("lighting", Lighting), ("noise", SensorNoise)):
             instance_of(getattr(self, name), kind, name, f"binpick.sim.{kind.__name__}()")

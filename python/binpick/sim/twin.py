@@ -19,13 +19,14 @@ import dataclasses
 import math
 import threading
 import time
+from dataclasses import replace
 from typing import Any, Callable, Optional
 
 import numpy as np
 
 from .. import _validate, parts
 from .._sizes import check_part
-from .._validate import instance_of, positive, thread_count
+from .._validate import positive, thread_count
 from ..cell.config import CellConfig, GripperGeometry
 from ..cell.grasp import GraspMatcher, continuous_symmetry, grip_width, symmetry_maps
 from ..cell.loop import Cell, quiet
@@ -42,7 +43,14 @@ from ..devices import (
     SerialSettings,
     safety,
 )
-from ..devices.emulators import ArmModel, DynamixelEmulator, GripperEmulator, RobotEmulator, RobotEmulatorConfig
+from ..devices.emulators import (
+    DynamixelEmulator,
+    GripperEmulator,
+    GripperEmulatorConfig,
+    RobotEmulator,
+    RobotEmulatorConfig,
+)
+from ..devices.emulators.clock import PhysicalClock
 from ..devices.emulators.ur import URArm, UREmulator
 from ..devices.gripper import GTO
 from ..errors import InvalidInputError, NoObjectFound
@@ -51,6 +59,15 @@ from ..transforms import inverse, look_down, rotation_angle_deg
 from .camera import SimCamera
 from .cell import Cell as Layout
 from .contacts import contacts_along
+from .hardware import (
+    SIM_FINGER_SPEED_MM_S,
+    SIM_JOINT_SPEEDS_DEG_S,
+    SIM_RAMP_S,
+    _layout_and_gripper,
+    _Reach,
+    sim_arm,
+    sim_limits,
+)
 from .pile import Pile, PushReport
 
 #: The gripper counts as closed (a pushing tool) when its fingers are at most this far apart, mm.
@@ -66,138 +83,7 @@ CONTACT_POINTS = 3000
 #: Fastest sweep the physics is asked to run, mm/s: faster motions are pushed at this speed.
 MAX_SWEEP_SPEED = 1000.0
 
-__all__ = ["TwinWorld", "SimulatedCell", "simulated_cell", "sim_limits", "sim_arm", "sim_gripper", "SIM_ARM"]
-
-
-def _sim_arm(scale: float = 1.0) -> ArmModel:
-    # A larger arm than the emulator's default RV-1A class, so that the simulated cell's scan pose
-    # 620 mm above the bin floor and every corner of the bin are within reach; ``scale`` grows its
-    # links (and workspace) for the larger cells of large parts.
-    return ArmModel(
-        base_height_mm=250.0,
-        upper_arm_mm=400.0 * scale,
-        forearm_mm=450.0 * scale,
-        flange_mm=90.0,
-        workspace_min_mm=(-900.0 * scale, -900.0 * scale, -200.0),
-        workspace_max_mm=(900.0 * scale, 900.0 * scale, 1100.0 * scale),
-    )
-
-
-SIM_ARM = _sim_arm()
-"""The simulated cell's arm (see :class:`binpick.devices.emulators.ArmModel`)."""
-
-#: Arm sizes tried by :func:`sim_arm`: the links of :data:`SIM_ARM` scaled by these factors.
-_ARM_SCALES = (1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0)
-
-
-def sim_arm(layout: Any = None, gripper: Optional[GripperGeometry] = None) -> ArmModel:
-    """The arm of a simulated cell: :data:`SIM_ARM` when it reaches the layout's scan pose and,
-    tool straight down, every point of the bin (a grid 30 mm in from the walls, with the fingertips
-    20 mm above the floor, at the approach height above the rim, and at the scan height); else the
-    smallest arm with its links (not its base height) scaled by 1.25, 1.5, … that does — the
-    larger robot a cell for large parts has. InvalidInputError when none up to 3× does."""
-    layout, gripper = _layout_and_gripper(layout, gripper)
-    lo, hi = layout.bin.bounds
-    reach = float(gripper.T_flange_gripper[2, 3]) + gripper.tip_depth_mm
-    xs = np.linspace(lo[0] + 30.0, hi[0] - 30.0, 7)
-    ys = np.linspace(lo[1] + 30.0, hi[1] - 30.0, 5)
-    zs = (float(lo[2]) + reach + 20.0, float(hi[2]) + reach + 30.0, float(layout.T_base_flange[2, 3]))
-    poses = [layout.T_base_flange] + [look_down(x, y, z) for x in xs for y in ys for z in zs]
-    for k in _ARM_SCALES:
-        arm = SIM_ARM if k == 1.0 else _sim_arm(k)
-        if all(_Reach(arm)(T) for T in poses):
-            return arm
-    raise InvalidInputError(
-        f"layout: no simulated arm up to {_ARM_SCALES[-1]:g}× the default reaches the whole bin "
-        f"{np.round(lo, 1).tolist()}..{np.round(hi, 1).tolist()} mm; use a smaller bin or place it nearer the robot"
-    )
-
-
-def sim_limits(layout: Any = None, gripper: Optional[GripperGeometry] = None) -> safety.CellLimits:
-    """The simulated cell's motion limits: a workspace around the bin and the drop area, and an
-    approach height that keeps the gripper above the bin's rim for joint moves."""
-    layout, gripper = _layout_and_gripper(layout, gripper)
-    lo, hi = layout.bin.bounds
-    reach = float(gripper.T_flange_gripper[2, 3]) + gripper.tip_depth_mm
-    return safety.CellLimits(
-        workspace_min_mm=(float(lo[0]) - 150.0, float(lo[1]) - 250.0, float(lo[2]) + 60.0),
-        workspace_max_mm=(float(hi[0]) + 100.0, float(hi[1]) + 250.0, float(layout.T_base_flange[2, 3]) + 80.0),
-        approach_height_mm=float(hi[2]) + reach + 30.0,
-        max_lateral_below_mm=40.0,
-    )
-
-
-#: The longest fingers :func:`sim_gripper` gives a simulated gripper, mm: deeper bins (those of
-#: large parts) get fingers this long, and parts against their walls may be out of reach.
-MAX_SIM_FINGER_MM = 150.0
-
-
-#: A part thinner than this share of its footprint's width is flat: lying on its face, it can be
-#: gripped only across that face.
-FLAT_SHARE = 0.25
-
-
-def sim_gripper(layout: Any = None, model: Optional[Model] = None) -> GripperGeometry:
-    """The simulated cell's gripper: :class:`GripperGeometry`'s defaults but for fingers long
-    enough to reach the bin's floor with the palm above the rim (the bin's depth plus the
-    fingertips' reach past the TCP; at least the default 45 mm, at most :data:`MAX_SIM_FINGER_MM`),
-    the TCP moved away from the flange by what the fingers grew — the fingers a bin-picking cell
-    fits so that the palm clears the walls when a part lies against them. For a flat part
-    (``model``: thinner than :data:`FLAT_SHARE` of its footprint's narrowest width — a flange, a
-    plate), which lying on its face can be gripped only across it, the fingers open as far as that
-    width and the pre-shape's clearance need, within the simulated gripper's stroke."""
-    layout = instance_of(Layout() if layout is None else layout, Layout, "layout", "binpick.sim.Cell()")
-    base = GripperGeometry()
-    lo, hi = layout.bin.bounds
-    length = float(np.clip(float(hi[2] - lo[2]) + base.tip_depth_mm, base.finger_length_mm, MAX_SIM_FINGER_MM))
-    T = base.T_flange_gripper.copy()
-    T[:3, 3] += T[:3, 2] * (length - base.finger_length_mm)
-    opening = base.open_width_mm
-    if model is not None:
-        width, thickness = _footprint(instance_of(model, Model, "model", "binpick.parts.flange()"))
-        if thickness < FLAT_SHARE * width:
-            needed = width + 2.0 * (base.preshape_clearance_mm or 0.0) + 2.0
-            opening = float(min(max(opening, needed), GripperConfig().stroke_mm))
-    return GripperGeometry(T_flange_gripper=T, finger_length_mm=length, open_width_mm=opening)
-
-
-def _footprint(model: Model) -> tuple[float, float]:
-    """The narrowest width of a part's footprint on its largest face (its caliper width across the
-    two longest principal axes, over directions every 2°) and its thickness along the third, mm."""
-    pts = np.asarray(model.points, dtype=np.float64)
-    _, axes = np.linalg.eigh(np.cov((pts - pts.mean(axis=0)).T))
-    face = pts @ axes[:, 1:]  # the two longest axes (eigh sorts ascending)
-    angles = np.radians(np.arange(0.0, 180.0, 2.0))
-    widths = np.ptp(face @ np.stack([np.cos(angles), np.sin(angles)]), axis=0)
-    return float(widths.min()), float(np.ptp(pts @ axes[:, 0]))
-
-
-def _layout_and_gripper(layout: Any, gripper: Any, model: Optional[Model] = None) -> tuple[Layout, GripperGeometry]:
-    """The simulated hardware and the gripper, each its default when None (:func:`sim_gripper` of
-    the layout and the part; InvalidTypeError naming it when it is not one)."""
-    layout = instance_of(Layout() if layout is None else layout, Layout, "layout", "binpick.sim.Cell()")
-    return (
-        layout,
-        sim_gripper(layout, model)
-        if gripper is None
-        else instance_of(gripper, GripperGeometry, "gripper", "binpick.sim.sim_gripper(layout)"),
-    )
-
-
-class _Reach:
-    """``T_base_flange → bool``: whether the arm's inverse kinematics reaches the pose in posture FL1."""
-
-    def __init__(self, arm: Any, fl1: int = 7) -> None:
-        self.arm = arm
-        self.fl1 = fl1
-        self.q_ref = np.radians([0.0, 0.0, 90.0, 0.0, 90.0, 0.0])
-
-    def __call__(self, T: np.ndarray) -> bool:
-        try:
-            self.arm.inverse(T, self.fl1, self.q_ref)
-        except Exception:  # the arm model raises its refusal (joint limit, out of reach) as an exception
-            return False
-        return True
+__all__ = ["TwinWorld", "SimulatedCell", "simulated_cell"]
 
 
 class TwinWorld:
@@ -221,11 +107,16 @@ class TwinWorld:
         grip_tolerance_mm: the gripper holds a part when the part's pose in the gripper is within
             this distance of a declared grasp …
         grip_tolerance_deg: … and within this angle.
-        speed_scale: speeds up the emulated arm (1 = real time).
+        speed_scale: plays the emulated arm and gripper this many times faster than they move
+            (1 = real time); the hardware time they take is kept on :attr:`clock` at their own
+            speeds (:data:`SIM_JOINT_SPEEDS_DEG_S`, :data:`SIM_RAMP_S`, :data:`SIM_FINGER_SPEED_MM_S`,
+            the laser motor's, the camera's ``layout.camera_fps``).
         progress: stage printer (see :class:`ProgressPrinter`).
         num_threads: rendering and pose-estimation threads, 0 = all cores.
         robot: the arm: ``"melfa"`` (the paper's, R3 over a pty) or ``"ur"`` (a UR5e-class arm,
             its controller on TCP: RTDE, dashboard, URScript).
+        max_override_percent, max_linear_speed_mm_s: the arm's speed limits in place of the
+            simulated cell's (50 %, 250 mm/s); the simulated cell runs at its limits' speeds.
         config_overrides: fields of :class:`CellConfig` to set (e.g. ``estimate_options``, ``limits``).
     """
 
@@ -245,6 +136,8 @@ class TwinWorld:
         progress: Optional[Callable[[str, str], None]] = None,
         num_threads: int = 0,
         robot: str = "melfa",
+        max_override_percent: Optional[float] = None,
+        max_linear_speed_mm_s: Optional[float] = None,
         **config_overrides: Any,
     ) -> None:
         if not isinstance(model, Model):
@@ -274,6 +167,18 @@ class TwinWorld:
         self.count = count
         given = config_overrides.pop("limits", None)
         self.limits = given or sim_limits(self.layout, self.gripper_geometry)
+        speeds = {
+            k: v
+            for k, v in (
+                ("max_override_percent", max_override_percent),
+                ("max_linear_speed_mm_s", max_linear_speed_mm_s),
+            )
+            if v is not None
+        }
+        if speeds:  # the arm's speeds as the limits allow them (the cell runs at them)
+            self.limits = replace(self.limits, **speeds)
+        #: The cell's hardware time, kept by its emulators (see :mod:`binpick.devices.emulators.clock`).
+        self.clock = PhysicalClock()
         self.config_overrides = config_overrides
         self.lock = threading.RLock()
         t0 = time.perf_counter()
@@ -390,18 +295,30 @@ class TwinWorld:
                 arm=self.arm,
                 start_pose=self.layout.T_base_flange,
                 speed_scale=self.speed_scale,
-            ).start()
+            )
+            self.robot_emulator.clock = self.clock
+            self.robot_emulator.start()
             where = "UR controller on " + ", ".join(
                 f"{k} {h}:{p}" for k, (h, p) in self.robot_emulator.addresses.items()
             )
         else:
             self.robot_emulator = RobotEmulator(
-                config=RobotEmulatorConfig(arm=self.arm, speed_scale=self.speed_scale)
-            ).start()
+                config=RobotEmulatorConfig(
+                    arm=self.arm,
+                    speed_scale=self.speed_scale,
+                    joint_speeds_deg_s=SIM_JOINT_SPEEDS_DEG_S,
+                    ramp_s=SIM_RAMP_S,
+                )
+            )
+            self.robot_emulator.clock = self.clock
+            self.robot_emulator.start()
             where = f"robot on {self.robot_emulator.slave_path}"
         self.robot_emulator.on_motion = self._on_motion
-        self.motor_emulator = DynamixelEmulator().start()
-        self.gripper_emulator = _SimGripperEmulator(self).start()
+        self.motor_emulator = DynamixelEmulator()
+        self.gripper_emulator = _SimGripperEmulator(self)
+        for emulator in (self.motor_emulator, self.gripper_emulator):
+            emulator.clock = self.clock
+            emulator.start()
         self.progress(
             "emulate",
             f"{where}, laser motor on {self.motor_emulator.slave_path}, gripper on {self.gripper_emulator.slave_path}",
@@ -716,6 +633,7 @@ class SimulatedCell(TwinWorld):
             camera=SimCamera(self, seed=self.seed),
             progress=self.progress,
             truth=self,
+            clock=self.clock,
         )
         self.cell.open()
         return self.cell
@@ -727,8 +645,9 @@ class SimulatedCell(TwinWorld):
             limits=limits,
             config=MelfaConfig(
                 serial=SerialSettings(baudrate=9600, parity="E", stopbits=2, timeout_s=1.0, retries=2),
-                initial_override_percent=min(50.0, limits.max_override_percent),
-                initial_linear_speed_mm_s=min(250.0, limits.max_linear_speed_mm_s),
+                # As fast as the cell's limits allow (50 % and 250 mm/s by default).
+                initial_override_percent=limits.max_override_percent,
+                initial_linear_speed_mm_s=limits.max_linear_speed_mm_s,
                 poll_interval_s=0.01,
                 motion_timeout_s=30.0,
             ),
@@ -753,7 +672,11 @@ class _SimGripperEmulator(GripperEmulator):
     """The Modbus gripper emulator whose fingers stop on the simulated part between them."""
 
     def __init__(self, sim: TwinWorld) -> None:
-        super().__init__()
+        stroke = sim._gripper_config.stroke_mm
+        slow, fast = (255.0 * v / stroke for v in SIM_FINGER_SPEED_MM_S)
+        super().__init__(
+            config=GripperEmulatorConfig(min_speed_units_s=slow, max_speed_units_s=fast, speed_scale=sim.speed_scale)
+        )
         self.sim = sim
 
     def _apply(self) -> None:

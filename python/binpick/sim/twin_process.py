@@ -136,6 +136,8 @@ class _CameraServer:
                     return  # the stream cannot be trusted past a bad request
                 if op == wire.OP_WORLD:
                     conn.sendall(self._world_reply())
+                elif op == wire.OP_CLOCK:  # the hardware time alone: nothing settles
+                    conn.sendall(wire.encode_document({"clock_s": self.world.clock.now()}))
                 else:
                     conn.sendall(self._depth_reply() if op == wire.OP_DEPTH else self._frame_reply())
         except OSError:
@@ -421,6 +423,7 @@ center_mm = {_toml_list(board.center)}   # the centre of the corner grid, base f
             "T_base_flange": w.robot_emulator.pose().tolist(),
             "laser_angle": w.laser_angle(),
             "frames_served": 0 if self.camera is None else self.camera.frames,
+            "clock_s": round(w.clock.now(), 4),
         }
 
     def _check_contacts(self) -> None:

@@ -14,7 +14,8 @@ Records. Every cycle is a JSON object (``cycle_record()``): ``seed``, ``pile_siz
 :data:`binpick.cell.FAILURE_KINDS`), the pose error against the truth, confidence, grasp, … —
 all of them decided by the seed alone, identical with one worker, N workers or Ray — and the
 measurements, which vary from run to run and machine to machine (:data:`MEASURED`):
-``cycle_time_s`` and ``stage_s`` (see ``physical_stage_s()``), ``cpu_s`` (the worker process's
+``cycle_time_s`` and ``stage_s`` (the cell's physical time, :func:`binpick.cell.records.cycle_stages_s`:
+the hardware's on the simulated cell's clock, binpick's compute as measured), ``cpu_s`` (the worker process's
 CPU time over the cycle: the simulator's renderer, physics and emulators with binpick's own
 compute), ``binpick_cpu_s`` (binpick's own compute: line extraction, pose, planning) and
 ``wall_s``. Every pile is a JSON object too (``run_pile()``'s ``pile``).
@@ -281,14 +282,20 @@ def _jsonable(value: Any) -> Any:
 
 def _cell_settings(path: Any) -> tuple[Optional[int], dict, Any, dict]:
     """The cell file's scan and gripper settings: frames, [estimate], the gripper (its [gripper]
-    shape and [cell] tool) and the options the cell judges picks by (orientation_needed,
-    min_confidence). The simulated cell's bin, camera and arm stay the simulator's."""
+    shape and [cell] tool), the options the cell judges picks by (orientation_needed,
+    min_confidence) and the arm's speeds (``[limits] max_override_percent`` and
+    ``max_linear_speed_mm_s``: the simulated cell runs at them). The simulated cell's bin, camera
+    and arm stay the simulator's."""
     from ..cell.cell_file import _estimate_options, _gripper_geometry, _stake, load_cell_file
 
     f = load_cell_file(path)
     frames = None if f.get("cell", "frames", None) is None else f.integer("cell", "frames")
     gripper = _gripper_geometry(f, f.pose("cell", "tool", [0, 0, 150, 0, 0, 0]))
-    return frames, _estimate_options(f), gripper, _stake(f)
+    options = _stake(f)
+    for key in ("max_override_percent", "max_linear_speed_mm_s"):
+        if f.get("limits", key, None) is not None:
+            options[key] = f.number("limits", key)
+    return frames, _estimate_options(f), gripper, options
 
 
 def _resolve_part(part: Any, unit: str) -> tuple[Any, str]:

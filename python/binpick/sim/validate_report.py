@@ -8,10 +8,11 @@ Definitions (over the run's cycles: pick attempts; the look that finds a bin emp
   at 95 % (:func:`wilson`);
 * bins emptied — piles whose every part left the bin;
 * failures by kind — the cycles of each :data:`binpick.cell.FAILURE_KINDS`;
-* cycle time — each cycle's ``cycle_time_s`` (see :func:`binpick.sim.validate_workers.physical_stage_s`):
-  mean, median, 90th percentile;
-* picks per hour — 3600 × picked cycles / the sum of every cycle's time, failed ones included:
-  the rate parts come out of the bin;
+* cycle time — each cycle's physical ``cycle_time_s`` (:func:`binpick.cell.records.cycle_stages_s`:
+  the hardware's time on the simulated cell's clock and binpick's compute): mean, median, 90th
+  percentile, and each stage's mean;
+* picks per hour — :func:`binpick.cell.records.picks_per_hour`: 3600 × picked cycles / the sum of
+  every cycle's time, failed ones included: the rate parts come out of the bin;
 * CPU per cycle — the workers' CPU time per cycle (``cpu_s``; binpick's own: ``binpick_cpu_s``);
 * cycles per core-hour — cycles / the workers' whole CPU time (each pile's, setup and last
   look included) × 3600.
@@ -31,7 +32,7 @@ import numpy as np
 from .._validate import write_atomic
 from ..errors import InvalidInputError
 
-__all__ = ["Z95", "ValidationReport", "summarize", "table", "wilson"]
+__all__ = ["Z95", "ValidationReport", "stage_text", "summarize", "table", "wilson"]
 
 #: The standard normal quantile of a two-sided 95 % interval.
 Z95 = 1.959963984540054
@@ -49,6 +50,12 @@ def wilson(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
     return 0.0 if successes == 0 else centre - half, 1.0 if successes == n else centre + half
 
 
+def stage_text(stages: Mapping[str, float]) -> str:
+    """A cycle's stages as a line: ``scan move 0.5 s, sweep 2.4 s, compute 0.3 s, …``."""
+    names = {"scan.move": "scan move", "scan.sweep": "sweep", "motion": "pick motion"}
+    return ", ".join(f"{names.get(k, k)} {v:.2f} s" for k, v in stages.items() if v > 0.0005)
+
+
 def summarize(
     records: Sequence[Mapping[str, Any]],
     piles: Sequence[Mapping[str, Any]],
@@ -57,7 +64,7 @@ def summarize(
     run: Optional[Mapping[str, Any]] = None,
 ) -> dict:
     """The report's figures (``report.json``; definitions in the module docstring)."""
-    from ..cell.records import FAILURE_KINDS
+    from ..cell.records import CYCLE_STAGES, FAILURE_KINDS, picks_per_hour
 
     n = len(records)
     picked = sum(r["outcome"] == "picked" for r in records)
@@ -90,16 +97,21 @@ def summarize(
             "min": float(times.min()),
             "max": float(times.max()),
         },
-        "picks_per_hour": 3600.0 * picked / float(times.sum()) if len(times) and times.sum() > 0 else None,
+        "stage_s_mean": {
+            k: float(np.mean([r["stage_s"].get(k, 0.0) for r in records if r.get("stage_s")])) for k in CYCLE_STAGES
+        }
+        if any(r.get("stage_s") for r in records)
+        else None,
+        "picks_per_hour": picks_per_hour(picked, times.tolist()),
         "cpu_s_per_cycle": float(np.mean(cpu)) if cpu else None,
         "binpick_cpu_s_per_cycle": float(np.mean(own)) if own else None,
         "cpu_s_total": pile_cpu,
         "cycles_per_core_hour": 3600.0 * n / pile_cpu if pile_cpu > 0 else None,
         "emulator_failures": [f for p in piles for f in p.get("emulator_failures", [])],
         "picture_errors": [f for p in piles for f in p.get("picture_errors", [])],
-        "measured": "cycle_time_s, picks_per_hour and the CPU figures are measurements (they vary with the machine "
-        "and its load); cycle_time_s is the emulated stages' time, the arm's scaled back by the speed scale "
-        "(binpick.sim.validate_workers.physical_stage_s), until the simulated cell keeps a virtual clock",
+        "measured": "the CPU figures are measurements (they vary with the machine and its load); cycle_time_s and "
+        "picks_per_hour are the hardware's time on the simulated cell's clock (decided by the seed) and binpick's "
+        "compute as measured (binpick.cell.records.cycle_stages_s)",
         "settings": dict(settings or {}),
         "run": dict(run or {}),
     }
@@ -126,6 +138,8 @@ def table(summary: Mapping[str, Any]) -> str:
     if s["cycle_time_s"]:
         c = s["cycle_time_s"]
         lines.append(f"  cycle time        median {c['median']:.1f} s, p90 {c['p90']:.1f} s, mean {c['mean']:.1f} s")
+        if s.get("stage_s_mean"):
+            lines.append("    of which         " + stage_text(s["stage_s_mean"]))
     if s["picks_per_hour"] is not None:
         lines.append(f"  picks per hour    {s['picks_per_hour']:.0f}")
     if s["cpu_s_per_cycle"] is not None:
@@ -224,7 +238,7 @@ def save_summary(path: Path, summary: Mapping[str, Any], records: Sequence[Mappi
         left.axvline(c["median"], color="k", linestyle="--", linewidth=0.8, label=f"median {c['median']:.1f} s")
         left.axvline(c["p90"], color="k", linestyle=":", linewidth=0.8, label=f"p90 {c['p90']:.1f} s")
         left.legend(fontsize=8)
-    left.set_xlabel("cycle time, s (emulated stages; see report.json's 'measured')")
+    left.set_xlabel("physical cycle time, s (the cell's hardware clock and binpick's compute)")
     left.set_ylabel("cycles")
     pph = summary["picks_per_hour"]
     left.set_title("cycle time" + ("" if pph is None else f" — {pph:.0f} picks per hour"))

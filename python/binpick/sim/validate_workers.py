@@ -21,6 +21,7 @@ from typing import Any, Optional
 
 import numpy as np
 
+from ..cell.records import cycle_stages_s
 from ..errors import BinpickError, InvalidInputError
 
 __all__ = [
@@ -32,7 +33,6 @@ __all__ = [
     "Pool",
     "RayTasks",
     "cycle_record",
-    "physical_stage_s",
     "pile_size",
     "run_pile",
 ]
@@ -94,35 +94,16 @@ def pile_size(seed: int, sizes: Sequence[int]) -> int:
     return lo + seed % (hi - lo + 1)
 
 
-def physical_stage_s(timings: Mapping[str, float], speed_scale: float) -> dict[str, float]:
-    """The physical time of a cycle's stages, s — a stand-in until the simulated cell keeps a
-    virtual clock (issue 37, item 2), which replaces this function: the stages the arm moves in
-    (``scan.move``, ``motion``), as the robot emulator ran them ``speed_scale`` times faster
-    than the arm, scaled back by ``speed_scale`` — which scales up too what else those stages
-    waited for (the gripper's fingers, which the emulator moves at their own speed, the
-    drivers' polling and the simulator's physics), so they overstate the arm's time, by about a
-    third on this machine; and the sweep (``scan.sweep``) as it ran: the laser motor's steps at
-    their own speed, each frame waiting for the simulator's renderer and physics rather than a
-    camera's exposure. Measurements of the wall clock, they vary with the machine and its load."""
-    arm = ("scan.move", "motion")
-    return {
-        k: round(float(timings.get(k, 0.0)) / 1e3 * (speed_scale if k in arm else 1.0), 4)
-        for k in ("scan.move", "scan.sweep", "motion")
-    }
-
-
 def _binpick_cpu_s(timings: Mapping[str, float]) -> float:
     """binpick's own CPU time in a cycle, s: the stages it times on its thread (line extraction,
     pose, planning, grasp widths)."""
     return round(sum(float(v) for k, v in timings.items() if k.startswith(("cpu.", "scan.cpu."))) / 1e3, 4)
 
 
-def cycle_record(
-    seed: int, pile_size: int, record: Any, *, speed_scale: float, cpu_s: Optional[float], wall_s: Optional[float]
-) -> dict:
+def cycle_record(seed: int, pile_size: int, record: Any, *, cpu_s: Optional[float], wall_s: Optional[float]) -> dict:
     """The JSON record of one cycle (see the module docstring) from its :class:`binpick.cell.PickRecord`."""
     t = record.truth
-    stages = physical_stage_s(record.timings, speed_scale)
+    stages = cycle_stages_s(record.timings) or {}
     T = record.T_base_object
     return {
         "seed": seed,
@@ -148,8 +129,8 @@ def cycle_record(
         "nudges": len(record.nudges),
         "collisions": [str(c["with"]) for c in record.collisions],
         "T_base_object": None if T is None else np.round(T, 4).tolist(),
-        "cycle_time_s": round(sum(stages.values()), 4),
-        "stage_s": stages,
+        "cycle_time_s": round(sum(stages.values()), 4) if stages else None,
+        "stage_s": {k: round(v, 4) for k, v in stages.items()},
         "cpu_s": None if cpu_s is None else round(cpu_s, 4),
         "binpick_cpu_s": _binpick_cpu_s(record.timings),
         "wall_s": None if wall_s is None else round(wall_s, 4),
@@ -206,7 +187,6 @@ def run_pile(model: Any, spec: PileSpec) -> dict:
         end = (time.process_time(), time.perf_counter())
         spans = clock.spans(end)
         bin_bounds = sim.cell.config.bin_bounds
-        speed_scale = sim.speed_scale
         emulator_failures = list(sim.emulator_failures)
     cycles = [r for r in report.records if not r.bin_empty]
     records = [
@@ -214,7 +194,6 @@ def run_pile(model: Any, spec: PileSpec) -> dict:
             spec.seed,
             spec.pile_size,
             r,
-            speed_scale=speed_scale,
             cpu_s=spans.get(r.index, (None, None))[0],
             wall_s=spans.get(r.index, (None, None))[1],
         )

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Optional
 
 from ...errors import InvalidInputError
+from .clock import PhysicalClock
 
 __all__ = ["Fault", "PtyEmulator", "IDLE_BAUD", "REST_DELAY_S"]
 
@@ -112,8 +113,16 @@ class PtyEmulator:
         self._closed = False
         #: exceptions raised while handling requests (an emulator bug); tests assert it stays empty
         self.failures: list[str] = []
+        #: the cell's hardware time (a :class:`~binpick.devices.emulators.clock.PhysicalClock`
+        #: shared with the cell's other emulators), or None: what each command takes is spent there
+        self.clock: Optional[PhysicalClock] = None
         self._rest_line()
         self._thread = threading.Thread(target=self._serve, name=f"{self.device}-emulator", daemon=True)
+
+    def _spend(self, seconds: float) -> None:
+        """The device takes ``seconds`` of the cell's hardware time (kept when a clock is set)."""
+        if self.clock is not None:
+            self.clock.spend(seconds, self.device)
 
     # -- public
     def start(self) -> PtyEmulator:

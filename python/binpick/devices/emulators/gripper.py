@@ -40,6 +40,8 @@ class GripperEmulatorConfig:
         min_speed_units_s: finger speed at SPEED 0, position units per second.
         max_speed_units_s: finger speed at SPEED 255, position units per second.
         device_exception: exception code sent for the DEVICE_ERROR fault.
+        speed_scale: the fingers move this many times faster than their speed (> 1 makes a
+            simulated cell quick); the time spent on the cell's clock is the speed's.
     """
 
     slave: int = 9
@@ -47,12 +49,14 @@ class GripperEmulatorConfig:
     min_speed_units_s: float = 200.0
     max_speed_units_s: float = 2000.0
     device_exception: int = 4
+    speed_scale: float = 1.0
 
     def __post_init__(self) -> None:
         check_int(self.slave, "GripperEmulatorConfig.slave", 1, 247)
         check_number(self.activation_s, "GripperEmulatorConfig.activation_s", low=0.0, unit="s")
         check_number(self.min_speed_units_s, "GripperEmulatorConfig.min_speed_units_s", low=1e-3)
         check_number(self.max_speed_units_s, "GripperEmulatorConfig.max_speed_units_s", low=1e-3)
+        check_number(self.speed_scale, "GripperEmulatorConfig.speed_scale", low=1e-3, high=1e6)
 
 
 class GripperEmulator(PtyEmulator):
@@ -92,12 +96,16 @@ class GripperEmulator(PtyEmulator):
             self._activated_at = None
         elif self._activated_at is None:
             self._activated_at = monotonic() + self.config.activation_s
+            self._spend(self.config.activation_s)
         c = self.config
-        self.axis.speed = c.min_speed_units_s + (c.max_speed_units_s - c.min_speed_units_s) * speed / 255.0
+        physical = c.min_speed_units_s + (c.max_speed_units_s - c.min_speed_units_s) * speed / 255.0
+        self.axis.speed = physical * c.speed_scale
         goal = float(request)
         if self.object_at is not None and goal > self.axis.position() >= 0 and goal > self.object_at:
             goal = float(max(self.object_at, self.axis.position()))
         if action & GTO and self._activated_at is not None:
+            if goal != self.axis.goal:  # the fingers' travel to the goal (or to the part they stop on)
+                self._spend(abs(goal - self.axis.position()) / physical)
             self.axis.set_goal(goal)
 
     # -- protocol

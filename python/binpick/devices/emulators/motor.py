@@ -5,6 +5,12 @@ replies with CRC-error status to packets whose CRC is wrong, refuses what the se
 (EEPROM writes with torque on, read-only addresses, goals outside the position limits, unknown
 instructions) and, with torque on, moves the present position toward the goal at the profile
 velocity (or ``max_speed_rad_s`` when that is 0).
+
+On a cell's :class:`~binpick.devices.emulators.clock.PhysicalClock` (``clock`` set) the servo
+turns in the cell's hardware time, not the wall clock's: it turns while the camera's frames
+take their time (a continuous sweep), and a read of its moving status while it turns is a
+driver waiting for it — each such poll takes :data:`STATUS_POLL_S` of the clock, at most until
+the servo arrives.
 """
 
 from __future__ import annotations
@@ -37,7 +43,11 @@ from ..dynamixel import (
 )
 from ._pty import PtyEmulator, monotonic
 
-__all__ = ["LinearAxis", "DynamixelEmulatorConfig", "DynamixelEmulator", "CrcFailure"]
+__all__ = ["LinearAxis", "DynamixelEmulatorConfig", "DynamixelEmulator", "CrcFailure", "STATUS_POLL_S"]
+
+#: The time a read of the moving status takes on the bus, s: a 2-byte READ and its status
+#: packet, 27 bytes at 57600 baud.
+STATUS_POLL_S = 27 * 10 / 57600
 
 ADDR_MAX_POSITION, ADDR_MIN_POSITION = 48, 52
 TABLE_SIZE = 147
@@ -45,19 +55,26 @@ _ERR_INSTRUCTION, _ERR_CRC, _ERR_RANGE, _ERR_LENGTH, _ERR_LIMIT, _ERR_ACCESS = 2
 
 
 class LinearAxis:
-    """A position that moves toward its goal at a constant speed (units per second)."""
+    """A position that moves toward its goal at a constant speed (units per second), in the
+    time ``now()`` gives (the wall clock's by default)."""
 
-    def __init__(self, position: float, speed: float) -> None:
+    def __init__(self, position: float, speed: float, now: Any = None) -> None:
         self.speed = speed
+        self.now = now or monotonic
         self._pos = self.goal = float(position)
-        self._t = monotonic()
+        self._t = self.now()
         self.enabled = True
+
+    def arrival(self) -> float:
+        """When the position reaches the goal (its time now when there)."""
+        here = self.position()
+        return self._t + (abs(self.goal - here) / self.speed if self.enabled else 0.0)
 
     def position(self) -> float:
         """The position now (advancing the model to this instant)."""
-        now = monotonic()
+        now = self.now()
         if self.enabled:
-            step = self.speed * (now - self._t)
+            step = self.speed * max(0.0, now - self._t)  # 0 when the time source was changed
             delta = self.goal - self._pos
             self._pos = self.goal if abs(delta) <= step else self._pos + math.copysign(step, delta)
         self._t = now
@@ -129,8 +146,12 @@ class DynamixelEmulator(PtyEmulator):
         struct.pack_into("<i", t, ADDR_MIN_POSITION, config.min_position)
         struct.pack_into("<i", t, ADDR_GOAL_POSITION, config.start_position)
         self.table = t
-        self.axis = LinearAxis(config.start_position, config.max_speed_rad_s * 4096 / (2 * math.pi))
+        self.axis = LinearAxis(config.start_position, config.max_speed_rad_s * 4096 / (2 * math.pi), self._now)
         self.axis.enabled = False
+
+    def _now(self) -> float:
+        """The servo's time: the cell's hardware clock when one is set, else the wall clock."""
+        return monotonic() if self.clock is None else self.clock.now()
 
     # -- state for tests
     def present_position(self) -> float:
@@ -200,6 +221,9 @@ class DynamixelEmulator(PtyEmulator):
             addr, n = struct.unpack("<HH", p.params)
             if addr + n > TABLE_SIZE:
                 return self._status(_ERR_ACCESS)
+            if self.clock is not None and addr <= ADDR_MOVING < addr + n and self.axis.moving():
+                # A driver waiting for the servo: the poll takes its time on the bus, the servo turns on.
+                self.clock.advance_to(min(self.clock.now() + STATUS_POLL_S, self.axis.arrival()), self.device)
             self._refresh()
             return self._status(0, bytes(self.table[addr : addr + n]))
         if p.instruction == INST_WRITE:

@@ -13,8 +13,10 @@ upper arm − flange length. Posture flag FL1: bit 2 right (wrist in front of J1
 The emulator keeps the arm's joints, refuses what a controller refuses (no session, no operation
 rights, servo off, alarm, busy, unreachable target, joint or operation-range limits, bad syntax)
 with QeR/Qer and an error number whose text ERRORMES returns, and takes time to move: joint
-moves at ``joint_speed_deg_s`` × override, straight moves at the commanded speed × override
-(both × ``speed_scale``). The error numbers are the emulator's own, not the controller's table.
+moves at each joint's top speed × override, straight moves at the commanded speed × override,
+ramping up and down over ``ramp_s`` (:meth:`RobotEmulatorConfig.move_time_s`, the time spent on
+the cell's :class:`~binpick.devices.emulators.clock.PhysicalClock`), played ``speed_scale`` times
+faster. The error numbers are the emulator's own, not the controller's table.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from ...errors import InvalidInputError
 from ...transforms import quaternion_matrix
 from ..xyzabc import rotation_from_abc, xyzabc_from_transform
 from ._pty import Fault, PtyEmulator, monotonic
+from .clock import trapezoid_s
 
 __all__ = ["ArmModel", "RobotEmulatorConfig", "RobotEmulator", "ERROR_TEXTS"]
 
@@ -174,6 +177,10 @@ class RobotEmulatorConfig:
         model_name: text returned by OPEN.
         home_deg: joint angles at start-up, degrees.
         joint_speed_deg_s: joint speed of MOV at 100 % override, degrees per second.
+        joint_speeds_deg_s: each joint's own top speed (six values, deg/s), where they differ
+            (an arm's datasheet lists them); empty: ``joint_speed_deg_s`` for every joint.
+        ramp_s: the time a joint or the straight-line speed takes to reach full speed from rest
+            (and to stop): a constant acceleration of speed / ``ramp_s``; 0: at once.
         speed_scale: multiplies every speed (use > 1 to make tests quick).
         servo_on_delay_s: time servo power takes to come on after SRVON, seconds.
     """
@@ -183,12 +190,40 @@ class RobotEmulatorConfig:
     model_name: str = "RV-1A"
     home_deg: tuple[float, ...] = (0.0, 0.0, 90.0, 0.0, 90.0, 0.0)
     joint_speed_deg_s: float = 180.0
+    joint_speeds_deg_s: tuple[float, ...] = ()
+    ramp_s: float = 0.0
     speed_scale: float = 1.0
     servo_on_delay_s: float = 0.0
 
     def __post_init__(self) -> None:
         check_number(self.joint_speed_deg_s, "RobotEmulatorConfig.joint_speed_deg_s", low=1e-3, unit="deg/s")
         check_number(self.speed_scale, "RobotEmulatorConfig.speed_scale", low=1e-3, high=1e6)
+        check_number(self.ramp_s, "RobotEmulatorConfig.ramp_s", low=0.0, high=10.0, unit="s")
+        if len(self.joint_speeds_deg_s) not in (0, 6):
+            raise InvalidInputError("RobotEmulatorConfig.joint_speeds_deg_s: expected six speeds in deg/s, or none")
+        for v in self.joint_speeds_deg_s:
+            check_number(v, "RobotEmulatorConfig.joint_speeds_deg_s", low=1e-3, unit="deg/s")
+
+    @property
+    def joint_speeds_rad_s(self) -> np.ndarray:
+        """Each joint's top speed at 100 % override, rad/s."""
+        speeds = self.joint_speeds_deg_s or (self.joint_speed_deg_s,) * 6
+        return np.radians(np.asarray(speeds, dtype=np.float64))
+
+    def move_time_s(
+        self, joints: np.ndarray, override: float = 1.0, linear_mm: float = 0.0, speed_mm_s: float = 0.0
+    ) -> float:
+        """The physical time of a motion through the joint samples ``joints`` (K, 6) rad at
+        ``override`` (0–1): each joint over its travel at its top speed × override, ramping in
+        and out over ``ramp_s`` (:func:`~binpick.devices.emulators.clock.trapezoid_s`), the
+        joints finishing together (the slowest decides); for a straight move also its length
+        ``linear_mm`` at ``speed_mm_s`` × override."""
+        travel = np.abs(np.diff(np.asarray(joints, dtype=np.float64), axis=0)).sum(axis=0)
+        speeds = self.joint_speeds_rad_s * override
+        t = max((trapezoid_s(d, v, self.ramp_s) for d, v in zip(travel, speeds)), default=0.0)
+        if linear_mm > 0.0:
+            t = max(t, trapezoid_s(linear_mm, speed_mm_s * override, self.ramp_s))
+        return t
         check_number(self.servo_on_delay_s, "RobotEmulatorConfig.servo_on_delay_s", low=0.0, unit="s")
         if len(self.home_deg) != 6:
             raise InvalidInputError("RobotEmulatorConfig.home_deg: expected six joint angles in degrees")
@@ -277,7 +312,8 @@ class RobotEmulator(PtyEmulator):
         self.hands: dict[int, bool] = {}
         #: Called as ``on_motion(T_base_flange path (K, 4, 4), speed mm/s)`` when a motion starts
         #: (the flange poses it passes through, ending where an injected alarm stops it; the speed
-        #: at 100 % speed scale); a simulated world uses it to sweep the tool through its parts.
+        #: at 100 % speed scale, its top speed along the path); a simulated world uses it to sweep
+        #: the tool through its parts.
         #: It runs on the serving thread under the emulator's lock: it must not call back into
         #: the emulator. Its exceptions are recorded in :attr:`failures`.
         self.on_motion: Optional[Callable[[np.ndarray, float], None]] = None
@@ -330,9 +366,6 @@ class RobotEmulator(PtyEmulator):
         else:
             self._q = m.joints(s)
 
-    def _speed_factor(self) -> float:
-        return self._override / 100.0 * self.config.speed_scale
-
     def _plan(self, target: np.ndarray, fl1: int, linear: bool) -> _Motion:
         arm = self.config.arm
         if linear:
@@ -348,16 +381,16 @@ class RobotEmulator(PtyEmulator):
                 path.append(q)
             path[0] = self._q
             joints = np.array(path)
-            turn = float(np.abs(np.diff(joints, axis=0)).sum(axis=0).max())
-            duration = max(dist / self._speed_mm_s, turn / math.radians(self.config.joint_speed_deg_s))
         else:
             q1 = arm.inverse(target, fl1, self._q)
             joints = np.array([self._q, q1])
-            duration = float(np.abs(q1 - self._q).max()) / math.radians(self.config.joint_speed_deg_s)
-        motion = _Motion(joints, monotonic(), duration / self._speed_factor())
+            dist = 0.0
+        physical = self.config.move_time_s(joints, self._override / 100.0, dist, self._speed_mm_s)
+        motion = _Motion(joints, monotonic(), physical / self.config.speed_scale)
         if self._pending_alarm is not None:
             motion.alarm_at, motion.alarm_code = self._pending_alarm
             self._pending_alarm = None
+        self._spend(physical * (1.0 if motion.alarm_at is None else motion.alarm_at))
         return motion
 
     def _report_motion(self, m: _Motion) -> None:
@@ -367,8 +400,11 @@ class RobotEmulator(PtyEmulator):
         samples = max(2 * len(m.path), 30)
         poses = np.array([self.config.arm.forward(m.joints(s)) for s in np.linspace(0.0, end, samples)])
         length = float(np.linalg.norm(np.diff(poses[:, :3, 3], axis=0), axis=1).sum())
-        real_duration = end * m.duration * self.config.speed_scale
-        speed = length / real_duration if real_duration > 0 else 0.0
+        # The flange's top speed along the path: the length over the time at speed, ramps aside
+        # (a trapezoid's d / (T − ramp); a move too short to reach it peaks at 2d / T).
+        T, r = end * m.duration * self.config.speed_scale, self.config.ramp_s
+        at_speed = T - r if T >= 2 * r else T / 2
+        speed = length / at_speed if at_speed > 0 else 0.0
         try:
             self.on_motion(poses, speed)
         except Exception as exc:  # keep serving; the failure shows in failures

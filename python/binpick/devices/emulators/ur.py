@@ -19,7 +19,8 @@ It speaks the three interfaces binpick's UR driver uses, as the controller does:
   the real controller streams on this port is not emulated (the driver reads RTDE).
 
 The arm moves only when powered on with its brakes released; it takes time to move (joint moves
-at ``v`` rad/s, straight moves at ``v`` m/s, both × ``speed_scale``); a target its inverse
+at ``v`` rad/s, straight moves at ``v`` m/s, reaching them at the acceleration ``a``, played
+``speed_scale`` times faster; the time spent on its ``clock`` when one is set); a target its inverse
 kinematics cannot reach stops the program with the arm where it was.
 """
 
@@ -38,6 +39,7 @@ import numpy as np
 
 from ...transforms import rotation_about, rotation_vector
 from .. import rtde
+from .clock import PhysicalClock, trapezoid_s
 
 __all__ = ["URArm", "UREmulator", "CONTROLLER_VERSION", "ROBOT_MODES"]
 
@@ -226,6 +228,8 @@ class UREmulator:
         self.log: list[str] = []
         self.failures: list[str] = []
         self.on_motion: Optional[Callable[[np.ndarray, float], None]] = None
+        #: the cell's hardware time (:class:`~binpick.devices.emulators.clock.PhysicalClock`), or None
+        self.clock: Optional[PhysicalClock] = None
         self._motion: Optional[tuple[float, float, np.ndarray, np.ndarray]] = None  # t0, duration, times, qs
         self._program: Optional[threading.Thread] = None
         self._abort = threading.Event()
@@ -383,6 +387,8 @@ class UREmulator:
             elif kind == "textmsg":
                 self.log.append(statement[1])
             elif kind == "sleep":
+                if self.clock is not None:
+                    self.clock.spend(statement[1], "robot")
                 abort.wait(statement[1] / self.speed_scale)
             elif kind == "stop":
                 self._halt()
@@ -397,7 +403,7 @@ class UREmulator:
 
     def _move(self, statement: tuple, abort: threading.Event) -> bool:
         """Runs one movej/movel; False when it cannot (power, brakes, reach), the program then stops."""
-        kind, is_pose, values, _, v = statement
+        kind, is_pose, values, a, v = statement
         if self.robot_mode != 7:
             self.log.append(f"{kind}: the robot is not running (robot mode {ROBOT_MODES.get(self.robot_mode)})")
             return False
@@ -410,7 +416,7 @@ class UREmulator:
                     else np.array(values)
                 )
                 qs = np.linspace(q0, q1, 20)
-                duration = float(np.abs(q1 - q0).max()) / v
+                duration = trapezoid_s(float(np.abs(q1 - q0).max()), v, v / a)
             else:
                 T0, T1 = self.arm.forward(q0), rtde.transform_from_ur_pose(values) @ np.linalg.inv(self.T_flange_tcp)
                 steps = 20
@@ -424,10 +430,12 @@ class UREmulator:
                     qs.append(self.arm.inverse(T, qs[-1]))
                 qs = np.array(qs)
                 distance = float(np.linalg.norm(T1[:3, 3] - T0[:3, 3])) / 1000.0
-                duration = max(distance / v, float(np.abs(qs[-1] - q0).max()) / 3.0)
+                duration = max(trapezoid_s(distance, v, v / a), float(np.abs(qs[-1] - q0).max()) / 3.0)
         except ValueError as exc:
             self.log.append(f"{kind}: {exc}")
             return False
+        if self.clock is not None:  # the arm's time, from the program's speed and acceleration
+            self.clock.spend(duration, "robot")
         duration /= self.speed_scale
         with self.lock:
             self._motion = (time.monotonic(), duration, np.linspace(0.0, 1.0, len(qs)), qs)
