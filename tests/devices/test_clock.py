@@ -97,3 +97,23 @@ def test_gripper_fingers_take_their_travel_at_their_speed():
         gripper.close_port()
         emulator.close()
     assert emulator.failures == []
+
+
+def test_a_motor_whose_protocol_sends_no_speed_cannot_sweep_continuously(ai_motor):
+    with pytest.raises(InvalidInputError, match=r'AiMotor protocol sets no speed.*sweep = "steps"'):
+        ai_motor.set_speed(0.2)
+
+
+def test_the_servo_turns_on_the_clock_and_a_wait_for_it_takes_its_travel(dxl_emulator, dxl_motor):
+    clock = PhysicalClock()
+    dxl_emulator.clock = clock
+    dxl_motor.enable()
+    speed = dxl_motor.set_speed(math.radians(90.0))  # the profile velocity's units round it
+    assert speed == pytest.approx(math.radians(90.0), rel=0.01)
+    start = dxl_motor.present_angle()
+    dxl_motor.move_to(start + math.radians(30.0), wait=False)
+    assert dxl_motor.present_angle() == pytest.approx(start, abs=1e-9)  # no time has passed on the clock
+    reached = dxl_motor.wait_until_reached()
+    assert reached == pytest.approx(start + math.radians(30.0), abs=math.radians(0.1))
+    # Waiting polls the moving status; the polls take the servo's travel (whole ticks), no more.
+    assert clock.now() == pytest.approx(abs(reached - start) / speed, abs=1e-6)

@@ -38,10 +38,20 @@ from .grasp import branch_grasps, grasp_openings, mesh_grasps, swept_points
 from .symmetry import GraspMatcher, continuous_near_axis, continuous_symmetry
 from .views import turned_scan_poses
 
-__all__ = ["CellConfig", "GripperGeometry", "SWEEPS", "check_static_poses", "sweep_angles", "turned_scan_poses"]
+__all__ = [
+    "CellConfig",
+    "GripperGeometry",
+    "RESCANS",
+    "SWEEPS",
+    "check_static_poses",
+    "sweep_angles",
+    "turned_scan_poses",
+]
 
 #: How the laser can turn through a scan (:attr:`CellConfig.sweep`).
 SWEEPS = ("steps", "continuous")
+#: What a scan after a clean pick sweeps (:attr:`CellConfig.rescan`).
+RESCANS = ("full", "changed")
 
 
 @dataclass(frozen=True)
@@ -206,6 +216,11 @@ class CellConfig:
             rate; each frame's angle is the motor's reported position interpolated to the
             middle of its exposure). Continuous needs a motor whose speed can be set and a
             camera that reports its rate and each frame's time on the cell's clock.
+        rescan: what a scan after a clean pick sweeps: ``"full"``, the whole bin; or
+            ``"changed"``, only the angles whose sheets cross the region around the part that
+            left, the rest kept from the last scan — with a full scan when the fresh lines show
+            that anything else moved, after anything but a clean pick, and for more than one
+            scan pose (:mod:`binpick.cell.rescan`).
         scan_angles: motor angles (rad) per scan pose; None = computed from the calibration to sweep the bin.
         grasps: name → ``T_gripper_object``; None = the model's declared grasps, or
             :func:`~binpick.cell.branch_grasps` for a model with branches and no declared grasps,
@@ -267,6 +282,7 @@ class CellConfig:
     drop_pose: Any
     frames: int = 90
     sweep: str = "steps"
+    rescan: str = "full"
     scan_angles: Optional[Sequence[Sequence[float]]] = None
     grasps: Optional[Mapping[str, Any]] = None
     gripper: GripperGeometry = field(default_factory=GripperGeometry)
@@ -345,6 +361,7 @@ class CellConfig:
         object.__setattr__(self, "drop_pose", as_transform(self.drop_pose, "drop_pose"))
         count(self.frames, "frames", 1)
         choice(self.sweep, "sweep", SWEEPS)
+        choice(self.rescan, "rescan", RESCANS)
         if self.sweep == "continuous" and self.frames < 2:
             raise InvalidInputError("frames: a continuous sweep takes at least 2 frames a scan pose")
         if self.scan_angles is not None:

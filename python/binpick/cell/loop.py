@@ -71,6 +71,7 @@ from .records import (
     pose_trust,
     with_collisions,
 )
+from .rescan import RescanBasis, basis_after, rescan
 from .shots import DepthSource, depth_scan
 from .sweeps import sweep_laser
 from .symmetry import continuous_near_axis
@@ -169,6 +170,7 @@ class Cell:
         if clock is not None and not callable(clock):
             raise InvalidTypeError(f"clock: expected a function returning seconds, got {type(clock).__name__}")
         self.clock = clock
+        self._basis: Optional[RescanBasis] = None  # what the next scan may build on (config.rescan)
         self._empty_grips: list[np.ndarray] = []
         self._passed_over: list[np.ndarray] = []  # where parts were passed over earlier in the run
         self._declined: list[np.ndarray] = []  # parts the robot program would not try (the vision server)
@@ -236,8 +238,17 @@ class Cell:
             return depth_scan(self, poses)
         if poses is None:
             views = [(T, cfg.angles_for(i)) for i, T in enumerate(cfg.scan_poses)]
+            basis, self._basis = self._basis, None
+            if basis is not None:  # only what the last pick changed, where that is safe
+                return rescan(self, basis, views)
         else:
             views = [(T, cfg.sweep_from(T)) for T in (as_transform(T, f"poses[{i}]") for i, T in enumerate(poses))]
+        return self.sweep_views(views)
+
+    def sweep_views(self, views: Sequence[tuple[np.ndarray, np.ndarray]]) -> ScanResult:
+        """Sweeps the laser through the angles of each (flange pose, angles) of ``views``; the
+        cloud in the base frame."""
+        cfg = self.config
         timings: dict[str, float] = {"move": 0.0, "sweep": 0.0, "extract": 0.0, "cpu.extract": 0.0}
         sweep = Sweep()
         for T_scan, wanted in views:
@@ -639,12 +650,14 @@ class Cell:
         self._empty_grips, self._passed_over = [], []
         records: list[PickRecord] = []
         self._last: tuple[Optional[ScanResult], Optional[Located]] = (None, None)
+        self._basis = None
         stopped: Optional[str] = None
         try:
             for i in range(1, n + 1):
                 self.progress("pick", f"— pick {i} of {n} —")
                 record, stopped = self._cycle(i)
                 record = with_collisions(record, self.truth, self._last[0])
+                self._basis = basis_after(self, record, self._last[0])
                 self._passed_over += [k.T_base_object for k in record.skipped]
                 records.append(record)
                 if stopped is not None:

@@ -89,7 +89,6 @@ class LaserMotor(abc.ABC):
     def _send_goal(self, angle_rad: float) -> None:
         """Sends the goal (already checked against the range) to the motor."""
 
-    @property
     def set_speed(self, speed_rad_s: float) -> float:
         """Turns the moves that follow at ``speed_rad_s`` (at most ``range.max_speed_rad_s``; a
         continuous sweep turns at a set speed); returns the speed the motor was set to, as its
@@ -99,6 +98,7 @@ class LaserMotor(abc.ABC):
             'sweep the laser in steps (the cell file\'s [cell] sweep = "steps")'
         )
 
+    @property
     def goal_angle(self) -> Optional[float]:
         """The last goal sent, radians (None before the first)."""
         return self._goal

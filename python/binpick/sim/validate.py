@@ -283,17 +283,18 @@ def _jsonable(value: Any) -> Any:
 def _cell_settings(path: Any) -> tuple[Optional[int], dict, Any, dict]:
     """The cell file's scan and gripper settings: frames, [estimate], the gripper (its [gripper]
     shape and [cell] tool), the options the cell judges picks by (orientation_needed,
-    min_confidence), the laser's sweep (``[cell] sweep``) and the arm's speeds (``[limits] max_override_percent`` and
-    ``max_linear_speed_mm_s``: the simulated cell runs at them). The simulated cell's bin, camera
-    and arm stay the simulator's."""
+    min_confidence), the laser's sweep (``[cell] sweep``, ``rescan``) and the arm's speeds
+    (``[limits] max_override_percent`` and ``max_linear_speed_mm_s``: the simulated cell runs at
+    them). The simulated cell's bin, camera and arm stay the simulator's."""
     from ..cell.cell_file import _estimate_options, _gripper_geometry, _stake, load_cell_file
 
     f = load_cell_file(path)
     frames = None if f.get("cell", "frames", None) is None else f.integer("cell", "frames")
     gripper = _gripper_geometry(f, f.pose("cell", "tool", [0, 0, 150, 0, 0, 0]))
     options = _stake(f)
-    if f.get("cell", "sweep", None) is not None:
-        options["sweep"] = f.text("cell", "sweep")
+    for key in ("sweep", "rescan"):
+        if f.get("cell", key, None) is not None:
+            options[key] = f.text("cell", key)
     for key in ("max_override_percent", "max_linear_speed_mm_s"):
         if f.get("limits", key, None) is not None:
             options[key] = f.number("limits", key)

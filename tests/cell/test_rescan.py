@@ -1,0 +1,118 @@
+"""Rescanning only what a pick changed: after a clean pick the cell sweeps the band of angles
+around the part that left and keeps the rest of the last scan — unless the fresh lines show that
+something else moved, or the pick was not clean."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import binpick
+from binpick.cell import PickRecord
+from binpick.cell.rescan import basis_after, laser_angles
+from binpick.sim import SimulatedCell
+
+ESTIMATE = {"d_star": 12.0, "min_points": 500}
+
+
+def _nearest(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Each point of ``a``'s distance to the nearest of ``b`` (brute force, in chunks)."""
+    out = np.empty(len(a))
+    for i in range(0, len(a), 256):
+        d = np.linalg.norm(a[i : i + 256, None, :] - b[None, :, :], axis=2)
+        out[i : i + 256] = d.min(axis=1)
+    return out
+
+
+@pytest.fixture(scope="module")
+def after_one_pick():
+    """A pile of four tees after one clean pick, the cell set to rescan only what changed; the
+    messages the cell printed."""
+    lines: list[tuple[str, str]] = []
+    sim = SimulatedCell(
+        binpick.parts.tee(),
+        count=4,
+        seed=1,
+        frames=60,
+        rescan="changed",
+        estimate_options=ESTIMATE,
+        progress=lambda s, m: lines.append((s, m)),
+    )
+    sim.start()
+    report = sim.cell.run(1)
+    assert report.records[0].success, report.records[0].error
+    yield sim, report, lines
+    sim.close()
+
+
+def test_after_a_clean_pick_only_the_band_around_it_is_swept_and_the_cloud_is_the_bins(after_one_pick):
+    sim, report, lines = after_one_pick
+    basis = sim.cell._basis
+    assert basis is not None, "a clean pick leaves a basis for the next scan"
+    partial = sim.cell.scan()
+    share = partial.timings["rescanned_share"]
+    assert 0.0 < share < 0.7
+    assert any("rescanned" in m and "around the part that left" in m for s, m in lines if s == "scan")
+    # The fresh band covers the part that left: no point of the last scan stays where it lay.
+    gone = report.records[0].truth.instance
+    assert gone not in {int(i) for i in sim.pile.ids}
+    # The merged cloud is the bin as a full scan sees it now: each point near the full scan's.
+    full = sim.cell.sweep_views([(sim.config.scan_poses[0], sim.config.angles_for(0))])
+    rng = np.random.default_rng(0)
+    sample = partial.points[rng.choice(len(partial.points), 1500, replace=False)]
+    d = _nearest(sample, full.points)
+    assert np.quantile(d, 0.98) < 2.0, np.quantile(d, [0.5, 0.9, 0.98, 1.0])
+    # ... and no point was lost: each full-scan point has a merged point nearby.
+    back = _nearest(full.points[rng.choice(len(full.points), 1500, replace=False)], partial.points)
+    assert np.quantile(back, 0.98) < 2.0, np.quantile(back, [0.5, 0.9, 0.98, 1.0])
+    # A band takes its share of the sweep's hardware time, not the whole.
+    assert partial.timings["phys.sweep"] < 0.75 * full.timings["phys.sweep"]
+
+
+def test_a_part_that_moved_outside_the_region_makes_the_cell_scan_the_whole_bin(after_one_pick):
+    sim, report, lines = after_one_pick
+    sim.cell._basis = basis = basis_after(sim.cell, report.records[0], sim.cell._last[0])
+    band = sim.config.angles_for(0)
+    T = sim.config.scan_poses[0]
+    # A part the band's sheets cross, outside the region: taken away, as if the pick had dragged it off.
+    pts = np.asarray(sim.model.points)
+    moved = None
+    for pid, P in zip(sim.pile.ids, sim.pile.poses):
+        placed = pts @ P[:3, :3].T + P[:3, 3]
+        outside = ~((placed >= basis.lo) & (placed <= basis.hi)).all(axis=1)
+        theta = laser_angles(sim.cell, T, placed[outside])
+        if outside.mean() > 0.9 and len(theta) and (theta.max() > band.min()):
+            moved = int(pid)
+            break
+    assert moved is not None, "the pile of seed 1 has a part beside the region"
+    sim.pile.remove(moved)
+    lines.clear()
+    scan = sim.cell.scan()
+    assert any(s == "scan" and m.startswith("rescanning the whole bin") for s, m in lines), lines
+    assert "rescanned_share" not in scan.timings
+    # The whole sweep's time, and the band's before it.
+    assert scan.timings["phys.sweep"] > 60 / 15.0
+
+
+def test_anything_but_a_clean_pick_scans_the_whole_bin_next(after_one_pick):
+    sim, report, _ = after_one_pick
+    clean = report.records[0]
+    scan = sim.cell._last[0]
+    assert basis_after(sim.cell, clean, scan) is not None
+    for changed in (
+        {"success": False, "failure": "wrong pose"},
+        {"held": False},
+        {"nudges": (object(),)},
+        {"collisions": ({"with": "part 2", "points": 3},)},
+        {"looks": 2},
+    ):
+        assert basis_after(sim.cell, replace(clean, **changed), scan) is None, changed
+    assert isinstance(clean, PickRecord)
+    full = replace(sim.cell.config, rescan="full")
+    sim.cell.config, keep = full, sim.cell.config
+    try:
+        assert basis_after(sim.cell, clean, scan) is None
+    finally:
+        sim.cell.config = keep
