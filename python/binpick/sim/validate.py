@@ -282,23 +282,28 @@ def _jsonable(value: Any) -> Any:
 
 def _cell_settings(path: Any) -> tuple[Optional[int], dict, Any, dict]:
     """The cell file's scan and gripper settings: frames, [estimate], the gripper (its [gripper]
-    shape and [cell] tool), the options the cell judges picks by (orientation_needed,
-    min_confidence), the laser's sweep (``[cell] sweep``, ``rescan``) and the arm's speeds
-    (``[limits] max_override_percent`` and ``max_linear_speed_mm_s``: the simulated cell runs at
-    them). The simulated cell's bin, camera and arm stay the simulator's."""
-    from ..cell.cell_file import _estimate_options, _gripper_geometry, _stake, load_cell_file
+    shape and [cell] tool, where it gives them: else the simulated cell's), the options the cell
+    judges picks by (orientation_needed, min_confidence), the laser's sweep (``[cell] sweep``,
+    ``rescan``) and the arm's speeds (``[limits] max_override_percent`` and
+    ``max_linear_speed_mm_s``: the simulated cell runs at them). The simulated cell's bin,
+    camera and arm stay the simulator's."""
+    from ..cell import cell_file as cf
 
-    f = load_cell_file(path)
+    f = cf.load_cell_file(path)
     frames = None if f.get("cell", "frames", None) is None else f.integer("cell", "frames")
-    gripper = _gripper_geometry(f, f.pose("cell", "tool", [0, 0, 150, 0, 0, 0]))
-    options = _stake(f)
+    # The file's gripper where it describes one; else the simulated cell's, made for the part.
+    described = f.get("cell", "tool", None) is not None or any(
+        f.get("gripper", k, None) is not None for k in cf.GRIPPER_SHAPE_KEYS
+    )
+    gripper = cf._gripper_geometry(f, f.pose("cell", "tool", [0, 0, 150, 0, 0, 0])) if described else None
+    options = cf._stake(f)
     for key in ("sweep", "rescan"):
         if f.get("cell", key, None) is not None:
             options[key] = f.text("cell", key)
     for key in ("max_override_percent", "max_linear_speed_mm_s"):
         if f.get("limits", key, None) is not None:
             options[key] = f.number("limits", key)
-    return frames, _estimate_options(f), gripper, options
+    return frames, cf._estimate_options(f), gripper, options
 
 
 def _resolve_part(part: Any, unit: str) -> tuple[Any, str]:

@@ -278,6 +278,7 @@ impl Scene {
             placed,
             hits,
             shade,
+            sheets: std::sync::Mutex::new(None),
         })
     }
 }

@@ -212,3 +212,50 @@ fn renderer_and_triangulation_share_one_camera_model() {
     assert!(worst_px < 0.05, "worst reprojection {worst_px} px");
     assert!(worst_mm < 0.05, "worst triangulation {worst_mm} mm");
 }
+
+#[test]
+fn the_sheet_index_lights_exactly_the_pixels_trying_every_one_would() {
+    // A tilted floor (the sheet's reach differs across it), a glossy plate standing almost
+    // edge-on (wide reaches, a laser shadow, reflections), speckle: each frame the index gives
+    // is the frame of every pixel tried.
+    let mut scene = Scene::new();
+    let floor = scene.add_mesh(&plane_mesh(0.0, 1000.0), Material::default()).unwrap();
+    scene
+        .add_instance(
+            floor,
+            Isometry3::translation(0.0, 0.0, 500.0) * Isometry3::rotation(Vector3::x() * 0.3),
+            0,
+        )
+        .unwrap();
+    let glossy = Material {
+        specular: 0.6,
+        ..Default::default()
+    };
+    let plate = scene.add_mesh(&plane_mesh(0.0, 40.0), glossy).unwrap();
+    scene
+        .add_instance(
+            plate,
+            Isometry3::translation(10.0, 5.0, 450.0) * Isometry3::rotation(Vector3::y() * 1.4),
+            1,
+        )
+        .unwrap();
+    let view = scene
+        .view(&small_camera(), &Isometry3::identity(), &Lighting::default())
+        .unwrap();
+    let laser = Laser::default();
+    let noise = SensorNoise {
+        reflections: 0.5,
+        ..Default::default()
+    };
+    for (k, theta) in [-0.3, -0.12, -0.05, 0.0, 0.07, 0.2].into_iter().enumerate() {
+        let indexed = view.frame(&laser, theta, &noise, k as u64).unwrap();
+        let every = view.frame_trying(&laser, theta, &noise, k as u64, Some(())).unwrap();
+        let lit = every
+            .iter()
+            .zip(view.ambient_frame(&noise, 99).unwrap().iter())
+            .filter(|(a, b)| a > b)
+            .count();
+        assert!(lit > 0);
+        assert!(indexed == every, "angle {theta}: the index missed or added lit pixels");
+    }
+}

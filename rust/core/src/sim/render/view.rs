@@ -10,6 +10,90 @@ pub struct View {
     pub(super) placed: Vec<Placed>,
     pub(super) hits: Vec<Hit>,
     pub(super) shade: Vec<[f32; 3]>,
+    /// The pixels indexed by the motor angle whose sheet reaches them, for the last laser asked for.
+    pub(super) sheets: std::sync::Mutex<Option<Arc<SheetIndex>>>,
+}
+
+/// The reaches a pixel is indexed under, rad: each pixel under the least that holds its own
+/// (a surface seen edge-on spreads the sheet over more of the motor's turn); one whose reach
+/// exceeds the last (near the projector's turning axis) is tried at every angle.
+const REACHES: [f64; 5] = [0.004, 0.01, 0.03, 0.1, 0.3];
+
+/// The pixels a view sees, by the motor angle whose laser sheet passes through their surface
+/// point, for one laser pose and sheet: the projector turns about its own y axis through its
+/// origin, so in its frame at angle 0 a point (x, y, z) lies at distance ρ·sin(φ − θ) from the
+/// sheet at angle θ, with φ = atan2(x, z), ρ = √(x² + z²). A pixel can be lit at θ only where
+/// that distance is within the 5σ the frame's test allows — σ² the sheet's plus the pixel's
+/// footprint across it, at most |∂p/∂u|² + |∂p/∂v|² — so a frame tries only the pixels whose φ
+/// is within that reach of θ (or of θ ± π), and lights exactly the pixels testing every one
+/// would.
+pub(super) struct SheetIndex {
+    key: [u64; 18],
+    /// Per entry of [`REACHES`], (φ, pixel) of the pixels indexed under it, sorted by φ.
+    levels: Vec<Vec<(f64, u32)>>,
+    /// The pixels whose reach exceeds every level's: tried at every angle.
+    wide: Vec<u32>,
+}
+
+impl SheetIndex {
+    fn key(laser: &Laser, sigma2: f64, pixel_var: f64) -> [u64; 18] {
+        let mut key = [0u64; 18];
+        for (k, v) in laser.t_camera_laser0.to_homogeneous().iter().enumerate() {
+            key[k] = v.to_bits();
+        }
+        key[16] = sigma2.to_bits();
+        key[17] = pixel_var.to_bits();
+        key
+    }
+
+    fn build(view: &View, laser: &Laser, sigma2: f64, pixel_var: f64) -> SheetIndex {
+        let t_laser_camera = laser.t_camera_laser0.inverse();
+        let mut levels = vec![Vec::new(); REACHES.len()];
+        let mut wide = Vec::new();
+        for (i, h) in view.hits.iter().enumerate() {
+            if h.id == -1 {
+                continue;
+            }
+            let q = t_laser_camera * Point::from(v3(&h.p));
+            let rho = (q.x * q.x + q.z * q.z).sqrt();
+            let g = v3(&h.dpdu).norm_squared() + v3(&h.dpdv).norm_squared();
+            let r = 5.0 * (sigma2 + g * pixel_var).sqrt() / rho.max(1e-9);
+            // |sin(φ − θ)| ≤ r: within asin(r) of φ (or of φ ± π); a little slack for rounding.
+            let reach = if r < 1.0 {
+                r.asin() * 1.001 + 1e-9
+            } else {
+                f64::INFINITY
+            };
+            match REACHES.iter().position(|&level| reach <= level) {
+                Some(k) => levels[k].push((q.x.atan2(q.z), i as u32)),
+                None => wide.push(i as u32),
+            }
+        }
+        for level in &mut levels {
+            level.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        }
+        SheetIndex {
+            key: Self::key(laser, sigma2, pixel_var),
+            levels,
+            wide,
+        }
+    }
+
+    /// The pixels the sheet at `theta` can reach, in row-major order.
+    fn candidates(&self, theta: f64) -> Vec<u32> {
+        use std::f64::consts::PI;
+        let mut out = self.wide.clone();
+        for (level, &reach) in self.levels.iter().zip(REACHES.iter()) {
+            for centre in [theta - 2.0 * PI, theta - PI, theta, theta + PI, theta + 2.0 * PI] {
+                let lo = level.partition_point(|&(phi, _)| phi < centre - reach);
+                let hi = level.partition_point(|&(phi, _)| phi <= centre + reach);
+                out.extend(level[lo..hi].iter().map(|&(_, i)| i));
+            }
+        }
+        out.sort_unstable();
+        out.dedup();
+        out
+    }
 }
 
 impl std::fmt::Debug for View {
@@ -39,18 +123,42 @@ pub(super) fn mix_seed(seed: u64, a: u64, b: u64) -> u64 {
 /// Adds sensor noise to a float image and quantises it to 8 bits, rows in parallel, each row's
 /// noise seeded from (`seed`, `salt`, row) so the result does not depend on the thread count.
 pub(super) fn quantise(img: &[[f32; 3]], width: usize, noise: &SensorNoise, seed: u64, salt: u64) -> Vec<u8> {
+    quantise_adding(img, &[], width, noise, seed, salt)
+}
+
+/// [`quantise`] of `img` with light added at some pixels: `adds` (pixel, RGB), sorted by pixel,
+/// each pixel's in the order they were added — the image is not copied to add them.
+pub(super) fn quantise_adding(
+    img: &[[f32; 3]],
+    adds: &[(usize, [f32; 3])],
+    width: usize,
+    noise: &SensorNoise,
+    seed: u64,
+    salt: u64,
+) -> Vec<u8> {
     let mut out = vec![0u8; img.len() * 3];
     let noisy = noise.read_noise > 0.0 || noise.shot_noise > 0.0;
     let (read2, shot) = ((noise.read_noise * noise.read_noise) as f32, noise.shot_noise as f32);
     out.par_chunks_mut(width * 3).enumerate().for_each(|(row, buf)| {
         let mut rng = Rng::new(mix_seed(seed, salt, row as u64));
-        for (u, px) in img[row * width..(row + 1) * width].iter().enumerate() {
+        let start = row * width;
+        let mut next = adds.partition_point(|&(i, _)| i < start);
+        for (u, px) in img[start..start + width].iter().enumerate() {
+            let mut px = *px;
+            while next < adds.len() && adds[next].0 == start + u {
+                for (v, add) in px.iter_mut().zip(adds[next].1) {
+                    *v += add;
+                }
+                next += 1;
+            }
             for c in 0..3 {
                 let mut v = px[c];
                 if noisy {
                     v += (read2 + shot * v.max(0.0)).sqrt() * fast_normal(&mut rng);
                 }
-                buf[u * 3 + c] = v.round().clamp(0.0, 255.0) as u8;
+                // Rounded half away from zero, as `round()` (whose library call costs more than
+                // the noise): for v ≥ −0.5 that is ⌊v + 0.5⌋, and below it both clamp to 0.
+                buf[u * 3 + c] = (v + 0.5).clamp(0.0, 255.0) as u8;
             }
         }
     });
@@ -104,6 +212,18 @@ impl View {
     /// under ambient light plus the laser line where the sheet meets the first surface it
     /// reaches from the projector, with sensor noise. `seed` fixes the noise.
     pub fn frame(&self, laser: &Laser, theta: f64, noise: &SensorNoise, seed: u64) -> Result<Vec<u8>> {
+        self.frame_trying(laser, theta, noise, seed, None)
+    }
+
+    /// [`View::frame`], trying the pixels the sheet index finds (`every`: every pixel instead).
+    pub(super) fn frame_trying(
+        &self,
+        laser: &Laser,
+        theta: f64,
+        noise: &SensorNoise,
+        seed: u64,
+        every: Option<()>,
+    ) -> Result<Vec<u8>> {
         laser.validate()?;
         noise.validate()?;
         if !theta.is_finite() {
@@ -122,73 +242,91 @@ impl View {
         let sigma2 = laser.sheet_sigma * laser.sheet_sigma;
         let pixel_var = 1.0 / 12.0 + noise.blur * noise.blur;
         let salt = theta.to_bits();
-        let mut img = self.shade.clone();
-        let lit: Vec<(usize, f64)> = img
-            .par_chunks_mut(w)
-            .enumerate()
-            .flat_map_iter(|(row, buf)| {
-                let mut rng = Rng::new(mix_seed(seed ^ 0x5EC1_E000, salt, row as u64));
-                let mut lit_here = Vec::new();
-                for (u, px) in buf.iter_mut().enumerate() {
-                    let h = &self.hits[row * w + u];
-                    if h.id == -1 {
-                        continue;
-                    }
-                    let p = Point::from(v3(&h.p));
-                    let wv = p - o;
-                    let d = xl.dot(&wv);
-                    let (a, b) = (xl.dot(&v3(&h.dpdu)), xl.dot(&v3(&h.dpdv)));
-                    let s2 = sigma2 + (a * a + b * b) * pixel_var;
-                    if d * d > 25.0 * s2 {
-                        continue;
-                    }
-                    let along = zl.dot(&wv);
-                    if along <= 0.0 || yl.dot(&wv).abs() > tan_half_fan * along {
-                        continue;
-                    }
-                    let dist = wv.norm();
-                    let to_laser = -wv / dist;
-                    let n = v3(&h.n);
-                    let cos_i = n.dot(&to_laser);
-                    if cos_i <= 0.0 {
-                        continue;
-                    }
-                    // Laser shadow: something between the projector and this point.
-                    let margin = 0.05 + 1e-4 * dist;
-                    if cast(&self.placed, &o, &(wv / dist), dist - margin).is_some() {
-                        continue;
-                    }
-                    let profile = (sigma2 / s2).sqrt() * (-0.5 * d * d / s2).exp();
-                    let irradiance = laser.power * profile * laser.reference_distance / dist;
-                    let m = &self.placed[h.placed as usize].mesh.material;
-                    let view_dir = -p.coords / p.coords.norm();
-                    let half = (to_laser + view_dir).normalize();
-                    let spec = m.specular * n.dot(&half).max(0.0).powf(m.shininess);
-                    let mut gain = 1.0;
-                    if noise.speckle > 0.0 {
-                        gain = (1.0 + noise.speckle * fast_normal(&mut rng) as f64).max(0.0);
-                    }
-                    for (c, p) in px.iter_mut().enumerate() {
-                        *p += (irradiance * gain * laser.color[c] * (m.albedo[c] * cos_i + spec)) as f32;
-                    }
-                    if noise.reflections > 0.0 && m.specular > 0.0 {
-                        lit_here.push((row * w + u, irradiance * gain));
-                    }
-                }
-                lit_here
-            })
-            .collect();
-        if noise.reflections > 0.0 {
-            self.add_reflections(&mut img, &lit, laser, &o, noise.reflections);
+        let tried: Vec<u32> = match every {
+            Some(()) => (0..self.hits.len() as u32).collect(),
+            None => self.sheet_index(laser, sigma2, pixel_var).candidates(theta),
+        };
+        let mut adds: Vec<(usize, [f32; 3])> = Vec::new();
+        let mut lit: Vec<(usize, f64)> = Vec::new();
+        // Row by row, each row's speckle drawn in pixel order from its own seed, as when every
+        // pixel of the image is tried: the same frame, from the pixels the sheet can reach.
+        let mut row_now = usize::MAX;
+        let mut rng = Rng::new(0);
+        for i in tried {
+            let i = i as usize;
+            let (row, h) = (i / w, &self.hits[i]);
+            let p = Point::from(v3(&h.p));
+            let wv = p - o;
+            let d = xl.dot(&wv);
+            let (a, b) = (xl.dot(&v3(&h.dpdu)), xl.dot(&v3(&h.dpdv)));
+            let s2 = sigma2 + (a * a + b * b) * pixel_var;
+            if d * d > 25.0 * s2 {
+                continue;
+            }
+            let along = zl.dot(&wv);
+            if along <= 0.0 || yl.dot(&wv).abs() > tan_half_fan * along {
+                continue;
+            }
+            let dist = wv.norm();
+            let to_laser = -wv / dist;
+            let n = v3(&h.n);
+            let cos_i = n.dot(&to_laser);
+            if cos_i <= 0.0 {
+                continue;
+            }
+            // Laser shadow: something between the projector and this point.
+            let margin = 0.05 + 1e-4 * dist;
+            if cast(&self.placed, &o, &(wv / dist), dist - margin).is_some() {
+                continue;
+            }
+            if row != row_now {
+                row_now = row;
+                rng = Rng::new(mix_seed(seed ^ 0x5EC1_E000, salt, row as u64));
+            }
+            let profile = (sigma2 / s2).sqrt() * (-0.5 * d * d / s2).exp();
+            let irradiance = laser.power * profile * laser.reference_distance / dist;
+            let m = &self.placed[h.placed as usize].mesh.material;
+            let view_dir = -p.coords / p.coords.norm();
+            let half = (to_laser + view_dir).normalize();
+            let spec = m.specular * n.dot(&half).max(0.0).powf(m.shininess);
+            let mut gain = 1.0;
+            if noise.speckle > 0.0 {
+                gain = (1.0 + noise.speckle * fast_normal(&mut rng) as f64).max(0.0);
+            }
+            adds.push((
+                i,
+                std::array::from_fn(|c| (irradiance * gain * laser.color[c] * (m.albedo[c] * cos_i + spec)) as f32),
+            ));
+            if noise.reflections > 0.0 && m.specular > 0.0 {
+                lit.push((i, irradiance * gain));
+            }
         }
-        Ok(quantise(&img, w, noise, seed, salt))
+        if noise.reflections > 0.0 {
+            self.add_reflections(&mut adds, &lit, laser, &o, noise.reflections);
+        }
+        adds.sort_by_key(|&(i, _)| i); // stable: each pixel's light in the order it came
+        Ok(quantise_adding(&self.shade, &adds, w, noise, seed, salt))
+    }
+
+    /// The sheet index of this view for `laser` (built on first use, kept for the next frames).
+    fn sheet_index(&self, laser: &Laser, sigma2: f64, pixel_var: f64) -> Arc<SheetIndex> {
+        let key = SheetIndex::key(laser, sigma2, pixel_var);
+        let mut cache = self.sheets.lock().unwrap_or_else(|e| e.into_inner());
+        match cache.as_ref() {
+            Some(index) if index.key == key => index.clone(),
+            _ => {
+                let index = Arc::new(SheetIndex::build(self, laser, sigma2, pixel_var));
+                *cache = Some(index.clone());
+                index
+            }
+        }
     }
 
     /// One mirror bounce of the laser off glossy surfaces: the reflected light lands on another
     /// surface and shows there as a stray spot or line, as on shiny real parts.
     pub(super) fn add_reflections(
         &self,
-        img: &mut [[f32; 3]],
+        adds: &mut Vec<(usize, [f32; 3])>,
         lit: &[(usize, f64)],
         laser: &Laser,
         o: &Point,
@@ -222,9 +360,7 @@ impl View {
             let cos2 = n2.dot(&out).abs();
             let albedo = self.placed[k].mesh.material.albedo;
             let e = strength * m.specular * irradiance * cos2;
-            for c in 0..3 {
-                img[j][c] += (e * laser.color[c] * albedo[c]) as f32;
-            }
+            adds.push((j, std::array::from_fn(|c| (e * laser.color[c] * albedo[c]) as f32)));
         }
     }
 }
