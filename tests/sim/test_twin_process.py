@@ -356,6 +356,15 @@ def test_binpick_pick_removes_three_parts_in_three_attempts(twin, tmp_path):
     assert [p.name for p in sweeps] == ["sweep_000", "sweep_001", "sweep_002"], done.stdout[-6000:]
     assert all(len(load_scan(p)) == FRAMES for p in sweeps)
     assert [c for c in after["collisions"] if c["with"] == "bin" or c["with"].startswith("robot")] == []
+    # The rehearsal's physical time, on the twin's hardware clock: each pick's stages, and the rate.
+    for p in picks:
+        stages = p["stage_s"]
+        assert p["cycle_time_s"] == pytest.approx(sum(stages.values()))
+        assert stages["scan.sweep"] >= FRAMES / 15.0 and stages["motion"] > 0.5 and stages["scan.move"] > 0.0
+    assert re.search(
+        r"cycle time \(the cell's hardware clock, and binpick's compute\): mean [\d.]+ s .*picks per hour", done.stdout
+    )
+    assert after["clock_s"] >= sum(p["cycle_time_s"] - p["stage_s"]["compute"] for p in picks)
     twin.picked += 3
     print(f"twin start-up {twin.startup_s:.1f} s, binpick pick --picks 3 {pick_s:.1f} s")
 
