@@ -73,6 +73,8 @@ class _BoardLayer:
         """The layer, or None when the layout has no board or the camera does not see it."""
         if layout.board is None:
             return None
+        if _out_of_view(layout, T_base_flange):  # the board far from the picture: no pixel to test
+            return None
         layer = cls(layout, view, T_base_flange)
         return layer if layer.mask.any() else None
 
@@ -93,6 +95,23 @@ class _BoardLayer:
             seed=seed,
         )
         return np.where(self.mask[:, :, None], img, rgb)
+
+
+def _out_of_view(layout: Layout, T_base_flange: np.ndarray) -> bool:
+    """Whether the board lies clearly outside the camera's picture: in front of the camera, its
+    corners' pinhole projections all beyond one side of the image by a tenth of its size (more
+    than any lens distortion moves them). False when unsure: the pixels are tested then."""
+    board, cam = layout.board, layout.camera
+    (xmin, ymin), (xmax, ymax) = board.extent
+    corners = np.array([[x, y, 0.0, 1.0] for x in (xmin, xmax) for y in (ymin, ymax)])
+    local = (inverse(T_base_flange @ layout.T_flange_camera) @ board.T_base_board @ corners.T).T[:, :3]
+    if (local[:, 2] <= 1e-6).any():
+        return False
+    K = cam.K
+    u = K[0, 0] * local[:, 0] / local[:, 2] + K[0, 2]
+    v = K[1, 1] * local[:, 1] / local[:, 2] + K[1, 2]
+    du, dv = 0.1 * cam.width, 0.1 * cam.height
+    return bool((u < -du).all() or (u > cam.width + du).all() or (v < -dv).all() or (v > cam.height + dv).all())
 
 
 def _frame(view: View, board: Optional[_BoardLayer], angle: float, seed: int, num_threads: int = 0) -> np.ndarray:
