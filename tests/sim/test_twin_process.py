@@ -360,7 +360,7 @@ def test_binpick_pick_removes_three_parts_in_three_attempts(twin, tmp_path):
     for p in picks:
         stages = p["stage_s"]
         assert p["cycle_time_s"] == pytest.approx(sum(stages.values()))
-        assert stages["scan.sweep"] >= FRAMES / 15.0 and stages["motion"] > 0.5 and stages["scan.move"] > 0.0
+        assert stages["scan.sweep"] >= FRAMES / 15.0 and stages["motion"] > 0.5  # (the arm may start at the scan pose)
     assert re.search(
         r"cycle time \(the cell's hardware clock, and binpick's compute\): mean [\d.]+ s .*picks per hour", done.stdout
     )
