@@ -336,3 +336,18 @@ def test_piles_finished_out_of_order_give_the_records_and_pictures_in_seed_order
     five = binpick.validate("tee", cycles=5, count=2, workers=2, out=tmp_path / "five")
     assert [p["seed"] for p in five.piles] == [0, 1, 2] and five.summary["cycles"] == 6
     assert [json.loads(x)["seed"] for x in (tmp_path / "five" / "piles.jsonl").read_text().splitlines()] == [0, 1, 2]
+
+
+def test_the_readme_cell_file_of_the_papers_hardware_sets_the_scan_and_the_speeds(tmp_path):
+    from _readme import readme_block
+
+    path = tmp_path / "paper.toml"
+    path.write_text(readme_block("<!-- paper-cell -->"))
+    frames, options, gripper, overrides = v._cell_settings(path)
+    assert frames == 34 and options == {} and gripper is None  # the simulator's gripper for the part
+    assert overrides == {
+        "sweep": "continuous",
+        "rescan": "changed",
+        "max_override_percent": 100.0,
+        "max_linear_speed_mm_s": 500.0,
+    }
