@@ -518,6 +518,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if not getattr(args, "command", None):
         parser.print_help()
         return 2
+    if args.command in ("demo", "pick", "validate"):
+        _take_ctrl_c()
     try:
         return int(args.run(args))
     except (_Usage, InvalidInputError) as exc:
@@ -529,6 +531,16 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     except KeyboardInterrupt:
         print(f"binpick {args.command}: interrupted", file=sys.stderr)
         return 130  # as a shell reports SIGINT
+
+
+def _take_ctrl_c() -> None:
+    """A run that moves a cell stops on Ctrl-C (SIGINT), the arm stopped and the picks kept,
+    even when started from a script in the background, which inherits SIGINT ignored."""
+    import signal
+    import threading
+
+    if threading.current_thread() is threading.main_thread() and signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def _forward(entry: Any, argv: list[str]) -> int:
