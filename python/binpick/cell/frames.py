@@ -37,6 +37,10 @@ class FrameSource(abc.ABC):
     def begin(self, T_base_flange: np.ndarray) -> None:
         """Called before a sweep with the flange pose read back from the robot."""
 
+    def streaming(self, on: bool) -> None:
+        """Called with True when a continuous sweep starts (frames at the camera's own rate,
+        whatever the host does between grabs) and False when it ends."""
+
     def laser_at(self, angle: float) -> None:
         """Called before each grab with the laser angle the motor reported at rest (rad)."""
 

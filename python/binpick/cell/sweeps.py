@@ -27,7 +27,10 @@ from .frames import Sweep
 __all__ = ["sweep_laser"]
 
 #: Position readings of a continuous sweep a frame's angle is fitted to (those nearest its time).
-FIT_READINGS = 12
+FIT_READINGS = 40
+#: Position readings taken after each frame of a continuous sweep, one after another on the bus:
+#: at several phases against the encoder's ticks, so that the fit averages the ticks' rounding.
+READS_PER_FRAME = 4
 
 #: A continuous sweep stops grabbing when the motor has not reached the sweep's end after this
 #: many times the frames it was set up for (a motor that stalls or turns slower than it was set).
@@ -90,25 +93,35 @@ def _continuous(cell: Any, wanted: np.ndarray, readings: list, times: list):
     full = motor.range.max_speed_rad_s
     speed = motor.set_speed(abs(a1 - a0) / len(wanted) * fps)
     try:
+        camera.streaming(True)
         motor.move_to(a1, wait=False)
-        before = (clock(), motor.present_angle())
+        before = _read(clock, motor)
         readings.append(before)
         limit = math.ceil(STREAM_SLACK * len(wanted)) + 1
         for _ in range(limit):
             img = camera.grab()
             t = camera.frame_time_s
-            after = (clock(), motor.present_angle())
+            for _ in range(READS_PER_FRAME - 1):
+                readings.append(_read(clock, motor))
+            after = _read(clock, motor)
             if t is None:
                 raise InvalidInputError(
                     f"sweep: the {type(camera).__name__} did not time its frame; a continuous sweep needs each "
                     "frame's time on the cell's clock; sweep in steps"
                 )
-            readings.append(after)
             times.append(t)
             yield _at(t, before, after), img
             before = after
             if abs(after[1] - a1) <= motor.range.tolerance_rad:
+                # Arrived: the readings after the first at the end are of a motor at rest, off the line.
+                arrived = next(
+                    (k for k, (_, a) in enumerate(readings) if abs(a - a1) <= motor.range.tolerance_rad), None
+                )
+                del readings[len(readings) if arrived is None else arrived + 1 :]
+                if arrived is None:
+                    readings.append(after)
                 break
+            readings.append(after)
         else:
             raise DeviceTimeout(
                 f"laser motor: a continuous sweep set to {math.degrees(speed):.2f}°/s was at "
@@ -117,6 +130,7 @@ def _continuous(cell: Any, wanted: np.ndarray, readings: list, times: list):
             )
         motor.wait_until_reached()
     finally:
+        camera.streaming(False)
         motor.set_speed(full)
 
 
@@ -134,6 +148,13 @@ def fitted_angles(times: np.ndarray, readings: np.ndarray, n: int = FIT_READINGS
         slope = float(dt @ (aa - aa.mean())) / var if var > 0 else 0.0
         out[k] = aa.mean() + slope * (t - tt.mean())
     return out
+
+
+def _read(clock: Any, motor: Any) -> tuple[float, float]:
+    """The motor's angle and the time it was read at: the middle of the read's time on the bus."""
+    t0 = clock()
+    angle = motor.present_angle()
+    return (t0 + clock()) / 2, angle
 
 
 def _at(t: float, before: tuple[float, float], after: tuple[float, float]) -> float:

@@ -8,6 +8,7 @@ not shadowed by objects between projector and board: keep the board clear of the
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING, Any, Optional
 
 import numpy as np
@@ -136,6 +137,12 @@ class SimCamera(FrameSource):
         self._view: Optional[View] = None
         self._board: Optional[_BoardLayer] = None
         self._frame = 0
+        self._stream: Optional[list[float]] = None  # streaming: [start time, frames since]
+
+    def streaming(self, on: bool) -> None:
+        """Free-running from now (``on``): frames follow each other at the frame rate, whatever
+        the host does between grabs; else each grab triggers a frame."""
+        self._stream = [self.sim.clock.now(), 0.0] if on else None
 
     def begin(self, T_base_flange: np.ndarray) -> None:
         self.sim.settle_pending()
@@ -149,13 +156,20 @@ class SimCamera(FrameSource):
             raise InvalidInputError(
                 "camera: call begin(T_base_flange) before grab(); the cell does this at each scan pose"
             )
-        # A frame takes 1 / fps of the cell's time; the laser is drawn where the motor stands at
-        # the middle of it (where it turns during the frame: a continuous sweep).
-        clock, half = self.sim.clock, 0.5 / self.sim.layout.camera_fps
-        clock.spend(half, "camera")
-        self.frame_time_s = clock.now()
+        # A triggered frame takes 1 / fps of the cell's time from the grab; a streaming one is the
+        # next whose middle is yet to come. The laser is drawn where the motor stands at the
+        # middle of the frame (where it turns during the frame: a continuous sweep).
+        clock, period = self.sim.clock, 1.0 / self.sim.layout.camera_fps
+        if self._stream is None:
+            mid = clock.now() + period / 2
+        else:
+            start, k = self._stream
+            k = max(k, float(math.ceil((clock.now() - start) / period - 0.5 - 1e-9)))
+            mid, self._stream[1] = start + (k + 0.5) * period, k + 1
+        clock.advance_to(mid, "camera")
+        self.frame_time_s = mid
         img = _frame(self._view, self._board, self.sim.laser_angle(), self.seed + self._frame, self.sim.num_threads)
-        clock.spend(half, "camera")
+        clock.advance_to(mid + period / 2, "camera")
         self._frame += 1
         return img
 

@@ -224,6 +224,12 @@ class DynamixelEmulator(PtyEmulator):
             if self.clock is not None and addr <= ADDR_MOVING < addr + n and self.axis.moving():
                 # A driver waiting for the servo: the poll takes its time on the bus, the servo turns on.
                 self.clock.advance_to(min(self.clock.now() + STATUS_POLL_S, self.axis.arrival()), self.device)
+            elif self.clock is not None and self.axis.moving():
+                # A read while it turns takes its time on the bus; the position is the one at its middle.
+                self.clock.advance_to(self.clock.now() + STATUS_POLL_S / 2, self.device)
+                self._refresh()
+                self.clock.advance_to(self.clock.now() + STATUS_POLL_S / 2, self.device)
+                return self._status(0, bytes(self.table[addr : addr + n]))
             self._refresh()
             return self._status(0, bytes(self.table[addr : addr + n]))
         if p.instruction == INST_WRITE:
