@@ -6,10 +6,12 @@ position interpolated to the middle of the frame's exposure, both on the cell's 
 
 Interpolating a continuous sweep: the motor reports whole encoder ticks (a Dynamixel's 4096 a
 turn: 0.088°), and a laser line's depth error is its angle's error times about the distance over
-the baseline (×4 in the paper's cell: 0.04° is 1.5 mm). So each frame's angle is not read off
-the two nearest readings but from a straight line fitted to the :data:`FIT_READINGS` readings
-nearest its time: the motor turns at a steady speed over them, and the fit averages the tick's
-rounding down.
+the baseline (×4 in the paper's cell: 0.04° is 1.5 mm). So the motor is read
+:data:`READS_PER_FRAME` times a frame (each read timed at its middle on the bus, the camera
+free-running meanwhile), and each frame's angle is not read off the two nearest readings but from
+a straight line fitted to the :data:`FIT_READINGS` readings nearest its time: the motor turns at
+a steady speed over them, and the fit averages the ticks' rounding down — read once a frame, the
+readings fall at a near-periodic phase against the ticks and leave a bias of up to 1/8 tick.
 """
 
 from __future__ import annotations
