@@ -183,17 +183,19 @@ def test_the_report_figures_of_handcrafted_records():
     assert s["cpu_s_per_cycle"] == 2.0
 
 
+# No pose is ever sure enough, nowhere else to look and no nudge: the one cycle is "no grasp".
+NO_GRASP = PileSpec(
+    seed=0,
+    pile_size=1,
+    frames=30,
+    estimate_options=ESTIMATE,
+    overrides={"min_confidence": 1.0, "look_again_poses": (), "max_nudges": 0},
+    pictures=frozenset({"no grasp"}),
+)
+
+
 def test_a_failed_cycle_has_its_kind_and_its_picture():
-    # No pose is ever sure enough, nowhere else to look and no nudge: the one cycle is "no grasp".
-    spec = PileSpec(
-        seed=0,
-        pile_size=1,
-        frames=30,
-        estimate_options=ESTIMATE,
-        overrides={"min_confidence": 1.0, "look_again_poses": (), "max_nudges": 0},
-        pictures=frozenset({"no grasp"}),
-    )
-    result = run_pile(binpick.parts.tee(), spec)
+    result = run_pile(binpick.parts.tee(), NO_GRASP)
     assert [r["outcome"] for r in result["records"]] == ["no grasp"]
     assert result["pile"]["emptied"] is False and result["pile"]["failures"] == {"no grasp": 1}
     assert result["pile"]["stopped"]
@@ -206,15 +208,7 @@ def test_a_picture_that_cannot_be_drawn_loses_no_record(monkeypatch):
         raise InvalidInputError("collisions.T_base_gripper: not a rotation")
 
     monkeypatch.setattr(binpick.viz, "save_failure", broken)
-    spec = PileSpec(
-        seed=0,
-        pile_size=1,
-        frames=30,
-        estimate_options=ESTIMATE,
-        overrides={"min_confidence": 1.0, "look_again_poses": (), "max_nudges": 0},
-        pictures=frozenset({"no grasp"}),
-    )
-    result = run_pile(binpick.parts.tee(), spec)
+    result = run_pile(binpick.parts.tee(), NO_GRASP)
     assert [r["outcome"] for r in result["records"]] == ["no grasp"] and result["pictures"] == {}
     assert result["pile"]["picture_errors"] == [
         "seed 0 cycle 1 (no grasp): InvalidInputError: collisions.T_base_gripper: not a rotation"

@@ -138,15 +138,8 @@ def _failure_pictures(out: Path, report: Any, model: Any, bin_bounds: Any) -> li
             continue
         title = f"pick {r.index}: {r.failure} — {r.error or ''}"
         written.append(
-            viz.save_failure(
-                out / f"failure_pick{r.index}.png",
-                r.scan.points,
-                model=model,
-                skipped=r.skipped,
-                located=r.T_base_object,
-                bin_bounds=bin_bounds,
-                title=title if len(title) < 140 else title[:137] + "...",
-                collisions=r.collisions,
+            viz.save_record_failure(
+                out / f"failure_pick{r.index}.png", r, model=model, bin_bounds=bin_bounds, title=title
             )
         )
     return written

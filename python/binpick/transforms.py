@@ -231,6 +231,19 @@ def pose_error(
 MAX_SWEEP_FRAMES = 10_000
 
 
+def sheet_angles(T_base_laser: np.ndarray, points: Any) -> np.ndarray:
+    """The motor angle (rad) whose laser sheet passes through each of ``points`` (N, 3, base
+    frame), for the laser at motor angle 0 posed at ``T_base_laser``: at angle θ the sheet is
+    x cos θ − z sin θ = 0 in the laser frame, so it meets a point at θ = atan2(x, z)."""
+    local = _in_laser_frame(T_base_laser, points)
+    return np.arctan2(local[:, 0], local[:, 2])
+
+
+def _in_laser_frame(T_base_laser: np.ndarray, points: Any) -> np.ndarray:
+    T_laser_base = inverse(T_base_laser)
+    return np.asarray(points, dtype=np.float64) @ T_laser_base[:3, :3].T + T_laser_base[:3, 3]
+
+
 def laser_sweep(
     T_base_laser: np.ndarray, lo: np.ndarray, hi: np.ndarray, frames: int, margin: float = 10.0
 ) -> np.ndarray:
@@ -242,14 +255,12 @@ def laser_sweep(
     frames = count(frames, "frames", 1, MAX_SWEEP_FRAMES)
     corners = [[x, y, lo[2]] for x in (lo[0] - margin, hi[0] + margin) for y in (lo[1], hi[1])]
     corners += [[x, y, hi[2]] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])]
-    T_laser_base = inverse(T_base_laser)
-    local = np.asarray(corners) @ T_laser_base[:3, :3].T + T_laser_base[:3, 3]
+    local = _in_laser_frame(T_base_laser, corners)
     behind = local[:, 2] <= 0
     if behind.any():
         raise InvalidInputError(
             f"margin: the box corner {np.round(corners[int(np.argmax(behind))], 1).tolist()} mm lies behind the laser "
             "(its light travels along +z_L), where no sheet reaches; use a smaller margin or a scan pose above the box"
         )
-    # At motor angle θ the sheet is x cos θ − z sin θ = 0 in the laser frame: it meets a point at θ = atan2(x, z).
-    theta = np.arctan2(local[:, 0], local[:, 2])
+    theta = sheet_angles(T_base_laser, corners)
     return np.array([float(theta.mean())]) if frames == 1 else np.linspace(theta.min(), theta.max(), frames)

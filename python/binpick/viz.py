@@ -35,7 +35,15 @@ from ._validate import (
 from .errors import FileWriteError, InvalidInputError
 from .models import Model
 
-__all__ = ["save_cloud", "save_instances", "save_pick_summary", "save_contact_sheet", "save_failure", "error_axis_top"]
+__all__ = [
+    "save_cloud",
+    "save_instances",
+    "save_pick_summary",
+    "save_contact_sheet",
+    "save_failure",
+    "save_record_failure",
+    "error_axis_top",
+]
 
 _MAX_POINTS = 60_000
 _CLIP = 20.0
@@ -372,6 +380,21 @@ def save_contact_sheet(
 
 
 _REASON_COLORS = ("tab:red", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan", "tab:gray")
+
+
+def save_record_failure(path: str | os.PathLike[str], record: Any, *, model: Any, bin_bounds: Any, title: str) -> Path:
+    """:func:`save_failure` of a failed :class:`binpick.cell.PickRecord`: its last scan, the
+    parts it passed over, the pose it went for and what it touched; ``title`` cut to 140 characters."""
+    return save_failure(
+        path,
+        record.scan.points,
+        model=model,
+        skipped=record.skipped,
+        located=record.T_base_object,
+        bin_bounds=bin_bounds,
+        title=title if len(title) < 140 else title[:137] + "...",
+        collisions=record.collisions,
+    )
 
 
 def save_failure(

@@ -22,7 +22,7 @@ from typing import Any, Optional
 
 import numpy as np
 
-from ..transforms import inverse
+from ..transforms import sheet_angles
 from .records import PickRecord, ScanResult
 
 __all__ = ["CHANGED_MM", "CHANGED_SHARE", "MAX_SHARE", "RescanBasis", "basis_after", "band", "laser_angles", "rescan"]
@@ -72,11 +72,9 @@ def basis_after(cell: Any, record: PickRecord, scan: Optional[ScanResult]) -> Op
 
 def laser_angles(cell: Any, T_base_flange: np.ndarray, points: np.ndarray) -> np.ndarray:
     """The motor angle (rad) whose laser sheet passes through each point (base frame) with the
-    flange at ``T_base_flange``: the sheet at θ is x cos θ − z sin θ = 0 in the laser's frame."""
+    flange at ``T_base_flange`` (:func:`binpick.transforms.sheet_angles`)."""
     cal = cell.config.calibration
-    T_laser_base = inverse(T_base_flange @ cal.T_flange_camera @ cal.T_camera_laser)
-    local = np.asarray(points, dtype=np.float64) @ T_laser_base[:3, :3].T + T_laser_base[:3, 3]
-    return np.arctan2(local[:, 0], local[:, 2])
+    return sheet_angles(T_base_flange @ cal.T_flange_camera @ cal.T_camera_laser, points)
 
 
 def band(cell: Any, basis: RescanBasis, wanted: np.ndarray, T_base_flange: np.ndarray) -> Optional[np.ndarray]:

@@ -236,15 +236,8 @@ def _failure_png(model: Any, record: Any, bin_bounds: Any, seed: int) -> bytes:
 
     title = f"seed {seed}, cycle {record.index}: {record.failure} — {record.error or ''}"
     with tempfile.TemporaryDirectory() as folder:
-        path = viz.save_failure(
-            Path(folder) / "failure.png",
-            record.scan.points,
-            model=model,
-            skipped=record.skipped,
-            located=record.T_base_object,
-            bin_bounds=bin_bounds,
-            title=title if len(title) < 140 else title[:137] + "...",
-            collisions=record.collisions,
+        path = viz.save_record_failure(
+            Path(folder) / "failure.png", record, model=model, bin_bounds=bin_bounds, title=title
         )
         return path.read_bytes()
 
