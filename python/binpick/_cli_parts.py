@@ -13,8 +13,9 @@ from pathlib import Path
 from typing import Any
 
 from ._paths import close_match, no_such_file
+from .parts import BUILT_IN
 
-PARTS = ("tee", "elbow", "cross")
+PARTS = tuple(BUILT_IN)
 
 
 class _Usage(Exception):
@@ -36,7 +37,7 @@ def _model(part: str, unit: str = "mm", flag: str = "--part") -> Any:
             raise _Usage(
                 f"--unit {unit}: the built-in part {part!r} is in mm; --unit is the unit of a mesh file: leave it out"
             )
-        return getattr(parts, part)()
+        return parts.built_in(part)
     if not os.path.lexists(part):
         meant = difflib.get_close_matches(part.lower(), PARTS, n=1) or [close_match(part)]
         raise _Usage(

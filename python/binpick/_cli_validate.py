@@ -79,7 +79,11 @@ def _add_validate(sub: Any) -> None:
         "OUT/records.jsonl (a line per cycle), OUT/piles.jsonl, OUT/report.json and OUT/summary.png as piles "
         "finish: run the same command again to resume a run that was stopped.",
     )
-    v.add_argument("part", metavar="PART", help="built-in part (tee, elbow, cross) or a mesh file")
+    v.add_argument(
+        "part",
+        metavar="PART",
+        help="built-in part (tee, elbow, cross, or a near-symmetric part such as keyed_shaft) or a mesh file",
+    )
     v.add_argument("--unit", default="mm", help="unit of a mesh file (mm, cm, m, in)")
     n = v.add_mutually_exclusive_group()
     n.add_argument("--seeds", type=int, default=None, help="piles to run, one seed each (default 10)")

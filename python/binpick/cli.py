@@ -33,6 +33,7 @@ from ._cli_parts import _existing, _model, _Usage, collision_exit, error_text, r
 from ._cli_report import _pictures, _print_table, interrupted, outcome_line, run_keeping_picks
 from ._cli_validate import _add_validate
 from .errors import BinpickError, InvalidInputError, NoObjectFound
+from .parts import BUILT_IN
 
 __all__ = ["main"]
 
@@ -354,7 +355,13 @@ def _add_demo(sub: Any) -> None:
         description="Drops a pile of parts into the simulated bin, then scans, locates and picks them with the "
         "real drivers talking to emulated devices on ptys; writes pictures into --out.",
     )
-    d.add_argument("--part", default="tee", help="built-in part (tee, elbow, cross) or a mesh file (default tee)")
+    d.add_argument(
+        "--part",
+        default="tee",
+        help="built-in part (tee, elbow, cross, or a near-symmetric part: "
+        + ", ".join(list(BUILT_IN)[3:])
+        + ") or a mesh file (default tee)",
+    )
     d.add_argument("--unit", default="mm", help="unit of a mesh file (mm, cm, m, in)")
     d.add_argument("--count", type=int, default=12, help="parts in the pile (default 12)")
     d.add_argument("--picks", type=int, default=3, help="picks to attempt (default 3)")
@@ -430,7 +437,7 @@ def _add_estimate(sub: Any) -> None:
         default=None,
         help="unit of the scene file's coordinates (mm, cm, m, in); default: the unit the file declares, else mm",
     )
-    t.add_argument("model", help="built-in part (tee, elbow, cross) or a mesh file")
+    t.add_argument("model", help="built-in part (tee, elbow, cross, keyed_shaft, …) or a mesh file")
     t.add_argument("--unit", default="mm", help="unit of a mesh file (mm, cm, m, in)")
     t.add_argument(
         "--method", default="auto", choices=("auto", "ppf", "ccp", "centroid"), help="coarse pose method (default auto)"

@@ -48,6 +48,8 @@ __all__ = [
     "base_shape",
     "NEAR_SYMMETRIC",
     "MORE_NEAR_SYMMETRIC",
+    "BUILT_IN",
+    "built_in",
     "MAX_PART_SIZE_MM",
     "MAX_BOLT_HOLES",
 ]
@@ -470,6 +472,20 @@ def pinned_flange(
 
 #: Near-symmetric parts beyond the bench's five, for the cell's bin clearing (issue 39).
 MORE_NEAR_SYMMETRIC = {"d_shaft": d_shaft, "pinned_flange": pinned_flange}
+
+
+#: Every built-in part by the name ``binpick demo --part``, ``binpick validate`` and
+#: :func:`built_in` take: the fittings, then the near-symmetric parts.
+BUILT_IN = {"tee": tee, "elbow": elbow, "cross": cross, **NEAR_SYMMETRIC, **MORE_NEAR_SYMMETRIC}
+
+
+def built_in(name: str) -> Model:
+    """The built-in part ``name`` (:data:`BUILT_IN`) at its default sizes, in mm."""
+    if not isinstance(name, str):
+        raise InvalidTypeError(f"name: expected a built-in part's name (str), got {type(name).__name__}")
+    if name not in BUILT_IN:
+        raise InvalidInputError(f"name: {name!r} is not a built-in part; one of {', '.join(BUILT_IN)}")
+    return BUILT_IN[name]()
 
 
 def base_shape(name: str, **sizes) -> Model:

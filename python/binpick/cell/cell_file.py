@@ -312,10 +312,10 @@ def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig
     f = instance_of(cell_file, CellFile, "cell_file", "load_cell_file(path)")
     here = os.path.dirname(os.path.abspath(f.path))
     name, unit = f.text("part", "model"), f.text("part", "unit", "mm")
-    if name not in ("tee", "elbow", "cross"):
+    if name not in parts.BUILT_IN:
         model = Model.from_mesh(os.path.join(here, name), unit=unit)
     elif unit_scale(unit) == 1.0:
-        model = getattr(parts, name)()
+        model = parts.built_in(name)
     else:  # a built-in part is in mm: the unit of a mesh file means nothing for it
         raise InvalidInputError(
             f"{f.path}: [part] unit = {unit!r:.40}: the built-in part {name!r} is in mm; leave unit out"

@@ -16,6 +16,7 @@ import time
 from typing import Optional
 
 from ..errors import BinpickError
+from ..parts import BUILT_IN
 from .emulators import PtyEmulator
 
 __all__ = ["emulate_main"]
@@ -65,7 +66,12 @@ def _parser() -> argparse.ArgumentParser:
     )
     c = p.add_argument_group("cell")
     c.add_argument("--out", default=None, help="cell: the folder for cell.toml, world.json and camera.sock (required)")
-    c.add_argument("--part", default="tee", help="cell: built-in part (tee, elbow, cross) or a mesh file (default tee)")
+    c.add_argument(
+        "--part",
+        default="tee",
+        help="cell: built-in part (tee, elbow, cross, or a near-symmetric part such as keyed_shaft) or a mesh file "
+        "(default tee)",
+    )
     c.add_argument("--unit", default="mm", help="cell: unit of a mesh file (mm, cm, m, in)")
     c.add_argument("--count", type=int, default=12, help="cell: parts dropped into the bin (default 12)")
     c.add_argument("--seed", type=int, default=0, help="cell: seed of the pile and the sensor noise (default 0)")
@@ -138,7 +144,7 @@ def _cell(args: argparse.Namespace) -> int:
         from .._cli_parts import _model, _Usage, error_text
 
         model = _model(args.part, args.unit)
-        ref = args.part if args.part in ("tee", "elbow", "cross") else os.path.abspath(args.part)
+        ref = args.part if args.part in BUILT_IN else os.path.abspath(args.part)
         twin = CellTwin(
             args.out,
             model,

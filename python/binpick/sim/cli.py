@@ -18,7 +18,11 @@ def _parser() -> argparse.ArgumentParser:
         description="Drop parts into the simulated bin, scan the pile with the laser and write a scan folder "
         "(frames/*.png, scan.json, calibration.toml, ground_truth.json, contact_sheet.png).",
     )
-    p.add_argument("--part", default="tee", help="built-in part (tee, elbow, cross) or a mesh file (STL/PLY/OBJ, mm)")
+    p.add_argument(
+        "--part",
+        default="tee",
+        help="built-in part (tee, elbow, cross, keyed_shaft, …) or a mesh file (STL/PLY/OBJ, mm)",
+    )
     p.add_argument("--count", type=int, default=12, help="parts in the pile (default 12)")
     p.add_argument("--seed", type=int, default=0, help="seed of the pile and the sensor noise")
     p.add_argument("--frames", type=int, default=90, help="laser frames across the bin (default 90)")

@@ -316,8 +316,8 @@ def _resolve_part(part: Any, unit: str) -> tuple[Any, str]:
         model, name = part, part.name
     elif isinstance(part, (str, os.PathLike)):
         name = os.fspath(part)
-        if name in ("tee", "elbow", "cross"):
-            model = getattr(parts, name)()
+        if name in parts.BUILT_IN:
+            model = parts.built_in(name)
         else:
             model = Model.from_mesh(name, unit=unit)
             name = f"{os.path.abspath(name)} ({unit})"
