@@ -135,3 +135,21 @@ def test_the_expected_flip_maps_the_surface_onto_itself(built, name):
     a = np.asarray(EXPECTED[name][1]) / np.linalg.norm(EXPECTED[name][1])
     R = 2 * np.outer(a, a) - np.eye(3)
     assert _shapes.surface_distance(part.vertices, part.faces, part.points @ R.T).max() < 0.05
+
+
+def test_every_built_in_part_is_taken_by_name_and_a_wrong_name_is_refused_with_the_list():
+    from binpick._cli_parts import _model, _Usage
+    from binpick.errors import InvalidInputError, InvalidTypeError
+
+    assert list(parts.BUILT_IN)[:3] == ["tee", "elbow", "cross"]
+    assert set(parts.NEAR_SYMMETRIC) | set(parts.MORE_NEAR_SYMMETRIC) <= set(parts.BUILT_IN)
+    flange = parts.built_in("pinned_flange")
+    assert flange.name == "pinned_flange" and np.allclose(np.ptp(flange.points, axis=0)[:2], 70.0, atol=1.0)
+    # The commands take the same names (demo --part, validate PART, simulate, emulate cell).
+    assert _model("keyed_shaft").name == "keyed_shaft"
+    with pytest.raises(_Usage, match="did you mean pinned_flange"):
+        _model("pinned_flang")
+    with pytest.raises(InvalidInputError, match=r"'nut' is not a built-in part; one of tee, elbow, cross, .*d_shaft"):
+        parts.built_in("nut")
+    with pytest.raises(InvalidTypeError, match="name: expected a built-in part's name"):
+        parts.built_in(3)

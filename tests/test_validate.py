@@ -342,6 +342,7 @@ def test_the_readme_cell_file_of_the_papers_hardware_sets_the_scan_and_the_speed
     assert overrides == {
         "sweep": "continuous",
         "rescan": "changed",
+        "plan_ahead": True,
         "max_override_percent": 100.0,
         "max_linear_speed_mm_s": 500.0,
     }

@@ -97,8 +97,8 @@ def _add_validate(sub: Any) -> None:
         "--cell",
         default=None,
         metavar="CELL.toml",
-        help="a cell file whose frames, sweep, rescan, [estimate], gripper, tool and [limits] speeds are used "
-        "(the bin, camera and arm stay simulated)",
+        help="a cell file whose frames, sweep, rescan, plan_ahead, [estimate], gripper, tool and [limits] speeds "
+        "are used (the bin, camera and arm stay simulated)",
     )
     v.add_argument("--d-star", type=float, default=None, help="segmentation distance d* (mm); default: the estimator's")
     v.add_argument(

@@ -10,6 +10,7 @@ import pytest
 
 import binpick
 from binpick.cell.records import ScanResult
+from binpick.cell.views import something_in_bin
 from binpick.sim import SimulatedCell
 
 
@@ -31,13 +32,13 @@ def _scan(points: np.ndarray) -> ScanResult:
 
 def test_a_scan_of_the_part_shows_something_in_the_bin_and_its_empty_floor_does_not(sim):
     scan = sim.cell.scan()
-    assert sim.cell._something_in_bin(scan)
+    assert something_in_bin(sim.cell.config, scan)
     lo, hi = sim.cell.config.bin_bounds
     floor = scan.points[scan.points[:, 2] < lo[2] + 1.0]  # the floor as scanned, noise and all
-    assert len(floor) > 1000 and not sim.cell._something_in_bin(_scan(floor))
+    assert len(floor) > 1000 and not something_in_bin(sim.cell.config, _scan(floor))
     # The walls as scanned are not something in the bin either.
     walls = scan.points[(scan.points[:, 0] > hi[0] - 1.0) | (scan.points[:, 0] < lo[0] + 1.0)]
-    assert not sim.cell._something_in_bin(_scan(np.vstack([floor, walls])))
+    assert not something_in_bin(sim.cell.config, _scan(np.vstack([floor, walls])))
     # A speck (a few points, 2 mm across) above the floor is noise, not a part.
     speck = np.array([400.0, 0.0, 10.0]) + np.random.default_rng(0).uniform(-1, 1, (20, 3))
-    assert not sim.cell._something_in_bin(_scan(np.vstack([floor, speck])))
+    assert not something_in_bin(sim.cell.config, _scan(np.vstack([floor, speck])))

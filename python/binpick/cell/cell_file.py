@@ -111,6 +111,7 @@ drop_pose = [400.0, -250.0, 350.0, 180.0, 0.0, 0.0]
 frames = 90
 sweep = "steps"              # or "continuous": the motor turns while the camera streams (it must time its frames)
 rescan = "full"              # or "changed": after a clean pick, sweep only around the part that left
+plan_ahead = false           # true: plan the next pick during the carry, used where the next scan shows no change
 tool = [0.0, 0.0, 195.0, 0.0, 0.0, 0.0]   # the gripper's TCP in the flange frame
 # scan_height_mm = 120.0     # how far above the rim parts are looked for (default: the bin's depth or the part's size)
 orientation_needed = false   # true: parts are placed by their orientation, an undecided pose is not picked
@@ -341,6 +342,7 @@ def config_from_file(cell_file: CellFile, *, num_threads: int = 0) -> CellConfig
         frames=f.integer("cell", "frames", 90),
         sweep=f.text("cell", "sweep", "steps"),
         rescan=f.text("cell", "rescan", "full"),
+        plan_ahead=f.boolean("cell", "plan_ahead", False),
         scan_height_mm=None if f.get("cell", "scan_height_mm", None) is None else f.number("cell", "scan_height_mm"),
         **_stake(f),
         gripper=gripper,

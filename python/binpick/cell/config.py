@@ -221,6 +221,9 @@ class CellConfig:
             left, the rest kept from the last scan — with a full scan when the fresh lines show
             that anything else moved, after anything but a clean pick, and for more than one
             scan pose (:mod:`binpick.cell.rescan`).
+        plan_ahead: plan the next pick on a thread while the arm carries the last one away, and
+            use that plan when the next scan shows the region it works in unchanged (else
+            locate and plan on the new scan as without it): :mod:`binpick.cell.ahead`.
         scan_angles: motor angles (rad) per scan pose; None = computed from the calibration to sweep the bin.
         grasps: name → ``T_gripper_object``; None = the model's declared grasps, or
             :func:`~binpick.cell.branch_grasps` for a model with branches and no declared grasps,
@@ -283,6 +286,7 @@ class CellConfig:
     frames: int = 90
     sweep: str = "steps"
     rescan: str = "full"
+    plan_ahead: bool = False
     scan_angles: Optional[Sequence[Sequence[float]]] = None
     grasps: Optional[Mapping[str, Any]] = None
     gripper: GripperGeometry = field(default_factory=GripperGeometry)
@@ -322,6 +326,7 @@ class CellConfig:
         non_negative(self.floor_clearance_mm, "floor_clearance_mm", "mm")
         number(self.min_confidence, "min_confidence", 0.0, 1.0)
         object.__setattr__(self, "orientation_needed", flag(self.orientation_needed, "orientation_needed"))
+        object.__setattr__(self, "plan_ahead", flag(self.plan_ahead, "plan_ahead"))
         positive(self.ambiguity_tolerance_deg, "ambiguity_tolerance_deg", "deg")
         positive(self.ambiguity_tolerance_mm, "ambiguity_tolerance_mm")
         object.__setattr__(

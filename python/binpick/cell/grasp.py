@@ -42,6 +42,7 @@ __all__ = [
     "grip_width",
     "grasp_openings",
     "plan_grasp",
+    "scene_hits",
     "grasp_filter",
     "symmetry_maps",
     "continuous_symmetry",
@@ -601,6 +602,34 @@ def _first_usable(
     return None
 
 
+def _reachable_scene(
+    config: CellConfig, T_base_object: np.ndarray, scene: np.ndarray, free_turn: bool, unseen_step: Any
+) -> tuple[Optional[np.ndarray], np.ndarray, np.ndarray]:
+    """What :func:`plan_grasp` checks a grasp against: the part's points swept about its free
+    axis (None when its turn is decided), the part's points at ``T_base_object`` (swept, where
+    they are), and the scene points the fingers and body can reach from a TCP on the part, each
+    standing for its surface out to the next laser line (:func:`_unseen`)."""
+    own = swept_points(config.model) if free_turn and continuous_near_axis(config.model) is not None else None
+    part = np.asarray(config.model.points if own is None else own) @ T_base_object[:3, :3].T + T_base_object[:3, 3]
+    z_mid, radius = _occupied_sphere(config.gripper)
+    centre = part.mean(axis=0)
+    reach = abs(z_mid) + radius + float(np.linalg.norm(part - centre, axis=1).max())
+    return own, part, _unseen(_near(scene, centre, reach), unseen_step)
+
+
+def scene_hits(
+    config: CellConfig, plan: PickPlan, T_base_object: Any, scene: Any, free_turn: bool, unseen_step: Any
+) -> int:
+    """The scene points (base frame, the part's own left out) inside the gripper of ``plan`` at
+    its grasp, counted as :func:`plan_grasp` counts them when it chooses a grasp: for a plan made
+    on an earlier scan, checked against a new one."""
+    T_base_object, scene, _ = plan_inputs(config, T_base_object, scene, plan.T_base_flange, "plan.T_base_flange")
+    _, _, near = _reachable_scene(config, T_base_object, scene, free_turn, unseen_step)
+    opening = config.gripper.open_width_mm if plan.opening_mm is None else float(plan.opening_mm)
+    T_bg = np.asarray(plan.T_base_gripper, dtype=np.float64)[None]
+    return int(_hits_many(config.gripper, near, T_bg, np.array([opening]), grow_mm=float(config.scan_clearance_mm))[0])
+
+
 def plan_grasp(
     config: CellConfig,
     T_base_object: np.ndarray,
@@ -641,12 +670,7 @@ def plan_grasp(
     # not run into its other branches either: those are checked against the model at the located
     # pose, which also covers the part's unseen underside. Only scene points the fingers and
     # body can reach from a TCP on the part are kept.
-    own = swept_points(config.model) if free_turn and continuous_near_axis(config.model) is not None else None
-    part = np.asarray(config.model.points if own is None else own) @ T_base_object[:3, :3].T + T_base_object[:3, 3]
-    z_mid, radius = _occupied_sphere(config.gripper)
-    centre = part.mean(axis=0)
-    reach = abs(z_mid) + radius + float(np.linalg.norm(part - centre, axis=1).max())
-    scene = _unseen(_near(scene, centre, reach), unseen_step)
+    own, part, scene = _reachable_scene(config, T_base_object, scene, free_turn, unseen_step)
     samples: dict[str, list] = {}
     candidates = _candidates(config, T_base_object, rejected, samples, own is not None)
     # The grasps with scene points inside the gripper (up to max_collision_points: stray points,

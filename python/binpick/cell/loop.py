@@ -17,7 +17,9 @@ poses, gripper geometry, motion limits). One pick is::
                    safety rules; take the one touching the fewest scene points, the most
                    vertical among equals (:func:`binpick.cell.grasp.plan_grasp`)
     cell.pick()    open, above → approach → grasp (straight along the gripper axis), close, lift
-                   straight up, drop pose, open; on any fault the arm is stopped and the fault raised
+                   straight up, drop pose, open; on any fault the arm is stopped and the fault raised;
+                   with ``config.plan_ahead``, the next pick is planned during the carry and used
+                   where the next scan shows its region unchanged (:mod:`binpick.cell.ahead`)
 
 The simulated cell (:class:`binpick.sim.SimulatedCell`) runs this loop on emulated devices; this
 module loads neither the emulators nor the simulator.
@@ -52,6 +54,7 @@ from ..errors import (
 )
 from ..poses import estimate_poses
 from ..vision import describe_frames, triangulate
+from .ahead import PlanAhead
 from .config import CellConfig, check_static_poses
 from .frames import FrameSource, Sweep
 from .grasp import NoGraspError, line_step, plan_bin_clash, plan_grasp, staked_filter
@@ -75,7 +78,7 @@ from .rescan import RescanBasis, basis_after, rescan
 from .shots import DepthSource, depth_scan
 from .sweeps import sweep_laser
 from .symmetry import continuous_near_axis
-from .views import deciding_first
+from .views import deciding_first, something_in_bin
 
 __all__ = ["Cell", "PICK_MOVES", "ProgressPrinter", "quiet"]
 
@@ -89,11 +92,6 @@ PICK_MOVES: tuple[tuple[str, Optional[bool]], ...] = (
     ("lift", True),
     ("drop", False),
 )
-
-
-#: Scan points more than this far (mm) inside the bin's walls and above its floor are something in
-#: the bin (many times the scan's noise, less than any part is thick): see :meth:`Cell._something_in_bin`.
-IN_BIN_MM = 3.0
 
 
 def _ms_since(t0: float) -> float:
@@ -175,6 +173,9 @@ class Cell:
         self._passed_over: list[np.ndarray] = []  # where parts were passed over earlier in the run
         self._declined: list[np.ndarray] = []  # parts the robot program would not try (the vision server)
         self._cpu: dict[str, float] = {}
+        self._cpu_now: Callable[[], float] = time.process_time  # the planning-ahead thread counts its own
+        self._ahead: Optional[PlanAhead] = None  # the next pick, planned during the carry (config.plan_ahead)
+        self._after_lift: Optional[Callable[[], None]] = None
         check_static_poses(config)
 
     # -- life cycle
@@ -318,20 +319,12 @@ class Cell:
                 f"the scan's {len(keep)} usable points span {span:.0f} mm, less than a fifth of the "
                 f"{cfg.model.name} ({cfg.model.diameter:.0f} mm): nothing to locate"
             )
-        # The camera orients the normals (up does for looks from several poses joined: a face only
-        # the side look saw may face away from the first camera); the swept scan is judged along up
-        # (along_rays=False): its lines, millimetres apart, alias a grid of the camera's rays.
-        cameras = (np.asarray(scan.T_base_flanges) @ cfg.calibration.T_flange_camera)[:, :3, 3]
-        camera = cameras[0] if np.ptp(cameras, axis=0).max() < 1.0 else None
-        fixed = getattr(scan.cloud, "viewpoint", None)  # a fixed camera's shot: judged along its rays
-        defaults = dict(num_threads=cfg.num_threads, search_instances=cfg.max_candidates, viewpoint=camera)
-        if fixed is not None:
-            defaults["viewpoint"] = fixed
-        options = {**defaults, "along_rays": fixed is not None, **cfg.estimate_options}
         wanted = count(max_instances, "max_instances") or cfg.max_candidates
-        c0 = time.process_time()
-        results = estimate_poses(scan.points[keep], cfg.model, bin=cfg.bin_bounds, max_instances=wanted, **options)
-        self._cpu["cpu.pose"] = self._cpu.get("cpu.pose", 0.0) + (time.process_time() - c0) * 1e3
+        c0 = self._cpu_now()
+        results = estimate_poses(
+            scan.points[keep], cfg.model, bin=cfg.bin_bounds, max_instances=wanted, **self.pose_options(scan)
+        )
+        self._cpu["cpu.pose"] = self._cpu.get("cpu.pose", 0.0) + (self._cpu_now() - c0) * 1e3
         found = []
         for result in results:
             if result.score < cfg.min_score:
@@ -356,6 +349,19 @@ class Cell:
             )
         return found
 
+    def pose_options(self, scan: ScanResult) -> dict[str, Any]:
+        """The options ``scan`` is judged with: the camera orients the normals (up, for looks from
+        several poses joined); a sweep is judged along up (its lines, millimetres apart, alias a
+        grid of the camera's rays), a fixed camera's shot along its rays; config.estimate_options."""
+        cfg = self.config
+        cameras = (np.asarray(scan.T_base_flanges) @ cfg.calibration.T_flange_camera)[:, :3, 3]
+        camera = cameras[0] if np.ptp(cameras, axis=0).max() < 1.0 else None
+        fixed = getattr(scan.cloud, "viewpoint", None)
+        defaults = dict(num_threads=cfg.num_threads, search_instances=cfg.max_candidates, viewpoint=camera)
+        if fixed is not None:
+            defaults["viewpoint"] = fixed
+        return {**defaults, "along_rays": fixed is not None, **cfg.estimate_options}
+
     def _judge_located(self, result: Any, T: np.ndarray) -> Optional[PoseTruth]:
         """The truth of a located pose (None without ground truth). For a pose flagged ambiguous
         the best of it and its alternatives: :meth:`plan` picks such a pose only with a grasp
@@ -368,14 +374,18 @@ class Cell:
         truths = [self.truth.judge(np.asarray(P, dtype=np.float64), turn_about=about) for P in poses]
         return min(truths, key=lambda t: (not t.pick_grade, t.rotation_error_deg / 5.0 + t.translation_error_mm / 3.0))
 
-    def locate_and_plan(self, scan: ScanResult, skipped: Optional[list[Skipped]] = None) -> tuple[Located, PickPlan]:
-        """Locates the parts in ``scan`` and plans the pick of the first one that can be picked:
-        every part :meth:`locate_all` finds, in turn; when none can, their points are left out
-        and the scan is searched again, up to ``config.max_candidates`` parts. The parts passed
-        over go into ``skipped``. NoGraspError (the last part's) when none can be picked,
-        NoObjectFound when no part is found."""
+    def locate_and_plan(
+        self, scan: ScanResult, skipped: Optional[list[Skipped]] = None, *, exclude: Optional[np.ndarray] = None
+    ) -> tuple[Located, PickPlan]:
+        """Locates the parts in ``scan`` (without the points where ``exclude`` is true) and plans
+        the pick of the first one that can be picked: every part :meth:`locate_all` finds, in
+        turn; when none can, their points are left out and the scan is searched again, up to
+        ``config.max_candidates`` parts. The parts passed over go into ``skipped``. NoGraspError
+        (the last part's) when none can be picked, NoObjectFound when no part is found."""
         skipped = [] if skipped is None else skipped
         excluded = np.zeros(len(scan.points), dtype=bool)
+        if exclude is not None:
+            excluded |= np.asarray(exclude, dtype=bool)
         last: Optional[NoGraspError] = None
         tried: list[np.ndarray] = []
         while len(tried) < self.config.max_candidates:
@@ -399,7 +409,7 @@ class Cell:
                 tried.append(t)
                 try:
                     self._refuse_empty_grip_spot(located)
-                    c0, w0 = time.process_time(), self.config.openings_cpu_ms
+                    c0, w0 = self._cpu_now(), self.config.openings_cpu_ms
                     try:
                         return located, self.plan(located)
                     finally:
@@ -407,7 +417,7 @@ class Cell:
                         # counted apart from the pick's planning.
                         widths = self.config.openings_cpu_ms - w0
                         self._cpu["cpu.grasp_widths"] = self._cpu.get("cpu.grasp_widths", 0.0) + widths
-                        plan_ms = (time.process_time() - c0) * 1e3 - widths
+                        plan_ms = (self._cpu_now() - c0) * 1e3 - widths
                         self._cpu["cpu.plan"] = self._cpu.get("cpu.plan", 0.0) + plan_ms
                 except NoGraspError as exc:
                     last = exc
@@ -633,6 +643,8 @@ class Cell:
             if held is False:
                 self.gripper.open()
                 return False
+            if self._after_lift is not None:  # the carry has begun: plan the next pick meanwhile
+                self._after_lift()
             self._move(*moves["drop"])
             self.gripper.open()
             return held
@@ -651,11 +663,12 @@ class Cell:
         records: list[PickRecord] = []
         self._last: tuple[Optional[ScanResult], Optional[Located]] = (None, None)
         self._basis = None
+        self._ahead = PlanAhead(self) if self.config.plan_ahead else None
         stopped: Optional[str] = None
         try:
             for i in range(1, n + 1):
                 self.progress("pick", f"— pick {i} of {n} —")
-                record, stopped = self._cycle(i)
+                record, stopped = self._cycle(i, records[-1] if records else None)
                 record = with_collisions(record, self.truth, self._last[0])
                 self._basis = basis_after(self, record, self._last[0])
                 self._passed_over += [k.T_base_object for k in record.skipped]
@@ -664,19 +677,23 @@ class Cell:
                     break
         except KeyboardInterrupt:
             raise RunInterrupted(self._report(records, f"interrupted (Ctrl-C) in pick {len(records) + 1}")) from None
+        finally:
+            if self._ahead is not None:
+                self._ahead.discard()
+            self._ahead = None
         return self._report(records, stopped)
 
     def _report(self, records: list[PickRecord], stopped: Optional[str]) -> RunReport:
         last_scan, last_located = self._last
         return RunReport(tuple(records), stopped, last_scan, last_located, ground_truth=self.truth is not None)
 
-    def _cycle(self, i: int) -> tuple[PickRecord, Optional[str]]:
+    def _cycle(self, i: int, before: Optional[PickRecord] = None) -> tuple[PickRecord, Optional[str]]:
         """One pick of :meth:`run` (:meth:`_look_and_pick`); at a dead end (parts located, none
         pickable from any view) a blocked part is nudged (:mod:`binpick.cell.nudge`) and the cell
         looks again, up to ``config.max_nudges`` times."""
         nudges: list = []
         while True:
-            record, why = self._look_and_pick(i)
+            record, why = self._look_and_pick(i, None if nudges else before)
             dead_end = why is not None and record.failure == "no grasp" and bool(record.skipped)
             if not dead_end or record.scan is None:
                 return replace(record, nudges=tuple(nudges)), why
@@ -693,10 +710,12 @@ class Cell:
                 return replace(record, nudges=tuple(nudges)), f"{why} (no nudge passes the checks)"
             nudges.append(plan)
 
-    def _look_and_pick(self, i: int) -> tuple[PickRecord, Optional[str]]:
+    def _look_and_pick(self, i: int, before: Optional[PickRecord] = None) -> tuple[PickRecord, Optional[str]]:
         """Scan, locate and plan — looking again from each of ``config.look_again_poses`` while
         nothing is pickable (from one only when neither look finds any part), each look judged
-        together with the first — then pick; the record, and why the run stops (None to go on)."""
+        together with the first — then pick; the record, and why the run stops (None to go on).
+        ``before``: the pick just made, whose plan made ahead (:mod:`binpick.cell.ahead`) the
+        first look may confirm."""
         t0, c0 = time.perf_counter(), self.clock and self.clock()
         self._cpu = {}
         scan = first = None  # the look now, and the first look each later one is judged with
@@ -722,13 +741,17 @@ class Cell:
                 for key, v in scan.timings.items():
                     times[f"scan.{key}"] = times.get(f"scan.{key}", 0.0) + v
                 t1 = time.perf_counter()
+                ahead = self._ahead.take(before, scan, times) if self._ahead is not None and k == 0 else None
+                if ahead is not None:
+                    located, plan = ahead
+                    break
                 try:
                     located, plan = self.locate_and_plan(scan, skipped)
                 except (NoObjectFound, NoGraspError):
                     # Two looks that found no part in a bin with nothing in it: the bin is empty,
                     # as far as the cell can see; parts found but not pickable, or something in
                     # the bin that no pose explains, are worth every view there is.
-                    if k == len(views) - 1 or (k >= 1 and not skipped and not self._something_in_bin(scan)):
+                    if k == len(views) - 1 or (k >= 1 and not skipped and not something_in_bin(self.config, scan)):
                         raise
                     if k == 0:
                         views[1:] = deciding_first(self.config, views[1:], skipped, self.progress)
@@ -737,7 +760,12 @@ class Cell:
                     times["locate+plan"] = times.get("locate+plan", 0.0) + _ms_since(t1)
                 break
             self._last = (scan, located)
-            record = self.pick(located, plan=plan, index=i)
+            if self._ahead is not None and looks == 1:
+                self._after_lift = lambda: self._ahead.start(located, skipped)
+            try:
+                record = self.pick(located, plan=plan, index=i)
+            finally:
+                self._after_lift = None
             times.update(record.timings)
             times.update(self._cpu)
             times["total"] = _ms_since(t0)
@@ -767,17 +795,5 @@ class Cell:
 
     def _parts_left(self, scan: ScanResult) -> bool:
         """Whether parts are left in the bin: the ground truth's word where the cell has one, else
-        whether ``scan`` shows something standing in it (:meth:`_something_in_bin`)."""
-        return self.truth.parts_left() > 0 if self.truth is not None else self._something_in_bin(scan)
-
-    def _something_in_bin(self, scan: ScanResult) -> bool:
-        """Whether the scan shows something standing in the bin: at least 10 points more than
-        :data:`IN_BIN_MM` inside its walls and above its floor, spanning a fifth of the part's
-        size (what :meth:`locate_all` needs to search at all)."""
-        lo, hi = self.config.bin_bounds
-        m = IN_BIN_MM
-        p = scan.points
-        inside = p[
-            np.all(p[:, :2] > lo[:2] + m, axis=1) & np.all(p[:, :2] < hi[:2] - m, axis=1) & (p[:, 2] > lo[2] + m)
-        ]
-        return len(inside) >= 10 and float(np.linalg.norm(np.ptp(inside, axis=0))) >= 0.2 * self.config.model.diameter
+        whether ``scan`` shows something standing in it (:func:`binpick.cell.views.something_in_bin`)."""
+        return self.truth.parts_left() > 0 if self.truth is not None else something_in_bin(self.config, scan)

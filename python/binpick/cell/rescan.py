@@ -25,7 +25,17 @@ import numpy as np
 from ..transforms import sheet_angles
 from .records import PickRecord, ScanResult
 
-__all__ = ["CHANGED_MM", "CHANGED_SHARE", "MAX_SHARE", "RescanBasis", "basis_after", "band", "laser_angles", "rescan"]
+__all__ = [
+    "CHANGED_MM",
+    "CHANGED_SHARE",
+    "MAX_SHARE",
+    "RescanBasis",
+    "basis_after",
+    "band",
+    "clean_pick",
+    "laser_angles",
+    "rescan",
+]
 
 #: A height-map cell whose fresh height differs from the last scan's by more than this, mm,
 #: has changed (well above the scan's noise, below any part's thickness).
@@ -49,11 +59,10 @@ class RescanBasis:
     hi: np.ndarray
 
 
-def basis_after(cell: Any, record: PickRecord, scan: Optional[ScanResult]) -> Optional[RescanBasis]:
-    """The basis for rescanning only what ``record``'s pick changed, or None when the next scan
-    must be whole (see the module docstring)."""
-    cfg = cell.config
-    clean = (
+def clean_pick(record: PickRecord) -> bool:
+    """Whether ``record``'s pick changed the bin only where its part was: it succeeded, the
+    gripper did not close on nothing, nothing was nudged or touched, and it took one look."""
+    return bool(
         record.success
         and record.held is not False
         and not record.nudges
@@ -61,7 +70,19 @@ def basis_after(cell: Any, record: PickRecord, scan: Optional[ScanResult]) -> Op
         and record.looks == 1
         and record.T_base_object is not None
     )
-    if cfg.rescan != "changed" or not clean or scan is None or len(cfg.scan_poses) != 1 or len(scan.angles) < 2:
+
+
+def basis_after(cell: Any, record: PickRecord, scan: Optional[ScanResult]) -> Optional[RescanBasis]:
+    """The basis for rescanning only what ``record``'s pick changed, or None when the next scan
+    must be whole (see the module docstring)."""
+    cfg = cell.config
+    if (
+        cfg.rescan != "changed"
+        or not clean_pick(record)
+        or scan is None
+        or len(cfg.scan_poses) != 1
+        or len(scan.angles) < 2
+    ):
         return None
     pts = np.asarray(cfg.model.points, dtype=np.float64)
     T = np.asarray(record.T_base_object, dtype=np.float64)

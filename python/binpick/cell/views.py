@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -18,7 +18,11 @@ from ..transforms import rotation_about
 if TYPE_CHECKING:  # annotations only: config imports this module
     from .config import CellConfig
 
-__all__ = ["turned_scan_poses", "deciding_views", "deciding_first"]
+__all__ = ["IN_BIN_MM", "turned_scan_poses", "deciding_views", "deciding_first", "something_in_bin"]
+
+#: Scan points more than this far (mm) inside the bin's walls and above its floor are something in
+#: the bin (many times the scan's noise, less than any part is thick): see :func:`something_in_bin`.
+IN_BIN_MM = 3.0
 
 
 def turned_scan_poses(config: CellConfig, *, tilt_deg: float = 20.0) -> tuple[np.ndarray, ...]:
@@ -112,3 +116,14 @@ def deciding_first(config: CellConfig, views: list, skipped: Sequence, progress)
         f"({T[0, 3]:.1f}, {T[1, 3]:.1f}, {T[2, 3]:.1f}) mm: looking from there first",
     )
     return [views[i] for i in order]
+
+
+def something_in_bin(config: CellConfig, scan: Any) -> bool:
+    """Whether ``scan`` (a :class:`binpick.cell.records.ScanResult`) shows something standing in
+    the bin: at least 10 points more than :data:`IN_BIN_MM` inside its walls and above its
+    floor, spanning a fifth of the part's size (what the cell needs to search at all)."""
+    lo, hi = config.bin_bounds
+    m = IN_BIN_MM
+    p = scan.points
+    inside = p[np.all(p[:, :2] > lo[:2] + m, axis=1) & np.all(p[:, :2] < hi[:2] - m, axis=1) & (p[:, 2] > lo[2] + m)]
+    return len(inside) >= 10 and float(np.linalg.norm(np.ptp(inside, axis=0))) >= 0.2 * config.model.diameter

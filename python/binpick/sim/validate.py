@@ -284,7 +284,7 @@ def _cell_settings(path: Any) -> tuple[Optional[int], dict, Any, dict]:
     """The cell file's scan and gripper settings: frames, [estimate], the gripper (its [gripper]
     shape and [cell] tool, where it gives them: else the simulated cell's), the options the cell
     judges picks by (orientation_needed, min_confidence), the laser's sweep (``[cell] sweep``,
-    ``rescan``) and the arm's speeds (``[limits] max_override_percent`` and
+    ``rescan``), planning ahead (``plan_ahead``) and the arm's speeds (``[limits] max_override_percent`` and
     ``max_linear_speed_mm_s``: the simulated cell runs at them). The simulated cell's bin,
     camera and arm stay the simulator's."""
     from ..cell import cell_file as cf
@@ -300,6 +300,8 @@ def _cell_settings(path: Any) -> tuple[Optional[int], dict, Any, dict]:
     for key in ("sweep", "rescan"):
         if f.get("cell", key, None) is not None:
             options[key] = f.text("cell", key)
+    if f.get("cell", "plan_ahead", None) is not None:
+        options["plan_ahead"] = f.boolean("cell", "plan_ahead")
     for key in ("max_override_percent", "max_linear_speed_mm_s"):
         if f.get("limits", key, None) is not None:
             options[key] = f.number("limits", key)
