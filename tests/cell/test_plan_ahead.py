@@ -141,9 +141,14 @@ def test_a_run_picks_with_plans_made_during_the_carry_where_the_next_scan_confir
     for r in used:
         assert r.truth.pick_grade
         # No pose search in the cycle: its planning ran during the carry, inside the window it had.
-        assert "cpu.pose" not in r.timings and r.timings["ahead.pose"] > 0
+        assert "cpu.pose" not in r.timings and r.timings["ahead.compute.pose"] > 0
         assert r.timings["ahead.window"] > 0 and r.timings["cpu.ahead_wait"] == 0.0
         assert r.timings["cpu.confirm"] > 0
+    # validate's records say which cycles used a plan made ahead, and count its compute as binpick's.
+    from binpick.sim.validate_workers import cycle_record
+
+    rec = cycle_record(1, 12, used[0], cpu_s=None, wall_s=None)
+    assert rec["planned_ahead"] is True and rec["binpick_cpu_s"] * 1e3 >= used[0].timings["ahead.compute.pose"]
     assert any(m.startswith("(planning ahead) ") for s, m in sim.lines if s == "locate")
     assert any("the plan made during the carry stands" in m for s, m in sim.lines)
     # The thread is gone when the run is over.

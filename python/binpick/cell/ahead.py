@@ -28,13 +28,14 @@ checked whole against the arm's real pose before the first motion
 (:meth:`binpick.cell.Cell.check_plan`), and the pose used is the new scan's verdict, judged
 against the ground truth (the simulator) when it is used.
 
-Time: the planning's time on its own thread is recorded as ``ahead.pose``, ``ahead.plan`` and
-``ahead.grasp_widths`` (ms, wall: the pose search runs on a worker thread of its own, which a
-thread's CPU clock would miss), with the hardware time it overlapped (``ahead.window``: from the
-lift to the end of the next scan). What the cell had to wait for beyond that window is compute
-on the critical path (``cpu.ahead_wait``, in the cycle's ``compute`` stage); the check on the
-new scan is too (``cpu.confirm``). On a real cell, whose wall clock is its physical time, the
-wait is the wall time the next cycle spent joining the thread (``ahead.wait``).
+Time: the planning's time on its own thread is recorded as ``ahead.compute.pose``,
+``ahead.compute.plan`` and ``ahead.compute.grasp_widths`` (ms, wall: the pose search runs on a
+worker thread of its own, which a thread's CPU clock would miss), with the hardware time it
+overlapped (``ahead.window``: from the lift to the end of the next scan). What the cell had to
+wait for beyond that window is compute on the critical path (``cpu.ahead_wait``, in the cycle's
+``compute`` stage); the check on the new scan is too (``cpu.confirm``). On a real cell, whose
+wall clock is its physical time, the wait is the wall time the next cycle spent joining the
+thread (``ahead.wait``).
 """
 
 from __future__ import annotations
@@ -129,7 +130,7 @@ class PlanAhead:
         if "error" in done:  # a bug, not a finding: never hidden behind a fallback
             raise done["error"]
         window_ms = (cell.clock() - c0) * 1e3 if c0 is not None else (wait0 - t0) * 1e3
-        spent = {f"ahead.{k.removeprefix('cpu.')}": v for k, v in done.get("cpu", {}).items()}
+        spent = {f"ahead.compute.{k.removeprefix('cpu.')}": v for k, v in done.get("cpu", {}).items()}
         times.update(spent)
         times["ahead.window"] = window_ms
         times["ahead.wait"] = (time.perf_counter() - wait0) * 1e3

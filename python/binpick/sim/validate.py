@@ -17,7 +17,8 @@ measurements, which vary from run to run and machine to machine (:data:`MEASURED
 ``cycle_time_s`` and ``stage_s`` (the cell's physical time, :func:`binpick.cell.records.cycle_stages_s`:
 the hardware's on the simulated cell's clock, binpick's compute as measured), ``cpu_s`` (the worker process's
 CPU time over the cycle: the simulator's renderer, physics and emulators with binpick's own
-compute), ``binpick_cpu_s`` (binpick's own compute: line extraction, pose, planning) and
+compute), ``binpick_cpu_s`` (binpick's own compute: line extraction, pose, planning, and the planning done
+ahead for the cycle during the last carry) and
 ``wall_s``. Every pile is a JSON object too (``run_pile()``'s ``pile``).
 
 Files (``out``): ``run.json`` (the settings), ``records.jsonl`` (a line per cycle),
