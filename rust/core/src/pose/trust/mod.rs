@@ -67,6 +67,9 @@ impl Trust {
 /// turned (every 2.5° for 24 turns; up to half the gap either way).
 const FINE_TURNS: usize = 6;
 
+/// A near turn and its side (see [`Candidate`]).
+type SidedTurn = (Turn, usize);
+
 /// A candidate pose, refined, and where it came from: a continuous turn, and its side (0: the
 /// pose's own, turned about a continuous near axis or not at all; k: the k-th discrete near
 /// turn, a flip, and its compositions with the continuous turns).
@@ -183,7 +186,7 @@ pub(super) fn assess(
     if local.len() < 12 {
         return (Trust::undecided(base), est.t_scene_model);
     }
-    let turns: Vec<(Turn, usize)> = region.turns.iter().copied().zip(region.sides.iter().copied()).collect();
+    let turns: Vec<SidedTurn> = region.turns.iter().copied().zip(region.sides.iter().copied()).collect();
     let sample = thin(&local, p.refine_points);
     let refine = IcpConfig::robust_plane(
         3.0 * judge.depth.tol,
@@ -213,11 +216,11 @@ pub(super) fn assess(
     // them: with the discrete turns among them too, a thin plate's turns about its face normal
     // (its faces map onto themselves at any angle) once took all three places from the quarter
     // turn that was the truth.
-    let (mut turns, mut discrete): (Vec<(Turn, usize)>, Vec<(Turn, usize)>) = turns.into_iter().partition(|t| t.0 .1);
+    let (mut turns, mut discrete): (Vec<SidedTurn>, Vec<SidedTurn>) = turns.into_iter().partition(|t| t.0 .1);
     if discrete.len() > p.max_discrete {
         turns.append(&mut discrete);
     }
-    type Finalist = ((Turn, usize), Option<Isometry3<f64>>);
+    type Finalist = (SidedTurn, Option<Isometry3<f64>>);
     let turns: Vec<Finalist> = if turns.len() > p.finalists {
         let quick_cfg = IcpConfig {
             max_iterations: p.quick_iterations,
@@ -226,7 +229,7 @@ pub(super) fn assess(
         // Each turn is scored by how many judged points it fits, on as many as a refinement
         // uses: a flange's notch is a few dozen of them, and among 400 it was left to chance.
         let few = thin(&sample, p.quick_points);
-        let mut quick: Vec<(usize, (Turn, usize), Isometry3<f64>)> = turns
+        let mut quick: Vec<(usize, SidedTurn, Isometry3<f64>)> = turns
             .into_iter()
             .filter_map(|(turn, side)| {
                 let t = polish(&turn.0, &few, &quick_cfg)?;
@@ -428,7 +431,7 @@ impl Region {
         // at the pose's own turn, the flip rarely lands on the pin: on six camera piles of pinned
         // flanges 11 poses had their truth outside the pose and its alternatives (5 with these),
         // and the simulated cell lifted 7 such parts in two piles (1 with these).
-        let composed: Vec<(Turn, usize)> = turns
+        let composed: Vec<SidedTurn> = turns
             .iter()
             .zip(&sides)
             .filter(|(t, _)| !t.1)
