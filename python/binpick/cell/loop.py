@@ -19,7 +19,7 @@ poses, gripper geometry, motion limits). One pick is::
     cell.pick()    open, above → approach → grasp (straight along the gripper axis), close, lift
                    straight up, drop pose, open; on any fault the arm is stopped and the fault raised;
                    with ``config.plan_ahead``, the next pick is planned during the carry and used
-                   where the next scan shows its region unchanged (:mod:`binpick.cell.ahead`)
+                   where the next scan confirms its part and clears its gripper (:mod:`binpick.cell.ahead`)
 
 The simulated cell (:class:`binpick.sim.SimulatedCell`) runs this loop on emulated devices; this
 module loads neither the emulators nor the simulator.
