@@ -78,3 +78,22 @@ workspace_max_mm = {list(limits.workspace_max_mm)}
 approach_height_mm = {limits.approach_height_mm}
 """)
     return path
+
+
+def recording_tee_cell(**settings: Any) -> Any:
+    """A started simulated cell of tees (``settings``: the pile's count and seed, the frames, the
+    cell's options), searched with the cell tests' fast estimate options; every (stage, message)
+    it prints is kept in its ``lines``."""
+    import binpick
+    from binpick.sim import SimulatedCell
+
+    lines: list[tuple[str, str]] = []
+    sim = SimulatedCell(
+        binpick.parts.tee(),
+        estimate_options={"d_star": 12.0, "min_points": 500},
+        progress=lambda s, m: lines.append((s, m)),
+        **settings,
+    )
+    sim.lines = lines
+    sim.start()
+    return sim

@@ -8,32 +8,18 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from _cell_helpers import recording_tee_cell
 
-import binpick
 from binpick.cell import PickRecord
 from binpick.cell.ahead import PlanAhead
-from binpick.sim import SimulatedCell
 from binpick.vision import Cloud
-
-ESTIMATE = {"d_star": 12.0, "min_points": 500}
 
 
 @pytest.fixture(scope="module")
 def sim():
     """A pile of twelve tees on a cell that plans ahead; its messages in ``sim.lines``. The tests
     that take parts out by hand run first, the run of picks last."""
-    lines: list[tuple[str, str]] = []
-    cell = SimulatedCell(
-        binpick.parts.tee(),
-        count=12,
-        seed=4,
-        frames=45,
-        plan_ahead=True,
-        estimate_options=ESTIMATE,
-        progress=lambda s, m: lines.append((s, m)),
-    )
-    cell.start()
-    cell.lines = lines
+    cell = recording_tee_cell(count=12, seed=4, frames=45, plan_ahead=True)
     yield cell
     cell.close()
 
@@ -108,7 +94,7 @@ def test_a_plan_after_a_pick_that_was_not_clean_is_dropped(sim):
     assert any("was not clean" in m for s, m in sim.lines)
 
 
-def test_the_planning_thread_has_no_device_and_no_truth(sim):
+def test_the_planning_thread_has_no_device_and_no_truth(sim, monkeypatch):
     cell = sim.cell
     scan = cell.scan()
     located, _ = cell.locate_and_plan(scan)
@@ -118,16 +104,10 @@ def test_the_planning_thread_has_no_device_and_no_truth(sim):
         seen.update(robot=ahead.robot, motor=ahead.motor, gripper=ahead.gripper, camera=ahead.camera, truth=ahead.truth)
         done["why"] = "spied"
 
-    import binpick.cell.ahead as module
-
-    real = module._plan
-    module._plan = spy
-    try:
-        ahead = PlanAhead(cell)
-        ahead.start(located, [])
-        ahead.discard()
-    finally:
-        module._plan = real
+    monkeypatch.setattr("binpick.cell.ahead._plan", spy)
+    ahead = PlanAhead(cell)
+    ahead.start(located, [])
+    ahead.discard()
     assert seen["motor"] is seen["gripper"] is seen["camera"] is seen["truth"] is None
     assert not hasattr(seen["robot"], "move_to")
     np.testing.assert_allclose(seen["robot"].read_pose(), cell.config.scan_poses[-1])

@@ -8,13 +8,10 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from _cell_helpers import recording_tee_cell
 
-import binpick
 from binpick.cell import PickRecord
 from binpick.cell.rescan import basis_after, laser_angles
-from binpick.sim import SimulatedCell
-
-ESTIMATE = {"d_star": 12.0, "min_points": 500}
 
 
 def _nearest(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -30,20 +27,10 @@ def _nearest(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 def after_one_pick():
     """A pile of four tees after one clean pick, the cell set to rescan only what changed; the
     messages the cell printed."""
-    lines: list[tuple[str, str]] = []
-    sim = SimulatedCell(
-        binpick.parts.tee(),
-        count=4,
-        seed=1,
-        frames=60,
-        rescan="changed",
-        estimate_options=ESTIMATE,
-        progress=lambda s, m: lines.append((s, m)),
-    )
-    sim.start()
+    sim = recording_tee_cell(count=4, seed=1, frames=60, rescan="changed")
     report = sim.cell.run(1)
     assert report.records[0].success, report.records[0].error
-    yield sim, report, lines
+    yield sim, report, sim.lines
     sim.close()
 
 

@@ -220,6 +220,9 @@ pub(super) fn assess(
     if discrete.len() > p.max_discrete {
         turns.append(&mut discrete);
     }
+    // The glance points a pose fits at the quick look's tolerance (the fine turns below use the
+    // tolerance of the refined pose).
+    let quick_fits = |t: &Isometry3<f64>| fit_flags(&glance, model, t, tol0).into_iter().filter(|&f| f).count();
     type Finalist = (SidedTurn, Option<Isometry3<f64>>);
     let turns: Vec<Finalist> = if turns.len() > p.finalists {
         let quick_cfg = IcpConfig {
@@ -233,8 +236,7 @@ pub(super) fn assess(
             .into_iter()
             .filter_map(|(turn, side)| {
                 let t = polish(&turn.0, &few, &quick_cfg)?;
-                let fits = fit_flags(&glance, model, &t, tol0).into_iter().filter(|&f| f).count();
-                Some((fits, (turn, side), t))
+                Some((quick_fits(&t), (turn, side), t))
             })
             .collect();
         quick.sort_by_key(|q| std::cmp::Reverse(q.0));
@@ -251,7 +253,6 @@ pub(super) fn assess(
     } else {
         turns.into_iter().map(|t| (t, None)).collect()
     };
-    let glanced = |t: &Isometry3<f64>| fit_flags(&glance, model, t, tol0).into_iter().filter(|&f| f).count();
     let mut candidates: Vec<Candidate> = std::iter::once(((Isometry3::identity(), false), 0))
         .chain(discrete)
         .map(|t| (t, None))
@@ -267,7 +268,7 @@ pub(super) fn assess(
                         .ok()
                         .map(|r| r.t_target_source.inverse());
                     match r {
-                        Some(r) if glanced(&r) >= glanced(&q) => r,
+                        Some(r) if quick_fits(&r) >= quick_fits(&q) => r,
                         _ => q,
                     }
                 }
