@@ -89,6 +89,13 @@ pub(super) fn evidence_of(fit: &[bool], tol: f64, violated: usize, per_probe: f6
     }
 }
 
+/// Whether two poses are pick-grade of each other (modulo the part's exact symmetries): the same
+/// pose as a pick sees it.
+pub(super) fn pick_grade_of(model: &PoseModel, p: &TrustParams, a: &Isometry3<f64>, b: &Isometry3<f64>) -> bool {
+    let (r, d) = model.symmetries.pose_error(a, b);
+    r < p.pick_rotation && d < p.pick_translation
+}
+
 /// The candidates (`poses`, scored as `scored`) that the scan cannot rule out against the best
 /// (index `best`): those distinct from it (not pick-grade of each other) that [`standing`] leaves
 /// open, one per pose; the smallest lead of the best over a distinct candidate, in that
@@ -105,10 +112,7 @@ pub(super) fn weigh(
 ) -> (Vec<usize>, f64, f64) {
     let top = &scored[best];
     let kept = poses[best];
-    let same = |t: &Isometry3<f64>, u: &Isometry3<f64>| {
-        let (r, d) = model.symmetries.pose_error(t, u);
-        r < p.pick_rotation && d < p.pick_translation
-    };
+    let same = |t: &Isometry3<f64>, u: &Isometry3<f64>| pick_grade_of(model, p, t, u);
     let mut open: Vec<usize> = Vec::new();
     let mut ruled_out: Vec<(usize, f64)> = Vec::new();
     let mut lead = f64::INFINITY;
