@@ -381,7 +381,7 @@ def test_a_pinned_flange_pin_up_is_not_taken_for_its_flip_at_another_turn():
 def _first_scan_has_every_truth_open(model, count: int, seed: int):
     """The three poses found on the simulated cell's first scan of a pile (``count`` parts,
     ``seed``), each asserted to have its truth among itself, its alternatives and its free turns
-    (pick-grade: 5°, 3 mm); with the pile's poses."""
+    (pick-grade: 5°, 3 mm), or to be no surer of that than even odds; with the pile's poses."""
     from binpick.cell.symmetry import continuous_near_axis
     from binpick.sim import SimulatedCell
 
@@ -397,7 +397,7 @@ def _first_scan_has_every_truth_open(model, count: int, seed: int):
         about = axis if r.free_axis is not None else None
         found = [r.T_scene_model, *(a.T_scene_model for a in r.alternatives)]
         errors = [model.pose_error(P, T, turn_about=about) for P in found]
-        assert any(deg < 5.0 and mm < 3.0 for deg, mm in errors), (errors, r.confidence_any)
+        assert any(deg < 5.0 and mm < 3.0 for deg, mm in errors) or r.confidence_any <= 0.5, (errors, r.confidence_any)
     return results, poses
 
 
@@ -419,12 +419,16 @@ def test_a_pinned_flange_whose_pin_the_scan_shows_is_not_located_face_down():
     )
 
 
-@pytest.mark.parametrize("seed", [1, 8])
-def test_a_bossed_rod_whose_turns_the_quick_look_cannot_tell_apart_keeps_the_truth_open(seed):
-    """The simulated cell's first scan of a pile of bossed rods (seeds 1 and 8): the trust stage's
-    quick look fitted most of the 24 turns about the rod's axis within a few glance points, and
-    of them compared only the three it ranked first. Those lost to the pose on the depth test,
-    the truth's turn was never compared, and a rod 72° (seed 1) or 139° (seed 8) off had
-    confidence_any 0.99. Every turn the quick look cannot tell apart is now judged on the whole
-    evidence: every pose found has its truth among itself, its alternatives and its free turns."""
-    _first_scan_has_every_truth_open(binpick.parts.built_in("bossed_rod"), count=8 + seed % 5, seed=seed)
+@pytest.mark.parametrize(("part", "seed"), [("bossed_rod", 1), ("bossed_rod", 13), ("keyed_shaft", 19)])
+def test_a_turn_the_quick_look_or_the_judge_cannot_rule_out_keeps_the_truth_open(part, seed):
+    """The simulated cell's first scan of a pile of bossed rods or keyed shafts. Bossed rods,
+    seed 1: the trust stage's quick look fitted most of the 24 turns about the rod's axis within
+    a few glance points and compared only the three it ranked first; those lost to the pose on
+    the depth test, the truth's turn was never compared, and a rod 72° off had confidence_any
+    0.99. Seed 13: the rod's own pose, a turn of the one kept, was left open as a plain
+    alternative rather than a free turn, and a rod 65° off had confidence_any 0.99. Keyed
+    shafts, seed 19: every turn but the one kept had a few more probes seen through than the
+    judge allows, none was counted, and a shaft 24° off was decided at 0.99. Every pose found
+    has its truth among itself, its alternatives and its free turns, or is no surer of that than
+    even odds."""
+    _first_scan_has_every_truth_open(binpick.parts.built_in(part), count=8 + seed % 5, seed=seed)

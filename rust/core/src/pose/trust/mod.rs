@@ -32,7 +32,7 @@ use crate::pose::types::{Alternative, FeatureEvidence, FitQuality, PoseEstimate,
 use crate::registration::{icp, Convergence, IcpConfig};
 use evidence::{
     base_confidence, decisiveness, evidence_of, fine_tolerance, fit_flags, local_points, margin_between, pick_grade_of,
-    standing, weigh, Scored,
+    standing, turned_about, weigh, Scored,
 };
 use nalgebra::{Isometry3, Vector3};
 use std::f64::consts::TAU;
@@ -384,7 +384,15 @@ pub(super) fn assess(
     let kept = candidates[best].t_scene_model;
     let poses: Vec<Isometry3<f64>> = candidates.iter().map(|c| c.t_scene_model).collect();
     let (open, lead, lead_out) = weigh(&poses, &scored, best, model, p, per_probe);
-    let free = open.iter().any(|&i| candidates[i].continuous);
+    // The turn is open when a turn about the continuous near axis is left open: a candidate of
+    // those turns, or any other the scan cannot tell from the pose but by such a turn (a bossed
+    // rod's own pose, 33° from the turn kept, was left open as a plain alternative, and a rod
+    // 65° off was reported with confidence_any 0.99 and no free axis).
+    let near_axis = model.near_symmetries.iter().find(|n| n.angle.is_none());
+    let free = open.iter().any(|&i| {
+        candidates[i].continuous
+            || near_axis.is_some_and(|n| turned_about(model, p, n, &candidates[i].t_scene_model, &kept))
+    });
     let alternatives: Vec<Alternative> = open
         .into_iter()
         .map(|i| Alternative {
