@@ -51,12 +51,16 @@ class _BoardLayer:
     """The layout's calibration board seen from one robot pose: where it is nearer than the
     ray-cast scene (``mask``), and its image with the laser at an angle composed over a frame."""
 
-    def __init__(self, layout: Layout, view: View, T_base_flange: np.ndarray) -> None:
+    def __init__(
+        self, layout: Layout, view: View, T_base_flange: np.ndarray, window: Optional[tuple[slice, slice]] = None
+    ) -> None:
         board = layout.board
         self.layout = layout
         self.T_camera_board = inverse(T_base_flange @ layout.T_flange_camera) @ board.T_base_board
         cam = layout.camera
-        rays = _pixel_rays(cam)
+        # Only the pixels that may see the board are tested (rows, columns; all by default).
+        rows, cols = window or (slice(0, cam.height), slice(0, cam.width))
+        rays = _pixel_rays(cam).reshape(cam.height, cam.width, 3)[rows, cols].reshape(-1, 3)
         n, p0 = self.T_camera_board[:3, 2], self.T_camera_board[:3, 3]
         denom = rays @ n
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -65,18 +69,20 @@ class _BoardLayer:
         (xmin, ymin), (xmax, ymax) = board.extent
         on = (depth > 0) & (local[:, 0] >= xmin) & (local[:, 0] <= xmax) & (local[:, 1] >= ymin)
         on &= local[:, 1] <= ymax
-        scene = view.depth.ravel().astype(np.float64)
+        scene = view.depth[rows, cols].ravel().astype(np.float64)
         nearer = np.isnan(scene) | (depth < scene)
-        self.mask = (on & nearer).reshape(cam.height, cam.width)
+        self.mask = np.zeros((cam.height, cam.width), dtype=bool)
+        self.mask[rows, cols] = (on & nearer).reshape(self.mask[rows, cols].shape)
 
     @classmethod
     def of(cls, layout: Layout, view: View, T_base_flange: np.ndarray) -> Optional[_BoardLayer]:
         """The layer, or None when the layout has no board or the camera does not see it."""
         if layout.board is None:
             return None
-        if _out_of_view(layout, T_base_flange):  # the board far from the picture: no pixel to test
+        window = _window(layout, T_base_flange)
+        if window is None:  # the board far from the picture: no pixel to test
             return None
-        layer = cls(layout, view, T_base_flange)
+        layer = cls(layout, view, T_base_flange, window)
         return layer if layer.mask.any() else None
 
     def over(self, rgb: np.ndarray, angle: float, seed: int) -> np.ndarray:
@@ -98,21 +104,26 @@ class _BoardLayer:
         return np.where(self.mask[:, :, None], img, rgb)
 
 
-def _out_of_view(layout: Layout, T_base_flange: np.ndarray) -> bool:
-    """Whether the board lies clearly outside the camera's picture: in front of the camera, its
-    corners' pinhole projections all beyond one side of the image by a tenth of its size (more
-    than any lens distortion moves them). False when unsure: the pixels are tested then."""
+def _window(layout: Layout, T_base_flange: np.ndarray) -> Optional[tuple[slice, slice]]:
+    """The rows and columns of the picture that may see the board: the box of its corners'
+    pinhole projections grown by a tenth of the image's size each way (more than any lens
+    distortion moves them), clipped to the image; None when that box misses the image (the board
+    clearly out of the picture), the whole image when a corner is not in front of the camera."""
     board, cam = layout.board, layout.camera
     (xmin, ymin), (xmax, ymax) = board.extent
     corners = np.array([[x, y, 0.0, 1.0] for x in (xmin, xmax) for y in (ymin, ymax)])
     local = (inverse(T_base_flange @ layout.T_flange_camera) @ board.T_base_board @ corners.T).T[:, :3]
     if (local[:, 2] <= 1e-6).any():
-        return False
+        return slice(0, cam.height), slice(0, cam.width)
     K = cam.K
     u = K[0, 0] * local[:, 0] / local[:, 2] + K[0, 2]
     v = K[1, 1] * local[:, 1] / local[:, 2] + K[1, 2]
     du, dv = 0.1 * cam.width, 0.1 * cam.height
-    return bool((u < -du).all() or (u > cam.width + du).all() or (v < -dv).all() or (v > cam.height + dv).all())
+    u0, u1 = max(0, math.floor(u.min() - du)), min(cam.width, math.ceil(u.max() + du) + 1)
+    v0, v1 = max(0, math.floor(v.min() - dv)), min(cam.height, math.ceil(v.max() + dv) + 1)
+    if u0 >= u1 or v0 >= v1:
+        return None
+    return slice(v0, v1), slice(u0, u1)
 
 
 def _frame(view: View, board: Optional[_BoardLayer], angle: float, seed: int, num_threads: int = 0) -> np.ndarray:

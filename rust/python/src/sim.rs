@@ -465,9 +465,14 @@ impl PySimView {
         let num_threads = crate::convert::threads(num_threads)?;
         let frames = run_borrowed(py, move || {
             binpick_core::with_threads(num_threads, || {
-                let mut all = Vec::new();
+                let mut all: Vec<u8> = Vec::new();
                 for (i, a) in angles.iter().enumerate() {
-                    all.extend(view.frame(&l, *a, &n, seed.wrapping_add(i as u64))?);
+                    let frame = view.frame(&l, *a, &n, seed.wrapping_add(i as u64))?;
+                    if all.is_empty() {
+                        all = frame; // one frame (a grab): not copied
+                    } else {
+                        all.extend(frame);
+                    }
                 }
                 Ok::<_, Error>(all)
             })

@@ -279,6 +279,7 @@ impl Scene {
             hits,
             shade,
             sheets: std::sync::Mutex::new(None),
+            spreads: std::sync::Mutex::new(None),
         })
     }
 }
