@@ -92,18 +92,24 @@ def test_vectorised_grasp_matching_equals_pose_error_over_every_grasp(tee):
         assert matcher.error(T) == pytest.approx(expected, abs=1e-6)
 
 
+def _random_grasps(rng: np.random.Generator, n: int) -> list[np.ndarray]:
+    """``n`` grasps at random turns, their TCPs about 20 mm from the object's origin."""
+    grasps = []
+    for _ in range(n):
+        G = np.eye(4)
+        G[:3, :3] = rotation_about(rng.normal(size=3), rng.uniform(0.0, math.pi))
+        G[:3, 3] = rng.normal(size=3) * 20.0
+        grasps.append(G)
+    return grasps
+
+
 def test_the_matcher_allows_any_turn_about_a_continuous_symmetry_axis():
     # A shaft's pose about its own axis is arbitrary: a grip of the shaft turned by any angle about
     # its axis (through a centre off the object origin) is the same grip, and the matcher finds the
     # turn in closed form; a turn about another axis or a shift along the axis is still an error.
     rng = np.random.default_rng(3)
     centre, axis = np.array([2.0, -1.0, 5.0]), np.array([0.0, 0.0, 1.0])
-    grasps = []
-    for _ in range(5):
-        G = np.eye(4)
-        G[:3, :3] = rotation_about(rng.normal(size=3), rng.uniform(0.0, math.pi))
-        G[:3, 3] = rng.normal(size=3) * 20.0
-        grasps.append(G)
+    grasps = _random_grasps(rng, 5)
     plain = GraspMatcher(grasps, tolerance_deg=12.0, tolerance_mm=6.0)
     shaft = GraspMatcher(grasps, tolerance_deg=12.0, tolerance_mm=6.0, continuous=(centre, axis * 3.0))
     for angle in (0.3, 1.7, -2.9):
@@ -122,3 +128,37 @@ def test_the_matcher_allows_any_turn_about_a_continuous_symmetry_axis():
         assert shaft.error(slid)[1] == pytest.approx(8.0, abs=1e-6)
     with pytest.raises(binpick.InvalidInputError, match="continuous"):
         GraspMatcher(grasps, tolerance_deg=12.0, tolerance_mm=6.0, continuous=(centre, np.zeros(3)))
+
+
+def test_the_matcher_weighs_a_stack_of_poses_as_it_weighs_each_and_names_a_bad_one():
+    # A planner weighs a batch of grasps against each alternative of an undecided pose at once:
+    # errors() of a stack is error() of each (a flip symmetry and a continuous axis off the
+    # origin), and a stack with a bad pose is refused naming it.
+    rng = np.random.default_rng(5)
+    centre, axis = np.array([1.0, 4.0, -3.0]), np.array([0.0, 0.6, 0.8])
+    flip = np.eye(4)
+    flip[:3, :3] = rotation_about(np.array([1.0, 0.0, 0.0]), math.pi)
+    flip[:3, 3] = centre - flip[:3, :3] @ centre
+    grasps = _random_grasps(rng, 40)
+    matcher = GraspMatcher(grasps, (flip,), tolerance_deg=12.0, tolerance_mm=6.0, continuous=(centre, axis))
+    poses = []
+    for k in range(50):
+        T = grasps[rng.integers(len(grasps))].copy()
+        T[:3, :3] = rotation_about(rng.normal(size=3), rng.uniform(0, 0.15 if k < 25 else 3.0)) @ T[:3, :3]
+        T[:3, 3] += rng.normal(size=3) * (1.0 if k < 25 else 40.0)
+        poses.append(T)
+    deg, mm = matcher.errors(np.stack(poses))
+    assert deg.shape == mm.shape == (50,)
+    for T, d, m in zip(poses, deg, mm):
+        assert (d, m) == pytest.approx(matcher.error(T), abs=1e-9)
+    assert sum(matcher.within(e) for e in zip(deg, mm)) >= 20  # the near ones match a grasp
+    bad = np.stack(poses[:3])
+    bad[1, :3, :3] *= 1.1
+    with pytest.raises(binpick.InvalidInputError, match=r"T_gripper_objects\[1\]"):
+        matcher.errors(bad)
+    with pytest.raises(binpick.ShapeError, match="T_gripper_objects"):
+        matcher.errors(np.eye(4))
+    nan = np.stack(poses[:2])
+    nan[0, 0, 3] = np.nan
+    with pytest.raises(binpick.NonFiniteError, match="T_gripper_objects"):
+        matcher.errors(nan)

@@ -43,6 +43,7 @@ __all__ = [
     "grasp_openings",
     "plan_grasp",
     "scene_hits",
+    "GraspTest",
     "grasp_filter",
     "symmetry_maps",
     "continuous_symmetry",
@@ -488,9 +489,10 @@ def plan_inputs(
     )
 
 
-def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarray], bool]]:
+def grasp_filter(config: CellConfig, result: Any) -> Optional[GraspTest]:
     """For a pose the scan cannot settle, the test ``T_base_gripper → bool`` a grasp must pass
-    (None when the pose is unambiguous and has no free axis):
+    (a :class:`GraspTest`, which also weighs a stack of grasps at once; None when the pose is
+    unambiguous and has no free axis):
 
     - ``result.ambiguous``: the gripper pose, expressed against every alternative pose of the
       part (``result.alternatives``), must land the fingers on it as one of the cell's grasps
@@ -500,11 +502,25 @@ def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarr
       that axis and the fingers closing square to it (across a shaft's body, from its side or
       end-on), so that any turn about the axis turns the grip about it and leaves it unchanged.
     """
-    tests = []
+    tests: list[Callable[[np.ndarray], np.ndarray]] = []  # each: (K, 4, 4) T_base_gripper → (K,) bool
     if getattr(result, "ambiguous", False) and getattr(result, "alternatives", ()):
         matcher = config.ambiguity_matcher
         alternatives = [np.asarray(a.T_scene_model, dtype=np.float64) for a in result.alternatives]
-        tests.append(lambda T_bg: all(matcher.within(matcher.error(inverse(T_bg) @ T_a)) for T_a in alternatives))
+
+        def on_every_alternative(T_bg: np.ndarray) -> np.ndarray:
+            T_gb = np.zeros_like(T_bg)  # the inverses, rigid: Rᵀ, −Rᵀ t
+            T_gb[:, :3, :3] = np.swapaxes(T_bg[:, :3, :3], 1, 2)
+            T_gb[:, :3, 3] = -np.einsum("kij,kj->ki", T_gb[:, :3, :3], T_bg[:, :3, 3])
+            T_gb[:, 3, 3] = 1.0
+            ok = np.ones(len(T_bg), dtype=bool)
+            for T_a in alternatives:
+                deg, mm = matcher.errors((T_gb @ T_a)[ok])
+                ok[ok] = (deg <= matcher.tolerance_deg) & (mm <= matcher.tolerance_mm)
+                if not ok.any():
+                    break
+            return ok
+
+        tests.append(on_every_alternative)
     axis = getattr(result, "free_axis", None)
     if axis is not None:
         a = np.asarray(axis, dtype=np.float64) / np.linalg.norm(axis)
@@ -517,18 +533,38 @@ def grasp_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarr
         c = T_bo[:3, :3] @ centre + T_bo[:3, 3]
         sin_tol = math.sin(math.radians(config.ambiguity_tolerance_deg))
 
-        def across(T_bg: np.ndarray) -> bool:
-            off = T_bg[:3, 3] - c
-            off_axis = float(np.linalg.norm(off - (off @ a) * a))
-            return abs(float(T_bg[:3, 0] @ a)) <= sin_tol and off_axis <= config.ambiguity_tolerance_mm
+        def across(T_bg: np.ndarray) -> np.ndarray:
+            off = T_bg[:, :3, 3] - c
+            off_axis = np.linalg.norm(off - (off @ a)[:, None] * a, axis=1)
+            return (np.abs(T_bg[:, :3, 0] @ a) <= sin_tol) & (off_axis <= config.ambiguity_tolerance_mm)
 
         tests.append(across)
     if not tests:
         return None
-    return lambda T_bg: all(t(T_bg) for t in tests)
+    return GraspTest(tests)
 
 
-def staked_filter(config: CellConfig, result: Any) -> Optional[Callable[[np.ndarray], bool]]:
+class GraspTest:
+    """The test of :func:`grasp_filter`: called with one ``T_base_gripper`` it says whether that
+    grasp passes; :meth:`many` says it for a stack (K, 4, 4) at once (the planner's batches)."""
+
+    def __init__(self, tests: list[Callable[[np.ndarray], np.ndarray]]) -> None:
+        self._tests = tests
+
+    def many(self, T_base_grippers: np.ndarray) -> np.ndarray:
+        """(K,) bool: which of the grasps (K, 4, 4) pass every test."""
+        T = np.asarray(T_base_grippers, dtype=np.float64)
+        ok = np.ones(len(T), dtype=bool)
+        for test in self._tests:
+            if ok.any():
+                ok[ok] = test(T[ok])
+        return ok
+
+    def __call__(self, T_base_gripper: np.ndarray) -> bool:
+        return bool(self.many(np.asarray(T_base_gripper, dtype=np.float64)[None])[0])
+
+
+def staked_filter(config: CellConfig, result: Any) -> Optional[GraspTest]:
     """The grasp test of :func:`grasp_filter` for a located pose, once the pose's stake is checked:
     NoGraspError (reason "low confidence") when the pose — or, planned with a grasp the same on
     every alternative, the pose or one of its alternatives (``confidence_any``) — is less
@@ -681,9 +717,11 @@ def plan_grasp(
     while batch := list(itertools.islice(candidates, size)):
         size = min(2 * size, _BATCH)  # the first usable grasp is often among the most vertical few
         if accept is not None:
+            many = getattr(accept, "many", None)  # a GraspTest weighs the batch at once
+            passes = many(np.stack([c[2] for c in batch])) if many is not None else [accept(c[2]) for c in batch]
             kept = []
-            for c in batch:
-                if accept(c[2]):
+            for c, ok in zip(batch, passes):
+                if ok:
                     kept.append(c)
                 else:
                     rejected["ambiguous"] += 1

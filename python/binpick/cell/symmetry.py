@@ -9,9 +9,8 @@ from typing import Any, Optional
 
 import numpy as np
 
-from .._validate import as_transform, as_vector, instance_of, positive
-from ..errors import InvalidInputError
-from ..transforms import rotation_angle_deg
+from .._validate import as_float_array, as_transform, as_vector, check_finite, check_rigid, instance_of, positive
+from ..errors import InvalidInputError, ShapeError
 
 __all__ = ["GraspMatcher", "continuous_symmetry", "continuous_near_axis", "symmetry_maps"]
 
@@ -52,6 +51,16 @@ def continuous_near_axis(model: Any) -> Optional[tuple[np.ndarray, np.ndarray]]:
     return None
 
 
+def _skew(a: np.ndarray) -> np.ndarray:
+    """[a]×, the cross-product matrix of ``a``."""
+    return np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
+
+
+#: The most grasp × symmetry × pose triples :meth:`GraspMatcher.errors` weighs at once (a few
+#: tens of MB of temporaries).
+_MATCH_CHUNK = 1 << 16
+
+
 class GraspMatcher:
     """Matches a part's pose in the gripper against every declared grasp at once.
 
@@ -87,6 +96,7 @@ class GraspMatcher:
         self.tolerance_deg = positive(tolerance_deg, "tolerance_deg", "deg")
         self.tolerance_mm = positive(tolerance_mm, "tolerance_mm")
         self._axis: Optional[tuple[np.ndarray, np.ndarray]] = None
+        self._weights: Optional[np.ndarray] = None
         if continuous is not None:
             centre = as_vector(continuous[0], "continuous centre", 3)
             axis = as_vector(continuous[1], "continuous axis", 3)
@@ -95,34 +105,91 @@ class GraspMatcher:
                 raise InvalidInputError("continuous: the symmetry axis has no direction; pass a unit vector")
             self._axis = (centre, axis / norm)
 
-    def _turned(self, M: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """For M = (B·S)_Rᵀ A_R per grasp and symmetry: the turn R_θ about the continuous axis that
-        brings B·S·R_θ nearest A in rotation (θ maximises tr(R_θᵀ M): closed form), and R_θ."""
-        _, a = self._axis
-        K = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-        along = np.einsum("i,...ij,j->...", a, M, a)
-        theta = np.arctan2(np.einsum("ij,...ij->...", K, M), np.trace(M, axis1=-2, axis2=-1) - along)
-        c, s = np.cos(theta)[..., None, None], np.sin(theta)[..., None, None]
-        R = c * np.eye(3) + s * K + (1.0 - c) * np.outer(a, a)
-        return np.einsum("...ji,...jk->...ik", R, M), R
-
     def error(self, T_gripper_object: np.ndarray) -> tuple[float, float]:
         """(rotation error deg, translation error mm) against the nearest declared grasp."""
-        B = self._stack
         A = as_transform(T_gripper_object, "T_gripper_object")
-        M = np.einsum("gsji,jk->gsik", B[:, :, :3, :3], A[:3, :3])  # B_Rᵀ A_R
-        t = B[:, :, :3, 3]
+        deg, mm = self._errors(A[None])
+        return float(deg[0]), float(mm[0])
+
+    def errors(self, T_gripper_objects: Any) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`error` of each of a stack of poses in the gripper (K, 4, 4): rotation errors
+        (K,) deg and translation errors (K,) mm, each against its nearest declared grasp, in a
+        few array operations for all (a planner weighing a batch of grasps against a pose's
+        alternatives asked one at a time, thousands of times a pick)."""
+        A = as_float_array(T_gripper_objects, "T_gripper_objects")
+        if A.ndim != 3 or A.shape[1:] != (4, 4):
+            raise ShapeError(f"T_gripper_objects: expected a stack (K, 4, 4) of transforms, got shape {A.shape}")
+        check_finite(A, "T_gripper_objects")
+        R = A[:, :3, :3]
+        off = np.abs(np.swapaxes(R, 1, 2) @ R - np.eye(3)).max(axis=(1, 2), initial=0.0)
+        last = (np.abs(A[:, 3] - (0.0, 0.0, 0.0, 1.0)) > (1e-9, 1e-9, 1e-9, 1e-9 + 1e-5)).any(axis=1)
+        bad = np.flatnonzero((off > 1e-6) | (np.linalg.det(R) < 0) | last)  # check_rigid's rules
+        if len(bad):
+            check_rigid(A[bad[0]], f"T_gripper_objects[{bad[0]}]")  # raises, naming the first
+        return self._errors(A)
+
+    def _errors(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`errors` of checked poses, in chunks of at most :data:`_MATCH_CHUNK` grasp ×
+        symmetry × pose triples."""
+        B = self._stack
+        chunk = max(1, _MATCH_CHUNK // (B.shape[0] * B.shape[1]))
+        parts = [self._errors_of(B, A[i : i + chunk]) for i in range(0, len(A), chunk)]
+        return np.concatenate([d for d, _ in parts]), np.concatenate([m for _, m in parts])
+
+    def _forms(self) -> np.ndarray:
+        """The linear forms of a pose's rotation A_R that :meth:`_errors_of` reads, per grasp and
+        symmetry: (G·S·F, 9) weights on A_R's entries. With M = B_Rᵀ A_R (B = T_go · S), a form
+        Σ C ∘ M is Σ (B_R C) ∘ A_R. The forms: tr M and M's axial part (its angle); with a
+        continuous axis a also aᵀMa, ⟨[a]×, M⟩ (the best turn θ about a, in closed form) and the
+        axial parts of [a]× M and a aᵀ M (those of R_θᵀ M, from θ)."""
+        if self._weights is None:
+            E = np.zeros((3, 3, 3))
+            for k, (i, j) in enumerate(((2, 1), (0, 2), (1, 0))):  # axial part: M[i, j] − M[j, i]
+                E[k, i, j], E[k, j, i] = 1.0, -1.0
+            forms = [np.eye(3), *E]
+            if self._axis is not None:
+                a = self._axis[1]
+                K = _skew(a)
+                aa = np.outer(a, a)
+                forms += [aa, K, *(K.T @ e for e in E), *(aa @ e for e in E)]
+            BR = self._stack[:, :, :3, :3]
+            W = np.einsum("gsij,fjk->gsfik", BR, np.stack(forms))
+            self._weights = W.reshape(-1, 9)
+        return self._weights
+
+    def _errors_of(self, B: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        deg, mm = self._pair_errors(B, A)
+        g = np.argmin(deg / self.tolerance_deg + mm / self.tolerance_mm, axis=0)
+        k = np.arange(len(A))
+        return deg[g, k], mm[g, k]
+
+    def _pair_errors(self, B: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(deg, mm), each (G, K): the error of each pose A (K, 4, 4) against each grasp of
+        ``B`` (G, S, 4, 4; its forms :meth:`_forms`), at the symmetry nearest it."""
+        G, S = B.shape[:2]
+        v = (self._forms() @ A[:, :3, :3].reshape(len(A), 9).T).reshape(G, S, -1, len(A))  # (G, S, F, K)
+        trace, axial = v[:, :, 0], v[:, :, 1:4]
+        t = B[:, :, :3, 3][:, :, None, :]  # (G, S, 1, 3)
         if self._axis is not None:
-            M, R = self._turned(M)
-            c = self._axis[0]
-            t = t + np.einsum("gsij,gsj->gsi", B[:, :, :3, :3], c - np.einsum("gsij,j->gsi", R, c))
-        deg = rotation_angle_deg(M)
-        mm = np.linalg.norm(t - A[:3, 3], axis=-1)
-        s = np.argmin(deg / 5.0 + mm / 3.0, axis=1)  # pose_error's choice of symmetry, per grasp
-        g_idx = np.arange(len(B))
-        deg, mm = deg[g_idx, s], mm[g_idx, s]
-        g = int(np.argmin(deg / self.tolerance_deg + mm / self.tolerance_mm))
-        return float(deg[g]), float(mm[g])
+            # The turn θ about the axis that brings B·S·R_θ nearest A: θ = atan2(Q, P) maximises
+            # tr(R_θᵀ M) = cos θ P + sin θ Q + aᵀMa; R_θᵀ M's axial part is linear in cos θ, sin θ.
+            along, Q = v[:, :, 4], v[:, :, 5]
+            P = trace - along
+            r = np.hypot(P, Q)
+            safe = np.where(r > 0.0, r, 1.0)
+            c, s = np.where(r > 0.0, P / safe, 1.0), np.where(r > 0.0, Q / safe, 0.0)
+            trace = c * P + s * Q + along
+            axial = c[:, :, None] * axial - s[:, :, None] * v[:, :, 6:9] + (1.0 - c)[:, :, None] * v[:, :, 9:12]
+            centre, a = self._axis
+            BR = B[:, :, :3, :3]
+            u = BR @ (centre - (a @ centre) * a)  # B_R (c₀ − R_θ c₀) = (1 − cos θ) B_R u − sin θ B_R (a × c₀)
+            w = BR @ np.cross(a, centre)
+            t = t + (1.0 - c)[..., None] * u[:, :, None, :] - s[..., None] * w[:, :, None, :]
+        # The angle as rotation_angle_deg takes it: atan2 of the axial part's half norm and (tr − 1) / 2.
+        deg = np.degrees(np.arctan2(np.linalg.norm(axial, axis=2) / 2.0, (trace - 1.0) / 2.0))  # (G, S, K)
+        mm = np.linalg.norm(t - A[:, :3, 3], axis=-1)
+        s_best = np.argmin(deg / 5.0 + mm / 3.0, axis=1)[:, None]  # pose_error's choice of symmetry, per grasp
+        return np.take_along_axis(deg, s_best, axis=1)[:, 0], np.take_along_axis(mm, s_best, axis=1)[:, 0]
 
     def cost(self, error: tuple[float, float]) -> float:
         """An error in units of the tolerances (≤ 2 when both are within them)."""
