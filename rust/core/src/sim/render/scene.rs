@@ -279,7 +279,6 @@ impl Scene {
             hits,
             shade,
             sheets: std::sync::Mutex::new(None),
-            spreads: std::sync::Mutex::new(None),
         })
     }
 }

@@ -2,9 +2,6 @@
 
 use super::*;
 
-/// The noise a view's spread was computed for (read and shot noise, bits) and that spread.
-pub(super) type Spread = ([u64; 2], Arc<Vec<[f32; 3]>>);
-
 /// The geometry a camera sees from one robot pose: per pixel the first surface, its normal and
 /// instance id, and its ambient shading. Lit by the laser per motor angle with [`View::frame`].
 pub struct View {
@@ -15,9 +12,6 @@ pub struct View {
     pub(super) shade: Vec<[f32; 3]>,
     /// The pixels indexed by the motor angle whose sheet reaches them, for the last laser asked for.
     pub(super) sheets: std::sync::Mutex<Option<Arc<SheetIndex>>>,
-    /// The sensor noise's standard deviation at every pixel of `shade` (per channel), for the
-    /// noise it was computed for (`SensorNoise::read_noise`, `shot_noise` bits): the same every frame.
-    pub(super) spreads: std::sync::Mutex<Option<Spread>>,
 }
 
 /// The reaches a pixel is indexed under, rad: each pixel under the least that holds its own
@@ -117,8 +111,7 @@ impl std::fmt::Debug for View {
 pub(super) fn fast_normal(rng: &mut Rng) -> f32 {
     let x = rng.next_u64();
     let s = (x & 0xFFFF) + ((x >> 16) & 0xFFFF) + ((x >> 32) & 0xFFFF) + (x >> 48);
-    // s < 2¹⁸ is exact as an i32 and as an f32: converted from i32 in one instruction (from u64,
-    // the baseline x86-64 target has none), to the same value.
+    // s < 2¹⁸: the same value converted from i32, in one instruction on the baseline x86-64 target.
     ((s as i32 as f32 + 2.0) / 65536.0 - 2.0) * 1.732_050_8
 }
 
@@ -131,22 +124,13 @@ pub(super) fn mix_seed(seed: u64, a: u64, b: u64) -> u64 {
 /// Adds sensor noise to a float image and quantises it to 8 bits, rows in parallel, each row's
 /// noise seeded from (`seed`, `salt`, row) so the result does not depend on the thread count.
 pub(super) fn quantise(img: &[[f32; 3]], width: usize, noise: &SensorNoise, seed: u64, salt: u64) -> Vec<u8> {
-    quantise_adding(img, None, &[], width, noise, seed, salt)
-}
-
-/// The noise's standard deviation (read and shot noise) of a pixel of `value`, per channel.
-#[inline]
-fn spread_of(value: &[f32; 3], noise: &SensorNoise) -> [f32; 3] {
-    let (read2, shot) = ((noise.read_noise * noise.read_noise) as f32, noise.shot_noise as f32);
-    value.map(|v| (read2 + shot * v.max(0.0)).sqrt())
+    quantise_adding(img, &[], width, noise, seed, salt)
 }
 
 /// [`quantise`] of `img` with light added at some pixels: `adds` (pixel, RGB), sorted by pixel,
-/// each pixel's in the order they were added — the image is not copied to add them. `spread`:
-/// the noise's standard deviation at every pixel of `img` ([`spread_of`]), where known.
+/// each pixel's in the order they were added — the image is not copied to add them.
 pub(super) fn quantise_adding(
     img: &[[f32; 3]],
-    spread: Option<&[[f32; 3]]>,
     adds: &[(usize, [f32; 3])],
     width: usize,
     noise: &SensorNoise,
@@ -155,40 +139,27 @@ pub(super) fn quantise_adding(
 ) -> Vec<u8> {
     let mut out = vec![0u8; img.len() * 3];
     let noisy = noise.read_noise > 0.0 || noise.shot_noise > 0.0;
+    let (read2, shot) = ((noise.read_noise * noise.read_noise) as f32, noise.shot_noise as f32);
     out.par_chunks_mut(width * 3).enumerate().for_each(|(row, buf)| {
         let mut rng = Rng::new(mix_seed(seed, salt, row as u64));
         let start = row * width;
-        let first = adds.partition_point(|&(i, _)| i < start);
-        let row_adds = &adds[first..first + adds[first..].partition_point(|&(i, _)| i < start + width)];
-        let mut next = row_adds.iter().peekable();
-        for (u, (px, out)) in img[start..start + width]
-            .iter()
-            .zip(buf.chunks_exact_mut(3))
-            .enumerate()
-        {
+        let mut next = adds.partition_point(|&(i, _)| i < start);
+        for (u, px) in img[start..start + width].iter().enumerate() {
             let mut px = *px;
-            let mut lit = false;
-            while let Some((_, add)) = next.next_if(|a| a.0 == start + u) {
-                for (v, add) in px.iter_mut().zip(add) {
+            while next < adds.len() && adds[next].0 == start + u {
+                for (v, add) in px.iter_mut().zip(adds[next].1) {
                     *v += add;
                 }
-                lit = true;
+                next += 1;
             }
-            if !noisy {
-                for (v, out) in px.into_iter().zip(out) {
-                    *out = (v + 0.5).clamp(0.0, 255.0) as u8;
+            for c in 0..3 {
+                let mut v = px[c];
+                if noisy {
+                    v += (read2 + shot * v.max(0.0)).sqrt() * fast_normal(&mut rng);
                 }
-                continue;
-            }
-            let sd = match spread {
-                Some(known) if !lit => known[start + u],
-                _ => spread_of(&px, noise),
-            };
-            for ((v, sd), out) in px.into_iter().zip(sd).zip(out) {
-                let v = v + sd * fast_normal(&mut rng);
                 // Rounded half away from zero, as `round()` (whose library call costs more than
                 // the noise): for v ≥ −0.5 that is ⌊v + 0.5⌋, and below it both clamp to 0.
-                *out = (v + 0.5).clamp(0.0, 255.0) as u8;
+                buf[u * 3 + c] = (v + 0.5).clamp(0.0, 255.0) as u8;
             }
         }
     });
@@ -235,17 +206,7 @@ impl View {
     /// The image under ambient light alone, with sensor noise.
     pub fn ambient_frame(&self, noise: &SensorNoise, seed: u64) -> Result<Vec<u8>> {
         noise.validate()?;
-        let spread = self.spread(noise);
-        let w = self.camera.width as usize;
-        Ok(quantise_adding(
-            &self.shade,
-            Some(&spread),
-            &[],
-            w,
-            noise,
-            seed,
-            u64::MAX,
-        ))
+        Ok(quantise(&self.shade, self.camera.width as usize, noise, seed, u64::MAX))
     }
 
     /// The RGB frame the camera grabs with the laser at motor angle `theta` (rad): the scene
@@ -345,25 +306,10 @@ impl View {
             self.add_reflections(&mut adds, &lit, laser, &o, noise.reflections);
         }
         adds.sort_by_key(|&(i, _)| i); // stable: each pixel's light in the order it came
-        let spread = self.spread(noise);
-        Ok(quantise_adding(&self.shade, Some(&spread), &adds, w, noise, seed, salt))
+        Ok(quantise_adding(&self.shade, &adds, w, noise, seed, salt))
     }
 
     /// The sheet index of this view for `laser` (built on first use, kept for the next frames).
-    /// [`spread_of`] every pixel of the view's ambient image, computed once for `noise`.
-    fn spread(&self, noise: &SensorNoise) -> Arc<Vec<[f32; 3]>> {
-        let key = [noise.read_noise.to_bits(), noise.shot_noise.to_bits()];
-        let mut cache = self.spreads.lock().unwrap_or_else(|e| e.into_inner());
-        match cache.as_ref() {
-            Some((k, spread)) if *k == key => spread.clone(),
-            _ => {
-                let spread: Arc<Vec<[f32; 3]>> = Arc::new(self.shade.iter().map(|px| spread_of(px, noise)).collect());
-                *cache = Some((key, spread.clone()));
-                spread
-            }
-        }
-    }
-
     fn sheet_index(&self, laser: &Laser, sigma2: f64, pixel_var: f64) -> Arc<SheetIndex> {
         let key = SheetIndex::key(laser, sigma2, pixel_var);
         let mut cache = self.sheets.lock().unwrap_or_else(|e| e.into_inner());
