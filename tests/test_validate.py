@@ -346,3 +346,22 @@ def test_the_readme_cell_file_of_the_papers_hardware_sets_the_scan_and_the_speed
         "max_override_percent": 100.0,
         "max_linear_speed_mm_s": 500.0,
     }
+
+
+def test_a_worker_process_starts_with_one_thread_for_numpys_blas(monkeypatch):
+    # Each pile runs on one thread: a worker spawned from the pool has the numeric libraries'
+    # thread counts at 1 where the user set none (a user's own setting is kept), and the parent's
+    # environment is as it was afterwards.
+    import multiprocessing
+
+    from binpick.sim.validate_workers import _one_library_thread
+
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    monkeypatch.delenv("MKL_NUM_THREADS", raising=False)
+    monkeypatch.setenv("OMP_NUM_THREADS", "3")
+    with _one_library_thread():
+        with multiprocessing.get_context("spawn").Pool(1) as pool:
+            seen = pool.map(os.getenv, ["OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS"])
+    assert seen == ["1", "1", "3"]
+    assert "OPENBLAS_NUM_THREADS" not in os.environ and "MKL_NUM_THREADS" not in os.environ
+    assert os.environ["OMP_NUM_THREADS"] == "3"
