@@ -158,6 +158,7 @@ def test_the_matcher_weighs_a_stack_of_poses_as_it_weighs_each_and_names_a_bad_o
         matcher.errors(bad)
     with pytest.raises(binpick.ShapeError, match="T_gripper_objects"):
         matcher.errors(np.eye(4))
+    assert [len(e) for e in matcher.errors(np.zeros((0, 4, 4)))] == [0, 0]
     nan = np.stack(poses[:2])
     nan[0, 0, 3] = np.nan
     with pytest.raises(binpick.NonFiniteError, match="T_gripper_objects"):

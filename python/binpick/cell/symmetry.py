@@ -134,6 +134,8 @@ class GraspMatcher:
         B = self._stack
         chunk = max(1, _MATCH_CHUNK // (B.shape[0] * B.shape[1]))
         parts = [self._errors_of(B, A[i : i + chunk]) for i in range(0, len(A), chunk)]
+        if not parts:  # no poses: no errors
+            return np.zeros(0), np.zeros(0)
         return np.concatenate([d for d, _ in parts]), np.concatenate([m for _, m in parts])
 
     def _forms(self) -> np.ndarray:
