@@ -97,6 +97,7 @@ class GraspMatcher:
         self.tolerance_mm = positive(tolerance_mm, "tolerance_mm")
         self._axis: Optional[tuple[np.ndarray, np.ndarray]] = None
         self._weights: Optional[np.ndarray] = None
+        self._swing: Optional[tuple[np.ndarray, np.ndarray]] = None
         if continuous is not None:
             centre = as_vector(continuous[0], "continuous centre", 3)
             axis = as_vector(continuous[1], "continuous axis", 3)
@@ -133,7 +134,7 @@ class GraspMatcher:
         symmetry × pose triples."""
         B = self._stack
         chunk = max(1, _MATCH_CHUNK // (B.shape[0] * B.shape[1]))
-        parts = [self._errors_of(B, A[i : i + chunk]) for i in range(0, len(A), chunk)]
+        parts = [self._errors_of(A[i : i + chunk]) for i in range(0, len(A), chunk)]
         if not parts:  # no poses: no errors
             return np.zeros(0), np.zeros(0)
         return np.concatenate([d for d, _ in parts]), np.concatenate([m for _, m in parts])
@@ -157,17 +158,22 @@ class GraspMatcher:
             BR = self._stack[:, :, :3, :3]
             W = np.einsum("gsij,fjk->gsfik", BR, np.stack(forms))
             self._weights = W.reshape(-1, 9)
+            if self._axis is not None:
+                # B_R (c₀ − R_θ c₀) = (1 − cos θ) B_R u − sin θ B_R (a × c₀), u = c₀'s part across a.
+                centre, a = self._axis
+                self._swing = BR @ (centre - (a @ centre) * a), BR @ np.cross(a, centre)
         return self._weights
 
-    def _errors_of(self, B: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        deg, mm = self._pair_errors(B, A)
+    def _errors_of(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        deg, mm = self._pair_errors(A)
         g = np.argmin(deg / self.tolerance_deg + mm / self.tolerance_mm, axis=0)
         k = np.arange(len(A))
         return deg[g, k], mm[g, k]
 
-    def _pair_errors(self, B: np.ndarray, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(deg, mm), each (G, K): the error of each pose A (K, 4, 4) against each grasp of
-        ``B`` (G, S, 4, 4; its forms :meth:`_forms`), at the symmetry nearest it."""
+    def _pair_errors(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(deg, mm), each (G, K): the error of each pose A (K, 4, 4) against each grasp, at the
+        symmetry nearest it."""
+        B = self._stack
         G, S = B.shape[:2]
         v = (self._forms() @ A[:, :3, :3].reshape(len(A), 9).T).reshape(G, S, -1, len(A))  # (G, S, F, K)
         trace, axial = v[:, :, 0], v[:, :, 1:4]
@@ -182,10 +188,7 @@ class GraspMatcher:
             c, s = np.where(r > 0.0, P / safe, 1.0), np.where(r > 0.0, Q / safe, 0.0)
             trace = c * P + s * Q + along
             axial = c[:, :, None] * axial - s[:, :, None] * v[:, :, 6:9] + (1.0 - c)[:, :, None] * v[:, :, 9:12]
-            centre, a = self._axis
-            BR = B[:, :, :3, :3]
-            u = BR @ (centre - (a @ centre) * a)  # B_R (c₀ − R_θ c₀) = (1 − cos θ) B_R u − sin θ B_R (a × c₀)
-            w = BR @ np.cross(a, centre)
+            u, w = self._swing  # (G, S, 3) each, with the forms
             t = t + (1.0 - c)[..., None] * u[:, :, None, :] - s[..., None] * w[:, :, None, :]
         # The angle as rotation_angle_deg takes it: atan2 of the axial part's half norm and (tr − 1) / 2.
         deg = np.degrees(np.arctan2(np.linalg.norm(axial, axis=2) / 2.0, (trace - 1.0) / 2.0))  # (G, S, K)
