@@ -188,18 +188,17 @@ def test_the_twin_holds_a_part_only_where_it_fits_between_the_fingers(sim):
     assert plan.opening_mm < sim.cell.config.gripper.open_width_mm
     opened = []
     gripper = sim.cell.gripper
-    real = gripper.open_for_grasp
-    gripper.open_for_grasp = lambda w: (
-        opened.append(sim.finger_opening_mm()),
-        real(w),
-        opened.append(sim.finger_opening_mm()),
-    )
+    real_open, real_settle = gripper.open_for_grasp, gripper.settle
+    # The fingers as the command goes out, and once the cell has waited for them (before the
+    # arm goes down into the bin).
+    gripper.open_for_grasp = lambda w, wait=True: (opened.append(sim.finger_opening_mm()), real_open(w, wait=wait))
+    gripper.settle = lambda: (real_settle(), opened.append(sim.finger_opening_mm()))[0]
     try:
         record = sim.cell.pick(
             located(T_bo, SimpleNamespace(score=1.0, rmse=0.0, method="test", timings={})), plan=plan
         )
     finally:
-        del gripper.open_for_grasp
+        del gripper.open_for_grasp, gripper.settle
     assert record.held is True  # (the judge has no truth for a pose the test gives: only held or not)
     assert len(sim.pile.ids) == 0
     # The twin's fingers went from fully open (its 85 mm stroke, after the last pick) to the planned opening.

@@ -11,7 +11,7 @@ import pytest
 from _cell_helpers import recording_tee_cell
 
 from binpick.cell import PickRecord
-from binpick.cell.rescan import basis_after, laser_angles
+from binpick.cell.rescan import RescanBasis, band, basis_after, laser_angles
 
 
 def _nearest(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -103,3 +103,54 @@ def test_anything_but_a_clean_pick_scans_the_whole_bin_next(after_one_pick):
         assert basis_after(sim.cell, clean, scan) is None
     finally:
         sim.cell.config = keep
+
+
+def test_a_part_is_never_picked_on_points_the_sweep_only_carried_over(after_one_pick):
+    sim, report, lines = after_one_pick
+    assert len(sim.pile), "parts are left to pick"
+    last = sim.cell._last[0]
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in sim.config.bin_bounds)
+    # Sweep again only around an empty strip along the bin's -x wall: every part lies in points
+    # the rescan keeps from the last scan, which a part that settled a little may no longer match.
+    pts = np.asarray(sim.model.points)
+    placed = np.vstack([pts @ P[:3, :3].T + P[:3, 3] for P in sim.pile.poses])
+    # (along the -x or the +x wall, whichever is farther from every part)
+    if placed[:, 0].min() - lo[0] > hi[0] - placed[:, 0].max():
+        strip = (lo.copy(), np.array([lo[0] + 12.0, hi[1], hi[2]]))
+        clear = placed[:, 0].min() - strip[1][0]
+    else:
+        strip = (np.array([hi[0] - 12.0, lo[1], lo[2]]), hi.copy())
+        clear = strip[0][0] - placed[:, 0].max()
+    assert clear > 20.0, "the strip is clear of every part"
+    sim.cell._basis = RescanBasis(scan=last, lo=strip[0], hi=strip[1])
+    partial = sim.cell.scan()
+    assert 0 < partial.carried < len(partial.points)
+    assert partial.seen_again(np.arange(partial.carried)) == 0.0
+    assert partial.seen_again(np.arange(partial.carried, len(partial.points))) == 1.0
+    # The same in a pick: the part chosen on kept points makes the cell sweep the whole bin first.
+    sim.cell._basis = RescanBasis(scan=last, lo=strip[0], hi=strip[1])
+    lines.clear()
+    record, _ = sim.cell._look_and_pick(2, None)  # one pick of a run (run() starts with a whole scan)
+    said = [m for s, m in lines if s == "scan"]
+    assert any("kept the last scan's points" in m for m in said), said
+    assert sim.cell._last[0].carried == 0
+    assert record.success and record.truth.pick_grade, record.error
+
+
+def test_the_band_also_sweeps_the_part_planned_next(after_one_pick):
+    sim, report, _ = after_one_pick
+    last = sim.cell._last[0]
+    basis = basis_after(sim.cell, report.records[0], last) or RescanBasis(
+        scan=last, lo=np.asarray(sim.config.bin_bounds[0], float), hi=np.asarray(sim.config.bin_bounds[0], float) + 10
+    )
+    T = sim.config.scan_poses[0]
+    wanted = np.asarray(sim.config.angles_for(0))
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in sim.config.bin_bounds)
+    # A box at the far +x end of the bin, which the region's own band does not reach.
+    far = (np.array([hi[0] - 30.0, lo[1], lo[2]]), np.array([hi[0] - 10.0, hi[1], lo[2] + 20.0]))
+    corners = [[x, y, z] for x in (far[0][0], far[1][0]) for y in (lo[1], hi[1]) for z in (far[0][2], far[1][2])]
+    theta = laser_angles(sim.cell, T, np.array(corners))
+    own = band(sim.cell, replace(basis, lo=lo, hi=lo + 10.0), wanted, T)
+    assert own is not None and not ((own >= theta.min()) & (own <= theta.max())).any()
+    both = band(sim.cell, replace(basis, lo=lo, hi=lo + 10.0, also=(far,)), wanted, T)
+    assert both is None or ((both >= theta.min()) & (both <= theta.max())).any()

@@ -75,7 +75,10 @@ def test_straight_move_takes_its_length_at_the_commanded_speed(timed_arm):
     assert clock.now() - before == pytest.approx(1.2, abs=1e-4)
 
 
-def test_gripper_fingers_take_their_travel_at_their_speed():
+@pytest.fixture
+def gripper_on_a_clock():
+    """A Modbus gripper driver and its emulator (fingers at 60–450 units/s, activation 0.05 s)
+    on a fresh clock."""
     clock = PhysicalClock()
     emulator = GripperEmulator(
         config=GripperEmulatorConfig(
@@ -87,17 +90,42 @@ def test_gripper_fingers_take_their_travel_at_their_speed():
     gripper = ModbusGripper(
         emulator.slave_path, config=GripperConfig(serial=SerialSettings(baudrate=115200, timeout_s=0.3), speed=255)
     )
-    try:
-        gripper.activate()
-        assert clock.now() == pytest.approx(0.05)
-        gripper.close()  # 255 units at 450 units/s (SPEED 255), nothing between the fingers
-        assert clock.now() == pytest.approx(0.05 + 255.0 / 450.0, abs=1e-6)
-        gripper.open()
-        assert clock.now() == pytest.approx(0.05 + 2 * 255.0 / 450.0, abs=1e-6)
-    finally:
-        gripper.close_port()
-        emulator.close()
+    yield gripper, clock
+    gripper.close_port()
+    emulator.close()
     assert emulator.failures == []
+
+
+def test_gripper_fingers_take_their_travel_at_their_speed(gripper_on_a_clock):
+    gripper, clock = gripper_on_a_clock
+    gripper.activate()
+    assert clock.now() == pytest.approx(0.05)
+    gripper.close()  # 255 units at 450 units/s (SPEED 255), nothing between the fingers
+    assert clock.now() == pytest.approx(0.05 + 255.0 / 450.0, abs=1e-6)
+    gripper.open()
+    assert clock.now() == pytest.approx(0.05 + 2 * 255.0 / 450.0, abs=1e-6)
+
+
+def test_the_fingers_move_while_the_arm_does_and_a_wait_takes_only_what_is_left(gripper_on_a_clock):
+    gripper, clock = gripper_on_a_clock
+    travel = 255.0 / 450.0  # fully closed to fully open at SPEED 255
+    gripper.activate()
+    gripper.close()
+    t0 = clock.now()
+    gripper.open_for_grasp(85.0, wait=False)  # sent; the arm moves meanwhile for longer than the fingers
+    clock.spend(travel + 0.3, "robot")
+    gripper.settle()
+    assert clock.now() - t0 == pytest.approx(travel + 0.3, abs=1e-6)
+    # An arm move shorter than the fingers' travel: the wait takes what is left of it.
+    t0 = clock.now()
+    gripper.close(wait=False)
+    clock.spend(0.2, "robot")
+    gripper.settle()
+    assert clock.now() - t0 == pytest.approx(travel, abs=1e-6)
+    # Releasing a part opens only to the width asked: 40 mm of the 85 mm stroke.
+    t0 = clock.now()
+    gripper.release(40.0)
+    assert clock.now() - t0 == pytest.approx(round(255 * 40.0 / 85.0) / 450.0, abs=1e-6)
 
 
 def test_a_motor_whose_protocol_sends_no_speed_cannot_sweep_continuously(ai_motor):

@@ -115,6 +115,20 @@ class PlanAhead:
             self._thread.join()
         self._thread, self._done = None, {}
 
+    def planned_box(self) -> Optional[tuple[np.ndarray, np.ndarray]]:
+        """The box (base frame, mm) of the part planned ahead at its planned pose, or None when
+        nothing was (waits for the planning: the next scan must sweep that part again, see
+        :mod:`binpick.cell.rescan`)."""
+        if self._thread is None:
+            return None
+        self._thread.join()
+        found = self._done.get("found")
+        if found is None:
+            return None
+        T = np.asarray(found[0].T_base_object, dtype=np.float64)
+        placed = np.asarray(self.cell.config.model.points, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
+        return placed.min(axis=0), placed.max(axis=0)
+
     def take(self, record: Optional[PickRecord], scan: ScanResult, times: dict) -> Optional[tuple[Located, PickPlan]]:
         """The part and plan made ahead, when the pick they followed (``record``) was clean and
         ``scan`` (the next scan) confirms them (see the module docstring): the part as the new

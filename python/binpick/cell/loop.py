@@ -74,7 +74,7 @@ from .records import (
     pose_trust,
     with_collisions,
 )
-from .rescan import RescanBasis, basis_after, rescan
+from .rescan import SEEN_AGAIN, RescanBasis, basis_after, rescan
 from .shots import DepthSource, depth_scan
 from .sweeps import sweep_laser
 from .symmetry import continuous_near_axis
@@ -241,6 +241,9 @@ class Cell:
             views = [(T, cfg.angles_for(i)) for i, T in enumerate(cfg.scan_poses)]
             basis, self._basis = self._basis, None
             if basis is not None:  # only what the last pick changed, where that is safe
+                planned = self._ahead.planned_box() if self._ahead is not None else None
+                if planned is not None:  # and the part planned next, which the fresh lines must confirm
+                    basis = replace(basis, also=(planned,))
                 return rescan(self, basis, views)
         else:
             views = [(T, cfg.sweep_from(T)) for T in (as_transform(T, f"poses[{i}]") for i, T in enumerate(poses))]
@@ -633,10 +636,15 @@ class Cell:
         """Runs the plan, checked whole first (:meth:`check_plan`); returns what the gripper said
         about holding. Faults stop the arm and are raised."""
         moves = self.check_plan(plan)
+        opening = self.finger_opening(plan)
         try:
-            # Open as wide as the collision checks assumed (fully when the gripper cannot be set to a width).
-            self.gripper.open_for_grasp(self.finger_opening(plan))
-            for name in ("above", "approach", "grasp"):
+            # Open as wide as the collision checks assumed (fully when the gripper cannot be set to
+            # a width) on the way to above the part, over the bin: the fingers must be there before
+            # the arm goes down into it.
+            self.gripper.open_for_grasp(opening, wait=False)
+            self._move(*moves["above"])
+            self.gripper.settle()
+            for name in ("approach", "grasp"):
                 self._move(*moves[name])
             held = self.gripper.close()
             self._move(*moves["lift"])
@@ -646,7 +654,7 @@ class Cell:
             if self._after_lift is not None:  # the carry has begun: plan the next pick meanwhile
                 self._after_lift()
             self._move(*moves["drop"])
-            self.gripper.open()
+            self.gripper.release(opening)  # as wide as around the part on the way in: it is free
             return held
         except BinpickError as exc:
             note = self._halt()
@@ -723,6 +731,7 @@ class Cell:
         skipped: list[Skipped] = []
         times: dict[str, float] = {}
         again = () if isinstance(self.camera, DepthSource) else self.config.look_again_poses  # a fixed camera: one view
+        views_whole = [(T, self.config.angles_for(j)) for j, T in enumerate(self.config.scan_poses)]
         views: list[Optional[tuple[np.ndarray, ...]]] = [None, *((T,) for T in again)]
         looks = 0
         try:
@@ -742,11 +751,18 @@ class Cell:
                     times[f"scan.{key}"] = times.get(f"scan.{key}", 0.0) + v
                 t1 = time.perf_counter()
                 ahead = self._ahead.take(before, scan, times) if self._ahead is not None and k == 0 else None
-                if ahead is not None:
-                    located, plan = ahead
-                    break
                 try:
-                    located, plan = self.locate_and_plan(scan, skipped)
+                    located, plan = ahead if ahead is not None else self.locate_and_plan(scan, skipped)
+                    if scan.seen_again(located.indices) < SEEN_AGAIN:
+                        # Chosen on points the sweep kept from the last scan: the whole bin, seen again.
+                        self.progress("scan", "the part chosen lies where this sweep kept the last scan's points")
+                        whole = self.sweep_views(views_whole)
+                        for key, v in whole.timings.items():
+                            times[f"scan.{key}"] = times.get(f"scan.{key}", 0.0) + v
+                        scan = first = whole
+                        self._last = (scan, self._last[1])
+                        times.pop("ahead.used", None)
+                        located, plan = self.locate_and_plan(scan, skipped)
                 except (NoObjectFound, NoGraspError):
                     # Two looks that found no part in a bin with nothing in it: the bin is empty,
                     # as far as the cell can see; parts found but not pickable, or something in

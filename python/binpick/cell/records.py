@@ -51,18 +51,26 @@ PICK_GRADE_MM = 3.0
 @dataclass(frozen=True, eq=False)
 class ScanResult:
     """One scan: the cloud in the base frame, the motor angle (rad) and flange pose of every frame,
-    a few kept frames (index → BGR image) and the stage timings (ms)."""
+    a few kept frames (index → BGR image) and the stage timings (ms). ``carried``: how many of
+    the first points were carried over from the scan before and not seen again (a rescan of
+    what a pick changed, :mod:`binpick.cell.rescan`); 0 for a scan seen whole."""
 
     cloud: Any
     angles: np.ndarray
     T_base_flanges: np.ndarray
     frames: Mapping[int, np.ndarray]
     timings: Mapping[str, float]
+    carried: int = 0
 
     @property
     def points(self) -> np.ndarray:
         """(N, 3) points, mm, base frame."""
         return self.cloud.points
+
+    def seen_again(self, indices: Any) -> float:
+        """The share of the points ``indices`` this scan saw itself (not carried over), 1 for none."""
+        idx = np.asarray(indices, dtype=np.int64)
+        return float(np.mean(idx >= self.carried)) if len(idx) else 1.0
 
     def joined(self, later: ScanResult) -> ScanResult:
         """This scan and a ``later`` one of the same bin from another pose, as one: their points
@@ -86,6 +94,7 @@ class ScanResult:
             T_base_flanges=np.concatenate([self.T_base_flanges, later.T_base_flanges]),
             frames=MappingProxyType({k + n: v for k, v in later.frames.items()}),
             timings=later.timings,
+            carried=self.carried,
         )
 
 

@@ -12,6 +12,12 @@ must agree: when more than :data:`CHANGED_SHARE` of the shared cells moved by mo
 :data:`CHANGED_MM`, something outside the region moved, and the cell scans the whole bin. So it
 does after anything but a clean pick, for a look from another pose, for a cell with more than
 one scan pose, and when the region's sweep would take more than :data:`MAX_SHARE` of the full one.
+
+A move smaller than that test sees (a part tilted a few degrees as the pile settled) can hide
+in the points kept, so no pick is made on them: the sweep also covers the part planned next
+(``plan_ahead``), and a part chosen whose points the sweep did not see again (less than
+:data:`SEEN_AGAIN` of them, :meth:`ScanResult.seen_again`) makes the cell scan the whole bin
+before it picks (:meth:`binpick.cell.Cell.scan`).
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ __all__ = [
     "CHANGED_SHARE",
     "MAX_SHARE",
     "RescanBasis",
+    "SEEN_AGAIN",
     "basis_after",
     "band",
     "clean_pick",
@@ -47,16 +54,21 @@ CHANGED_SHARE = 0.02
 MAX_SHARE = 0.6
 #: Height-map cell, mm.
 CELL_MM = 2.0
+#: A part is picked from a rescan only when at least this share of its points are fresh.
+SEEN_AGAIN = 0.75
 
 
 @dataclass(frozen=True)
 class RescanBasis:
     """What a partial rescan builds on: the last scan, and the box (base frame, mm) the part
-    that left it occupied, grown by half the part's size."""
+    that left it occupied, grown by half the part's size; ``also``, boxes the sweep must cover
+    too, though nothing is expected to change there (the part planned next, whose pose the
+    fresh lines must confirm)."""
 
     scan: ScanResult
     lo: np.ndarray
     hi: np.ndarray
+    also: tuple[tuple[np.ndarray, np.ndarray], ...] = ()
 
 
 def clean_pick(record: PickRecord) -> bool:
@@ -99,10 +111,10 @@ def laser_angles(cell: Any, T_base_flange: np.ndarray, points: np.ndarray) -> np
 
 
 def band(cell: Any, basis: RescanBasis, wanted: np.ndarray, T_base_flange: np.ndarray) -> Optional[np.ndarray]:
-    """The angles of ``wanted`` whose sheets cross the basis's region (one step beyond it on
-    each side), or None when that is most of the sweep."""
-    corners = np.array([[x, y, z] for x in (basis.lo[0], basis.hi[0]) for y in (basis.lo[1], basis.hi[1])
-                        for z in (basis.lo[2], basis.hi[2])])  # fmt: skip
+    """The angles of ``wanted`` whose sheets cross the basis's region and its ``also`` boxes
+    (one step beyond them on each side), or None when that is most of the sweep."""
+    corners = np.array([[x, y, z] for lo, hi in ((basis.lo, basis.hi), *basis.also) for x in (lo[0], hi[0])
+                        for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])  # fmt: skip
     theta = laser_angles(cell, T_base_flange, corners)
     step = float(np.abs(np.diff(wanted)).max()) if len(wanted) > 1 else 0.0
     inside = (wanted >= theta.min() - step) & (wanted <= theta.max() + step)
@@ -168,7 +180,7 @@ def merged(basis: RescanBasis, fresh: ScanResult, swept: np.ndarray) -> tuple[Op
         frames=MappingProxyType({}),
         timings=MappingProxyType({}),
     )
-    return kept.joined(fresh), f"kept {int(keep.sum())} points of the last scan"
+    return replace(kept.joined(fresh), carried=int(keep.sum())), f"kept {int(keep.sum())} points of the last scan"
 
 
 def _moved_share(old: np.ndarray, new: np.ndarray) -> tuple[float, int]:

@@ -97,9 +97,20 @@ class Gripper(abc.ABC):
     def activate(self) -> Any:
         """Makes the gripper ready to move (a reset and activation where the device needs one); nothing by default."""
 
-    def open_for_grasp(self, width_mm: float) -> None:
-        """Opens the fingers at least ``width_mm`` apart for a grasp; fully by default."""
+    def open_for_grasp(self, width_mm: float, *, wait: bool = True) -> None:
+        """Opens the fingers at least ``width_mm`` apart for a grasp; fully by default. Without
+        ``wait`` it returns once the command is sent (:meth:`settle` waits for the fingers)."""
+        self.open(wait=wait)
+
+    def release(self, width_mm: float) -> None:
+        """Lets go of a held part by opening the fingers to ``width_mm``, the opening they had
+        around it on the way in (so it is free of them), where the gripper sets widths; fully
+        by default. Waits for the fingers."""
         self.open()
+
+    def settle(self) -> None:
+        """Waits until the fingers have done what the last command sent without waiting asked
+        (nothing by default: such a gripper's commands wait)."""
 
     def close_port(self) -> None:
         """Releases the gripper's own connection, if it has one; nothing by default."""
@@ -127,18 +138,29 @@ class MelfaHandGripper(Gripper):
         self.hand = check_int(hand, "hand", 1, 8)
         self.settle_s = check_number(settle_s, "settle_s", low=0.0, high=60.0, unit="s")
 
+    _settled_at = 0.0
+
     def open(self, *, wait: bool = True) -> None:
         """HNDON<hand>, then (with ``wait``) the settle time."""
         self.robot.open_hand(self.hand)
-        if wait:
-            time.sleep(self.settle_s)
+        self._after_command(wait)
 
     def close(self, *, wait: bool = True) -> Optional[bool]:
         """HNDOFF<hand>; the hand outputs carry no sensing, so None."""
         self.robot.close_hand(self.hand)
-        if wait:
-            time.sleep(self.settle_s)
+        self._after_command(wait)
         return None
+
+    def settle(self) -> None:
+        """Sleeps out what is left of the settle time of a command sent without waiting."""
+        left = self._settled_at - time.monotonic()
+        if left > 0:
+            time.sleep(left)
+
+    def _after_command(self, wait: bool) -> None:
+        self._settled_at = time.monotonic() + self.settle_s
+        if wait:
+            self.settle()
 
 
 # --------------------------------------------------------------------------- Modbus RTU codec
@@ -329,6 +351,7 @@ class ModbusGripper(Gripper):
             raise InvalidInputError(f"config: expected GripperConfig, got {type(config).__name__}")
         self.config = config
         self._link = SerialLink(port, config.serial, device="gripper")
+        self._requested: Optional[int] = None  # the position of the last motion command
 
     def close_port(self) -> None:
         """Closes the serial port."""
@@ -379,8 +402,9 @@ class ModbusGripper(Gripper):
 
     def move_to_width(
         self, width_mm: float, *, speed: Optional[int] = None, force: Optional[int] = None, wait: bool = True
-    ) -> GripperStatus:
-        """Moves the fingers to ``width_mm`` apart; returns the status (after arriving with ``wait``)."""
+    ) -> Optional[GripperStatus]:
+        """Moves the fingers to ``width_mm`` apart; with ``wait`` returns the status once they
+        stop, else None as soon as the command is sent (:meth:`settle` waits for them)."""
         cfg = self.config
         w = check_number(width_mm, "width_mm", low=0.0, high=cfg.stroke_mm, unit="mm")
         sp = cfg.speed if speed is None else check_int(speed, "speed", 0, 255)
@@ -392,22 +416,37 @@ class ModbusGripper(Gripper):
             )
         position = int(round((1.0 - w / cfg.stroke_mm) * 255))
         self._command(ACT | GTO, position, sp, fo)
+        self._requested = position
         if not wait:
-            return self.status()
-        return self._wait(lambda st: st.position_request == position and not st.moving, cfg.move_timeout_s, "motion")
+            return None
+        return self.settle()
+
+    def settle(self) -> GripperStatus:
+        """Waits until the fingers have stopped at (or on the way to) the last position asked
+        for; returns the status."""
+        asked = self._requested
+        return self._wait(
+            lambda st: (asked is None or st.position_request == asked) and not st.moving,
+            self.config.move_timeout_s,
+            "motion",
+        )
 
     def open(self, *, wait: bool = True) -> None:
         """Opens fully."""
         self.move_to_width(self.config.stroke_mm, wait=wait)
 
-    def open_for_grasp(self, width_mm: float) -> None:
+    def open_for_grasp(self, width_mm: float, *, wait: bool = True) -> None:
         """Opens to ``width_mm`` (at most the stroke)."""
+        self.move_to_width(min(float(width_mm), float(self.config.stroke_mm)), wait=wait)
+
+    def release(self, width_mm: float) -> None:
+        """Opens to ``width_mm`` (at most the stroke): the part held is let go."""
         self.move_to_width(min(float(width_mm), float(self.config.stroke_mm)))
 
     def close(self, *, wait: bool = True) -> Optional[bool]:
         """Closes fully; with ``wait`` returns whether an object stopped the fingers."""
         st = self.move_to_width(0.0, wait=wait)
-        return st.holding if wait else None
+        return None if st is None else st.holding
 
     def _wait(self, done: Any, timeout_s: float, what: str) -> GripperStatus:
         deadline = time.monotonic() + timeout_s

@@ -374,9 +374,12 @@ class TwinWorld:
         """Where the gripper's TCP really is."""
         return self.robot_emulator.pose() @ self.gripper_geometry.T_flange_gripper
 
-    def finger_opening_mm(self) -> float:
-        """How far apart the gripper emulator's fingers are now, mm."""
-        return self._gripper_config.stroke_mm * (1.0 - self.gripper_emulator.axis.position() / 255.0)
+    def finger_opening_mm(self, widest: bool = False) -> float:
+        """How far apart the gripper emulator's fingers are now, mm; with ``widest``, the widest
+        they will be before they stop (they may be moving while the arm does)."""
+        axis = self.gripper_emulator.axis
+        position = min(axis.position(), axis.goal) if widest else axis.position()  # 0 is open
+        return self._gripper_config.stroke_mm * (1.0 - position / 255.0)
 
     @property
     def grasp_matcher(self) -> GraspMatcher:
@@ -460,7 +463,7 @@ class TwinWorld:
         pile as the motions before left it, in :meth:`settle_pending`."""
         if self.gripper_emulator is None:
             return
-        opening = self.finger_opening_mm()
+        opening = self.finger_opening_mm(widest=True)
         path = T_base_flange @ self.gripper_geometry.T_flange_gripper
         if self._held is not None or opening > CLOSED_OPENING_MM:
             # The part held (or let go and not yet out of the pile) is where the fingers are.

@@ -5,6 +5,12 @@ fingers move toward the requested position at a speed set by the SPEED byte and 
 an object placed with :attr:`GripperEmulator.object_at` (a position, 0 open – 255 closed).
 Wrong CRCs are ignored (a Modbus slave stays silent); unknown functions, addresses and values
 get Modbus exception replies.
+
+On a cell's :class:`~binpick.devices.emulators.clock.PhysicalClock` (``clock`` set) the fingers
+move alongside the other devices, as a real gripper does: a command marks when they will arrive
+(their travel at the SPEED byte's speed, from the clock's time at the command), and the first
+status read that finds them stopped holds the cell until then. A driver that waits for the
+fingers is charged the rest of their travel; one that moved the arm meanwhile, nothing more.
 """
 
 from __future__ import annotations
@@ -72,6 +78,8 @@ class GripperEmulator(PtyEmulator):
         self._activated_at: Optional[float] = None
         #: position (0–255) where an object stops closing fingers; None for empty air
         self.object_at: Optional[int] = None
+        #: when (on the clock) the fingers reach the goal of the last command
+        self.arrives_at = 0.0
 
     # -- model
     def _activated(self) -> bool:
@@ -104,8 +112,9 @@ class GripperEmulator(PtyEmulator):
         if self.object_at is not None and goal > self.axis.position() >= 0 and goal > self.object_at:
             goal = float(max(self.object_at, self.axis.position()))
         if action & GTO and self._activated_at is not None:
-            if goal != self.axis.goal:  # the fingers' travel to the goal (or to the part they stop on)
-                self._spend(abs(goal - self.axis.position()) / physical)
+            if goal != self.axis.goal and self.clock is not None:
+                # The fingers' travel to the goal (or to the part they stop on) runs on the clock from now.
+                self.arrives_at = self.clock.now() + abs(goal - self.axis.position()) / physical
             self.axis.set_goal(goal)
 
     # -- protocol
@@ -138,6 +147,8 @@ class GripperEmulator(PtyEmulator):
                 address, count = struct.unpack_from(">HH", frame, 2)
                 if address != STATUS_REGISTER or not 1 <= count <= 3:
                     return self._exception(fc, 2)
+                if self.clock is not None and not self.axis.moving():
+                    self.clock.advance_to(self.arrives_at, self.device)  # seen stopped: they have arrived
                 data = self._status()[: 2 * count]
                 return self._reply(bytes([slave, fc, len(data)]) + data)
             if fc == FC_WRITE_MULTIPLE:
