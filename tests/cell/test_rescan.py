@@ -11,7 +11,7 @@ import pytest
 from _cell_helpers import recording_tee_cell
 
 from binpick.cell import PickRecord
-from binpick.cell.rescan import RescanBasis, band, basis_after, laser_angles
+from binpick.cell.rescan import SEEN_AGAIN, RescanBasis, band, basis_after, laser_angles
 
 
 def _nearest(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -127,13 +127,14 @@ def test_a_part_is_never_picked_on_points_the_sweep_only_carried_over(after_one_
     assert 0 < partial.carried < len(partial.points)
     assert partial.seen_again(np.arange(partial.carried)) == 0.0
     assert partial.seen_again(np.arange(partial.carried, len(partial.points))) == 1.0
-    # The same in a pick: the part chosen on kept points makes the cell sweep the whole bin first.
+    # The same in a pick: the part chosen on kept points is swept again before it is picked.
     sim.cell._basis = RescanBasis(scan=last, lo=strip[0], hi=strip[1])
     lines.clear()
     record, _ = sim.cell._look_and_pick(2, None)  # one pick of a run (run() starts with a whole scan)
     said = [m for s, m in lines if s == "scan"]
-    assert any("kept the last scan's points" in m for m in said), said
-    assert sim.cell._last[0].carried == 0
+    assert any("kept the last scan's points: it is swept again" in m for m in said), said
+    scan, located = sim.cell._last
+    assert scan.seen_again(located.indices) >= SEEN_AGAIN
     assert record.success and record.truth.pick_grade, record.error
 
 

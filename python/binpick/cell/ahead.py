@@ -31,7 +31,8 @@ against the ground truth (the simulator) when it is used.
 Time: the planning's time on its own thread is recorded as ``ahead.compute.pose``,
 ``ahead.compute.plan`` and ``ahead.compute.grasp_widths`` (ms, wall: the pose search runs on a
 worker thread of its own, which a thread's CPU clock would miss), with the hardware time it
-overlapped (``ahead.window``: from the lift to the end of the next scan). What the cell had to
+overlapped (``ahead.window``: from the lift to the end of the next scan, or to its start where
+a rescan of what changed must sweep the part planned too). What the cell had to
 wait for beyond that window is compute on the critical path (``cpu.ahead_wait``, in the cycle's
 ``compute`` stage); the check on the new scan is too (``cpu.confirm``). On a real cell, whose
 wall clock is its physical time, the wait is the wall time the next cycle spent joining the
@@ -84,6 +85,8 @@ class PlanAhead:
         self._thread: Optional[threading.Thread] = None
         self._done: dict[str, Any] = {}
         self._since: tuple[float, Optional[float]] = (0.0, None)
+        #: when the cell first needed the plan (wall, clock), and the wall time it then waited
+        self._needed: Optional[tuple[float, Optional[float], float]] = None
 
     def start(self, located: Located, skipped: list[Skipped]) -> None:
         """Starts planning the pick after the one of ``located`` (just lifted) on its scan,
@@ -113,7 +116,7 @@ class PlanAhead:
         """Forgets any plan made ahead (waits for the thread: it has no device to stop)."""
         if self._thread is not None:
             self._thread.join()
-        self._thread, self._done = None, {}
+        self._thread, self._done, self._needed = None, {}, None
 
     def planned_box(self) -> Optional[tuple[np.ndarray, np.ndarray]]:
         """The box (base frame, mm) of the part planned ahead at its planned pose, or None when
@@ -121,7 +124,10 @@ class PlanAhead:
         :mod:`binpick.cell.rescan`)."""
         if self._thread is None:
             return None
+        cell = self.cell
+        wait0 = time.perf_counter()
         self._thread.join()
+        self._needed = (wait0, cell.clock() if cell.clock is not None else None, time.perf_counter() - wait0)
         found = self._done.get("found")
         if found is None:
             return None
@@ -140,14 +146,18 @@ class PlanAhead:
         wait0 = time.perf_counter()
         self._thread.join()
         done, cell = self._done, self.cell
-        self._thread, self._done = None, {}
+        waited = time.perf_counter() - wait0
+        c1 = cell.clock() if c0 is not None else None
+        if self._needed is not None:  # the scan needed the plan first (planned_box): the window ended there
+            wait0, c1, waited = self._needed
+        self._thread, self._done, self._needed = None, {}, None
         if "error" in done:  # a bug, not a finding: never hidden behind a fallback
             raise done["error"]
-        window_ms = (cell.clock() - c0) * 1e3 if c0 is not None else (wait0 - t0) * 1e3
+        window_ms = (c1 - c0) * 1e3 if c0 is not None and c1 is not None else (wait0 - t0) * 1e3
         spent = {f"ahead.compute.{k.removeprefix('cpu.')}": v for k, v in done.get("cpu", {}).items()}
         times.update(spent)
         times["ahead.window"] = window_ms
-        times["ahead.wait"] = (time.perf_counter() - wait0) * 1e3
+        times["ahead.wait"] = waited * 1e3
         times["cpu.ahead_wait"] = max(0.0, sum(spent.values()) - window_ms) if c0 is not None else 0.0
         if "found" not in done:
             cell.progress("plan", f"nothing was planned during the carry ({done.get('why')}); locating in the new scan")

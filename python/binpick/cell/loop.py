@@ -249,6 +249,18 @@ class Cell:
             views = [(T, cfg.sweep_from(T)) for T in (as_transform(T, f"poses[{i}]") for i, T in enumerate(poses))]
         return self.sweep_views(views)
 
+    def _sweep_part(self, scan: ScanResult, located: Located, views: list) -> ScanResult:
+        """``scan`` with the laser angles across the part at ``located`` swept again (its box
+        grown by a tenth of its size), :func:`binpick.cell.rescan.rescan` on it: for a part chosen
+        on points a rescan kept from the scan before."""
+        self.progress("scan", "the part chosen lies where this sweep kept the last scan's points: it is swept again")
+        T = np.asarray(located.T_base_object, dtype=np.float64)
+        pts = np.asarray(self.config.model.points, dtype=np.float64)
+        placed = pts @ T[:3, :3].T + T[:3, 3]
+        grow = 0.1 * float(np.ptp(pts, axis=0).max())
+        basis = RescanBasis(scan=scan, lo=placed.min(axis=0) - grow, hi=placed.max(axis=0) + grow)
+        return rescan(self, basis, views, around="the part chosen")
+
     def sweep_views(self, views: Sequence[tuple[np.ndarray, np.ndarray]]) -> ScanResult:
         """Sweeps the laser through the angles of each (flange pose, angles) of ``views``; the
         cloud in the base frame."""
@@ -753,13 +765,16 @@ class Cell:
                 ahead = self._ahead.take(before, scan, times) if self._ahead is not None and k == 0 else None
                 try:
                     located, plan = ahead if ahead is not None else self.locate_and_plan(scan, skipped)
-                    if scan.seen_again(located.indices) < SEEN_AGAIN:
-                        # Chosen on points the sweep kept from the last scan: the whole bin, seen again.
-                        self.progress("scan", "the part chosen lies where this sweep kept the last scan's points")
-                        whole = self.sweep_views(views_whole)
-                        for key, v in whole.timings.items():
+                    for whole in (False, True):
+                        if scan.seen_again(located.indices) >= SEEN_AGAIN:
+                            break
+                        # Chosen on points the sweep kept from the last scan: its band swept again
+                        # (the whole bin when that is most of it, or when it shows a move), then
+                        # the whole bin if the part chosen then is again one on kept points.
+                        again = self.sweep_views(views_whole) if whole else self._sweep_part(scan, located, views_whole)
+                        for key, v in again.timings.items():
                             times[f"scan.{key}"] = times.get(f"scan.{key}", 0.0) + v
-                        scan = first = whole
+                        scan = first = again
                         self._last = (scan, self._last[1])
                         times.pop("ahead.used", None)
                         located, plan = self.locate_and_plan(scan, skipped)

@@ -123,21 +123,21 @@ def band(cell: Any, basis: RescanBasis, wanted: np.ndarray, T_base_flange: np.nd
     return wanted[inside]
 
 
-def rescan(cell: Any, basis: RescanBasis, views: list) -> ScanResult:
+def rescan(cell: Any, basis: RescanBasis, views: list, around: str = "the part that left") -> ScanResult:
     """The scan of ``views`` (one scan pose) after a clean pick: the band of angles around the
     part that left, merged with the last scan (:func:`merged`); the whole sweep when the band is
     most of it or the fresh lines show something else moved (its time counted with the band's)."""
     T_scan, wanted = views[0]
     angles = band(cell, basis, np.asarray(wanted), T_scan)
     if angles is None:
-        cell.progress("scan", "the part that left spans most of the sweep: the whole bin is scanned")
+        cell.progress("scan", f"{around} spans most of the sweep: the whole bin is scanned")
         return cell.sweep_views(views)
     fresh = cell.sweep_views([(T_scan, angles)])
     scan, why = merged(basis, fresh, angles)
     if scan is not None:
         scan = replace(scan, timings=MappingProxyType({**scan.timings, "rescanned_share": len(angles) / len(wanted)}))
     if scan is not None:
-        cell.progress("scan", f"rescanned {len(angles)} of {len(wanted)} angles, around the part that left; {why}")
+        cell.progress("scan", f"rescanned {len(angles)} of {len(wanted)} angles, around {around}; {why}")
         return scan
     cell.progress("scan", f"rescanning the whole bin: {why}")
     whole = cell.sweep_views(views)
