@@ -765,12 +765,14 @@ class Cell:
                 ahead = self._ahead.take(before, scan, times) if self._ahead is not None and k == 0 else None
                 try:
                     located, plan = ahead if ahead is not None else self.locate_and_plan(scan, skipped)
-                    for whole in (False, True):
+                    for whole in (False, True) if k == 0 else (True,):
                         if scan.seen_again(located.indices) >= SEEN_AGAIN:
                             break
                         # Chosen on points the sweep kept from the last scan: its band swept again
                         # (the whole bin when that is most of it, or when it shows a move), then
-                        # the whole bin if the part chosen then is again one on kept points.
+                        # the whole bin if the part chosen then is again one on kept points. A
+                        # later look's scan joins other views, whose laser angles are another
+                        # frame's: there, the whole bin from the scan pose.
                         again = self.sweep_views(views_whole) if whole else self._sweep_part(scan, located, views_whole)
                         for key, v in again.timings.items():
                             times[f"scan.{key}"] = times.get(f"scan.{key}", 0.0) + v
