@@ -39,7 +39,6 @@ from typing import Any, Callable, Optional
 import numpy as np
 
 from .._validate import as_transform, count, number
-from ..devices import safety
 from ..devices.gripper import Gripper
 from ..devices.motor import LaserMotor
 from ..devices.robot import Robot
@@ -50,15 +49,15 @@ from ..errors import (
     InvalidTypeError,
     NoObjectFound,
     RunInterrupted,
-    SafetyError,
 )
 from ..poses import estimate_poses
 from ..vision import describe_frames, triangulate
 from .ahead import PlanAhead
 from .config import CellConfig, check_static_poses
 from .frames import FrameSource, Sweep
-from .grasp import NoGraspError, line_step, plan_bin_clash, plan_grasp, staked_filter
+from .grasp import NoGraspError, line_step, plan_grasp, staked_filter
 from .nudge import nudge_blocked
+from .plan_check import PICK_MOVES, check_plan
 from .progress import ProgressPrinter, quiet
 from .records import (
     Located,
@@ -81,17 +80,6 @@ from .symmetry import continuous_near_axis
 from .views import deciding_first, something_in_bin
 
 __all__ = ["Cell", "PICK_MOVES", "ProgressPrinter", "quiet"]
-
-
-#: The moves of one pick in the order :meth:`Cell.pick` makes them: the waypoint, and its
-#: interpolation when the loop fixes it (None: the plan's own).
-PICK_MOVES: tuple[tuple[str, Optional[bool]], ...] = (
-    ("above", None),
-    ("approach", None),
-    ("grasp", None),
-    ("lift", True),
-    ("drop", False),
-)
 
 
 def _ms_since(t0: float) -> float:
@@ -592,48 +580,9 @@ class Cell:
         return "wrong pose", f"part {picked} left the bin, but its located pose was {off} off (not pick-grade)"
 
     def check_plan(self, plan: PickPlan) -> dict[str, tuple[np.ndarray, bool]]:
-        """The moves of ``plan`` as :meth:`pick` makes them (:data:`PICK_MOVES`), checked whole
-        before the first: every waypoint present with a boolean interpolation, each pose rigid,
-        inside the workspace and with the tool down (before anything is sent), then every move from
-        the arm's pose now to the drop pose against the approach rules. A malformed plan raises
-        InvalidInputError and an unsafe one SafetyError naming the waypoint; either way the arm
-        and the gripper have been sent nothing. Returns waypoint → (pose, linear)."""
-        if not isinstance(plan, PickPlan):
-            raise InvalidInputError(f"plan: expected a binpick.cell.PickPlan, got {type(plan).__name__}")
-        if not isinstance(plan.waypoints, (tuple, list)):
-            raise InvalidInputError(
-                f"plan.waypoints: expected a tuple of (name, T_base_flange, linear), got {plan.waypoints!r:.80}"
-            )
-        linear: dict[str, bool] = {}
-        for i, entry in enumerate(plan.waypoints):
-            if not (isinstance(entry, tuple) and len(entry) == 3 and isinstance(entry[0], str)):
-                raise InvalidInputError(
-                    f"plan.waypoints[{i}]: expected (name, T_base_flange, linear), got {entry!r:.80}"
-                )
-            if not isinstance(entry[2], (bool, np.bool_)):
-                raise InvalidInputError(f"plan.waypoints[{i}]: linear must be True or False, got {entry[2]!r:.40}")
-            linear.setdefault(entry[0], bool(entry[2]))
-        missing = [name for name, _ in PICK_MOVES if name not in linear]
-        if missing:
-            raise InvalidInputError(
-                f"plan: waypoints {missing} are missing; a pick plan has {', '.join(n for n, _ in PICK_MOVES)} "
-                "(see binpick.cell.grasp.pick_waypoints)"
-            )
-        names = [name for name, _ in PICK_MOVES]
-        flags = [linear[name] if fixed is None else fixed for name, fixed in PICK_MOVES]
-        labels = [f"plan waypoint {name!r}" for name in names]
-        limits = self.config.limits
-        poses = [safety.check_pose(plan.pose(n), limits, name=label) for n, label in zip(names, labels)]
-        safety.check_sequence(self.robot.read_pose(), poses, flags, limits, names=labels)
-        clash = plan_bin_clash(self.config, list(zip(names, poses, flags)), self.finger_opening(plan))
-        if clash is not None:
-            raise SafetyError(
-                f"plan waypoint {clash[0]!r}: the gripper (fingers {self.finger_opening(plan):.0f} mm apart, palm, "
-                f"flange) would hit the bin's "
-                f"{clash[1]}; nothing was sent — choose a grasp that keeps the whole gripper inside the bin "
-                "and above its floor"
-            )
-        return {name: (T, lin) for name, T, lin in zip(names, poses, flags)}
+        """The moves of ``plan`` as :meth:`pick` makes them, checked whole before the first
+        (:func:`binpick.cell.plan_check.check_plan`); waypoint → (pose, linear)."""
+        return check_plan(self, plan)
 
     def finger_opening(self, plan: PickPlan) -> float:
         """How far apart the fingers will be on the way in for ``plan``: its opening where the
