@@ -53,7 +53,7 @@ from ..errors import BinpickError
 from ..poses import verify_pose
 from .grasp import NoGraspError, line_step, scene_hits, staked_filter
 from .records import Located, PickPlan, PickRecord, ScanResult, Skipped
-from .rescan import clean_pick
+from .rescan import clean_pick, part_box
 
 __all__ = ["PlanAhead", "SAME_POSE_DEG", "SAME_POSE_MM"]
 
@@ -131,9 +131,7 @@ class PlanAhead:
         found = self._done.get("found")
         if found is None:
             return None
-        T = np.asarray(found[0].T_base_object, dtype=np.float64)
-        placed = np.asarray(self.cell.config.model.points, dtype=np.float64) @ T[:3, :3].T + T[:3, 3]
-        return placed.min(axis=0), placed.max(axis=0)
+        return part_box(cell.config.model, found[0].T_base_object)
 
     def take(self, record: Optional[PickRecord], scan: ScanResult, times: dict) -> Optional[tuple[Located, PickPlan]]:
         """The part and plan made ahead, when the pick they followed (``record``) was clean and

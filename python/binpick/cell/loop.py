@@ -73,7 +73,7 @@ from .records import (
     pose_trust,
     with_collisions,
 )
-from .rescan import SEEN_AGAIN, RescanBasis, basis_after, rescan
+from .rescan import SEEN_AGAIN, RescanBasis, basis_after, part_box, rescan
 from .shots import DepthSource, depth_scan
 from .sweeps import sweep_laser
 from .symmetry import continuous_near_axis
@@ -242,12 +242,8 @@ class Cell:
         grown by a tenth of its size), :func:`binpick.cell.rescan.rescan` on it: for a part chosen
         on points a rescan kept from the scan before."""
         self.progress("scan", "the part chosen lies where this sweep kept the last scan's points: it is swept again")
-        T = np.asarray(located.T_base_object, dtype=np.float64)
-        pts = np.asarray(self.config.model.points, dtype=np.float64)
-        placed = pts @ T[:3, :3].T + T[:3, 3]
-        grow = 0.1 * float(np.ptp(pts, axis=0).max())
-        basis = RescanBasis(scan=scan, lo=placed.min(axis=0) - grow, hi=placed.max(axis=0) + grow)
-        return rescan(self, basis, views, around="the part chosen")
+        lo, hi = part_box(self.config.model, located.T_base_object, 0.1)
+        return rescan(self, RescanBasis(scan=scan, lo=lo, hi=hi), views, around="the part chosen")
 
     def sweep_views(self, views: Sequence[tuple[np.ndarray, np.ndarray]]) -> ScanResult:
         """Sweeps the laser through the angles of each (flange pose, angles) of ``views``; the
@@ -722,10 +718,10 @@ class Cell:
                         # the whole bin if the part chosen then is again one on kept points. A
                         # later look's scan joins other views, whose laser angles are another
                         # frame's: there, the whole bin from the scan pose.
-                        again = self.sweep_views(views_whole) if whole else self._sweep_part(scan, located, views_whole)
-                        for key, v in again.timings.items():
+                        swept = self.sweep_views(views_whole) if whole else self._sweep_part(scan, located, views_whole)
+                        for key, v in swept.timings.items():
                             times[f"scan.{key}"] = times.get(f"scan.{key}", 0.0) + v
-                        scan = first = again
+                        scan = first = swept
                         self._last = (scan, self._last[1])
                         times.pop("ahead.used", None)
                         located, plan = self.locate_and_plan(scan, skipped)

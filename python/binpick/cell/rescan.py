@@ -41,6 +41,7 @@ __all__ = [
     "band",
     "clean_pick",
     "laser_angles",
+    "part_box",
     "rescan",
 ]
 
@@ -96,11 +97,18 @@ def basis_after(cell: Any, record: PickRecord, scan: Optional[ScanResult]) -> Op
         or len(scan.angles) < 2
     ):
         return None
-    pts = np.asarray(cfg.model.points, dtype=np.float64)
-    T = np.asarray(record.T_base_object, dtype=np.float64)
+    lo, hi = part_box(cfg.model, record.T_base_object, 0.5)
+    return RescanBasis(scan=scan, lo=lo, hi=hi)
+
+
+def part_box(model: Any, T_base_object: np.ndarray, grow: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """The box (base frame, mm) of ``model``'s points at ``T_base_object``, grown on every side
+    by ``grow`` times the part's size."""
+    pts = np.asarray(model.points, dtype=np.float64)
+    T = np.asarray(T_base_object, dtype=np.float64)
     placed = pts @ T[:3, :3].T + T[:3, 3]
-    grow = 0.5 * float(np.ptp(pts, axis=0).max())
-    return RescanBasis(scan=scan, lo=placed.min(axis=0) - grow, hi=placed.max(axis=0) + grow)
+    margin = grow * float(np.ptp(pts, axis=0).max())
+    return placed.min(axis=0) - margin, placed.max(axis=0) + margin
 
 
 def laser_angles(cell: Any, T_base_flange: np.ndarray, points: np.ndarray) -> np.ndarray:
