@@ -183,3 +183,131 @@ def test_a_part_against_a_wall_leaning_away_from_it_is_pushed_over_towards_the_w
         flat = np.eye(4)
         flat[:3, 3] = [(lo[0] + hi[0]) / 2, lo[1] + 5.0 - verts[:, 1].min(), lo[2] - verts[:, 2].min()]
         assert abs(heading(flat) + 90.0) > 30.0  # lying flat: nothing to push over
+
+
+# --------------------------------------------------------------------------- freeing pushes
+
+
+def _raft_config(x_span=(250.0, 550.0)):
+    """A plain shaft (Ø24 × 150 mm) and a cell over a bin ``x_span`` long and 200 mm wide."""
+    from _files import small_calibration
+    from binpick.cell import CellConfig
+    from binpick.devices import CellLimits
+    from binpick.transforms import look_down
+
+    shaft = binpick.parts.keyed_shaft(diameter=24.0, length=150.0, feature=False, spacing=2.0)
+    centre = sum(x_span) / 2
+    return CellConfig(
+        calibration=small_calibration(),
+        model=shaft,
+        bin_bounds=((x_span[0], -100.0, 0.0), (x_span[1], 100.0, 80.0)),
+        scan_poses=(look_down(centre, 0.0, 450.0),),
+        drop_pose=look_down(centre, -250.0, 350.0),
+        frames=4,
+        limits=CellLimits(workspace_min_mm=(100.0, -400.0, 0.0), workspace_max_mm=(700.0, 400.0, 700.0)),
+    )
+
+
+def _raft(cfg, xs, ys):
+    """Shafts lying on the floor along x, their centres at (x, y) — touching where the y are a
+    diameter apart — and what a scan from above sees of them (their upper halves)."""
+    from binpick.transforms import rotation_about
+
+    poses = []
+    for x, y in zip(xs, ys):
+        T = np.eye(4)
+        T[:3, :3] = rotation_about((0.0, 1.0, 0.0), math.pi / 2)  # the model's z (the axis) along x
+        T[:3, 3] = (x, y, 12.0)
+        poses.append(T)
+    pts = np.asarray(cfg.model.points)
+    scene = np.concatenate([pts @ T[:3, :3].T + T[:3, 3] for T in poses])
+    return poses, scene[scene[:, 2] > 11.0]
+
+
+def test_a_shaft_in_a_row_of_its_kind_is_slid_out_along_its_axis_until_a_grasp_passes():
+    from binpick.cell.grasp import NoGraspError, plan_grasp
+
+    cfg = _raft_config()
+    poses, scene = _raft(cfg, (400.0, 400.0, 400.0), (-24.0, 0.0, 24.0))
+    here = cfg.scan_poses[0]
+    for T in poses:  # three shafts touching side by side: no finger fits beside any of them
+        with pytest.raises(NoGraspError, match="collision"):
+            plan_grasp(cfg, T, _others(scene, cfg, T), here)
+    plan = nudge.plan_separating(cfg, poses[1], scene, here)
+    assert plan is not None
+    # Along the shaft's axis (a push across would shove the row), far enough that a grasp clears
+    # the neighbours' ends, within the safety module's push limit.
+    assert abs(plan.direction[0]) > 0.98, plan.direction
+    moved = plan.T_after[:3, 3] - poses[1][:3, 3]
+    assert np.allclose(moved[1:], 0.0) and 20.0 <= abs(moved[0]) <= cfg.limits.max_push_mm
+    np.testing.assert_allclose(plan.T_after[:3, :3], poses[1][:3, :3])
+    after, _ = plan_grasp(cfg, plan.T_after, _others(scene, cfg, poses[1]), here)
+    assert after.grasp == plan.grasp_after
+    # The closed fingers go down beyond the shaft's end, clear of it and of the bin, and push
+    # along its axis: every move passes the checks the cell runs.
+    assert nudge.check_nudge(cfg, list(plan.waypoints), here, _others(scene, cfg, poses[1])) is None
+    tip_x = [T[0, 3] for name, T, _ in plan.waypoints if name.startswith(("descend", "push"))]
+    end_x = poses[1][0, 3] - math.copysign(75.0, plan.direction[0])
+    assert all((x - end_x) * plan.direction[0] < 0 for x in tip_x[:1]), (tip_x, end_x)
+    assert plan.as_dict()["frees"]["grasp"] == plan.grasp_after
+
+
+def test_no_freeing_push_for_a_row_with_no_room_to_slide_a_standing_part_or_one_on_others():
+    # The bin 170 mm long: shafts of 150 mm side by side cannot slide out past each other's
+    # ends, and pushing across would shove the row: no freeing push.
+    cfg = _raft_config((315.0, 485.0))
+    poses, scene = _raft(cfg, (400.0, 400.0, 400.0), (-24.0, 0.0, 24.0))
+    assert nudge.plan_separating(cfg, poses[1], scene, cfg.scan_poses[0]) is None
+    # Nor is a shaft standing on its end, alone in the open (pushed, it falls over, not slides),
+    # nor one lying on top of others.
+    cfg = _raft_config()
+    standing = np.eye(4)
+    standing[:3, 3] = (400.0, 0.0, 75.0)
+    pts = np.asarray(cfg.model.points) + standing[:3, 3]
+    assert nudge.plan_separating(cfg, standing, pts, cfg.scan_poses[0]) is None
+    (lying,), top = _raft(cfg, (400.0,), (0.0,))
+    assert nudge.plan_separating(cfg, lying, top, cfg.scan_poses[0]) is not None
+    on_top = lying.copy()
+    on_top[2, 3] += 20.0
+    assert nudge.plan_separating(cfg, on_top, top + (0.0, 0.0, 20.0), cfg.scan_poses[0]) is None
+
+
+def _others(scene, cfg, T):
+    """The scene without the points of the part at ``T`` (as the nudge and the cell leave them out)."""
+    own = nudge._near(scene, np.asarray(cfg.model.points) @ T[:3, :3].T + T[:3, 3], nudge.OWN_POINT_MM)
+    return scene[~own]
+
+
+def test_a_shaft_lying_against_a_wall_is_never_pushed_into_it():
+    # Lying along the -x wall, 2 mm from it: every push that could start goes towards the wall
+    # or along it, and a part lying on the floor slides as far as it is pushed — into the wall,
+    # the arm would crush it there (the physics throws it out of the bin). Along the wall, it
+    # has less room than a push is worth.
+    cfg = _raft_config()
+    T = np.eye(4)
+    T[:3, :3] = binpick.transforms.rotation_about((1.0, 0.0, 0.0), math.pi / 2)  # the axis along y
+    T[:3, 3] = (250.0 + 12.0 + 2.0, 0.0, 12.0)
+    pts = np.asarray(cfg.model.points) @ T[:3, :3].T + T[:3, 3]
+    with pytest.raises(nudge.NudgeRefused, match="pushed into the bin's wall"):
+        nudge.plan_nudge(cfg, T, pts[pts[:, 2] > 11.0], cfg.scan_poses[0])
+    # 40 mm from the wall, it may be pushed towards it, no nearer than the margin.
+    T[0, 3] = 250.0 + 12.0 + 40.0
+    footprint = (np.asarray(cfg.model.points) @ T[:3, :3].T + T[:3, 3])[:, :2]
+    plan = nudge.plan_nudge(cfg, T, np.zeros((0, 3)), cfg.scan_poses[0])
+    touch = float(((footprint - T[:2, 3]) @ plan.direction).min()) - nudge._closed_reach(cfg)
+    shove = float((plan.waypoints[-2][1][:2, 3] - T[:2, 3]) @ plan.direction) - touch
+    assert nudge.SEPARATE_STEP_MM <= shove <= nudge._room(cfg, footprint, plan.direction) - nudge.WALL_MARGIN_MM + 1e-6
+
+
+def test_a_part_a_push_leaves_out_of_the_bin_is_a_collision_of_that_cycle():
+    with SimulatedCell(binpick.parts.keyed_shaft(), count=1, seed=0, frames=4) as sim:
+        (pid,) = sim.pile.ids.tolist()
+        path = np.stack([np.eye(4), np.eye(4)])
+        sim._out_of_bin([pid], path, 0.0)  # where the pile left it: in the bin
+        assert sim.take_collisions() == []
+        lifted = sim.pile.pose(pid).copy()
+        lifted[2, 3] += 80.0 + 2 * sim.model.diameter  # jammed up a wall, above the rim
+        sim.pile.pose = lambda i: lifted if i == pid else None
+        sim._out_of_bin([pid], path, 0.0)
+        (event,) = sim.take_collisions()
+        assert event["with"].startswith(f"part {pid}, pushed out of the bin")

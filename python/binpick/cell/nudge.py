@@ -1,5 +1,19 @@
 """The nudge: when every located part is blocked (standing, leaning on a wall, no grasp within
-the tool-tilt limit), the closed gripper pushes one of them over and the cell looks again.
+the tool-tilt limit, lying in a row of its kind), the closed gripper pushes one of them and the
+cell looks again.
+
+First, a push that frees a part (:func:`plan_separating`): parts lying side by side — shafts that
+rolled together, plates edge to edge — leave no room for a finger between them, and pushing
+one across the row moves the row. For each located part, each direction (along the part's
+length first: a shaft slides past its neighbours' ends) and each distance (the shortest first,
+:data:`SEPARATE_STEP_MM` apart, within the safety module's ``max_push_mm``), the part is moved
+by that much on paper: the push is taken when the part's footprint stays in the bin, meets no
+other scanned part on its way (it would shove them too), and a grasp plan
+(:func:`~binpick.cell.grasp.plan_grasp`) passes at the part's new place against the scan. The
+cell scans again after any nudge and plans the pick on what it sees then: the prediction
+chooses the push, nothing is picked on it.
+
+Otherwise, a push that topples or shifts a blocked part:
 
 A nudge of a located part (``T_base_object``) is planned with the tool pointing straight down:
 above a start point ``NUDGE_START_MM`` outside the part's footprint (30 mm, else 8 mm: between
@@ -44,9 +58,10 @@ from ..devices import safety
 from ..errors import BinpickError, SafetyError
 from ..transforms import inverse, look_down
 from .config import CellConfig
-from .grasp import bin_clash, plan_inputs
+from .grasp import NoGraspError, bin_clash, plan_grasp, plan_inputs
+from .symmetry import continuous_near_axis
 
-__all__ = ["NudgePlan", "NudgeRefused", "plan_nudge", "check_nudge", "nudge_directions"]
+__all__ = ["NudgePlan", "NudgeRefused", "plan_nudge", "plan_separating", "check_nudge", "nudge_directions"]
 
 #: How far outside the part's footprint the closed fingers go down, mm: the first distance
 #: tried, then the second (a part near a wall leaves a narrow gap between them).
@@ -64,6 +79,19 @@ OWN_POINT_MM = 4.0
 LEAN_MM = 5.0
 #: The fingertips stay at least this far above the floor (beyond ``floor_clearance_mm``), mm.
 TIP_FLOOR_MARGIN_MM = 5.0
+#: The distances a freeing push (:func:`plan_separating`) moves a part are multiples of this, mm.
+SEPARATE_STEP_MM = 10.0
+#: The cells of the map of what stands in a freeing push's way, mm: finer than a finger, coarser
+#: than the scan's points are apart along a line.
+PATH_CELL_MM = 2.0
+#: Scanned points lower than this above the floor are the floor's, not a part's in the way, mm.
+PATH_FLOOR_MM = 2.0
+#: A part lying on the floor is pushed no nearer than this to a wall, mm.
+WALL_MARGIN_MM = 2.0
+#: A part whose height is at most this many times its thinnest extent lies on its broad side.
+FLAT_RATIO = 1.25
+#: A part whose lowest point is within this of the floor rests on the floor, mm.
+FLAT_FLOOR_MM = 5.0
 
 
 class NudgeRefused(SafetyError):
@@ -79,6 +107,10 @@ class NudgePlan:
     direction: np.ndarray
     tip_z_mm: float
     waypoints: tuple[tuple[str, np.ndarray, bool], ...]
+    #: A freeing push's (:func:`plan_separating`): where the part is planned to come to rest
+    #: and the grasp that passes there; None for a push that topples or shifts a blocked part.
+    T_after: Optional[np.ndarray] = None
+    grasp_after: Optional[str] = None
 
     @property
     def heading_deg(self) -> float:
@@ -91,6 +123,9 @@ class NudgePlan:
             "T_base_object": np.round(self.T_base_object, 6).tolist(),
             "heading_deg": round(self.heading_deg, 1),
             "tip_z_mm": round(self.tip_z_mm, 1),
+            "frees": None
+            if self.T_after is None
+            else {"T_after": np.round(self.T_after, 6).tolist(), "grasp": self.grasp_after},
         }
 
 
@@ -187,6 +222,151 @@ def check_nudge(config: CellConfig, waypoints: list, T_now: np.ndarray, scene: n
     return None
 
 
+def _push_height(config: CellConfig, verts: np.ndarray) -> float:
+    """The fingertips' height for pushing the part whose vertices (base frame) are ``verts``:
+    two thirds of its height above the floor, and clear of the floor."""
+    floor = float(config.bin_bounds[0][2])
+    top = float(verts[:, 2].max())
+    return max(top - (top - floor) / 3.0, floor + config.floor_clearance_mm + TIP_FLOOR_MARGIN_MM)
+
+
+def _closed_reach(config: CellConfig) -> float:
+    """How far the closed fingers reach from the TCP across, whichever way the push goes, mm."""
+    g = config.gripper
+    return math.hypot(g.finger_thickness_mm, g.finger_width_mm / 2)
+
+
+class _PathMap:
+    """Where the scanned points of other parts stand over the bin's floor, on a grid of
+    :data:`PATH_CELL_MM` cells: what a part pushed over the floor would run into."""
+
+    def __init__(self, config: CellConfig, others: np.ndarray) -> None:
+        lo, hi = (np.asarray(b, dtype=float) for b in config.bin_bounds)
+        self.lo, self.hi = lo[:2], hi[:2]
+        self.shape = tuple(int(n) for n in np.ceil((self.hi - self.lo) / PATH_CELL_MM).astype(int) + 1)
+        self.occupied = np.zeros(self.shape, dtype=bool)
+        up = others[(others[:, 2] > lo[2] + PATH_FLOOR_MM) & (others[:, 2] < hi[2])]
+        inside = ((up[:, :2] >= self.lo) & (up[:, :2] <= self.hi)).all(axis=1)
+        ij = ((up[inside, :2] - self.lo) // PATH_CELL_MM).astype(int)
+        self.occupied[ij[:, 0], ij[:, 1]] = True
+
+    def clear(self, footprint: np.ndarray, offset: np.ndarray) -> bool:
+        """Whether the part's footprint (its points' xy) moved by ``offset`` lies inside the
+        bin's walls (:data:`WALL_MARGIN_MM` from them) on cells no other part stands on."""
+        xy = footprint + offset
+        if (xy < self.lo + WALL_MARGIN_MM).any() or (xy > self.hi - WALL_MARGIN_MM).any():
+            return False
+        ij = ((xy - self.lo) // PATH_CELL_MM).astype(int)
+        return not bool(self.occupied[ij[:, 0], ij[:, 1]].any())
+
+
+def _freeing_directions(config: CellConfig, verts: np.ndarray, centre: np.ndarray) -> list[np.ndarray]:
+    """Push directions for a freeing push: along the part's longest extent over the floor both
+    ways (a shaft slides out along its axis), then :func:`nudge_directions`."""
+    xy = verts[:, :2] - verts[:, :2].mean(axis=0)
+    w, v = np.linalg.eigh(xy.T @ xy)
+    first = [v[:, 1], -v[:, 1]] if w[1] > 2.0 * max(w[0], 1e-9) else []
+    out: list[np.ndarray] = []
+    for d in first + nudge_directions(config, centre):
+        if all(float(d @ u) < math.cos(math.radians(10.0)) for u in out):
+            out.append(np.asarray(d, dtype=float))
+    return out
+
+
+def _room(config: CellConfig, footprint: np.ndarray, d: np.ndarray) -> float:
+    """How far the part's footprint (its points' xy) can move along ``d`` before it meets one of
+    the bin's walls, mm."""
+    lo, hi = (np.asarray(b, dtype=float)[:2] for b in config.bin_bounds)
+    room = math.inf
+    for axis in (0, 1):
+        if abs(d[axis]) > 1e-9:
+            wall = hi[axis] if d[axis] > 0 else lo[axis]
+            room = min(room, float(((wall - footprint[:, axis]) / d[axis]).min()))
+    return max(room, 0.0)
+
+
+def _lies_flat(config: CellConfig, verts: np.ndarray) -> bool:
+    """Whether the part whose vertices (base frame) are ``verts`` lies on the bin's floor on its
+    broad side (its height no more than :data:`FLAT_RATIO` times its thinnest extent, its bottom
+    within :data:`FLAT_FLOOR_MM` of the floor): pushed, it slides or rolls where it is pushed,
+    as :func:`plan_separating` plans; a part standing up or lying on others topples instead."""
+    centred = verts - verts.mean(axis=0)
+    thinnest = float(np.ptp(centred @ np.linalg.eigh(centred.T @ centred)[1][:, 0]))
+    floor = float(config.bin_bounds[0][2]) + config.floor_clearance_mm
+    height = float(np.ptp(verts[:, 2]))
+    return height <= FLAT_RATIO * thinnest and float(verts[:, 2].min()) <= floor + FLAT_FLOOR_MM
+
+
+def plan_separating(config: CellConfig, T_base_object: Any, scene: Any, T_now: Any) -> Optional[NudgePlan]:
+    """The shortest push of the located part ``T_base_object`` that frees it (see the module's
+    docstring): along each of :func:`_freeing_directions`, by a multiple of
+    :data:`SEPARATE_STEP_MM`, its footprint in the bin and clear of other scanned parts all the
+    way, a grasp passing at its new place against ``scene`` (base frame; the part's own points
+    left out), the push passing :func:`check_nudge`. None when no push does."""
+    T, pts, T_now = plan_inputs(config, T_base_object, scene, T_now, "T_now")
+    model = config.model
+    verts = np.asarray(model.vertices) @ T[:3, :3].T + T[:3, 3]
+    if not _lies_flat(config, verts):
+        return None
+    own = _near(pts, np.asarray(model.points) @ T[:3, :3].T + T[:3, 3], OWN_POINT_MM)
+    others = pts[~own]
+    centre = (verts[:, :2].min(axis=0) + verts[:, :2].max(axis=0)) / 2
+    footprint = (np.asarray(model.points) @ T[:3, :3].T + T[:3, 3])[:, :2]
+    path = _PathMap(config, others)
+    tip_z, reach = _push_height(config, verts), _closed_reach(config)
+    free_turn = continuous_near_axis(model) is not None
+    longest = config.limits.max_push_mm - min(NUDGE_START_MM) - SEPARATE_STEP_MM
+    directions = _freeing_directions(config, verts, centre)
+    cleared = [0.0] * len(directions)  # how far each direction's way is known clear
+    live = list(range(len(directions)))
+    grasps: dict[tuple[int, float], Optional[tuple[np.ndarray, Any]]] = {}
+    distance = SEPARATE_STEP_MM
+    while distance <= longest and live:
+        for k in list(live):
+            # Robust to a push that carries the part a step short of where it is planned to
+            # go: a grasp passes there too.
+            d, farther = directions[k], distance + SEPARATE_STEP_MM
+            while cleared[k] < farther - 1e-9 and path.clear(footprint, min(cleared[k] + PATH_CELL_MM, farther) * d):
+                cleared[k] = min(cleared[k] + PATH_CELL_MM, farther)
+            if cleared[k] < farther - 1e-9:  # something in the way: farther is no better
+                live.remove(k)
+                continue
+            for x in (distance, farther):  # each place planned once: a step's farther is the next's
+                if (k, x) not in grasps:
+                    grasps[k, x] = _grasp_at(config, T, x * d, others, T_now, free_turn)
+            if grasps[k, distance] is None or grasps[k, farther] is None:
+                continue
+            T_after, plan = grasps[k, farther]
+            rear = float(((verts[:, :2] - centre) @ d).min())
+            end = centre + (rear - reach + farther) * d
+            for gap in NUDGE_START_MM:
+                moves = _waypoints(config, centre + (rear - gap - reach) * d, end, tip_z)
+                if check_nudge(config, moves, T_now, others) is None:
+                    return NudgePlan(
+                        T_base_object=T,
+                        direction=d,
+                        tip_z_mm=tip_z,
+                        waypoints=tuple(moves),
+                        T_after=T_after,
+                        grasp_after=plan.grasp,
+                    )
+        distance += SEPARATE_STEP_MM
+    return None
+
+
+def _grasp_at(
+    config: CellConfig, T: np.ndarray, offset: np.ndarray, others: np.ndarray, T_now: np.ndarray, free_turn: bool
+) -> Optional[tuple[np.ndarray, Any]]:
+    """The part at ``T`` moved by ``offset`` (xy, mm) and the grasp plan that passes there
+    against ``others``, or None when none does."""
+    T_after = T.copy()
+    T_after[:2, 3] += offset
+    try:
+        return T_after, plan_grasp(config, T_after, others, T_now, free_turn=free_turn)[0]
+    except NoGraspError:
+        return None
+
+
 def plan_nudge(
     config: CellConfig, T_base_object: Any, scene: Any, T_now: Any, *, tried: Sequence[NudgePlan] = ()
 ) -> NudgePlan:
@@ -199,25 +379,31 @@ def plan_nudge(
     T, pts, T_now = plan_inputs(config, T_base_object, scene, T_now, "T_now")
     model = config.model
     verts = np.asarray(model.vertices) @ T[:3, :3].T + T[:3, 3]
-    floor = float(config.bin_bounds[0][2])
-    top = float(verts[:, 2].max())
-    tip_z = max(top - (top - floor) / 3.0, floor + config.floor_clearance_mm + TIP_FLOOR_MARGIN_MM)
+    tip_z, reach = _push_height(config, verts), _closed_reach(config)
     centre = (verts[:, :2].min(axis=0) + verts[:, :2].max(axis=0)) / 2
     own = _near(pts, np.asarray(model.points) @ T[:3, :3].T + T[:3, 3], OWN_POINT_MM)
     others = pts[~own]
-    # The closed fingers reach this far from the TCP across, whichever way the push goes.
-    g = config.gripper
-    reach = math.hypot(g.finger_thickness_mm, g.finger_width_mm / 2)
     why: list[str] = []
     directions = nudge_directions(config, centre, first=_topple(config, verts, reach))
     before = [p.direction for p in tried if np.linalg.norm(p.T_base_object[:2, 3] - T[:2, 3]) < model.diameter / 2]
     cos_apart = math.cos(math.radians(RETRY_APART_DEG))
     directions.sort(key=lambda d: any(float(d @ b) > cos_apart for b in before))  # stable: the order otherwise kept
+    # A part lying on the floor slides as far as it is pushed: never into a wall (the arm would
+    # crush it there). One standing topples, and may be pushed over towards a wall.
+    footprint = (np.asarray(model.points) @ T[:3, :3].T + T[:3, 3])[:, :2] if _lies_flat(config, verts) else None
     for d in directions:
         s = (verts[:, :2] - centre) @ d
+        touch = float(s.min()) - reach  # the TCP's place along d where the fingers meet the part
+        # A push that would reach a wall may still reach the centre.
+        ends = [NUDGE_PAST_MM, 0.0]
+        if footprint is not None:
+            room = _room(config, footprint, d) - WALL_MARGIN_MM
+            capped = {min(e, touch + room) for e in ends}
+            ends = sorted((e for e in capped if e - touch >= SEPARATE_STEP_MM), reverse=True)
+            problem = "the part would be pushed into the bin's wall" if not ends else None
         for gap in NUDGE_START_MM:
-            start = centre + (float(s.min()) - gap - reach) * d
-            for past in (NUDGE_PAST_MM, 0.0):  # a push that would reach a wall may still reach the centre
+            start = centre + (touch - gap) * d
+            for past in ends:
                 moves = _waypoints(config, start, centre + past * d, tip_z)
                 problem = check_nudge(config, moves, T_now, others)
                 if problem is None:
@@ -268,6 +454,23 @@ def nudge_blocked(cell: Any, skipped: list, scan: Any, made: Sequence[NudgePlan]
     made in this pick (see :func:`plan_nudge`). Faults stop the arm and are raised."""
     cfg = cell.config
     T_now = cell.robot.read_pose()
+    # A push that frees a part first: each part once (the looks' estimates of one part agree).
+    seen: list[np.ndarray] = []
+    for k in skipped:
+        t = k.T_base_object[:3, 3]
+        if any(np.linalg.norm(t - u) < OWN_POINT_MM for u in seen):
+            continue
+        seen.append(t)
+        plan = plan_separating(cfg, k.T_base_object, scan.points, T_now)
+        if plan is not None:
+            a = plan.T_after[:3, 3]
+            cell.progress(
+                "nudge",
+                f"pushing the {cfg.model.name} at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm "
+                f"{np.linalg.norm(a - t):.0f} mm towards {plan.heading_deg:.0f}° to free it (a grasp "
+                f"passes at ({a[0]:.1f}, {a[1]:.1f}) mm), fingertips {plan.tip_z_mm:.0f} mm up",
+            )
+            return plan if _execute(cell, plan) else _closed_on_something(cell)
     tried: list[np.ndarray] = []
     refusals = []
     for k in skipped:
@@ -286,12 +489,13 @@ def nudge_blocked(cell: Any, skipped: list, scan: Any, made: Sequence[NudgePlan]
             f"pushing the {cfg.model.name} at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm towards "
             f"{plan.heading_deg:.0f}° with the closed gripper, fingertips {plan.tip_z_mm:.0f} mm up",
         )
-        if not _execute(cell, plan):
-            cell.progress("nudge", "the gripper closed on something before the push; nothing was pushed")
-            return None
-        return plan
+        return plan if _execute(cell, plan) else _closed_on_something(cell)
     cell.progress("nudge", f"no part can be nudged: {refusals[0] if refusals else 'no part located'}")
     return None
+
+
+def _closed_on_something(cell: Any) -> None:
+    cell.progress("nudge", "the gripper closed on something before the push; nothing was pushed")
 
 
 def _execute(cell: Any, plan: NudgePlan) -> bool:

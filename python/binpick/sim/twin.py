@@ -549,6 +549,32 @@ class TwinWorld:
                 f"the closed gripper swept the bin at {speed:.0f} mm/s: parts {report.moved or 'none'} moved "
                 f"({report.push_steps} steps, settled in {time.perf_counter() - t0:.1f} s)",
             )
+            self._out_of_bin(report.moved, path, opening)
+
+    def _out_of_bin(self, moved: list[int], path: np.ndarray, opening: float) -> None:
+        """Records a collision for each of the parts ``moved`` by the push along ``path`` that
+        came to rest out of the bin: over a wall, or higher above the rim than the part is long
+        (jammed against a wall and forced up it — a push a real arm would have crushed it in)."""
+        lo, hi = (np.asarray(b, dtype=float) for b in self.layout.bin.bounds)
+        T_fg = inverse(self.gripper_geometry.T_flange_gripper)
+        for pid in moved:
+            if pid not in self.pile.ids:
+                continue
+            T = self.pile.pose(pid)
+            c = (self._contact_points @ T[:3, :3].T + T[:3, 3]).mean(axis=0)
+            if (c[:2] >= lo[:2]).all() and (c[:2] <= hi[:2]).all() and c[2] <= hi[2] + self.model.diameter:
+                continue
+            event = {
+                "with": f"part {pid}, pushed out of the bin (to ({c[0]:.0f}, {c[1]:.0f}, {c[2]:.0f}) mm)",
+                "points": 0,
+                "opening_mm": round(float(opening), 2),
+                "T_base_flange": np.round(path[-1] @ T_fg, 6).tolist(),
+                "T_base_gripper": np.round(path[-1], 6).tolist(),
+                "T_base_flange_start": np.round(path[0] @ T_fg, 6).tolist(),
+            }
+            self.collisions.append(event)
+            self._new_collisions.append(event)
+            self.progress("COLLISION", f"the push left {event['with']}")
 
     def settle_pending(self, contacts: bool = True) -> None:
         """Runs the gripper's queued sweeps through the pile, takes a released part out of the
