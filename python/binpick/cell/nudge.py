@@ -252,9 +252,14 @@ class _PathMap:
 
     def clear(self, footprint: np.ndarray, offset: np.ndarray) -> bool:
         """Whether the part's footprint (its points' xy) moved by ``offset`` lies inside the
-        bin's walls (:data:`WALL_MARGIN_MM` from them) on cells no other part stands on."""
+        bin's walls (:data:`WALL_MARGIN_MM` from them, or as near as it lies now) on cells no
+        other part stands on."""
         xy = footprint + offset
-        if (xy < self.lo + WALL_MARGIN_MM).any() or (xy > self.hi - WALL_MARGIN_MM).any():
+        # No nearer a wall than the margin, or than the part already lies (a part against a
+        # wall may slide along it).
+        lo = np.minimum(self.lo + WALL_MARGIN_MM, footprint.min(axis=0))
+        hi = np.maximum(self.hi - WALL_MARGIN_MM, footprint.max(axis=0))
+        if (xy < lo).any() or (xy > hi).any():
             return False
         ij = ((xy - self.lo) // PATH_CELL_MM).astype(int)
         return not bool(self.occupied[ij[:, 0], ij[:, 1]].any())
@@ -274,12 +279,13 @@ def _freeing_directions(config: CellConfig, verts: np.ndarray, centre: np.ndarra
 
 
 def _room(config: CellConfig, footprint: np.ndarray, d: np.ndarray) -> float:
-    """How far the part's footprint (its points' xy) can move along ``d`` before it meets one of
-    the bin's walls, mm."""
+    """How far the part's footprint (its points' xy) can be pushed along ``d`` before it is
+    pressed into one of the bin's walls, mm: walls the push meets at more than 45° from along
+    them (a part pushed at a wall more shallowly slides along it); 0 when it is already there."""
     lo, hi = (np.asarray(b, dtype=float)[:2] for b in config.bin_bounds)
     room = math.inf
     for axis in (0, 1):
-        if abs(d[axis]) > 1e-9:
+        if abs(d[axis]) > 1e-9 and abs(d[axis]) >= abs(d[1 - axis]):
             wall = hi[axis] if d[axis] > 0 else lo[axis]
             room = min(room, float(((wall - footprint[:, axis]) / d[axis]).min()))
     return max(room, 0.0)
