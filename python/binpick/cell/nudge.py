@@ -146,10 +146,15 @@ def nudge_directions(
     out = [towards, away] + [np.array([math.cos(a), math.sin(a)]) for a in ring]
     if first is not None:
         out.insert(0, np.asarray(first, dtype=float) / np.linalg.norm(first))
+    return _distinct(out)
+
+
+def _distinct(directions: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """``directions`` in order, each more than 10° from every one kept before it."""
     unique: list[np.ndarray] = []
-    for d in out:
+    for d in directions:
         if all(float(d @ u) < math.cos(math.radians(10.0)) for u in unique):
-            unique.append(d)
+            unique.append(np.asarray(d, dtype=float))
     return unique
 
 
@@ -222,6 +227,18 @@ def check_nudge(config: CellConfig, waypoints: list, T_now: np.ndarray, scene: n
     return None
 
 
+def _part_in_scan(
+    config: CellConfig, T: np.ndarray, pts: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The located part at ``T`` against the scan ``pts`` (base frame): its vertices, the centre
+    of its box over the floor (xy), its sample points, and the scan's points that are not its
+    own (farther than :data:`OWN_POINT_MM` from it)."""
+    verts = np.asarray(config.model.vertices) @ T[:3, :3].T + T[:3, 3]
+    part = np.asarray(config.model.points) @ T[:3, :3].T + T[:3, 3]
+    centre = (verts[:, :2].min(axis=0) + verts[:, :2].max(axis=0)) / 2
+    return verts, centre, part, pts[~_near(pts, part, OWN_POINT_MM)]
+
+
 def _push_height(config: CellConfig, verts: np.ndarray) -> float:
     """The fingertips' height for pushing the part whose vertices (base frame) are ``verts``:
     two thirds of its height above the floor, and clear of the floor."""
@@ -271,11 +288,7 @@ def _freeing_directions(config: CellConfig, verts: np.ndarray, centre: np.ndarra
     xy = verts[:, :2] - verts[:, :2].mean(axis=0)
     w, v = np.linalg.eigh(xy.T @ xy)
     first = [v[:, 1], -v[:, 1]] if w[1] > 2.0 * max(w[0], 1e-9) else []
-    out: list[np.ndarray] = []
-    for d in first + nudge_directions(config, centre):
-        if all(float(d @ u) < math.cos(math.radians(10.0)) for u in out):
-            out.append(np.asarray(d, dtype=float))
-    return out
+    return _distinct(first + nudge_directions(config, centre))
 
 
 def _room(config: CellConfig, footprint: np.ndarray, d: np.ndarray) -> float:
@@ -311,13 +324,10 @@ def plan_separating(config: CellConfig, T_base_object: Any, scene: Any, T_now: A
     left out), the push passing :func:`check_nudge`. None when no push does."""
     T, pts, T_now = plan_inputs(config, T_base_object, scene, T_now, "T_now")
     model = config.model
-    verts = np.asarray(model.vertices) @ T[:3, :3].T + T[:3, 3]
+    verts, centre, part, others = _part_in_scan(config, T, pts)
     if not _lies_flat(config, verts):
         return None
-    own = _near(pts, np.asarray(model.points) @ T[:3, :3].T + T[:3, 3], OWN_POINT_MM)
-    others = pts[~own]
-    centre = (verts[:, :2].min(axis=0) + verts[:, :2].max(axis=0)) / 2
-    footprint = (np.asarray(model.points) @ T[:3, :3].T + T[:3, 3])[:, :2]
+    footprint = part[:, :2]
     path = _PathMap(config, others)
     tip_z, reach = _push_height(config, verts), _closed_reach(config)
     free_turn = continuous_near_axis(model) is not None
@@ -384,11 +394,8 @@ def plan_nudge(
     tried last, after the others."""
     T, pts, T_now = plan_inputs(config, T_base_object, scene, T_now, "T_now")
     model = config.model
-    verts = np.asarray(model.vertices) @ T[:3, :3].T + T[:3, 3]
+    verts, centre, part, others = _part_in_scan(config, T, pts)
     tip_z, reach = _push_height(config, verts), _closed_reach(config)
-    centre = (verts[:, :2].min(axis=0) + verts[:, :2].max(axis=0)) / 2
-    own = _near(pts, np.asarray(model.points) @ T[:3, :3].T + T[:3, 3], OWN_POINT_MM)
-    others = pts[~own]
     why: list[str] = []
     directions = nudge_directions(config, centre, first=_topple(config, verts, reach))
     before = [p.direction for p in tried if np.linalg.norm(p.T_base_object[:2, 3] - T[:2, 3]) < model.diameter / 2]
@@ -396,7 +403,7 @@ def plan_nudge(
     directions.sort(key=lambda d: any(float(d @ b) > cos_apart for b in before))  # stable: the order otherwise kept
     # A part lying on the floor slides as far as it is pushed: never into a wall (the arm would
     # crush it there). One standing topples, and may be pushed over towards a wall.
-    footprint = (np.asarray(model.points) @ T[:3, :3].T + T[:3, 3])[:, :2] if _lies_flat(config, verts) else None
+    footprint = part[:, :2] if _lies_flat(config, verts) else None
     for d in directions:
         s = (verts[:, :2] - centre) @ d
         touch = float(s.min()) - reach  # the TCP's place along d where the fingers meet the part
