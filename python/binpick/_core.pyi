@@ -49,6 +49,27 @@ def scan_noise(points_in: _F64, viewpoint: _F64 | None, direction: _F64 | None) 
 def voxel_downsample(points_in: _F64, normals: _F64 | None, voxel_size: float) -> tuple[_F64, _F64 | None, _I64]:
     """One point per ``voxel_size`` voxel: (points, normals or None, index of each voxel's first input point)."""
 
+def nearest_distances(points_in: _F64, reference: _F64, num_threads: int) -> _F64:
+    """(N,) distance from each point to its nearest ``reference`` point (infinity for an empty reference)."""
+
+def gripper_occupied(
+    points_in: _F64, openings: _F64, shape: tuple[float, ...], margin: float, grow: float
+) -> npt.NDArray[np.bool_]:
+    """(N,) whether each gripper-frame point lies in the gripper of ``shape`` (tip depth, finger
+    length, width, thickness, body radius, body length), its fingers ``openings`` (N,) apart."""
+
+def gripper_hits(
+    points_in: _F64,
+    poses: _F64,
+    openings: _F64,
+    shape: tuple[float, ...],
+    margin: float,
+    grow: float,
+    num_threads: int,
+) -> _I64:
+    """(K,) how many base-frame points lie in the gripper at each pose (K, 4, 4), its fingers
+    ``openings`` (K,) apart."""
+
 def read_mesh(path: _Path, unit: str) -> tuple[_F64, _I64]:
     """A triangle mesh from STL (binary/ASCII), PLY or OBJ, scaled from ``unit`` (mm|cm|m|in) to mm:
     (vertices, faces)."""

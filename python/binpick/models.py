@@ -587,6 +587,15 @@ def estimate_normals(
     return _core.estimate_normals(pts, k, vp, d, thread_count(num_threads))
 
 
+def nearest_distances(points: Any, reference: Any, *, num_threads: int = 1) -> np.ndarray:
+    """The distance (mm) from each of ``points`` (N, 3) to the nearest of ``reference`` (M, 3),
+    (N,): a KD-tree over the reference (infinity everywhere when it is empty). ``num_threads``:
+    0 = all cores (the cell's planners keep to one)."""
+    pts = as_points(points, "points", min_points=0)
+    ref = as_points(reference, "reference", min_points=0)
+    return _core.nearest_distances(pts, ref, thread_count(num_threads))
+
+
 def voxel_downsample(
     points: Any, voxel_size: float, normals: Any = None
 ) -> tuple[np.ndarray, Optional[np.ndarray], np.ndarray]:

@@ -163,3 +163,104 @@ def test_the_matcher_weighs_a_stack_of_poses_as_it_weighs_each_and_names_a_bad_o
     nan[0, 0, 3] = np.nan
     with pytest.raises(binpick.NonFiniteError, match="T_gripper_objects"):
         matcher.errors(nan)
+
+
+def test_matches_says_whether_any_grasp_is_within_tolerance_as_each_grasp_alone_says():
+    # matches() weighs only the grasps near in translation (the swing of a turn about an axis
+    # off the origin included): for every pose it must say what asking each grasp alone says.
+    rng = np.random.default_rng(8)
+    centre, axis = np.array([6.0, -4.0, 2.0]), np.array([0.0, 0.6, 0.8])  # 7 mm off the origin
+    flip = np.eye(4)
+    flip[:3, :3] = rotation_about(np.array([1.0, 0.0, 0.0]), math.pi)
+    flip[:3, 3] = centre - flip[:3, :3] @ centre
+    grasps = _random_grasps(rng, 30)
+    kw = dict(tolerance_deg=12.0, tolerance_mm=6.0)
+    for continuous in (None, (centre, axis)):
+        matcher = GraspMatcher(grasps, (flip,), continuous=continuous, **kw)
+        alone = [GraspMatcher([G], (flip,), continuous=continuous, **kw) for G in grasps]
+        poses = []
+        for k in range(300):
+            T = grasps[rng.integers(len(grasps))].copy()
+            if continuous is not None and k % 2:  # turned about the axis: the origin swings up to 14 mm
+                turn = np.eye(4)
+                turn[:3, :3] = rotation_about(axis, rng.uniform(-math.pi, math.pi))
+                turn[:3, 3] = centre - turn[:3, :3] @ centre
+                T = T @ turn
+            T[:3, :3] = rotation_about(rng.normal(size=3), rng.uniform(0, 0.3)) @ T[:3, :3]
+            T[:3, 3] += rng.normal(size=3) * 4.0
+            poses.append(T)
+        poses = np.stack(poses)
+        expected = np.zeros(len(poses), dtype=bool)
+        for m in alone:
+            deg, mm = m.errors(poses)
+            expected |= (deg <= 12.0) & (mm <= 6.0)
+        got = matcher.matches(poses)
+        assert got.tolist() == expected.tolist()
+        assert 50 < got.sum() < 290  # both answers occur
+        assert matcher.matches(np.zeros((0, 4, 4))).shape == (0,)
+    bad = poses[:3].copy()
+    bad[2, :3, :3] *= 1.1
+    with pytest.raises(binpick.InvalidInputError, match=r"T_gripper_objects\[2\]"):
+        matcher.matches(bad)
+
+
+def test_nearest_distances_are_the_brute_force_distances():
+    from binpick.models import nearest_distances
+
+    rng = np.random.default_rng(2)
+    points, reference = rng.normal(size=(400, 3)) * 30.0, rng.normal(size=(700, 3)) * 30.0
+    brute = np.sqrt(((points[:, None, :] - reference[None, :, :]) ** 2).sum(axis=2)).min(axis=1)
+    assert nearest_distances(points, reference) == pytest.approx(brute, abs=1e-9)
+    assert np.isinf(nearest_distances(points[:2], np.zeros((0, 3)))).all()
+    assert nearest_distances(np.zeros((0, 3)), reference).shape == (0,)
+    with pytest.raises(binpick.NonFiniteError, match="reference"):
+        nearest_distances(points, np.full((2, 3), np.nan))
+    with pytest.raises(binpick.ShapeError, match="points"):
+        nearest_distances(points[:, :2], reference)
+
+
+def _occupied_by_hand(g, p, gap, margin, grow):
+    """The gripper's volume written out: two finger boxes and the body's cylinder above them."""
+    x, y, z = p[..., 0], p[..., 1], p[..., 2]
+    side = margin - grow
+    top = g.tip_depth_mm - g.finger_length_mm
+    offset, half = gap / 2 + g.finger_thickness_mm / 2, g.finger_thickness_mm / 2 - side
+    finger = (
+        (z <= g.tip_depth_mm - margin)
+        & (z >= top + side)
+        & (np.abs(y) <= g.finger_width_mm / 2 - side)
+        & ((np.abs(x - offset) <= half) | (np.abs(x + offset) <= half))
+    )
+    body = (z < top - side) & (z >= top - g.body_length_mm + side) & (np.hypot(x, y) <= g.body_radius_mm - side)
+    return finger | body
+
+
+def test_the_gripper_volume_and_its_counts_at_many_poses_are_the_pieces_written_out():
+    from binpick.cell import GripperGeometry
+    from binpick.cell.grasp import points_in_gripper
+
+    g = GripperGeometry(open_width_mm=60.0, finger_length_mm=40.0, body_radius_mm=30.0)
+    rng = np.random.default_rng(4)
+    local = rng.uniform((-45, -25, -110), (45, 25, 20), size=(6, 4000, 3))
+    gaps = rng.uniform(0.0, 60.0, size=(6, 1))
+    for margin, grow in ((0.0, 0.0), (1.0, 0.0), (0.0, 3.0)):
+        expected = _occupied_by_hand(g, local, gaps, margin, grow)
+        assert g.occupied(local, gaps, margin, grow).tolist() == expected.tolist()
+        assert 500 < expected.sum() < 20000
+    assert g.occupied(local[0, :5]).tolist() == _occupied_by_hand(g, local[0, :5], 60.0, 0.0, 0.0).tolist()
+    # Counted at poses in the base frame: the same points, each pose's own.
+    poses = []
+    for _ in range(6):
+        T = np.eye(4)
+        T[:3, :3] = rotation_about(rng.normal(size=3), rng.uniform(0, math.pi))
+        T[:3, 3] = rng.normal(size=3) * 100.0
+        poses.append(T)
+    poses = np.stack(poses)
+    base = np.concatenate([local[k] @ poses[k, :3, :3].T + poses[k, :3, 3] for k in range(6)])
+    counts = g.hits(base, poses, gaps[:, 0], 0.0, 2.0)
+    for k in range(6):
+        back = (base - poses[k, :3, 3]) @ poses[k, :3, :3]
+        assert counts[k] == _occupied_by_hand(g, back, gaps[k, 0], 0.0, 2.0).sum()
+        assert points_in_gripper(g, base, poses[k], gaps[k, 0]) == _occupied_by_hand(g, back, gaps[k, 0], 0, 0).sum()
+    with pytest.raises(binpick.InvalidInputError, match="T_base_gripper"):
+        g.hits(base, poses * 1.1, gaps[:, 0])

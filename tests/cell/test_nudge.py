@@ -13,7 +13,7 @@ import pytest
 
 import binpick
 from binpick.cell import nudge
-from binpick.cell.records import Skipped
+from binpick.cell.records import Skipped, cycle_stages_s
 from binpick.errors import SafetyError
 from binpick.sim import SimulatedCell
 
@@ -65,6 +65,13 @@ def test_a_dead_end_is_nudged_and_the_blocked_part_picked(tee):
     assert len(sim.pushes) == 1, "the nudge's moves push as one continuous sweep"
     assert np.linalg.norm(record.T_base_object[:3, 3] - before[:3, 3]) > 10.0
     assert _lowest_tip_above_floor(sim.cell.config, record.nudges) > 0.0
+    # The record is the whole cycle's: the look that found the dead end, the nudge (its planning
+    # in binpick's compute, its motion in the physical time beside the scans and the pick), the
+    # look after it.
+    stages = cycle_stages_s(record.timings)
+    assert record.looks == 1 + len(record.nudges)
+    assert record.timings["cpu.nudge"] > 0.0 and stages["compute"] * 1e3 >= record.timings["cpu.nudge"]
+    assert stages["other"] > 0.5, stages  # the push: down beside the part, across, up
 
 
 def test_a_nudge_through_the_floor_into_a_wall_or_out_of_reach_is_refused_with_nothing_sent(tee):

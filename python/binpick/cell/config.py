@@ -17,6 +17,7 @@ from typing import Any, Callable, Optional
 
 import numpy as np
 
+from .. import _core
 from .._validate import (
     MAX_COORDINATE,
     as_box,
@@ -108,6 +109,19 @@ class GripperGeometry:
             return float(self.open_width_mm)
         return float(min(self.open_width_mm, width_mm + 2.0 * self.preshape_clearance_mm))
 
+    @property
+    def shape_mm(self) -> tuple[float, float, float, float, float, float]:
+        """(tip depth, finger length, finger width, finger thickness, body radius, body length), mm:
+        the volume :meth:`occupied` and :meth:`hits` test points against."""
+        return (
+            float(self.tip_depth_mm),
+            float(self.finger_length_mm),
+            float(self.finger_width_mm),
+            float(self.finger_thickness_mm),
+            float(self.body_radius_mm),
+            float(self.body_length_mm),
+        )
+
     def occupied(
         self, points_gripper: np.ndarray, opening_mm: Any = None, margin_mm: float = 0.0, grow_mm: float = 0.0
     ) -> np.ndarray:
@@ -117,23 +131,28 @@ class GripperGeometry:
         ``margin_mm``, more than that far inside (a surface grazing the gripper is not in it);
         with ``grow_mm``, the gripper grown by that much on every side but below the fingertips
         (a clearance round it; what lies under the tips is the floor's business)."""
-        x, y, z = np.moveaxis(points_gripper, -1, 0)
-        m = float(margin_mm)
-        side = m - float(grow_mm)
-        top = self.tip_depth_mm - self.finger_length_mm
-        in_z = (z <= self.tip_depth_mm - m) & (z >= top + side)
+        p = np.asarray(points_gripper, dtype=np.float64)
+        lead = p.shape[:-1]
         gap = self.open_width_mm if opening_mm is None else np.asarray(opening_mm, dtype=np.float64)
-        offset = gap / 2 + self.finger_thickness_mm / 2
-        half = self.finger_thickness_mm / 2 - side
-        finger = (
-            in_z
-            & (np.abs(y) <= self.finger_width_mm / 2 - side)
-            & ((np.abs(x - offset) <= half) | (np.abs(x + offset) <= half))
-        )
-        body = (
-            (z < top - side) & (z >= top - self.body_length_mm + side) & (np.hypot(x, y) <= self.body_radius_mm - side)
-        )
-        return finger | body
+        gaps = np.ascontiguousarray(np.broadcast_to(gap, lead), dtype=np.float64).reshape(-1)
+        flat = np.ascontiguousarray(p.reshape(-1, 3))
+        return _core.gripper_occupied(flat, gaps, self.shape_mm, float(margin_mm), float(grow_mm)).reshape(lead)
+
+    def hits(
+        self,
+        points_base: np.ndarray,
+        T_base_grippers: np.ndarray,
+        openings_mm: np.ndarray,
+        margin_mm: float = 0.0,
+        grow_mm: float = 0.0,
+    ) -> np.ndarray:
+        """How many of the points (N, 3, base frame) lie inside the gripper (:meth:`occupied`) at
+        each of the poses ``T_base_grippers`` (K, 4, 4), its fingers ``openings_mm`` (K,) apart:
+        (K,) counts, from binpick's core (the planner asks this for thousands of poses a pick)."""
+        poses = np.ascontiguousarray(T_base_grippers, dtype=np.float64).reshape(-1, 4, 4)
+        gaps = np.ascontiguousarray(np.broadcast_to(np.asarray(openings_mm, dtype=np.float64), (len(poses),)))
+        pts = np.ascontiguousarray(points_base, dtype=np.float64).reshape(-1, 3)
+        return _core.gripper_hits(pts, poses, gaps, self.shape_mm, float(margin_mm), float(grow_mm), 1)
 
     def outline(self, opening_mm: Optional[float] = None, *, sides: int = 16) -> np.ndarray:
         """Points (M, 3, gripper frame) whose convex hull per piece covers the whole gripper with

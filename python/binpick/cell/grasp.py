@@ -114,15 +114,9 @@ def points_in_gripper(
     gripper: GripperGeometry, points_base: np.ndarray, T_base_gripper: np.ndarray, opening_mm: Optional[float] = None
 ) -> int:
     """How many of the points (N, 3, base frame) lie inside the gripper at ``T_base_gripper``, its
-    fingers ``opening_mm`` apart (``open_width_mm`` by default).
-
-    Only the points within the sphere about the fingers and body are tested piece by piece (one
-    distance per point first), so that planning runs thousands of these against a full scan."""
-    R, t = T_base_gripper[:3, :3], T_base_gripper[:3, 3]
-    z_mid, radius = _occupied_sphere(gripper)
-    d = points_base - (t + z_mid * R[:, 2])
-    near = points_base[np.einsum("ij,ij->i", d, d) <= radius * radius]
-    return int(gripper.occupied(near @ R - t @ R, opening_mm).sum())
+    fingers ``opening_mm`` apart (``open_width_mm`` by default): :meth:`GripperGeometry.hits`."""
+    opening = gripper.open_width_mm if opening_mm is None else opening_mm
+    return int(gripper.hits(points_base, np.asarray(T_base_gripper)[None], np.array([opening]))[0])
 
 
 def _occupied_sphere(gripper: GripperGeometry) -> tuple[float, float]:
@@ -401,37 +395,6 @@ def _unseen(points: np.ndarray, step: Optional[np.ndarray]) -> np.ndarray:
 _UNSEEN_SPACING_MM = 2.0
 
 
-def _hits_many(
-    gripper: GripperGeometry,
-    points: np.ndarray,
-    T_bg: np.ndarray,
-    openings: np.ndarray,
-    margin_mm: float = 0.0,
-    grow_mm: float = 0.0,
-) -> np.ndarray:
-    """:func:`points_in_gripper` for each of the gripper poses ``T_bg`` (K, 4, 4), its fingers
-    ``openings`` (K,) apart: the distances of every point to each pose's bounding sphere in one
-    matrix product (single precision, the sphere 1 mm larger to cover its rounding), then the
-    piece-by-piece test, pose by pose, on the points inside its sphere. ``margin_mm`` and
-    ``grow_mm``: see :meth:`GripperGeometry.occupied`."""
-    if len(points) == 0 or len(T_bg) == 0:
-        return np.zeros(len(T_bg), dtype=np.int64)
-    z_mid, radius = _occupied_sphere(gripper)
-    R, t = T_bg[:, :3, :3], T_bg[:, :3, 3]
-    C = (t + z_mid * R[:, :, 2]).astype(np.float32)
-    p32 = points.astype(np.float32)
-    d2 = np.einsum("ij,ij->i", C, C)[:, None] - 2.0 * (C @ p32.T) + np.einsum("ij,ij->i", p32, p32)[None]
-    reach = radius + 1.0 + max(0.0, float(grow_mm))
-    k, i = np.nonzero(d2 <= np.float32(reach**2))  # pose-major: each pose's points together
-    bounds = np.searchsorted(k, np.arange(len(T_bg) + 1))
-    openings = np.asarray(openings, dtype=np.float64)
-    hits = np.zeros(len(T_bg), dtype=np.int64)
-    for j in np.flatnonzero(np.diff(bounds)):
-        local = (points[i[bounds[j] : bounds[j + 1]]] - t[j]) @ R[j]
-        hits[j] = np.count_nonzero(gripper.occupied(local, openings[j], margin_mm, grow_mm))
-    return hits
-
-
 def _refusal(
     config: CellConfig, waypoints: list[Waypoint], hits: int, self_hits: int, here: np.ndarray
 ) -> Optional[str]:
@@ -514,8 +477,7 @@ def grasp_filter(config: CellConfig, result: Any) -> Optional[GraspTest]:
             T_gb[:, 3, 3] = 1.0
             ok = np.ones(len(T_bg), dtype=bool)
             for T_a in alternatives:
-                deg, mm = matcher.errors((T_gb @ T_a)[ok])
-                ok[ok] = (deg <= matcher.tolerance_deg) & (mm <= matcher.tolerance_mm)
+                ok[ok] = matcher.matches((T_gb @ T_a)[ok])
                 if not ok.any():
                     break
             return ok
@@ -625,7 +587,7 @@ def _first_usable(
     counted in ``rejected`` (a few kept in ``samples``). None when none is usable."""
     clear = [c for c, h in batch if h <= config.max_collision_points]
     poses = np.array([c[2] for c in clear]).reshape(-1, 4, 4)
-    own = _hits_many(config.gripper, part, poses, np.array([c[5] for c in clear]), GRAZE_MM)
+    own = config.gripper.hits(part, poses, np.array([c[5] for c in clear]), GRAZE_MM)
     own = dict(zip((id(c) for c in clear), own))
     for c, hits in batch:
         tilt, name, T_bg, T_bf, waypoints, opening = c
@@ -663,7 +625,7 @@ def scene_hits(
     _, _, near = _reachable_scene(config, T_base_object, scene, free_turn, unseen_step)
     opening = config.gripper.open_width_mm if plan.opening_mm is None else float(plan.opening_mm)
     T_bg = np.asarray(plan.T_base_gripper, dtype=np.float64)[None]
-    return int(_hits_many(config.gripper, near, T_bg, np.array([opening]), grow_mm=float(config.scan_clearance_mm))[0])
+    return int(config.gripper.hits(near, T_bg, np.array([opening]), grow_mm=float(config.scan_clearance_mm))[0])
 
 
 def plan_grasp(
@@ -729,8 +691,7 @@ def plan_grasp(
             batch = kept
         if not batch:
             continue
-        scene_hits = _hits_many(
-            config.gripper,
+        scene_hits = config.gripper.hits(
             scene,
             np.stack([c[2] for c in batch]),
             np.array([c[5] for c in batch]),

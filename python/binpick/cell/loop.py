@@ -86,6 +86,11 @@ def _ms_since(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
 
 
+#: Timings of an attempt that a cycle's later attempts do not add to (see :meth:`Cell._cycle`):
+#: the plan made ahead is only the first attempt's, and the totals are the whole cycle's.
+_PER_ATTEMPT = frozenset({"ahead.used", "ahead.window", "ahead.wait", "total", "phys.cycle"})
+
+
 def _phys_ms(clock: Optional[Callable[[], float]], since: Optional[float]) -> float:
     """The hardware time since ``since`` on ``clock``, ms (0 without a clock)."""
     return 0.0 if clock is None or since is None else (clock() - since) * 1e3
@@ -655,24 +660,46 @@ class Cell:
     def _cycle(self, i: int, before: Optional[PickRecord] = None) -> tuple[PickRecord, Optional[str]]:
         """One pick of :meth:`run` (:meth:`_look_and_pick`); at a dead end (parts located, none
         pickable from any view) a blocked part is nudged (:mod:`binpick.cell.nudge`) and the cell
-        looks again, up to ``config.max_nudges`` times."""
+        looks again, up to ``config.max_nudges`` times. The record's timings and looks are the
+        whole cycle's: every attempt's, and the nudges' (their planning as ``cpu.nudge``, their
+        motion in the cycle's physical time)."""
+        t0, c0 = time.perf_counter(), self.clock and self.clock()
         nudges: list = []
+        spent: dict[str, float] = {}  # the timings of the attempts and nudges before this one
+        looks = 0
+
+        def whole(record: PickRecord) -> PickRecord:
+            times = dict(record.timings)
+            for key, v in spent.items():
+                if key not in _PER_ATTEMPT:
+                    times[key] = times.get(key, 0.0) + v
+            times["total"] = _ms_since(t0)
+            if self.clock is not None:
+                times["phys.cycle"] = _phys_ms(self.clock, c0)
+            return replace(record, timings=MappingProxyType(times), looks=looks + record.looks, nudges=tuple(nudges))
+
         while True:
             record, why = self._look_and_pick(i, None if nudges else before)
             dead_end = why is not None and record.failure == "no grasp" and bool(record.skipped)
             if not dead_end or record.scan is None:
-                return replace(record, nudges=tuple(nudges)), why
+                return whole(record), why
             if len(nudges) >= self.config.max_nudges:
                 after = f" (after {len(nudges)} nudges)" if nudges else ""
-                return replace(record, nudges=tuple(nudges)), f"{why}{after}"
+                return whole(record), f"{why}{after}"
+            self._cpu = {}
+            fault: Optional[BinpickError] = None
             try:
                 plan = nudge_blocked(self, list(record.skipped), record.scan, nudges)
             except BinpickError as exc:
-                error = f"nudge: {type(exc).__name__}: {exc}"
-                record = replace(record, nudges=tuple(nudges), failure="fault", fault=True, error=error)
-                return record, f"pick {i}: {error}"
+                plan, fault = None, exc
+            record = replace(record, timings=MappingProxyType({**record.timings, **self._cpu}))
+            if fault is not None:
+                error = f"nudge: {type(fault).__name__}: {fault}"
+                return replace(whole(record), failure="fault", fault=True, error=error), f"pick {i}: {error}"
             if plan is None:
-                return replace(record, nudges=tuple(nudges)), f"{why} (no nudge passes the checks)"
+                return whole(record), f"{why} (no nudge passes the checks)"
+            spent = dict(whole(record).timings)
+            looks += record.looks
             nudges.append(plan)
 
     def _look_and_pick(self, i: int, before: Optional[PickRecord] = None) -> tuple[PickRecord, Optional[str]]:

@@ -56,6 +56,7 @@ import numpy as np
 
 from ..devices import safety
 from ..errors import BinpickError, SafetyError
+from ..models import nearest_distances
 from ..transforms import inverse, look_down
 from .config import CellConfig
 from .grasp import NoGraspError, bin_clash, plan_grasp, plan_inputs
@@ -453,10 +454,7 @@ def _near(points: np.ndarray, model_points: np.ndarray, radius: float) -> np.nda
     lo, hi = model_points.min(axis=0) - radius, model_points.max(axis=0) + radius
     out = np.zeros(len(points), dtype=bool)
     cand = np.flatnonzero(((points >= lo) & (points <= hi)).all(axis=1))
-    for chunk in np.array_split(cand, max(1, len(cand) // 512)):
-        if len(chunk):
-            d2 = ((points[chunk, None, :] - model_points[None, :, :]) ** 2).sum(axis=2)
-            out[chunk] = d2.min(axis=1) <= radius * radius
+    out[cand] = nearest_distances(points[cand], model_points) <= radius
     return out
 
 
@@ -467,6 +465,11 @@ def nudge_blocked(cell: Any, skipped: list, scan: Any, made: Sequence[NudgePlan]
     made in this pick (see :func:`plan_nudge`). Faults stop the arm and are raised."""
     cfg = cell.config
     T_now = cell.robot.read_pose()
+    c0 = cell._cpu_now()
+
+    def planned() -> None:  # the planning's CPU, for the cycle's compute
+        cell._cpu["cpu.nudge"] = cell._cpu.get("cpu.nudge", 0.0) + (cell._cpu_now() - c0) * 1e3
+
     # A push that frees a part first: each part once (the looks' estimates of one part agree).
     seen: list[np.ndarray] = []
     for k in skipped:
@@ -483,6 +486,7 @@ def nudge_blocked(cell: Any, skipped: list, scan: Any, made: Sequence[NudgePlan]
                 f"{np.linalg.norm(a - t):.0f} mm towards {plan.heading_deg:.0f}° to free it (a grasp "
                 f"passes at ({a[0]:.1f}, {a[1]:.1f}) mm), fingertips {plan.tip_z_mm:.0f} mm up",
             )
+            planned()
             return plan if _execute(cell, plan) else _closed_on_something(cell)
     tried: list[np.ndarray] = []
     refusals = []
@@ -502,7 +506,9 @@ def nudge_blocked(cell: Any, skipped: list, scan: Any, made: Sequence[NudgePlan]
             f"pushing the {cfg.model.name} at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm towards "
             f"{plan.heading_deg:.0f}° with the closed gripper, fingertips {plan.tip_z_mm:.0f} mm up",
         )
+        planned()
         return plan if _execute(cell, plan) else _closed_on_something(cell)
+    planned()
     cell.progress("nudge", f"no part can be nudged: {refusals[0] if refusals else 'no part located'}")
     return None
 

@@ -205,7 +205,8 @@ def cycle_stages_s(timings: Mapping[str, float]) -> Optional[dict[str, float]]:
     motor's steps and the camera's frames), ``motion`` (the pick: approach, grasp, lift, carry,
     release), ``other`` (what else the hardware did in the cycle: nudges), all from the clock;
     and ``compute``, binpick's own compute as measured (the CPU time of line extraction, pose,
-    planning and the wall time of triangulation), which the cell waits for between them."""
+    planning, nudge planning and the wall time of triangulation), which the cell waits for
+    between them. A cycle that nudged is counted whole: every look and nudge in it."""
     if "phys.cycle" not in timings:
         return None
     ms = {k: float(timings.get(k, 0.0)) for k in ("scan.phys.move", "scan.phys.sweep", "phys.motion")}
@@ -234,9 +235,11 @@ class PickRecord:
     ``success``: the part was lifted out (with ground truth: the removed part is the located one and
     its pose was pick-grade); ``held``: what the gripper reported (None when it cannot tell);
     ``error``: why the attempt failed, None on success; ``failure``: its kind, one of
-    :data:`FAILURE_KINDS` (None on success); ``timings``: stage → ms; ``skipped``: the located
-    parts passed over on the way (no usable grasp, low confidence, …); ``looks``: how many scans
-    the attempt took (more than one when the first showed nothing pickable); ``scan``: the last
+    :data:`FAILURE_KINDS` (None on success); ``timings``: stage → ms (the whole attempt's, its
+    nudges and the looks before and after them included); ``skipped``: the located parts passed
+    over on the way, since the last nudge (no usable grasp, low confidence, …); ``looks``: how
+    many scans the attempt took (more than one when the first showed nothing pickable, or after a
+    nudge); ``scan``: the last
     of them (for the picture of a failure); ``nudges``: the :class:`~binpick.cell.nudge.NudgePlan`
     s run before it, when every part located was blocked. ``bin_empty``: the attempt found the bin
     empty (no part left in it by the ground truth; without it, nothing standing above its floor) —

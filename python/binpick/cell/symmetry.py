@@ -98,6 +98,8 @@ class GraspMatcher:
         self._axis: Optional[tuple[np.ndarray, np.ndarray]] = None
         self._weights: Optional[np.ndarray] = None
         self._swing: Optional[tuple[np.ndarray, np.ndarray]] = None
+        self._flat_arrays: Optional[tuple[np.ndarray, ...]] = None
+        self._swing_mm = 0.0  # the part's origin from the continuous axis, mm (a turn moves it ≤ twice that)
         if continuous is not None:
             centre = as_vector(continuous[0], "continuous centre", 3)
             axis = as_vector(continuous[1], "continuous axis", 3)
@@ -115,8 +117,51 @@ class GraspMatcher:
     def errors(self, T_gripper_objects: Any) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`error` of each of a stack of poses in the gripper (K, 4, 4): rotation errors
         (K,) deg and translation errors (K,) mm, each against its nearest declared grasp, in a
-        few array operations for all (a planner weighing a batch of grasps against a pose's
-        alternatives asked one at a time, thousands of times a pick)."""
+        few array operations for all."""
+        return self._errors(self._checked(T_gripper_objects))
+
+    def matches(self, T_gripper_objects: Any) -> np.ndarray:
+        """Whether each of a stack of poses in the gripper (K, 4, 4) is within both tolerances of
+        some declared grasp, modulo the symmetries: (K,) bool. The question a planner weighing a
+        batch of grasps against a pose's alternatives asks thousands of times a pick, answered
+        without weighing every grasp: only the grasps whose part lies within the translation
+        tolerance of the pose's (and the swing a turn about the continuous axis can add) are
+        weighed in rotation."""
+        A = self._checked(T_gripper_objects)
+        W, Bt, Bt2, u, w = self._flat()
+        reach = self.tolerance_mm + 2.0 * self._swing_mm + 1e-6
+        out = np.zeros(len(A), dtype=bool)
+        chunk = max(1, _MATCH_CHUNK // len(Bt))
+        for i in range(0, len(A), chunk):
+            At = A[i : i + chunk, :3, 3]
+            d2 = Bt2[:, None] - 2.0 * (Bt @ At.T) + np.einsum("ij,ij->i", At, At)[None]
+            gs, k = np.nonzero(d2 <= reach * reach)
+            if len(gs) == 0:
+                continue
+            v = np.einsum("pfi,pi->pf", W[gs], A[i + k, :3, :3].reshape(len(k), 9))
+            deg, mm = self._deg_mm(v, Bt[gs], At[k], u[gs], w[gs])
+            out[i + k[(deg <= self.tolerance_deg) & (mm <= self.tolerance_mm)]] = True
+        return out
+
+    def _flat(self) -> tuple[np.ndarray, ...]:
+        """What :meth:`matches` reads per grasp × symmetry, flat (G·S first), made once: the
+        forms (G·S, F, 9), the translations (G·S, 3) and their squared norms, and the swing
+        ``u``, ``w`` (G·S, 3) (zeros without a continuous axis)."""
+        if self._flat_arrays is None:
+            B = self._stack
+            GS = B.shape[0] * B.shape[1]
+            W = self._forms().reshape(GS, -1, 9)
+            Bt = np.ascontiguousarray(B[:, :, :3, 3].reshape(GS, 3))
+            if self._swing is None:
+                u = w = np.zeros((GS, 3))
+            else:
+                u, w = (np.ascontiguousarray(x.reshape(GS, 3)) for x in self._swing)
+            self._flat_arrays = (W, Bt, np.einsum("ij,ij->i", Bt, Bt), u, w)
+        return self._flat_arrays
+
+    def _checked(self, T_gripper_objects: Any) -> np.ndarray:
+        """A stack (K, 4, 4) of rigid transforms, checked in a few array operations (ShapeError,
+        or check_rigid's error naming the first that is not rigid)."""
         A = as_float_array(T_gripper_objects, "T_gripper_objects")
         if A.ndim != 3 or A.shape[1:] != (4, 4):
             raise ShapeError(f"T_gripper_objects: expected a stack (K, 4, 4) of transforms, got shape {A.shape}")
@@ -127,7 +172,7 @@ class GraspMatcher:
         bad = np.flatnonzero((off > 1e-6) | (np.linalg.det(R) < 0) | last)  # check_rigid's rules
         if len(bad):
             check_rigid(A[bad[0]], f"T_gripper_objects[{bad[0]}]")  # raises, naming the first
-        return self._errors(A)
+        return A
 
     def _errors(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`errors` of checked poses, in chunks of at most :data:`_MATCH_CHUNK` grasp ×
@@ -162,6 +207,7 @@ class GraspMatcher:
                 # B_R (c₀ − R_θ c₀) = (1 − cos θ) B_R u − sin θ B_R (a × c₀), u = c₀'s part across a.
                 centre, a = self._axis
                 self._swing = BR @ (centre - (a @ centre) * a), BR @ np.cross(a, centre)
+                self._swing_mm = float(np.linalg.norm(centre - (a @ centre) * a))
         return self._weights
 
     def _errors_of(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -176,25 +222,31 @@ class GraspMatcher:
         B = self._stack
         G, S = B.shape[:2]
         v = (self._forms() @ A[:, :3, :3].reshape(len(A), 9).T).reshape(G, S, -1, len(A))  # (G, S, F, K)
-        trace, axial = v[:, :, 0], v[:, :, 1:4]
-        t = B[:, :, :3, 3][:, :, None, :]  # (G, S, 1, 3)
+        u, w = (0.0, 0.0) if self._swing is None else (x[:, :, None, :] for x in self._swing)
+        deg, mm = self._deg_mm(np.moveaxis(v, 2, 3), B[:, :, None, :3, 3], A[:, :3, 3], u, w)  # (G, S, K)
+        s_best = np.argmin(deg / 5.0 + mm / 3.0, axis=1)[:, None]  # pose_error's choice of symmetry, per grasp
+        return np.take_along_axis(deg, s_best, axis=1)[:, 0], np.take_along_axis(mm, s_best, axis=1)[:, 0]
+
+    def _deg_mm(self, v: np.ndarray, Bt: Any, At: Any, u: Any, w: Any) -> tuple[np.ndarray, np.ndarray]:
+        """(deg, mm) of pose/grasp pairs from their forms ``v`` (…, F) (:meth:`_forms` applied to
+        the pose's rotation), the grasp's translation ``Bt`` and the pose's ``At`` (…, 3), and the
+        swing ``u``, ``w`` (…, 3) of a turn about the continuous axis (unused without one)."""
+        trace, axial = v[..., 0], v[..., 1:4]
+        t = Bt
         if self._axis is not None:
             # The turn θ about the axis that brings B·S·R_θ nearest A: θ = atan2(Q, P) maximises
             # tr(R_θᵀ M) = cos θ P + sin θ Q + aᵀMa; R_θᵀ M's axial part is linear in cos θ, sin θ.
-            along, Q = v[:, :, 4], v[:, :, 5]
+            along, Q = v[..., 4], v[..., 5]
             P = trace - along
             r = np.hypot(P, Q)
             safe = np.where(r > 0.0, r, 1.0)
             c, s = np.where(r > 0.0, P / safe, 1.0), np.where(r > 0.0, Q / safe, 0.0)
             trace = c * P + s * Q + along
-            axial = c[:, :, None] * axial - s[:, :, None] * v[:, :, 6:9] + (1.0 - c)[:, :, None] * v[:, :, 9:12]
-            u, w = self._swing  # (G, S, 3) each, with the forms
-            t = t + (1.0 - c)[..., None] * u[:, :, None, :] - s[..., None] * w[:, :, None, :]
+            axial = c[..., None] * axial - s[..., None] * v[..., 6:9] + (1.0 - c)[..., None] * v[..., 9:12]
+            t = t + (1.0 - c)[..., None] * u - s[..., None] * w
         # The angle as rotation_angle_deg takes it: atan2 of the axial part's half norm and (tr − 1) / 2.
-        deg = np.degrees(np.arctan2(np.linalg.norm(axial, axis=2) / 2.0, (trace - 1.0) / 2.0))  # (G, S, K)
-        mm = np.linalg.norm(t - A[:, :3, 3], axis=-1)
-        s_best = np.argmin(deg / 5.0 + mm / 3.0, axis=1)[:, None]  # pose_error's choice of symmetry, per grasp
-        return np.take_along_axis(deg, s_best, axis=1)[:, 0], np.take_along_axis(mm, s_best, axis=1)[:, 0]
+        deg = np.degrees(np.arctan2(np.linalg.norm(axial, axis=-1) / 2.0, (trace - 1.0) / 2.0))
+        return deg, np.linalg.norm(t - At, axis=-1)
 
     def cost(self, error: tuple[float, float]) -> float:
         """An error in units of the tolerances (≤ 2 when both are within them)."""

@@ -12,7 +12,7 @@ import numpy as np
 from .._validate import positive
 from ..devices import safety
 from ..errors import SafetyError
-from ..models import Model
+from ..models import Model, nearest_distances
 from ..transforms import rotation_about
 
 if TYPE_CHECKING:  # annotations only: config imports this module
@@ -77,8 +77,7 @@ def deciding_views(
     for T_alt in alternatives:
         there = posed(np.asarray(T_alt, dtype=np.float64))
         for (p, n), (q, _) in ((here, there), (there, here)):
-            d2 = ((p[:, None, :] - q[None, :, :]) ** 2).sum(axis=-1).min(axis=1)
-            far = d2 > tolerance_mm**2
+            far = nearest_distances(p, q) > tolerance_mm
             features.append((p[far], n[far]))
     if not features:
         return list(range(len(views)))

@@ -97,7 +97,7 @@ def pile_size(seed: int, sizes: Sequence[int]) -> int:
 
 def _binpick_cpu_s(timings: Mapping[str, float]) -> float:
     """binpick's own CPU time in a cycle, s: the stages it times on its thread (line extraction,
-    pose, planning, grasp widths), and the planning done ahead for it during the last carry
+    pose, planning, grasp widths, nudge planning), and the planning done ahead for it during the last carry
     (:mod:`binpick.cell.ahead`, whose time is hidden in the carry's)."""
     keys = ("cpu.", "scan.cpu.", "ahead.compute.")
     return round(sum(float(v) for k, v in timings.items() if k.startswith(keys)) / 1e3, 4)

@@ -1,13 +1,13 @@
 //! Clouds, normals, voxels, meshes, PLY files and built-in parts.
 
 use crate::convert::{faces_to_py, indices_to_py, mesh_from_py, part_to_py, points, points_to_py, vector3};
-use crate::convert::{threads, vectors, vectors_to_py, PartArrays};
+use crate::convert::{isometries, threads, vectors, vectors_to_py, PartArrays};
 use crate::errors::{invalid, run};
 use binpick_core::parts;
 use binpick_core::{estimate_normals as core_normals, unit_scale, Orientation};
 use binpick_core::{read_mesh as core_read_mesh, read_ply as core_read_ply, write_ply as core_write_ply};
 use binpick_core::{sample_surface, voxel_downsample as core_voxel, with_threads};
-use binpick_core::{Density, KdIndex, Point};
+use binpick_core::{Clearance, Density, GripperShape, KdIndex, Point};
 use nalgebra::Vector3;
 use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -60,6 +60,114 @@ fn scan_noise(
         (None, None) => Orientation::TowardDirection(Vector3::z()),
     };
     run(py, move || Ok(binpick_core::scan_noise(&pts, orientation)))
+}
+
+/// The distance (mm) from each point to its nearest `reference` point (a KD-tree over the
+/// reference; infinity when the reference is empty).
+#[pyfunction]
+#[pyo3(signature = (points_in, reference, num_threads))]
+fn nearest_distances<'py>(
+    py: Python<'py>,
+    points_in: PyReadonlyArray2<'py, f64>,
+    reference: PyReadonlyArray2<'py, f64>,
+    num_threads: usize,
+) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
+    use rayon::prelude::*;
+    let pts = points(&points_in, "points")?;
+    let refs = points(&reference, "reference")?;
+    let num_threads = threads(num_threads)?;
+    let d = run(py, move || {
+        with_threads(num_threads, || {
+            let index = KdIndex::new(&refs);
+            Ok(pts
+                .par_iter()
+                .map(|p| index.nearest(p).map_or(f64::INFINITY, |n| n.distance_squared.sqrt()))
+                .collect::<Vec<f64>>())
+        })
+    })?;
+    Ok(numpy::PyArray1::from_vec(py, d))
+}
+
+/// The gripper of `shape` = (tip depth, finger length, finger width, finger thickness, body
+/// radius, body length), mm, tested with `margin` and `grow`, and its fingers' `openings`, one
+/// for each of `count` points or poses (`what`).
+fn gripper_args(
+    shape: [f64; 6],
+    margin: f64,
+    grow: f64,
+    openings: &PyReadonlyArray1<'_, f64>,
+    count: usize,
+    what: &str,
+) -> PyResult<(GripperShape, Clearance, Vec<f64>)> {
+    if shape.iter().chain([&margin, &grow]).any(|v| !v.is_finite()) {
+        return Err(invalid("shape", "every length must be finite (mm)"));
+    }
+    let openings = openings.as_slice()?.to_vec();
+    if openings.len() != count {
+        return Err(invalid("openings", &format!("one opening per {what}")));
+    }
+    let [tip_depth, finger_length, finger_width, finger_thickness, body_radius, body_length] = shape;
+    let shape = GripperShape {
+        tip_depth,
+        finger_length,
+        finger_width,
+        finger_thickness,
+        body_radius,
+        body_length,
+    };
+    Ok((shape, Clearance { margin, grow }, openings))
+}
+
+/// Which `points_in` (gripper frame) lie inside the gripper of `shape`, the fingers `openings`
+/// (one per point) apart; see `GripperShape::occupied`.
+#[pyfunction]
+#[pyo3(signature = (points_in, openings, shape, margin, grow))]
+fn gripper_occupied<'py>(
+    py: Python<'py>,
+    points_in: PyReadonlyArray2<'py, f64>,
+    openings: PyReadonlyArray1<'py, f64>,
+    shape: [f64; 6],
+    margin: f64,
+    grow: f64,
+) -> PyResult<Bound<'py, numpy::PyArray1<bool>>> {
+    let pts = points(&points_in, "points")?;
+    let (shape, clearance, openings) = gripper_args(shape, margin, grow, &openings, pts.len(), "point")?;
+    let inside = pts
+        .iter()
+        .zip(&openings)
+        .map(|(p, &w)| shape.occupied(p, w, clearance))
+        .collect();
+    Ok(numpy::PyArray1::from_vec(py, inside))
+}
+
+/// How many `points_in` (base frame) lie inside the gripper of `shape` at each pose
+/// `T_base_gripper` (K, 4, 4), its fingers `openings[k]` apart; see `GripperShape::hits`.
+#[pyfunction]
+#[pyo3(signature = (points_in, poses, openings, shape, margin, grow, num_threads))]
+#[allow(clippy::too_many_arguments)]
+fn gripper_hits<'py>(
+    py: Python<'py>,
+    points_in: PyReadonlyArray2<'py, f64>,
+    poses: numpy::PyReadonlyArray3<'py, f64>,
+    openings: PyReadonlyArray1<'py, f64>,
+    shape: [f64; 6],
+    margin: f64,
+    grow: f64,
+    num_threads: usize,
+) -> PyResult<Bound<'py, numpy::PyArray1<i64>>> {
+    let pts = points(&points_in, "points")?;
+    let poses = isometries(&poses, "T_base_gripper")?;
+    let (shape, clearance, openings) = gripper_args(shape, margin, grow, &openings, poses.len(), "pose")?;
+    let num_threads = threads(num_threads)?;
+    let counts = run(py, move || {
+        Ok(with_threads(num_threads, || {
+            shape.hits(&pts, &poses, &openings, clearance)
+        }))
+    })?;
+    Ok(numpy::PyArray1::from_vec(
+        py,
+        counts.into_iter().map(|c| c as i64).collect(),
+    ))
 }
 
 /// Voxel downsampling: (points, normals or None, first indices).
@@ -206,6 +314,9 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(estimate_normals, m)?)?;
     m.add_function(wrap_pyfunction!(scan_noise, m)?)?;
     m.add_function(wrap_pyfunction!(voxel_downsample, m)?)?;
+    m.add_function(wrap_pyfunction!(nearest_distances, m)?)?;
+    m.add_function(wrap_pyfunction!(gripper_occupied, m)?)?;
+    m.add_function(wrap_pyfunction!(gripper_hits, m)?)?;
     m.add_function(wrap_pyfunction!(read_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(sample_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(read_ply, m)?)?;

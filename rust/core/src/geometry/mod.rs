@@ -3,6 +3,7 @@
 
 mod camera;
 mod cloud;
+mod gripper;
 mod kabsch;
 mod plane;
 
@@ -12,5 +13,6 @@ pub use cloud::{
     centroid, check_count, check_finite, check_spread, covariance, covariance_of, eigen_ascending, extreme_axis,
     isometry_from_matrix, median, median_range, perpendicular_basis, principal_axes, thin, transform_points, Point,
 };
+pub use gripper::{Clearance, GripperShape};
 pub use kabsch::kabsch;
 pub use plane::{BinBox, Plane};

@@ -1,0 +1,185 @@
+//! The parallel gripper's occupied volume — two finger boxes and a cylindrical body above them —
+//! and how many scene points lie in it at each of a batch of poses (the grasp planner's
+//! collision count, asked for thousands of poses a pick).
+
+use nalgebra::Isometry3;
+use rayon::prelude::*;
+
+use super::Point;
+
+/// The gripper in its own frame (z = the approach into the part, x = the fingers' closing
+/// direction, origin = the TCP between the fingertips), lengths in mm.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GripperShape {
+    /// How far the fingertips reach past the TCP along +z.
+    pub tip_depth: f64,
+    /// The fingers' length along z.
+    pub finger_length: f64,
+    /// A finger's width along y.
+    pub finger_width: f64,
+    /// A finger's thickness along x.
+    pub finger_thickness: f64,
+    /// The body's radius about z.
+    pub body_radius: f64,
+    /// The body's length along z, above the fingers.
+    pub body_length: f64,
+}
+
+/// How a point is tested against the volume: `margin` — only points more than that far inside
+/// count (a surface grazing the gripper is not in it); `grow` — the gripper grown by that much on
+/// every side but below the fingertips (a clearance round it).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Clearance {
+    /// mm a point must lie inside to count.
+    pub margin: f64,
+    /// mm the volume grows on every side but below the tips.
+    pub grow: f64,
+}
+
+impl GripperShape {
+    /// Whether `p` (gripper frame) lies inside a finger, the fingers `opening` mm apart, or the body.
+    #[inline]
+    pub fn occupied(&self, p: &Point, opening: f64, clearance: Clearance) -> bool {
+        Volume::new(self, opening, clearance).holds(p.x, p.y, p.z)
+    }
+
+    /// How many of `points` (base frame) lie inside the gripper at each pose `T_base_gripper`,
+    /// its fingers `openings[k]` apart (one opening per pose). Poses are counted in parallel
+    /// (rayon's current pool).
+    pub fn hits(
+        &self,
+        points: &[Point],
+        poses: &[Isometry3<f64>],
+        openings: &[f64],
+        clearance: Clearance,
+    ) -> Vec<usize> {
+        poses
+            .par_iter()
+            .zip(openings.par_iter())
+            .map(|(pose, &opening)| {
+                let volume = Volume::new(self, opening, clearance);
+                // Gripper-frame coordinates are the rows of Rᵀ applied to p − t; z first, as
+                // most points lie above or below the whole volume.
+                let r = pose.rotation.to_rotation_matrix().into_inner();
+                let t = pose.translation.vector;
+                let (ax, ay, az) = (
+                    r.column(0).into_owned(),
+                    r.column(1).into_owned(),
+                    r.column(2).into_owned(),
+                );
+                // Branch-free (every test evaluated, `&` not `&&`): the points come in no order, and
+                // a mispredicted branch costs more than the arithmetic it would skip.
+                points
+                    .iter()
+                    .map(|p| {
+                        let d = p.coords - t;
+                        usize::from(volume.holds(ax.dot(&d), ay.dot(&d), az.dot(&d)))
+                    })
+                    .sum::<usize>()
+            })
+            .collect()
+    }
+}
+
+/// The volume at one opening and clearance, its bounds worked out once.
+struct Volume {
+    finger_z: (f64, f64),
+    finger_half_y: f64,
+    finger_offset: f64,
+    finger_half_x: f64,
+    body_z: (f64, f64),
+    /// The body's radius squared; −1 when the clearance leaves no body (no point is within).
+    body_radius_sq: f64,
+}
+
+impl Volume {
+    fn new(shape: &GripperShape, opening: f64, clearance: Clearance) -> Self {
+        let m = clearance.margin;
+        let side = m - clearance.grow;
+        let top = shape.tip_depth - shape.finger_length;
+        let finger_z = (top + side, shape.tip_depth - m);
+        let body_z = (top - shape.body_length + side, top - side);
+        let radius = shape.body_radius - side;
+        Self {
+            finger_z,
+            finger_half_y: shape.finger_width / 2.0 - side,
+            finger_offset: opening / 2.0 + shape.finger_thickness / 2.0,
+            finger_half_x: shape.finger_thickness / 2.0 - side,
+            body_z,
+            body_radius_sq: if radius >= 0.0 { radius * radius } else { -1.0 },
+        }
+    }
+
+    /// Whether the gripper-frame point (x, y, z) lies in a finger (z within the fingers' closed
+    /// range) or the body (z within its half-open range: the body ends where the fingers start).
+    #[inline]
+    fn holds(&self, x: f64, y: f64, z: f64) -> bool {
+        let finger = (z <= self.finger_z.1)
+            & (z >= self.finger_z.0)
+            & (y.abs() <= self.finger_half_y)
+            & (((x - self.finger_offset).abs() <= self.finger_half_x)
+                | ((x + self.finger_offset).abs() <= self.finger_half_x));
+        let body = (z < self.body_z.1) & (z >= self.body_z.0) & (x * x + y * y <= self.body_radius_sq);
+        finger | body
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Translation3, UnitQuaternion, Vector3};
+
+    const SHAPE: GripperShape = GripperShape {
+        tip_depth: 10.0,
+        finger_length: 45.0,
+        finger_width: 20.0,
+        finger_thickness: 8.0,
+        body_radius: 45.0,
+        body_length: 60.0,
+    };
+
+    #[test]
+    fn a_point_is_in_a_finger_the_body_or_the_gap() {
+        let none = Clearance::default();
+        // Fingers 40 mm apart: the right finger spans x in [20, 28], the gap between is free.
+        assert!(SHAPE.occupied(&Point::new(24.0, 0.0, 0.0), 40.0, none));
+        assert!(SHAPE.occupied(&Point::new(-24.0, 9.9, 9.9), 40.0, none));
+        assert!(!SHAPE.occupied(&Point::new(0.0, 0.0, 0.0), 40.0, none));
+        assert!(!SHAPE.occupied(&Point::new(24.0, 0.0, 10.1), 40.0, none)); // below the tips
+        assert!(!SHAPE.occupied(&Point::new(24.0, 10.1, 0.0), 40.0, none)); // beside the finger
+                                                                            // The body: z in [-95, -35), within 45 mm of the axis.
+        assert!(SHAPE.occupied(&Point::new(0.0, 0.0, -50.0), 40.0, none));
+        assert!(SHAPE.occupied(&Point::new(30.0, 30.0, -90.0), 40.0, none));
+        assert!(!SHAPE.occupied(&Point::new(40.0, 40.0, -50.0), 40.0, none));
+        assert!(!SHAPE.occupied(&Point::new(0.0, 0.0, -95.5), 40.0, none));
+        // A margin keeps a grazing point out; growing takes a near one in (not below the tips).
+        let margin = Clearance { margin: 1.0, grow: 0.0 };
+        assert!(!SHAPE.occupied(&Point::new(20.5, 0.0, 0.0), 40.0, margin));
+        let grown = Clearance { margin: 0.0, grow: 2.0 };
+        assert!(SHAPE.occupied(&Point::new(18.5, 0.0, 0.0), 40.0, grown));
+        assert!(!SHAPE.occupied(&Point::new(24.0, 0.0, 11.0), 40.0, grown));
+    }
+
+    #[test]
+    fn hits_count_the_points_in_the_gripper_at_each_pose() {
+        // A column of points along base z at x = 100; a gripper turned 90° about z with its TCP
+        // at (100, -24, 0): its +x finger (gripper x = base y) covers the column where z ∈ [-35, 10].
+        let column: Vec<Point> = (-200..=200).map(|z| Point::new(100.0, 0.0, z as f64)).collect();
+        let turned = Isometry3::from_parts(
+            Translation3::new(100.0, -24.0, 0.0),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2),
+        );
+        let away = Isometry3::translation(500.0, 0.0, 0.0);
+        let counts = SHAPE.hits(
+            &column,
+            &[turned, away, turned],
+            &[40.0, 40.0, 60.0],
+            Clearance::default(),
+        );
+        // Fingers 40 apart: the finger at gripper x ∈ [20, 28] holds base y = 0 (x = 24): z ∈ [-35, 10], 46 points.
+        // 60 apart: the finger moves to x ∈ [30, 38], off the column; the body (radius 45) still holds z ∈ [-95, -35).
+        assert_eq!(counts[1], 0);
+        assert_eq!(counts[0], 46 + 60);
+        assert_eq!(counts[2], 60);
+    }
+}
