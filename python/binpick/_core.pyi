@@ -70,6 +70,11 @@ def gripper_hits(
     """(K,) how many base-frame points lie in the gripper at each pose (K, 4, 4), its fingers
     ``openings`` (K,) apart."""
 
+def gripper_widest(
+    points_in: _F64, grasps: _F64, shape: tuple[float, ...], open_width: float, graze: float, num_threads: int
+) -> _F64:
+    """(K,) half the part's width between the open fingers at each grasp T_gripper_object (K, 4, 4), −1 for none."""
+
 def read_mesh(path: _Path, unit: str) -> tuple[_F64, _I64]:
     """A triangle mesh from STL (binary/ASCII), PLY or OBJ, scaled from ``unit`` (mm|cm|m|in) to mm:
     (vertices, faces)."""

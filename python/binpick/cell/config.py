@@ -154,6 +154,15 @@ class GripperGeometry:
         pts = np.ascontiguousarray(points_base, dtype=np.float64).reshape(-1, 3)
         return _core.gripper_hits(pts, poses, gaps, self.shape_mm, float(margin_mm), float(grow_mm), 1)
 
+    def widest(self, points_object: np.ndarray, T_gripper_objects: np.ndarray, graze_mm: float) -> np.ndarray:
+        """For each grasp ``T_gripper_objects`` (K, 4, 4): the farthest |x| (mm) of the part's
+        ``points_object`` (N, 3, object frame) in the slab the open fingers sweep — more than
+        ``graze_mm`` inside it along y and z, out to the fingers' outer faces — half the part's
+        width across the fingers there; −1 where no point lies between them. (K,), from binpick's core."""
+        pts = np.ascontiguousarray(points_object, dtype=np.float64).reshape(-1, 3)
+        grasps = np.ascontiguousarray(T_gripper_objects, dtype=np.float64).reshape(-1, 4, 4)
+        return _core.gripper_widest(pts, grasps, self.shape_mm, float(self.open_width_mm), float(graze_mm), 1)
+
     def outline(self, opening_mm: Optional[float] = None, *, sides: int = 16) -> np.ndarray:
         """Points (M, 3, gripper frame) whose convex hull per piece covers the whole gripper with
         the fingers ``opening_mm`` apart (``open_width_mm`` by default): the 8 corners of each
@@ -442,10 +451,17 @@ class CellConfig:
         todo = [n for n in dict.fromkeys(names) if n not in known]
         if todo:
             c0 = time.process_time()
-            points = swept_points(self.model) if swept else None
+            points = self.swept_points if swept else None
             known.update(grasp_openings(self.gripper, self.model, {n: self.grasps[n] for n in todo}, points))
             self._openings_cpu[0] += time.process_time() - c0
         return np.array([np.nan if known[n] is None else known[n] for n in names], dtype=np.float64)
+
+    @cached_property
+    def swept_points(self) -> np.ndarray:
+        """The part's points with the feature of its continuous near-symmetry turned all the way
+        about it (:func:`~binpick.cell.grasp.swept_points`), made once per cell: what the gripper
+        must clear where the part's turn is open."""
+        return swept_points(self.model)
 
     @property
     def openings_cpu_ms(self) -> float:

@@ -209,22 +209,7 @@ def grasp_openings(
     if not names:
         return {}
     pts = np.asarray(model.points if points is None else points, dtype=np.float64)
-    T = np.stack([np.asarray(grasps[n], dtype=np.float64) for n in names])
-    outer = gripper.open_width_mm / 2 + gripper.finger_thickness_mm
-    lo_z = gripper.tip_depth_mm - gripper.finger_length_mm + GRAZE_MM
-    hi_z = gripper.tip_depth_mm - GRAZE_MM
-    half_y = gripper.finger_width_mm / 2 - GRAZE_MM
-    widest = np.empty(len(T))
-    step = max(1, 1_000_000 // max(1, len(pts)))
-    P = pts.T
-    for k in range(0, len(T), step):
-        R, t = T[k : k + step, :3, :3], T[k : k + step, :3, 3]
-        # Every point in every grasp's gripper frame, a dense matrix product per axis.
-        y = np.abs(R[:, 1] @ P + t[:, 1, None])
-        z = R[:, 2] @ P + t[:, 2, None]
-        x = np.abs(R[:, 0] @ P + t[:, 0, None])
-        inside = (y < half_y) & (z > lo_z) & (z < hi_z) & (x <= outer)
-        widest[k : k + step] = np.where(inside, x, -1.0).max(axis=1)
+    widest = gripper.widest(pts, np.stack([np.asarray(grasps[n], dtype=np.float64) for n in names]), GRAZE_MM)
     return {
         n: (gripper.opening_for(2.0 * w if w >= 0.0 else None) if 2.0 * w <= gripper.open_width_mm else None)
         for n, w in zip(names, widest.tolist())
@@ -607,7 +592,7 @@ def _reachable_scene(
     axis (None when its turn is decided), the part's points at ``T_base_object`` (swept, where
     they are), and the scene points the fingers and body can reach from a TCP on the part, each
     standing for its surface out to the next laser line (:func:`_unseen`)."""
-    own = swept_points(config.model) if free_turn and continuous_near_axis(config.model) is not None else None
+    own = config.swept_points if free_turn and continuous_near_axis(config.model) is not None else None
     part = np.asarray(config.model.points if own is None else own) @ T_base_object[:3, :3].T + T_base_object[:3, 3]
     z_mid, radius = _occupied_sphere(config.gripper)
     centre = part.mean(axis=0)

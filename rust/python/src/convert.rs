@@ -14,6 +14,10 @@ pub fn points(arr: &PyReadonlyArray2<'_, f64>, arg: &str) -> PyResult<Vec<Point>
     if a.ncols() != 3 {
         return Err(invalid(arg, &format!("must have shape (N, 3), got {:?}", a.shape())));
     }
+    if let Some(flat) = a.as_slice() {
+        // C-contiguous (what the Python layer passes): straight from the buffer.
+        return Ok(flat.chunks_exact(3).map(|r| Point::new(r[0], r[1], r[2])).collect());
+    }
     Ok(a.rows().into_iter().map(|r| Point::new(r[0], r[1], r[2])).collect())
 }
 

@@ -89,33 +89,29 @@ fn nearest_distances<'py>(
 }
 
 /// The gripper of `shape` = (tip depth, finger length, finger width, finger thickness, body
-/// radius, body length), mm, tested with `margin` and `grow`, and its fingers' `openings`, one
-/// for each of `count` points or poses (`what`).
-fn gripper_args(
-    shape: [f64; 6],
-    margin: f64,
-    grow: f64,
-    openings: &PyReadonlyArray1<'_, f64>,
-    count: usize,
-    what: &str,
-) -> PyResult<(GripperShape, Clearance, Vec<f64>)> {
-    if shape.iter().chain([&margin, &grow]).any(|v| !v.is_finite()) {
+/// radius, body length), mm; those and the `lengths` it is used with must be finite.
+fn gripper_shape(shape: [f64; 6], lengths: &[f64]) -> PyResult<GripperShape> {
+    if shape.iter().chain(lengths).any(|v| !v.is_finite()) {
         return Err(invalid("shape", "every length must be finite (mm)"));
     }
-    let openings = openings.as_slice()?.to_vec();
-    if openings.len() != count {
-        return Err(invalid("openings", &format!("one opening per {what}")));
-    }
     let [tip_depth, finger_length, finger_width, finger_thickness, body_radius, body_length] = shape;
-    let shape = GripperShape {
+    Ok(GripperShape {
         tip_depth,
         finger_length,
         finger_width,
         finger_thickness,
         body_radius,
         body_length,
-    };
-    Ok((shape, Clearance { margin, grow }, openings))
+    })
+}
+
+/// The fingers' `openings`, one for each of `count` points or poses (`what`).
+fn one_each(openings: &PyReadonlyArray1<'_, f64>, count: usize, what: &str) -> PyResult<Vec<f64>> {
+    let openings = openings.as_slice()?.to_vec();
+    if openings.len() != count {
+        return Err(invalid("openings", &format!("one opening per {what}")));
+    }
+    Ok(openings)
 }
 
 /// Which `points_in` (gripper frame) lie inside the gripper of `shape`, the fingers `openings`
@@ -131,7 +127,8 @@ fn gripper_occupied<'py>(
     grow: f64,
 ) -> PyResult<Bound<'py, numpy::PyArray1<bool>>> {
     let pts = points(&points_in, "points")?;
-    let (shape, clearance, openings) = gripper_args(shape, margin, grow, &openings, pts.len(), "point")?;
+    let (shape, clearance) = (gripper_shape(shape, &[margin, grow])?, Clearance { margin, grow });
+    let openings = one_each(&openings, pts.len(), "point")?;
     let inside = pts
         .iter()
         .zip(&openings)
@@ -157,7 +154,8 @@ fn gripper_hits<'py>(
 ) -> PyResult<Bound<'py, numpy::PyArray1<i64>>> {
     let pts = points(&points_in, "points")?;
     let poses = isometries(&poses, "T_base_gripper")?;
-    let (shape, clearance, openings) = gripper_args(shape, margin, grow, &openings, poses.len(), "pose")?;
+    let (shape, clearance) = (gripper_shape(shape, &[margin, grow])?, Clearance { margin, grow });
+    let openings = one_each(&openings, poses.len(), "pose")?;
     let num_threads = threads(num_threads)?;
     let counts = run(py, move || {
         Ok(with_threads(num_threads, || {
@@ -168,6 +166,32 @@ fn gripper_hits<'py>(
         py,
         counts.into_iter().map(|c| c as i64).collect(),
     ))
+}
+
+/// For each grasp `T_gripper_object` (K, 4, 4): half the width of the part's `points_in` (object
+/// frame) between the fingers of the gripper of `shape`, open `open_width` mm, or −1 when none
+/// lies between them; see `GripperShape::widest_between`.
+#[pyfunction]
+#[pyo3(signature = (points_in, grasps, shape, open_width, graze, num_threads))]
+fn gripper_widest<'py>(
+    py: Python<'py>,
+    points_in: PyReadonlyArray2<'py, f64>,
+    grasps: numpy::PyReadonlyArray3<'py, f64>,
+    shape: [f64; 6],
+    open_width: f64,
+    graze: f64,
+    num_threads: usize,
+) -> PyResult<Bound<'py, numpy::PyArray1<f64>>> {
+    let pts = points(&points_in, "points")?;
+    let grasps = isometries(&grasps, "grasps")?;
+    let shape = gripper_shape(shape, &[open_width, graze])?;
+    let num_threads = threads(num_threads)?;
+    let widest = run(py, move || {
+        Ok(with_threads(num_threads, || {
+            shape.widest_between(&pts, &grasps, open_width, graze)
+        }))
+    })?;
+    Ok(numpy::PyArray1::from_vec(py, widest))
 }
 
 /// Voxel downsampling: (points, normals or None, first indices).
@@ -317,6 +341,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(nearest_distances, m)?)?;
     m.add_function(wrap_pyfunction!(gripper_occupied, m)?)?;
     m.add_function(wrap_pyfunction!(gripper_hits, m)?)?;
+    m.add_function(wrap_pyfunction!(gripper_widest, m)?)?;
     m.add_function(wrap_pyfunction!(read_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(sample_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(read_ply, m)?)?;

@@ -79,6 +79,36 @@ impl GripperShape {
             })
             .collect()
     }
+
+    /// For each pose `T_gripper_object` of a part whose `points` (object frame) are given: the
+    /// farthest |x| (mm) of the points inside the slab the fingers sweep when `open_width` mm
+    /// apart — more than `graze` mm inside it along y and z (a finger's edge may graze the part),
+    /// out to the open fingers' outer faces — or −1 when no point lies in it. Half the part's
+    /// width across the fingers at that grasp.
+    pub fn widest_between(&self, points: &[Point], poses: &[Isometry3<f64>], open_width: f64, graze: f64) -> Vec<f64> {
+        let outer = open_width / 2.0 + self.finger_thickness;
+        let (lo_z, hi_z) = (self.tip_depth - self.finger_length + graze, self.tip_depth - graze);
+        let half_y = self.finger_width / 2.0 - graze;
+        poses
+            .par_iter()
+            .map(|pose| {
+                let r = pose.rotation.to_rotation_matrix().into_inner();
+                let t = pose.translation.vector;
+                let (rx, ry, rz) = (r.row(0).transpose(), r.row(1).transpose(), r.row(2).transpose());
+                points.iter().fold(-1.0_f64, |widest, p| {
+                    let x = (rx.dot(&p.coords) + t.x).abs();
+                    let y = (ry.dot(&p.coords) + t.y).abs();
+                    let z = rz.dot(&p.coords) + t.z;
+                    let inside = (y < half_y) & (z > lo_z) & (z < hi_z) & (x <= outer);
+                    if inside {
+                        widest.max(x)
+                    } else {
+                        widest
+                    }
+                })
+            })
+            .collect()
+    }
 }
 
 /// The volume at one opening and clearance, its bounds worked out once.
@@ -158,6 +188,23 @@ mod tests {
         let grown = Clearance { margin: 0.0, grow: 2.0 };
         assert!(SHAPE.occupied(&Point::new(18.5, 0.0, 0.0), 40.0, grown));
         assert!(!SHAPE.occupied(&Point::new(24.0, 0.0, 11.0), 40.0, grown));
+    }
+
+    #[test]
+    fn the_widest_point_between_the_fingers_is_measured_in_their_slab_only() {
+        // A bar along object x from -15 to 15 at y = z = 0, and a point far off in y; the
+        // gripper at the object's origin (identity), and shifted 30 mm along z (the bar below the tips).
+        let mut bar: Vec<Point> = (-15..=15).map(|x| Point::new(x as f64, 0.0, 0.0)).collect();
+        bar.push(Point::new(22.0, 30.0, 0.0));
+        let below = Isometry3::translation(0.0, 0.0, 30.0);
+        let widest = SHAPE.widest_between(&bar, &[Isometry3::identity(), below], 50.0, 0.5);
+        assert_eq!(widest, vec![15.0, -1.0]);
+        // A point beyond the open fingers' outer faces (25 + 8) is not between them.
+        let wide: Vec<Point> = vec![Point::new(34.0, 0.0, 0.0), Point::new(-12.0, 0.0, 0.0)];
+        assert_eq!(
+            SHAPE.widest_between(&wide, &[Isometry3::identity()], 50.0, 0.5),
+            vec![12.0]
+        );
     }
 
     #[test]
