@@ -58,8 +58,7 @@ impl GripperShape {
             .zip(openings.par_iter())
             .map(|(pose, &opening)| {
                 let volume = Volume::new(self, opening, clearance);
-                // Gripper-frame coordinates are the rows of Rᵀ applied to p − t; z first, as
-                // most points lie above or below the whole volume.
+                // Gripper-frame coordinates: R's columns dotted with p − t (Rᵀ (p − t)).
                 let r = pose.rotation.to_rotation_matrix().into_inner();
                 let t = pose.translation.vector;
                 let (ax, ay, az) = (
