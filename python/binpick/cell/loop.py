@@ -72,6 +72,7 @@ from .records import (
     located_line,
     pose_trust,
     with_collisions,
+    with_earlier,
 )
 from .rescan import SEEN_AGAIN, RescanBasis, basis_after, part_box, rescan
 from .shots import DepthSource, depth_scan
@@ -84,11 +85,6 @@ __all__ = ["Cell", "PICK_MOVES", "ProgressPrinter", "quiet"]
 
 def _ms_since(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
-
-
-#: Timings of an attempt that a cycle's later attempts do not add to (see :meth:`Cell._cycle`):
-#: the plan made ahead is only the first attempt's, and the totals are the whole cycle's.
-_PER_ATTEMPT = frozenset({"ahead.used", "ahead.window", "ahead.wait", "total", "phys.cycle"})
 
 
 def _phys_ms(clock: Optional[Callable[[], float]], since: Optional[float]) -> float:
@@ -669,10 +665,7 @@ class Cell:
         looks = 0
 
         def whole(record: PickRecord) -> PickRecord:
-            times = dict(record.timings)
-            for key, v in spent.items():
-                if key not in _PER_ATTEMPT:
-                    times[key] = times.get(key, 0.0) + v
+            times = with_earlier(record.timings, spent)
             times["total"] = _ms_since(t0)
             if self.clock is not None:
                 times["phys.cycle"] = _phys_ms(self.clock, c0)

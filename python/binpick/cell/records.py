@@ -221,6 +221,21 @@ def cycle_stages_s(timings: Mapping[str, float]) -> Optional[dict[str, float]]:
     }
 
 
+#: Timings of an attempt that a cycle's later attempts do not add to (:func:`with_earlier`): the
+#: plan made ahead is only the first attempt's, and the totals are the whole cycle's.
+_PER_ATTEMPT = frozenset({"ahead.used", "ahead.window", "ahead.wait", "total", "phys.cycle"})
+
+
+def with_earlier(timings: Mapping[str, float], earlier: Mapping[str, float]) -> dict[str, float]:
+    """An attempt's ``timings`` (ms) with those of the attempts and nudges before it in the same
+    cycle added (:meth:`binpick.cell.Cell._cycle`), but for the per-attempt ones."""
+    times = dict(timings)
+    for key, v in earlier.items():
+        if key not in _PER_ATTEMPT:
+            times[key] = times.get(key, 0.0) + v
+    return times
+
+
 def picks_per_hour(picked: int, cycle_times_s: Sequence[float]) -> Optional[float]:
     """3600 × ``picked`` / the sum of every cycle's time, failed ones included: the rate parts
     come out of the bin (None without time)."""
