@@ -228,16 +228,20 @@ def check_nudge(config: CellConfig, waypoints: list, T_now: np.ndarray, scene: n
     return None
 
 
+def _vertices(config: CellConfig, T: np.ndarray) -> np.ndarray:
+    """The part's mesh vertices at ``T`` (base frame)."""
+    return np.asarray(config.model.vertices) @ T[:3, :3].T + T[:3, 3]
+
+
 def _part_in_scan(
-    config: CellConfig, T: np.ndarray, pts: np.ndarray
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The located part at ``T`` against the scan ``pts`` (base frame): its vertices, the centre
-    of its box over the floor (xy), its sample points, and the scan's points that are not its
-    own (farther than :data:`OWN_POINT_MM` from it)."""
-    verts = np.asarray(config.model.vertices) @ T[:3, :3].T + T[:3, 3]
+    config: CellConfig, T: np.ndarray, pts: np.ndarray, verts: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The located part at ``T`` (its vertices there ``verts``) against the scan ``pts`` (base
+    frame): the centre of its box over the floor (xy), its sample points, and the scan's points
+    that are not its own (farther than :data:`OWN_POINT_MM` from it)."""
     part = np.asarray(config.model.points) @ T[:3, :3].T + T[:3, 3]
     centre = (verts[:, :2].min(axis=0) + verts[:, :2].max(axis=0)) / 2
-    return verts, centre, part, pts[~_near(pts, part, OWN_POINT_MM)]
+    return centre, part, pts[~_near(pts, part, OWN_POINT_MM)]
 
 
 def _push_height(config: CellConfig, verts: np.ndarray) -> float:
@@ -325,9 +329,10 @@ def plan_separating(config: CellConfig, T_base_object: Any, scene: Any, T_now: A
     left out), the push passing :func:`check_nudge`. None when no push does."""
     T, pts, T_now = plan_inputs(config, T_base_object, scene, T_now, "T_now")
     model = config.model
-    verts, centre, part, others = _part_in_scan(config, T, pts)
+    verts = _vertices(config, T)
     if not _lies_flat(config, verts):
         return None
+    centre, part, others = _part_in_scan(config, T, pts, verts)
     footprint = part[:, :2]
     path = _PathMap(config, others)
     tip_z, reach = _push_height(config, verts), _closed_reach(config)
@@ -395,7 +400,8 @@ def plan_nudge(
     tried last, after the others."""
     T, pts, T_now = plan_inputs(config, T_base_object, scene, T_now, "T_now")
     model = config.model
-    verts, centre, part, others = _part_in_scan(config, T, pts)
+    verts = _vertices(config, T)
+    centre, part, others = _part_in_scan(config, T, pts, verts)
     tip_z, reach = _push_height(config, verts), _closed_reach(config)
     why: list[str] = []
     directions = nudge_directions(config, centre, first=_topple(config, verts, reach))

@@ -107,6 +107,7 @@ class GraspMatcher:
             if not norm > 1e-9:
                 raise InvalidInputError("continuous: the symmetry axis has no direction; pass a unit vector")
             self._axis = (centre, axis / norm)
+            self._swing_mm = float(np.linalg.norm(centre - (self._axis[1] @ centre) * self._axis[1]))
 
     def error(self, T_gripper_object: np.ndarray) -> tuple[float, float]:
         """(rotation error deg, translation error mm) against the nearest declared grasp."""
@@ -207,7 +208,6 @@ class GraspMatcher:
                 # B_R (c₀ − R_θ c₀) = (1 − cos θ) B_R u − sin θ B_R (a × c₀), u = c₀'s part across a.
                 centre, a = self._axis
                 self._swing = BR @ (centre - (a @ centre) * a), BR @ np.cross(a, centre)
-                self._swing_mm = float(np.linalg.norm(centre - (a @ centre) * a))
         return self._weights
 
     def _errors_of(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
