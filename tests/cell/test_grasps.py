@@ -80,14 +80,15 @@ def test_a_branch_standing_up_is_gripped_from_its_end_nearly_upright(tee, elevat
 def test_vectorised_grasp_matching_equals_pose_error_over_every_grasp(tee):
     S = np.eye(4)
     S[:3, :3] = rotation_about(np.array([0.0, 1.0, 0.0]), math.pi)
-    grasps = branch_grasps(tee, pitches_deg=(0.0,))  # 864 grasps: pose_error over each is slow
+    every = branch_grasps(tee, pitches_deg=(0.0,))  # 864 grasps; every fourth: pose_error over each is slow
+    grasps = {name: G for k, (name, G) in enumerate(every.items()) if k % 4 == 0}
     matcher = GraspMatcher(grasps, (S,), tolerance_deg=12.0, tolerance_mm=6.0)
     values = list(grasps.values())
     rng = np.random.default_rng(0)
-    for k in range(60):
+    for k in range(40):
         T = values[rng.integers(len(values))].copy()
-        T[:3, :3] = rotation_about(rng.normal(size=3), rng.uniform(0, 0.4 if k < 30 else 3.0)) @ T[:3, :3]
-        T[:3, 3] += rng.normal(size=3) * (3.0 if k < 30 else 30.0)
+        T[:3, :3] = rotation_about(rng.normal(size=3), rng.uniform(0, 0.4 if k < 20 else 3.0)) @ T[:3, :3]
+        T[:3, 3] += rng.normal(size=3) * (3.0 if k < 20 else 30.0)
         expected = min((pose_error(T, G, (S,)) for G in values), key=lambda e: e[0] / 12.0 + e[1] / 6.0)
         assert matcher.error(T) == pytest.approx(expected, abs=1e-6)
 

@@ -74,6 +74,27 @@ def test_a_dead_end_is_nudged_and_the_blocked_part_picked(tee):
     assert stages["other"] > 0.5, stages  # the push: down beside the part, across, up
 
 
+def test_after_a_nudge_the_cell_looks_from_the_scan_pose_and_the_best_turned_view_only(tee):
+    # A tee the gripper cannot take (fingers opening 12 mm, narrower than any of its branches):
+    # every look is a dead end. Before the nudge the cell looks from the scan pose and from every
+    # turned view; after it, from the scan pose and from the one turned view that best tells the
+    # part apart — the others were just tried, and only the pushed part has moved.
+    lines = []
+    square = binpick.cell.branch_grasps(tee, end_pitches_deg=())
+    narrow = binpick.cell.GripperGeometry(open_width_mm=12.0)
+    progress = lambda stage, msg: lines.append((stage, msg))  # noqa: E731
+    sim = SimulatedCell(tee, count=1, seed=0, frames=30, grasps=square, gripper=narrow, max_nudges=1, progress=progress)
+    with sim:
+        turned = len(sim.cell.config.look_again_poses)
+        report = sim.cell.run(1)
+        assert sim.emulator_failures == []
+    (record,) = report.records
+    assert turned == 4 and record.failure == "no grasp" and len(record.nudges) == 1, report.stopped
+    stages = [s for s, m in lines if s in ("look", "nudge") and not m.startswith("the ambiguous")]
+    assert record.looks == 1 + turned + 2, stages
+    assert stages.index("nudge") == turned and stages.count("look") == turned + 1, stages
+
+
 def test_a_nudge_through_the_floor_into_a_wall_or_out_of_reach_is_refused_with_nothing_sent(tee):
     sim = _dead_end(tee)
     with sim:

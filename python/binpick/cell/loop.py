@@ -672,7 +672,7 @@ class Cell:
             return replace(record, timings=MappingProxyType(times), looks=looks + record.looks, nudges=tuple(nudges))
 
         while True:
-            record, why = self._look_and_pick(i, None if nudges else before)
+            record, why = self._look_and_pick(i, None if nudges else before, nudged=bool(nudges))
             dead_end = why is not None and record.failure == "no grasp" and bool(record.skipped)
             if not dead_end or record.scan is None:
                 return whole(record), why
@@ -695,12 +695,14 @@ class Cell:
             looks += record.looks
             nudges.append(plan)
 
-    def _look_and_pick(self, i: int, before: Optional[PickRecord] = None) -> tuple[PickRecord, Optional[str]]:
+    def _look_and_pick(
+        self, i: int, before: Optional[PickRecord] = None, nudged: bool = False
+    ) -> tuple[PickRecord, Optional[str]]:
         """Scan, locate and plan — looking again from each of ``config.look_again_poses`` while
-        nothing is pickable (from one only when neither look finds any part), each look judged
-        together with the first — then pick; the record, and why the run stops (None to go on).
-        ``before``: the pick just made, whose plan made ahead (:mod:`binpick.cell.ahead`) the
-        first look may confirm."""
+        nothing is pickable (from one only when neither look finds any part, or ``nudged``: after
+        a nudge, whose views were all just tried), each look judged together with the first — then
+        pick; the record, and why the run stops (None to go on). ``before``: the pick just made,
+        whose plan made ahead (:mod:`binpick.cell.ahead`) the first look may confirm."""
         t0, c0 = time.perf_counter(), self.clock and self.clock()
         self._cpu = {}
         scan = first = None  # the look now, and the first look each later one is judged with
@@ -753,6 +755,7 @@ class Cell:
                         raise
                     if k == 0:
                         views[1:] = deciding_first(self.config, views[1:], skipped, self.progress)
+                        views[2 if nudged else len(views) :] = []
                     continue
                 finally:
                     times["locate+plan"] = times.get("locate+plan", 0.0) + _ms_since(t1)

@@ -146,6 +146,8 @@ class SimCamera(FrameSource):
         self.sim = sim
         self.seed = int(seed)
         self._view: Optional[View] = None
+        self._world: Optional[World] = None
+        self._world_key: Optional[tuple[bytes, bytes]] = None
         self._board: Optional[_BoardLayer] = None
         self._frame = 0
         self._stream: Optional[list[float]] = None  # streaming: [start time, frames since]
@@ -157,9 +159,13 @@ class SimCamera(FrameSource):
 
     def begin(self, T_base_flange: np.ndarray) -> None:
         self.sim.settle_pending()
-        world = World.of_pile(self.sim.pile)
+        pile = self.sim.pile
+        ids, poses = pile.ids, pile.poses
+        key = (np.asarray(ids).tobytes(), np.asarray(poses, dtype=np.float64).tobytes())
+        if key != self._world_key:  # the meshes placed again only when a part has moved or left
+            self._world, self._world_key = World.of_pile(pile), key
         actual = self.sim.robot_emulator.pose()
-        self._view = world.view(self.sim.layout, actual, num_threads=self.sim.num_threads)
+        self._view = self._world.view(self.sim.layout, actual, num_threads=self.sim.num_threads)
         self._board = _BoardLayer.of(self.sim.layout, self._view, actual)
 
     def grab(self) -> np.ndarray:
