@@ -65,6 +65,34 @@ pub(super) fn top_view(mesh: &crate::mesh::TriMesh, t_scene_model: &Isometry3<f6
     pts
 }
 
+/// `pts` with a floor at z = 0 added around `(cx, cy)`: the points `(cx + step·i, cy + step·j)`
+/// for `i, j` in `-n..n`, each unless a point of `pts` not below z = 0.5 lies within `clear` of
+/// it in x and y (found through a grid of `clear`-wide cells, not by trying every point).
+pub(super) fn with_floor(mut pts: Vec<Point>, (cx, cy): (f64, f64), step: f64, n: i32, clear: f64) -> Vec<Point> {
+    let key = |x: f64, y: f64| ((x / clear).floor() as i64, (y / clear).floor() as i64);
+    let mut raised: HashMap<(i64, i64), Vec<Point>> = HashMap::new();
+    for q in pts.iter().filter(|q| !(q.z < 0.5)) {
+        raised.entry(key(q.x, q.y)).or_default().push(*q);
+    }
+    for i in -n..n {
+        for j in -n..n {
+            let p = Point::new(cx + step * i as f64, cy + step * j as f64, 0.0);
+            let (kx, ky) = key(p.x, p.y);
+            let covered = (-1..=1).any(|dx| {
+                (-1..=1).any(|dy| {
+                    raised
+                        .get(&(kx + dx, ky + dy))
+                        .is_some_and(|cell| cell.iter().any(|q| !((q.xy() - p.xy()).norm() > clear)))
+                })
+            });
+            if !covered {
+                pts.push(p);
+            }
+        }
+    }
+    pts
+}
+
 /// The context of a call with `cfg` on `scene` whose bin removal kept `pts` (without their
 /// indices: the judge and the detection scene read none).
 pub(super) fn context<'a>(

@@ -65,15 +65,7 @@ fn lying(yaw: f64) -> Isometry3<f64> {
 
 /// `mesh` at `pose` seen from above, on a floor at z = 0, and the judge of the scene.
 fn judged_scene(mesh: &TriMesh, pose: &Isometry3<f64>, model: &PoseModel) -> Judge {
-    let mut pts = top_view(mesh, pose, 1);
-    for i in -100..100 {
-        for j in -100..100 {
-            let p = Point::new(400.0 + 1.0 * i as f64, 1.0 * j as f64, 0.0);
-            if pts.iter().all(|q| (q.xy() - p.xy()).norm() > 1.0 || q.z < 0.5) {
-                pts.push(p);
-            }
-        }
-    }
+    let pts = tests::with_floor(top_view(mesh, pose, 1), (400.0, 0.0), 1.0, 100, 1.0);
     let mut cfg = config(CoarseMethod::Ppf);
     cfg.bin = Some(BinBox {
         min: Point::new(280.0, -120.0, 0.0),

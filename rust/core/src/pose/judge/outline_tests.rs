@@ -38,16 +38,8 @@ fn short_rod() -> &'static PoseModel {
 
 /// The scene of `meshes` posed, seen from straight above, on a floor at z = 0.
 fn scene(meshes: &[(TriMesh, Isometry3<f64>)]) -> Vec<Point> {
-    let mut pts: Vec<Point> = meshes.iter().flat_map(|(m, t)| top_view(m, t, 3)).collect();
-    for i in -60..60 {
-        for j in -60..60 {
-            let p = Point::new(400.0 + 1.5 * i as f64, 1.5 * j as f64, 0.0);
-            if pts.iter().all(|q| (q.xy() - p.xy()).norm() > 0.9 * RADIUS || q.z < 0.5) {
-                pts.push(p);
-            }
-        }
-    }
-    pts
+    let pts: Vec<Point> = meshes.iter().flat_map(|(m, t)| top_view(m, t, 3)).collect();
+    tests::with_floor(pts, (400.0, 0.0), 1.5, 60, 0.9 * RADIUS)
 }
 
 fn judge_of(scene: &[Point], model: &PoseModel) -> Judge {
