@@ -217,7 +217,7 @@ fn renderer_and_triangulation_share_one_camera_model() {
 fn the_sheet_index_lights_exactly_the_pixels_trying_every_one_would() {
     // A tilted floor (the sheet's reach differs across it), a glossy plate standing almost
     // edge-on (wide reaches, a laser shadow, reflections), speckle: each frame the index gives
-    // is the frame of every pixel tried.
+    // is the frame of every pixel tried, and of a view that has drawn no frame before.
     let mut scene = Scene::new();
     let floor = scene.add_mesh(&plane_mesh(0.0, 1000.0), Material::default()).unwrap();
     scene
@@ -257,5 +257,16 @@ fn the_sheet_index_lights_exactly_the_pixels_trying_every_one_would() {
             .count();
         assert!(lit > 0);
         assert!(indexed == every, "angle {theta}: the index missed or added lit pixels");
+        // The laser shadows the view keeps from the frames before are the shadows this frame
+        // finds on a view that has drawn no other.
+        let alone = scene
+            .view(&small_camera(), &Isometry3::identity(), &Lighting::default())
+            .unwrap()
+            .frame(&laser, theta, &noise, k as u64)
+            .unwrap();
+        assert!(
+            indexed == alone,
+            "angle {theta}: a shadow kept from another frame is wrong"
+        );
     }
 }

@@ -1,6 +1,7 @@
 //! One robot pose's view: the laser frame lit per motor angle, with sensor noise.
 
 use super::*;
+use std::sync::atomic::{AtomicU8, Ordering};
 
 /// The geometry a camera sees from one robot pose: per pixel the first surface, its normal and
 /// instance id, and its ambient shading. Lit by the laser per motor angle with [`View::frame`].
@@ -33,6 +34,11 @@ pub(super) struct SheetIndex {
     levels: Vec<Vec<(f64, u32)>>,
     /// The pixels whose reach exceeds every level's: tried at every angle.
     wide: Vec<u32>,
+    /// Per pixel, whether something hides its surface point from the projector: 0 not yet
+    /// known, 1 in the light, 2 in shadow. The projector turns about an axis through its
+    /// origin, so the answer holds at every motor angle — found once, for the first frame that
+    /// lights the pixel, and kept for the sweep's next frames.
+    shadow: Vec<AtomicU8>,
 }
 
 impl SheetIndex {
@@ -76,6 +82,19 @@ impl SheetIndex {
             key: Self::key(laser, sigma2, pixel_var),
             levels,
             wide,
+            shadow: view.hits.iter().map(|_| AtomicU8::new(0)).collect(),
+        }
+    }
+
+    /// Whether pixel `i` is in the laser's shadow: `test` finds it out the first time.
+    fn in_shadow(&self, i: usize, test: impl FnOnce() -> bool) -> bool {
+        match self.shadow[i].load(Ordering::Relaxed) {
+            0 => {
+                let shadowed = test();
+                self.shadow[i].store(1 + u8::from(shadowed), Ordering::Relaxed);
+                shadowed
+            }
+            known => known == 2,
         }
     }
 
@@ -128,7 +147,8 @@ pub(super) fn quantise(img: &[[f32; 3]], width: usize, noise: &SensorNoise, seed
 }
 
 /// [`quantise`] of `img` with light added at some pixels: `adds` (pixel, RGB), sorted by pixel,
-/// each pixel's in the order they were added — the image is not copied to add them.
+/// each pixel's in the order they were added: row by row, the row's light summed in one
+/// reused buffer (not a copy of the image), its noise drawn, then rounded in a second pass.
 pub(super) fn quantise_adding(
     img: &[[f32; 3]],
     adds: &[(usize, [f32; 3])],
@@ -140,27 +160,27 @@ pub(super) fn quantise_adding(
     let mut out = vec![0u8; img.len() * 3];
     let noisy = noise.read_noise > 0.0 || noise.shot_noise > 0.0;
     let (read2, shot) = ((noise.read_noise * noise.read_noise) as f32, noise.shot_noise as f32);
-    out.par_chunks_mut(width * 3).enumerate().for_each(|(row, buf)| {
-        let mut rng = Rng::new(mix_seed(seed, salt, row as u64));
+    let rows = out.par_chunks_mut(width * 3).enumerate();
+    rows.for_each_init(Vec::new, |light: &mut Vec<f32>, (row, buf)| {
         let start = row * width;
-        let mut next = adds.partition_point(|&(i, _)| i < start);
-        for (u, px) in img[start..start + width].iter().enumerate() {
-            let mut px = *px;
-            while next < adds.len() && adds[next].0 == start + u {
-                for (v, add) in px.iter_mut().zip(adds[next].1) {
-                    *v += add;
-                }
-                next += 1;
+        light.clear();
+        light.extend_from_slice(img[start..start + width].as_flattened());
+        let first = adds.partition_point(|&(i, _)| i < start);
+        for (i, add) in adds[first..].iter().take_while(|&&(i, _)| i < start + width) {
+            for (v, add) in light[(i - start) * 3..][..3].iter_mut().zip(add) {
+                *v += add;
             }
-            for c in 0..3 {
-                let mut v = px[c];
-                if noisy {
-                    v += (read2 + shot * v.max(0.0)).sqrt() * fast_normal(&mut rng);
-                }
-                // Rounded half away from zero, as `round()` (whose library call costs more than
-                // the noise): for v ≥ −0.5 that is ⌊v + 0.5⌋, and below it both clamp to 0.
-                buf[u * 3 + c] = (v + 0.5).clamp(0.0, 255.0) as u8;
+        }
+        if noisy {
+            let mut rng = Rng::new(mix_seed(seed, salt, row as u64));
+            for v in light.iter_mut() {
+                *v += (read2 + shot * v.max(0.0)).sqrt() * fast_normal(&mut rng);
             }
+        }
+        // Rounded half away from zero, as `round()` (whose library call costs more than the
+        // noise): for v ≥ −0.5 that is ⌊v + 0.5⌋, and below it both clamp to 0.
+        for (o, v) in buf.iter_mut().zip(light.iter()) {
+            *o = (v + 0.5).clamp(0.0, 255.0) as u8;
         }
     });
     out
@@ -243,9 +263,10 @@ impl View {
         let sigma2 = laser.sheet_sigma * laser.sheet_sigma;
         let pixel_var = 1.0 / 12.0 + noise.blur * noise.blur;
         let salt = theta.to_bits();
+        let index = self.sheet_index(laser, sigma2, pixel_var);
         let tried: Vec<u32> = match every {
             Some(()) => (0..self.hits.len() as u32).collect(),
-            None => self.sheet_index(laser, sigma2, pixel_var).candidates(theta),
+            None => index.candidates(theta),
         };
         let mut adds: Vec<(usize, [f32; 3])> = Vec::new();
         let mut lit: Vec<(usize, f64)> = Vec::new();
@@ -277,7 +298,7 @@ impl View {
             }
             // Laser shadow: something between the projector and this point.
             let margin = 0.05 + 1e-4 * dist;
-            if cast(&self.placed, &o, &(wv / dist), dist - margin).is_some() {
+            if index.in_shadow(i, || cast(&self.placed, &o, &(wv / dist), dist - margin).is_some()) {
                 continue;
             }
             if row != row_now {
