@@ -21,6 +21,7 @@ use crate::segment::remove_support_planes;
 use crate::voxel::{subsample, voxel_downsample};
 use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
+use std::f64::consts::FRAC_PI_2;
 
 /// The scene prepared for detection and judging.
 pub(crate) struct DetectionScene {
@@ -267,6 +268,9 @@ fn vote(scene: &DetectionScene, ctx: &Context<'_>, ppf: &PpfModel, laps: &mut La
     Ok(hypotheses)
 }
 
+/// Screened poses closer than this (rad, and a PPF step apart at most) are one pose.
+const SAME_POSE_ANGLE: f64 = 0.05;
+
 /// Screens every hypothesis and converges the most promising few, spread over distinct places
 /// (a pile's best hypotheses crowd on one part).
 fn screen_and_polish(
@@ -289,11 +293,24 @@ fn screen_and_polish(
         if chosen.len() >= polish_count {
             break;
         }
-        let crowded = chosen
+        let near: Vec<&&Judged> = chosen
             .iter()
             .filter(|k| (k.center(model) - j.center(model)).norm() < min_gap)
-            .count();
-        if crowded < 2 {
+            .collect();
+        // Many hypotheses screen onto one pose: a copy of a chosen pose would take a slot from a
+        // distinct one. Two slots per place, and a third for another side of the part, more
+        // than a quarter turn from both chosen there: a near-symmetric part's flip can outscore
+        // the truth at screening (a tee standing against a wall, its flip through the wall).
+        let angles: Vec<f64> = near
+            .iter()
+            .map(|k| k.t_scene_model.rotation.angle_to(&j.t_scene_model.rotation))
+            .collect();
+        let copy = near
+            .iter()
+            .zip(&angles)
+            .any(|(k, &a)| a < SAME_POSE_ANGLE && (k.center(model) - j.center(model)).norm() < step);
+        let other_side = near.len() == 2 && angles.iter().all(|&a| a > FRAC_PI_2);
+        if !copy && (near.len() < 2 || other_side) {
             chosen.push(j);
         }
     }
