@@ -99,7 +99,7 @@ class GraspMatcher:
         self._weights: Optional[np.ndarray] = None
         self._swing: Optional[tuple[np.ndarray, np.ndarray]] = None
         self._flat_arrays: Optional[tuple[np.ndarray, ...]] = None
-        self._swing_mm = 0.0  # the part's origin from the continuous axis, mm (a turn moves it ≤ twice that)
+        self._across = np.zeros(3)  # the continuous axis's centre, its part across the axis: u, mm
         if continuous is not None:
             centre = as_vector(continuous[0], "continuous centre", 3)
             axis = as_vector(continuous[1], "continuous axis", 3)
@@ -107,7 +107,7 @@ class GraspMatcher:
             if not norm > 1e-9:
                 raise InvalidInputError("continuous: the symmetry axis has no direction; pass a unit vector")
             self._axis = (centre, axis / norm)
-            self._swing_mm = float(np.linalg.norm(centre - (self._axis[1] @ centre) * self._axis[1]))
+            self._across = centre - (self._axis[1] @ centre) * self._axis[1]
 
     def error(self, T_gripper_object: np.ndarray) -> tuple[float, float]:
         """(rotation error deg, translation error mm) against the nearest declared grasp."""
@@ -130,7 +130,8 @@ class GraspMatcher:
         weighed in rotation."""
         A = self._checked(T_gripper_objects)
         W, Bt, Bt2, u, w = self._flat()
-        reach = self.tolerance_mm + 2.0 * self._swing_mm + 1e-6
+        # A turn about the axis moves the part's origin by at most twice its distance from it, |u|.
+        reach = self.tolerance_mm + 2.0 * float(np.linalg.norm(self._across)) + 1e-6
         out = np.zeros(len(A), dtype=bool)
         chunk = max(1, _MATCH_CHUNK // len(Bt))
         for i in range(0, len(A), chunk):
@@ -207,7 +208,7 @@ class GraspMatcher:
             if self._axis is not None:
                 # B_R (c₀ − R_θ c₀) = (1 − cos θ) B_R u − sin θ B_R (a × c₀), u = c₀'s part across a.
                 centre, a = self._axis
-                self._swing = BR @ (centre - (a @ centre) * a), BR @ np.cross(a, centre)
+                self._swing = BR @ self._across, BR @ np.cross(a, centre)
         return self._weights
 
     def _errors_of(self, A: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
