@@ -37,10 +37,9 @@ def pytest_xdist_auto_num_workers(config):
     # `-n auto`: one worker more than the cores. The tests wait part of their time for the
     # emulators, the twin's processes and sockets; a third worker on 2 cores kept them busy
     # (session 33: the suite in 740 s against 808 s with 2).
-    import os
+    from binpick.sim.validate_workers import cores
 
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return cores + 1
+    return cores() + 1
 
 
 def pytest_configure(config):

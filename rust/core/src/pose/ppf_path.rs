@@ -293,23 +293,21 @@ fn screen_and_polish(
         if chosen.len() >= polish_count {
             break;
         }
-        let near: Vec<&&Judged> = chosen
+        // (distance, angle) to each chosen pose at this place.
+        let near: Vec<(f64, f64)> = chosen
             .iter()
-            .filter(|k| (k.center(model) - j.center(model)).norm() < min_gap)
+            .map(|k| {
+                let d = (k.center(model) - j.center(model)).norm();
+                (d, k.t_scene_model.rotation.angle_to(&j.t_scene_model.rotation))
+            })
+            .filter(|&(d, _)| d < min_gap)
             .collect();
         // Many hypotheses screen onto one pose: a copy of a chosen pose would take a slot from a
         // distinct one. Two slots per place, and a third for another side of the part, more
         // than a quarter turn from both chosen there: a near-symmetric part's flip can outscore
         // the truth at screening (a tee standing against a wall, its flip through the wall).
-        let angles: Vec<f64> = near
-            .iter()
-            .map(|k| k.t_scene_model.rotation.angle_to(&j.t_scene_model.rotation))
-            .collect();
-        let copy = near
-            .iter()
-            .zip(&angles)
-            .any(|(k, &a)| a < SAME_POSE_ANGLE && (k.center(model) - j.center(model)).norm() < step);
-        let other_side = near.len() == 2 && angles.iter().all(|&a| a > FRAC_PI_2);
+        let copy = near.iter().any(|&(d, a)| d < step && a < SAME_POSE_ANGLE);
+        let other_side = near.len() == 2 && near.iter().all(|&(_, a)| a > FRAC_PI_2);
         if !copy && (near.len() < 2 || other_side) {
             chosen.push(j);
         }
