@@ -1,10 +1,12 @@
 //! The grasp planner's collision count, one thread: how many scene points lie inside the
-//! gripper at each of a batch of poses (`GripperShape::hits`, the planner's question for every
-//! grasp it weighs), at 10k to 400k scene points (a scan near a part, and the same spread between
-//! laser lines); and the part's width between the fingers at each of 1,152 grasps
-//! (`GripperShape::widest_between`, measured once per grasp and cell).
+//! gripper at each of a batch of poses (`GripperShape::hits`), and how many it meets along a
+//! pick's motion (`GripperShape::hits_swept`: the approach along its axis, each point standing
+//! for what lies below it — the planner's question for every grasp it weighs), at 10k to 400k
+//! scene points (a scan near a part, and the same spread between laser lines); and the part's
+//! width between the fingers at each of 1,152 grasps (`GripperShape::widest_between`, measured
+//! once per grasp and cell).
 
-use binpick_core::{with_threads, Clearance, GripperShape, Point, Rng};
+use binpick_core::{with_threads, Clearance, GripperShape, Point, Rng, Sweep};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::hint::black_box;
@@ -43,22 +45,32 @@ fn poses(k: usize, rng: &mut Rng) -> Vec<Isometry3<f64>> {
 }
 
 fn bench_hits(c: &mut Criterion) {
-    let mut rng = Rng::new(7);
-    let batch = poses(32, &mut rng);
-    let openings = vec![40.0; batch.len()];
-    let mut group = c.benchmark_group("gripper_hits_32_poses");
-    for &n in &[10_000usize, 40_000, 400_000] {
-        let points = cloud(n, 150.0, &mut rng);
-        group.throughput(Throughput::Elements((n * batch.len()) as u64));
-        group.bench_with_input(BenchmarkId::from_parameter(n), &points, |b, points| {
-            b.iter(|| {
-                with_threads(1, || {
-                    black_box(SHAPE.hits(points, &batch, &openings, Clearance::default()))
+    // The same poses and clouds for both counts: with the points as points, and swept.
+    let swept = Sweep {
+        back: 40.0,
+        floor: Some(-150.0),
+    };
+    for (name, sweep) in [
+        ("gripper_hits_32_poses", Sweep::default()),
+        ("gripper_hits_swept_32_poses", swept),
+    ] {
+        let mut rng = Rng::new(7);
+        let batch = poses(32, &mut rng);
+        let openings = vec![40.0; batch.len()];
+        let mut group = c.benchmark_group(name);
+        for &n in &[10_000usize, 40_000, 400_000] {
+            let points = cloud(n, 150.0, &mut rng);
+            group.throughput(Throughput::Elements((n * batch.len()) as u64));
+            group.bench_with_input(BenchmarkId::from_parameter(n), &points, |b, points| {
+                b.iter(|| {
+                    with_threads(1, || {
+                        black_box(SHAPE.hits_swept(points, &batch, &openings, Clearance::default(), sweep))
+                    })
                 })
-            })
-        });
+            });
+        }
+        group.finish();
     }
-    group.finish();
 }
 
 fn bench_widest(c: &mut Criterion) {

@@ -210,10 +210,12 @@ def test_ctrl_c_stops_a_long_native_call_and_its_work():
         proc.kill()
     assert proc.returncode == 3, out
     interrupted, stopped = out.splitlines()
-    assert interrupted.startswith("interrupted") and waited < 2.0, (out, waited)
-    # A full run takes tens of seconds on one thread; its worker stops within a second.
+    # A full run takes tens of seconds on one thread; the call returns, and its worker stops, at
+    # their next check. The bounds leave room for a machine busy with the rest of the suite (the
+    # worker once took 1.01 s there) and still tell stopping from running on.
+    assert interrupted.startswith("interrupted") and waited < 3.0, (out, waited)
     _, seconds, running = stopped.split()
-    assert float(seconds) < 1.0 and running == "0", out
+    assert float(seconds) < 3.0 and running == "0", out
 
 
 # --------------------------------------------------------------------------- property tests

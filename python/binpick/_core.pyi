@@ -65,10 +65,13 @@ def gripper_hits(
     shape: tuple[float, ...],
     margin: float,
     grow: float,
+    back: float,
+    floor: float | None,
     num_threads: int,
 ) -> _I64:
-    """(K,) how many base-frame points lie in the gripper at each pose (K, 4, 4), its fingers
-    ``openings`` (K,) apart."""
+    """(K,) how many base-frame points the gripper meets at each pose (K, 4, 4), its fingers
+    ``openings`` (K,) apart, coming in ``back`` mm along its axis, each point standing for what
+    lies straight below it down to ``floor`` (None: itself)."""
 
 def gripper_widest(
     points_in: _F64, grasps: _F64, shape: tuple[float, ...], open_width: float, graze: float, num_threads: int

@@ -1,7 +1,8 @@
 """What lies between two laser lines is not seen: the planner lets each scene point stand for its
 surface out to the next line either side, so that a finger does not come down on an edge the
 lines missed (issue 38: the physics saw a finger corner touch a neighbour the planner counted 0
-points of)."""
+points of). Nor does a scan see under a surface: each point stands for what lies below it, so
+that a tilted finger does not slide in under a neighbour's seen top onto its hidden side."""
 
 from __future__ import annotations
 
@@ -42,27 +43,71 @@ def test_each_point_stands_for_its_surface_up_to_the_next_line():
     assert _unseen(p, None) is p
 
 
-def test_a_finger_is_not_planned_onto_an_edge_between_two_lines():
-    tee = binpick.parts.tee(resolution=2.0)
-    with SimulatedCell(tee, count=1, seed=0, frames=4) as sim:
-        cfg = sim.cell.config
-        here = sim.robot_emulator.pose()
-        T = sim.pile.poses[0]
-        plan, hits = plan_grasp(cfg, T, np.zeros((0, 3)), here)
-        assert hits == 0
-        # A neighbour's edge the lines missed: its last seen line 2 mm beyond the clearance the
-        # planner keeps round the finger (along the sweep, the gripper's closing axis), the next
-        # line 4 mm on, past the finger's far side, seeing nothing of it.
-        g, T_bg = cfg.gripper, plan.T_base_gripper
-        outer = plan.opening_mm / 2 + g.finger_thickness_mm
-        z = g.tip_depth_mm - 15.0
-        out = outer + cfg.scan_clearance_mm + 2.0
-        edge_g = np.array([[out, y, z] for y in np.linspace(-5.0, 5.0, 11)])
-        assert not g.occupied(edge_g, plan.opening_mm, grow_mm=cfg.scan_clearance_mm).any()
-        edge = edge_g @ T_bg[:3, :3].T + T_bg[:3, 3]
-        step = -4.0 * T_bg[:3, 0]  # toward the finger
-        step[2] = 0.0
-        same, _ = plan_grasp(cfg, T, edge, here)
-        assert same.grasp == plan.grasp, "seen as points only, the edge is outside the finger's clearance"
-        moved, _ = plan_grasp(cfg, T, edge, here, unseen_step=step)
-        assert moved.grasp != plan.grasp, "the edge may stand in the finger's way: another grasp"
+@pytest.fixture(scope="module")
+def lone_tee():
+    """A cell with one tee in its bin: (its config, the arm's pose, the tee's true pose)."""
+    with SimulatedCell(binpick.parts.tee(resolution=2.0), count=1, seed=0, frames=4) as sim:
+        yield sim.cell.config, sim.robot_emulator.pose(), sim.pile.poses[0]
+
+
+def test_a_finger_is_not_planned_onto_an_edge_between_two_lines(lone_tee):
+    cfg, here, T = lone_tee
+    plan, hits = plan_grasp(cfg, T, np.zeros((0, 3)), here)
+    assert hits == 0
+    # A neighbour's edge the lines missed: its last seen line 2 mm beyond the clearance the
+    # planner keeps round the finger (along the sweep, the gripper's closing axis), the next
+    # line 4 mm on, past the finger's far side, seeing nothing of it.
+    g, T_bg = cfg.gripper, plan.T_base_gripper
+    outer = plan.opening_mm / 2 + g.finger_thickness_mm
+    z = g.tip_depth_mm - 15.0
+    out = outer + cfg.scan_clearance_mm + 2.0
+    edge_g = np.array([[out, y, z] for y in np.linspace(-5.0, 5.0, 11)])
+    assert not g.occupied(edge_g, plan.opening_mm, grow_mm=cfg.scan_clearance_mm).any()
+    edge = edge_g @ T_bg[:3, :3].T + T_bg[:3, 3]
+    step = -4.0 * T_bg[:3, 0]  # toward the finger
+    step[2] = 0.0
+    same, _ = plan_grasp(cfg, T, edge, here)
+    assert same.grasp == plan.grasp, "seen as points only, the edge is outside the finger's clearance"
+    moved, _ = plan_grasp(cfg, T, edge, here, unseen_step=step)
+    assert moved.grasp != plan.grasp, "the edge may stand in the finger's way: another grasp"
+
+
+def test_a_finger_is_not_planned_in_under_a_neighbours_seen_surface(lone_tee):
+    # Session 34's one tee collision: a neighbour leaning on the part, its top seen and its side
+    # below hidden; a tilted finger slid in under the seen top, clear of every seen point, and met
+    # the hidden side. What lies under a seen surface is not known to be free.
+    cfg, here, T = lone_tee
+    plan, hits = plan_grasp(cfg, T, np.zeros((0, 3)), here, lambda T_bg: -T_bg[2, 2] < np.cos(np.radians(25.0)))
+    assert hits == 0 and plan.tilt_deg >= 25.0
+    g, T_bg = cfg.gripper, plan.T_base_gripper
+    grow = cfg.scan_clearance_mm
+    # Over each finger's middle, straight up (base z) to the first height clear of the grown
+    # gripper: the finger that leans out from under it is under a ledge there.
+    ledges = []
+    for side in (-1.0, 1.0):
+        middle = np.array([side * (plan.opening_mm / 2 + g.finger_thickness_mm / 2), 0.0, g.tip_depth_mm - 20.0])
+        start = middle @ T_bg[:3, :3].T + T_bg[:3, 3]
+        for rise in np.arange(1.0, 120.0, 0.5):
+            p = start + [0.0, 0.0, rise]
+            if not g.occupied((p - T_bg[:3, 3]) @ T_bg[:3, :3], plan.opening_mm, grow_mm=grow + 1.0):
+                ledges.append((rise, p))
+                break
+    rise, top = min(ledges, key=lambda item: item[0])
+    assert rise < 60.0, "the tilted gripper leaves a finger under open air"
+    # A neighbour's seen top there: a patch of points 1 mm apart, more than the cell tolerates,
+    # none of them inside the (grown) gripper at the grasp.
+    patch = top + np.array([[dx, dy, 0.0] for dx in np.arange(-2.0, 2.5, 1.0) for dy in np.arange(-2.0, 2.5, 1.0)])
+    patch = patch[~g.occupied((patch - T_bg[:3, 3]) @ T_bg[:3, :3], plan.opening_mm, grow_mm=grow)]
+    assert len(patch) > cfg.max_collision_points
+    assert g.hits(patch, T_bg[None], [plan.opening_mm], grow_mm=grow)[0] == 0
+    # Standing for what lies below them, the points are in the finger's way: that grasp is
+    # refused, and the one planned instead does not reach under the patch.
+    with pytest.raises(binpick.cell.NoGraspError, match="collision"):
+        plan_grasp(cfg, T, patch, here, lambda T_bg: np.allclose(T_bg, plan.T_base_gripper))
+    other, hits = plan_grasp(cfg, T, patch, here)
+    assert not np.allclose(other.T_base_gripper, plan.T_base_gripper)
+    floor = float(cfg.bin_bounds[0][2])
+    columns = np.concatenate([patch - [0.0, 0.0, d] for d in np.arange(0.0, patch[:, 2].max() - floor, 0.5)])
+    columns = columns[columns[:, 2] >= floor]
+    inside = g.hits(columns, other.T_base_gripper[None], [other.opening_mm], grow_mm=grow)[0]
+    assert inside <= cfg.max_collision_points

@@ -145,14 +145,25 @@ class GripperGeometry:
         openings_mm: np.ndarray,
         margin_mm: float = 0.0,
         grow_mm: float = 0.0,
+        *,
+        back_mm: float = 0.0,
+        floor_z_mm: Optional[float] = None,
     ) -> np.ndarray:
         """How many of the points (N, 3, base frame) lie inside the gripper (:meth:`occupied`) at
         each of the poses ``T_base_grippers`` (K, 4, 4), its fingers ``openings_mm`` (K,) apart:
-        (K,) counts, from binpick's core (the planner asks this for thousands of poses a pick)."""
+        (K,) counts, from binpick's core (the planner asks this for thousands of poses a pick).
+
+        Along a pick's motion: ``back_mm`` — the gripper comes in along its own axis from that far
+        behind each pose (the straight approach), and a point in its way counts; ``floor_z_mm`` —
+        each point stands for everything straight below it down to that height (base z): what a
+        scan cannot see under a seen surface, and what the gripper meets rising straight up from
+        anywhere on its approach."""
         poses = np.ascontiguousarray(T_base_grippers, dtype=np.float64).reshape(-1, 4, 4)
         gaps = np.ascontiguousarray(np.broadcast_to(np.asarray(openings_mm, dtype=np.float64), (len(poses),)))
         pts = np.ascontiguousarray(points_base, dtype=np.float64).reshape(-1, 3)
-        return _core.gripper_hits(pts, poses, gaps, self.shape_mm, float(margin_mm), float(grow_mm), 1)
+        back = non_negative(back_mm, "back_mm", "mm")
+        floor = None if floor_z_mm is None else number(floor_z_mm, "floor_z_mm", unit="mm")
+        return _core.gripper_hits(pts, poses, gaps, self.shape_mm, float(margin_mm), float(grow_mm), back, floor, 1)
 
     def widest(self, points_object: np.ndarray, T_gripper_objects: np.ndarray, graze_mm: float) -> np.ndarray:
         """For each grasp ``T_gripper_objects`` (K, 4, 4): the farthest |x| (mm) of the part's
@@ -266,8 +277,10 @@ class CellConfig:
             or pixel that caught it (by up to about a line's spacing, 3.3 mm in the default sweep),
             and the pose's error and the arm's repeatability add to it, mm.
         max_collision_points: a grasp is refused when more scene points than this (stray points)
-            lie inside the open gripper (fingers or body); the located part's own model (at the
-            located pose) may not lie inside it at all (more than ``binpick.cell.grasp.GRAZE_MM``).
+            lie in the open gripper's way (fingers or body, on the approach along its axis and
+            the rise from it; each point standing for what lies below it, which no scan sees);
+            the located part's own model (at the located pose) may not lie inside it at all
+            (more than ``binpick.cell.grasp.GRAZE_MM``).
         floor_clearance_mm: how far above the bin's floor every point of the gripper (fingers at
             the planned opening, palm, flange) must stay along approach, grasp and retreat, mm; a
             plan closer to the floor, or crossing the bin's walls below the rim, is refused.

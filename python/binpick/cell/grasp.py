@@ -324,10 +324,12 @@ def _most_upright(T_bo: np.ndarray, T_og: np.ndarray, centre: np.ndarray, axis: 
 
 
 def _near(points: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
-    """The points within ``radius`` of ``centre``."""
+    """The points within ``radius`` of ``centre`` horizontally, at any height (a point high above
+    stands for what lies below it)."""
     if len(points) == 0:
         return points
-    return points[np.einsum("ij,ij->i", points - centre, points - centre) <= radius * radius]
+    d = points[:, :2] - centre[:2]
+    return points[np.einsum("ij,ij->i", d, d) <= radius * radius]
 
 
 def line_step(cloud: Any) -> Optional[np.ndarray]:
@@ -590,14 +592,15 @@ def _reachable_scene(
 ) -> tuple[Optional[np.ndarray], np.ndarray, np.ndarray]:
     """What :func:`plan_grasp` checks a grasp against: the part's points swept about its free
     axis (None when its turn is decided), the part's points at ``T_base_object`` (swept, where
-    they are), and the scene points the fingers and body can reach from a TCP on the part, each
-    standing for its surface out to the next laser line (:func:`_unseen`)."""
+    they are), and the scene points the fingers and body can reach on their way to and from a
+    TCP on the part (:func:`_motion_hits`), each standing for its surface out to the next laser
+    line (:func:`_unseen`)."""
     own = config.swept_points if free_turn and continuous_near_axis(config.model) is not None else None
     part = np.asarray(config.model.points if own is None else own) @ T_base_object[:3, :3].T + T_base_object[:3, 3]
     z_mid, radius = _occupied_sphere(config.gripper)
     centre = part.mean(axis=0)
     reach = abs(z_mid) + radius + float(np.linalg.norm(part - centre, axis=1).max())
-    return own, part, _unseen(_near(scene, centre, reach), unseen_step)
+    return own, part, _unseen(_near(scene, centre, reach + float(config.approach_distance_mm)), unseen_step)
 
 
 def scene_hits(
@@ -610,7 +613,24 @@ def scene_hits(
     _, _, near = _reachable_scene(config, T_base_object, scene, free_turn, unseen_step)
     opening = config.gripper.open_width_mm if plan.opening_mm is None else float(plan.opening_mm)
     T_bg = np.asarray(plan.T_base_gripper, dtype=np.float64)[None]
-    return int(config.gripper.hits(near, T_bg, np.array([opening]), grow_mm=float(config.scan_clearance_mm))[0])
+    return int(_motion_hits(config, near, T_bg, np.array([opening]))[0])
+
+
+def _motion_hits(config: CellConfig, scene: np.ndarray, T_bg: np.ndarray, openings: np.ndarray) -> np.ndarray:
+    """How many ``scene`` points (base frame) the gripper, grown by ``config.scan_clearance_mm``,
+    meets on each pick's way in and out (:meth:`GripperGeometry.hits`): coming in along its axis
+    from the approach to the grasp ``T_bg`` (K, 4, 4), fingers ``openings`` (K,) apart, and
+    rising straight up from anywhere on that way (the descent to the approach and the lift), each
+    point standing for what lies straight below it down to the bin's floor, which the scan did
+    not see: a finger may not reach in under a neighbour's seen surface."""
+    return config.gripper.hits(
+        scene,
+        T_bg,
+        openings,
+        grow_mm=float(config.scan_clearance_mm),
+        back_mm=float(config.approach_distance_mm),
+        floor_z_mm=float(config.bin_bounds[0][2]),
+    )
 
 
 def plan_grasp(
@@ -623,19 +643,21 @@ def plan_grasp(
     unseen_step: Optional[np.ndarray] = None,
 ) -> tuple[PickPlan, int]:
     """The declared grasp of the part at ``T_base_object`` that is within the tilt limit,
-    reachable, clear of the ``scene`` points (base frame, the part's own left out) and of the
-    part's own model at that pose (none more than :data:`GRAZE_MM` inside the gripper),
-    whose whole motion from the flange pose ``here`` passes the safety rules, and which ``accept``
-    (``T_base_gripper → bool``, see :func:`grasp_filter`) accepts — of those, the one with the
-    fewest scene points inside its gripper, the most vertical among equals; with that number of
-    points. NoGraspError when none is. ``free_turn``: the part's turn about its continuous
-    near-symmetry axis is open (the result's ``free_axis``): the grasps turn to the most upright
-    about it, and the fingers' opening and the part's own collisions are checked against the part
-    at every turn (:func:`swept_points`). ``unseen_step``: the step between the scan's laser
-    lines (:func:`line_step`); each scene point then stands for its surface out to the next line
-    either side, which the scan did not see. The part's own model may not lie more than
-    :data:`GRAZE_MM` inside the gripper anywhere (the physics' measure of a touch); the scene may,
-    by up to ``config.max_collision_points`` (stray points)."""
+    reachable, clear of the ``scene`` points (base frame, the part's own left out) on its whole
+    way in and out — the approach along its axis, the rise from it, and nothing reached in under
+    a seen surface (:func:`_motion_hits`) — and of the part's own model at that pose (none more
+    than :data:`GRAZE_MM` inside the gripper), whose whole motion from the flange pose ``here``
+    passes the safety rules, and which ``accept`` (``T_base_gripper → bool``, see
+    :func:`grasp_filter`) accepts — of those, the one with the fewest scene points in its way,
+    the most vertical among equals; with that number of points. NoGraspError when none is.
+    ``free_turn``: the part's turn about its continuous near-symmetry axis is open (the result's
+    ``free_axis``): the grasps turn to the most upright about it, and the fingers' opening and the
+    part's own collisions are checked against the part at every turn (:func:`swept_points`).
+    ``unseen_step``: the step between the scan's laser lines (:func:`line_step`); each scene
+    point then stands for its surface out to the next line either side, which the scan did not
+    see. The part's own model may not lie more than :data:`GRAZE_MM` inside the gripper anywhere
+    (the physics' measure of a touch); the scene may, by up to ``config.max_collision_points``
+    (stray points)."""
     T_base_object, scene, here = plan_inputs(config, T_base_object, scene, here, "here")
     if accept is not None and not callable(accept):
         raise InvalidTypeError(f"accept: expected a function T_base_gripper → bool, got {type(accept).__name__}")
@@ -676,12 +698,7 @@ def plan_grasp(
             batch = kept
         if not batch:
             continue
-        scene_hits = config.gripper.hits(
-            scene,
-            np.stack([c[2] for c in batch]),
-            np.array([c[5] for c in batch]),
-            grow_mm=float(config.scan_clearance_mm),
-        )
+        scene_hits = _motion_hits(config, scene, np.stack([c[2] for c in batch]), np.array([c[5] for c in batch]))
         now = []
         for c, h in zip(batch, scene_hits.tolist()):
             if 0 < h <= config.max_collision_points:

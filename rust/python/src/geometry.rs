@@ -7,7 +7,7 @@ use binpick_core::parts;
 use binpick_core::{estimate_normals as core_normals, unit_scale, Orientation};
 use binpick_core::{read_mesh as core_read_mesh, read_ply as core_read_ply, write_ply as core_write_ply};
 use binpick_core::{sample_surface, voxel_downsample as core_voxel, with_threads};
-use binpick_core::{Clearance, Density, GripperShape, KdIndex, Point};
+use binpick_core::{Clearance, Density, GripperShape, KdIndex, Point, Sweep};
 use nalgebra::Vector3;
 use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
@@ -137,10 +137,11 @@ fn gripper_occupied<'py>(
     Ok(numpy::PyArray1::from_vec(py, inside))
 }
 
-/// How many `points_in` (base frame) lie inside the gripper of `shape` at each pose
-/// `T_base_gripper` (K, 4, 4), its fingers `openings[k]` apart; see `GripperShape::hits`.
+/// How many `points_in` (base frame) the gripper of `shape` meets at each pose `T_base_gripper`
+/// (K, 4, 4), its fingers `openings[k]` apart, coming in `back` mm along its axis, each point
+/// standing for what lies below it down to `floor` (None: itself); see `GripperShape::hits_swept`.
 #[pyfunction]
-#[pyo3(signature = (points_in, poses, openings, shape, margin, grow, num_threads))]
+#[pyo3(signature = (points_in, poses, openings, shape, margin, grow, back, floor, num_threads))]
 #[allow(clippy::too_many_arguments)]
 fn gripper_hits<'py>(
     py: Python<'py>,
@@ -150,16 +151,22 @@ fn gripper_hits<'py>(
     shape: [f64; 6],
     margin: f64,
     grow: f64,
+    back: f64,
+    floor: Option<f64>,
     num_threads: usize,
 ) -> PyResult<Bound<'py, numpy::PyArray1<i64>>> {
     let pts = points(&points_in, "points")?;
     let poses = isometries(&poses, "T_base_gripper")?;
-    let (shape, clearance) = (gripper_shape(shape, &[margin, grow])?, Clearance { margin, grow });
+    let (shape, clearance) = (gripper_shape(shape, &[margin, grow, back])?, Clearance { margin, grow });
+    if floor.is_some_and(|f| !f.is_finite()) {
+        return Err(invalid("floor", "a finite height in mm, or None"));
+    }
+    let sweep = Sweep { back, floor };
     let openings = one_each(&openings, poses.len(), "pose")?;
     let num_threads = threads(num_threads)?;
     let counts = run(py, move || {
         Ok(with_threads(num_threads, || {
-            shape.hits(&pts, &poses, &openings, clearance)
+            shape.hits_swept(&pts, &poses, &openings, clearance, sweep)
         }))
     })?;
     Ok(numpy::PyArray1::from_vec(
