@@ -58,8 +58,14 @@ def gripper_occupied(
     """(N,) whether each gripper-frame point lies in the gripper of ``shape`` (tip depth, finger
     length, width, thickness, body radius, body length), its fingers ``openings`` (N,) apart."""
 
+class GripperPoints:
+    """Scene points (N, 3, base frame) bucketed once for many ``gripper_hits`` counts."""
+
+    def __new__(cls, points_in: _F64) -> GripperPoints: ...
+    def __len__(self) -> int: ...
+
 def gripper_hits(
-    points_in: _F64,
+    points_in: _F64 | GripperPoints,
     poses: _F64,
     openings: _F64,
     shape: tuple[float, ...],

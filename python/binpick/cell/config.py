@@ -149,9 +149,10 @@ class GripperGeometry:
         back_mm: float = 0.0,
         floor_z_mm: Optional[float] = None,
     ) -> np.ndarray:
-        """How many of the points (N, 3, base frame) lie inside the gripper (:meth:`occupied`) at
-        each of the poses ``T_base_grippers`` (K, 4, 4), its fingers ``openings_mm`` (K,) apart:
-        (K,) counts, from binpick's core (the planner asks this for thousands of poses a pick).
+        """How many of the points (N, 3, base frame; or :meth:`scene`'s) lie inside the gripper
+        (:meth:`occupied`) at each of the poses ``T_base_grippers`` (K, 4, 4), its fingers
+        ``openings_mm`` (K,) apart: (K,) counts, from binpick's core (the planner asks this for
+        thousands of poses a pick).
 
         Along a pick's motion: ``back_mm`` — the gripper comes in along its own axis from that far
         behind each pose (the straight approach), and a point in its way counts; ``floor_z_mm`` —
@@ -160,10 +161,20 @@ class GripperGeometry:
         anywhere on its approach."""
         poses = np.ascontiguousarray(T_base_grippers, dtype=np.float64).reshape(-1, 4, 4)
         gaps = np.ascontiguousarray(np.broadcast_to(np.asarray(openings_mm, dtype=np.float64), (len(poses),)))
-        pts = np.ascontiguousarray(points_base, dtype=np.float64).reshape(-1, 3)
+        if isinstance(points_base, _core.GripperPoints):
+            pts = points_base
+        else:
+            pts = np.ascontiguousarray(points_base, dtype=np.float64).reshape(-1, 3)
         back = non_negative(back_mm, "back_mm", "mm")
         floor = None if floor_z_mm is None else number(floor_z_mm, "floor_z_mm", unit="mm")
         return _core.gripper_hits(pts, poses, gaps, self.shape_mm, float(margin_mm), float(grow_mm), back, floor, 1)
+
+    @staticmethod
+    def scene(points_base: np.ndarray) -> Any:
+        """The points (N, 3, base frame) bucketed once for many :meth:`hits` counts (which takes
+        the result in place of the array): the planner counts one scene at batch after batch of
+        grasps."""
+        return _core.GripperPoints(np.ascontiguousarray(points_base, dtype=np.float64).reshape(-1, 3))
 
     def widest(self, points_object: np.ndarray, T_gripper_objects: np.ndarray, graze_mm: float) -> np.ndarray:
         """For each grasp ``T_gripper_objects`` (K, 4, 4): the farthest |x| (mm) of the part's

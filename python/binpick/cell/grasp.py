@@ -676,6 +676,7 @@ def plan_grasp(
     # pose, which also covers the part's unseen underside. Only scene points the fingers and
     # body can reach from a TCP on the part are kept.
     own, part, scene = _reachable_scene(config, T_base_object, scene, free_turn, unseen_step)
+    scene = config.gripper.scene(scene)  # bucketed once for every batch's count
     samples: dict[str, list] = {}
     candidates = _candidates(config, T_base_object, rejected, samples, own is not None)
     # The grasps with scene points inside the gripper (up to max_collision_points: stray points,

@@ -46,7 +46,7 @@ mod voxel;
 pub use cancel::{scope as cancel_scope, CancelFlag, Token as CancelToken};
 pub use error::{Error, Result};
 pub use geometry::{centroid, isometry_from_matrix, transform_points, BinBox, Camera, Plane, Point, RayTable};
-pub use geometry::{Clearance, GripperShape, Sweep};
+pub use geometry::{Clearance, GripperShape, PointGrid, Sweep};
 pub use mesh::io::{read_mesh, read_ply, write_ply, PlyData};
 pub use mesh::lzf::{lzf_decompress, LZF_MAX_RATIO};
 pub use mesh::parts::{self, Part};

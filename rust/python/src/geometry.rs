@@ -2,17 +2,18 @@
 
 use crate::convert::{faces_to_py, indices_to_py, mesh_from_py, part_to_py, points, points_to_py, vector3};
 use crate::convert::{isometries, threads, vectors, vectors_to_py, PartArrays};
-use crate::errors::{invalid, run};
+use crate::errors::{invalid, run, run_borrowed};
 use binpick_core::parts;
 use binpick_core::{estimate_normals as core_normals, unit_scale, Orientation};
 use binpick_core::{read_mesh as core_read_mesh, read_ply as core_read_ply, write_ply as core_write_ply};
 use binpick_core::{sample_surface, voxel_downsample as core_voxel, with_threads};
-use binpick_core::{Clearance, Density, GripperShape, KdIndex, Point, Sweep};
+use binpick_core::{Clearance, Density, GripperShape, KdIndex, Point, PointGrid, Sweep};
 use nalgebra::Vector3;
 use numpy::{PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyBytes;
 use std::path::PathBuf;
+use std::sync::Arc;
 
 type Arr<'py> = Bound<'py, PyArray2<f64>>;
 
@@ -137,15 +138,39 @@ fn gripper_occupied<'py>(
     Ok(numpy::PyArray1::from_vec(py, inside))
 }
 
-/// How many `points_in` (base frame) the gripper of `shape` meets at each pose `T_base_gripper`
-/// (K, 4, 4), its fingers `openings[k]` apart, coming in `back` mm along its axis, each point
-/// standing for what lies below it down to `floor` (None: itself); see `GripperShape::hits_swept`.
+/// Scene points (base frame, (N, 3)) bucketed once for many counts of the gripper against them:
+/// `gripper_hits` takes one in place of an array (the planner counts one scene at batch after
+/// batch of grasps).
+#[pyclass(frozen, module = "binpick._core")]
+pub struct GripperPoints {
+    grid: Arc<PointGrid>,
+}
+
+#[pymethods]
+impl GripperPoints {
+    #[new]
+    #[pyo3(signature = (points_in))]
+    fn new(py: Python<'_>, points_in: PyReadonlyArray2<'_, f64>) -> PyResult<Self> {
+        let pts = points(&points_in, "points")?;
+        let grid = run_borrowed(py, || Ok(PointGrid::new(&pts)))?;
+        Ok(Self { grid: Arc::new(grid) })
+    }
+
+    fn __len__(&self) -> usize {
+        self.grid.len()
+    }
+}
+
+/// How many `points_in` (base frame: an (N, 3) array or a `GripperPoints`) the gripper of `shape`
+/// meets at each pose `T_base_gripper` (K, 4, 4), its fingers `openings[k]` apart, coming in
+/// `back` mm along its axis, each point standing for what lies below it down to `floor` (None:
+/// itself); see `GripperShape::hits_in`.
 #[pyfunction]
 #[pyo3(signature = (points_in, poses, openings, shape, margin, grow, back, floor, num_threads))]
 #[allow(clippy::too_many_arguments)]
 fn gripper_hits<'py>(
     py: Python<'py>,
-    points_in: PyReadonlyArray2<'py, f64>,
+    points_in: &Bound<'py, PyAny>,
     poses: numpy::PyReadonlyArray3<'py, f64>,
     openings: PyReadonlyArray1<'py, f64>,
     shape: [f64; 6],
@@ -155,7 +180,10 @@ fn gripper_hits<'py>(
     floor: Option<f64>,
     num_threads: usize,
 ) -> PyResult<Bound<'py, numpy::PyArray1<i64>>> {
-    let pts = points(&points_in, "points")?;
+    let grid = match points_in.cast::<GripperPoints>() {
+        Ok(prepared) => Grid::Shared(prepared.get().grid.clone()),
+        Err(_) => Grid::Points(points(&points_in.extract::<PyReadonlyArray2<'py, f64>>()?, "points")?),
+    };
     let poses = isometries(&poses, "T_base_gripper")?;
     let (shape, clearance) = (gripper_shape(shape, &[margin, grow, back])?, Clearance { margin, grow });
     if floor.is_some_and(|f| !f.is_finite()) {
@@ -165,14 +193,21 @@ fn gripper_hits<'py>(
     let openings = one_each(&openings, poses.len(), "pose")?;
     let num_threads = threads(num_threads)?;
     let counts = run(py, move || {
-        Ok(with_threads(num_threads, || {
-            shape.hits_swept(&pts, &poses, &openings, clearance, sweep)
+        Ok(with_threads(num_threads, || match &grid {
+            Grid::Shared(grid) => shape.hits_in(grid, &poses, &openings, clearance, sweep),
+            Grid::Points(pts) => shape.hits_swept(pts, &poses, &openings, clearance, sweep),
         }))
     })?;
     Ok(numpy::PyArray1::from_vec(
         py,
         counts.into_iter().map(|c| c as i64).collect(),
     ))
+}
+
+/// The points `gripper_hits` counts: bucketed already, or as given.
+enum Grid {
+    Shared(Arc<PointGrid>),
+    Points(Vec<Point>),
 }
 
 /// For each grasp `T_gripper_object` (K, 4, 4): half the width of the part's `points_in` (object
@@ -347,6 +382,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(voxel_downsample, m)?)?;
     m.add_function(wrap_pyfunction!(nearest_distances, m)?)?;
     m.add_function(wrap_pyfunction!(gripper_occupied, m)?)?;
+    m.add_class::<GripperPoints>()?;
     m.add_function(wrap_pyfunction!(gripper_hits, m)?)?;
     m.add_function(wrap_pyfunction!(gripper_widest, m)?)?;
     m.add_function(wrap_pyfunction!(read_mesh, m)?)?;

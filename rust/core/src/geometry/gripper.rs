@@ -2,7 +2,7 @@
 //! and how many scene points lie in it at each of a batch of poses (the grasp planner's
 //! collision count, asked for thousands of poses a pick).
 
-use nalgebra::Isometry3;
+use nalgebra::{Isometry3, Vector3};
 use rayon::prelude::*;
 
 use super::Point;
@@ -82,6 +82,20 @@ impl GripperShape {
         clearance: Clearance,
         sweep: Sweep,
     ) -> Vec<usize> {
+        self.hits_in(&PointGrid::new(points), poses, openings, clearance, sweep)
+    }
+
+    /// [`hits_swept`](Self::hits_swept) of points bucketed once ([`PointGrid`]): for a planner
+    /// that counts the same scene at batch after batch of poses. Each pose looks only at the
+    /// points over its volume's footprint (a tilted gripper covers a part of the bin).
+    pub fn hits_in(
+        &self,
+        grid: &PointGrid,
+        poses: &[Isometry3<f64>],
+        openings: &[f64],
+        clearance: Clearance,
+        sweep: Sweep,
+    ) -> Vec<usize> {
         poses
             .par_iter()
             .zip(openings.par_iter())
@@ -95,27 +109,51 @@ impl GripperShape {
                     r.column(1).into_owned(),
                     r.column(2).into_owned(),
                 );
+                // The base-frame box round the volume's own box: no point outside it (in x, y,
+                // and below it; above it too for points that stand for themselves) is met.
+                let frame = (t, [ax, ay, az]);
+                let (base_lo, base_hi) = base_box(&frame, volume.bounds());
+                let cells = grid.cells(base_lo, base_hi);
                 match sweep.floor {
-                    // Branch-free (every test evaluated, `&` not `&&`): the points come in no
-                    // order, and a mispredicted branch costs more than the arithmetic it would skip.
-                    None => points
-                        .iter()
-                        .map(|p| {
-                            let d = p.coords - t;
-                            usize::from(volume.holds(ax.dot(&d), ay.dot(&d), az.dot(&d)))
+                    // Branch-free within a cell (every test evaluated, `&` not `&&`): the points
+                    // come in no order, and a mispredicted branch costs more than the arithmetic
+                    // it would skip.
+                    None => cells
+                        .map(|cell| {
+                            cell.iter()
+                                .map(|p| {
+                                    let d = p.coords - t;
+                                    usize::from(volume.holds(ax.dot(&d), ay.dot(&d), az.dot(&d)))
+                                })
+                                .sum::<usize>()
                         })
-                        .sum::<usize>(),
+                        .sum(),
                     Some(floor) => {
                         // Base −z in the gripper frame: the way each point's column runs.
-                        let down = [-ax.z, -ay.z, -az.z];
-                        points
-                            .iter()
-                            .filter(|p| {
-                                let d = p.coords - t;
-                                let q = [ax.dot(&d), ay.dot(&d), az.dot(&d)];
-                                volume.meets(q, down, (p.z - floor).max(0.0))
+                        let down = Column::new([-ax.z, -ay.z, -az.z]);
+                        // Each piece's own base box: a column can meet a piece only from over
+                        // its footprint and no lower than its lowest point (most points are below
+                        // the body, and beside the fingers).
+                        let pieces = volume.pieces().map(|b| base_box(&frame, b));
+                        cells
+                            .map(|cell| {
+                                cell.iter()
+                                    .filter(|p| {
+                                        let over = pieces.map(|(lo, hi)| {
+                                            (p.x >= lo[0]) & (p.x <= hi[0]) & (p.y >= lo[1]) & (p.y <= hi[1]) & (p.z >= lo[2])
+                                        });
+                                        (over[0] | over[1] | over[2]) && {
+                                            let d = p.coords - t;
+                                            let q = [ax.dot(&d), ay.dot(&d), az.dot(&d)];
+                                            let len = (p.z - floor).max(0.0);
+                                            (over[0] && volume.meets_finger(q, &down, len, 1.0))
+                                                || (over[1] && volume.meets_finger(q, &down, len, -1.0))
+                                                || (over[2] && volume.meets_body(q, &down, len))
+                                        }
+                                    })
+                                    .count()
                             })
-                            .count()
+                            .sum()
                     }
                 }
             })
@@ -150,6 +188,96 @@ impl GripperShape {
                 })
             })
             .collect()
+    }
+}
+
+/// Points (base frame) bucketed by their (x, y) on a square grid, each cell's points stored
+/// together: built once for a scene that many poses of the gripper are counted against.
+#[derive(Debug, Clone)]
+pub struct PointGrid {
+    origin: [f64; 2],
+    cell: f64,
+    size: [usize; 2],
+    /// Where each cell's points start in `points` (one more entry than cells).
+    start: Vec<usize>,
+    points: Vec<Point>,
+}
+
+impl PointGrid {
+    /// Cells of `CELL_MM`, or larger where the points spread so far that there would be more
+    /// than `MAX_SIDE` a side.
+    const CELL_MM: f64 = 10.0;
+    const MAX_SIDE: usize = 256;
+
+    /// The grid of `points`.
+    pub fn new(points: &[Point]) -> Self {
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in points {
+            lo = [lo[0].min(p.x), lo[1].min(p.y)];
+            hi = [hi[0].max(p.x), hi[1].max(p.y)];
+        }
+        if points.is_empty() {
+            (lo, hi) = ([0.0; 2], [0.0; 2]);
+        }
+        let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        let cell = Self::CELL_MM.max(extent / (Self::MAX_SIDE - 1) as f64);
+        let size = [0, 1].map(|k| ((hi[k] - lo[k]) / cell) as usize + 1);
+        let mut grid = Self {
+            origin: lo,
+            cell,
+            size,
+            start: vec![0; size[0] * size[1] + 1],
+            points: Vec::with_capacity(points.len()),
+        };
+        let index: Vec<usize> = points.iter().map(|p| grid.index(p.x, p.y)).collect();
+        for &i in &index {
+            grid.start[i + 1] += 1;
+        }
+        for i in 1..grid.start.len() {
+            grid.start[i] += grid.start[i - 1];
+        }
+        let mut next = grid.start.clone();
+        let mut sorted = vec![Point::origin(); points.len()];
+        for (p, &i) in points.iter().zip(&index) {
+            sorted[next[i]] = *p;
+            next[i] += 1;
+        }
+        grid.points = sorted;
+        grid
+    }
+
+    /// How many points the grid holds.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// Whether the grid holds no point.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    fn column(&self, v: f64, k: usize) -> usize {
+        (((v - self.origin[k]) / self.cell).max(0.0) as usize).min(self.size[k] - 1)
+    }
+
+    fn index(&self, x: f64, y: f64) -> usize {
+        self.column(y, 1) * self.size[0] + self.column(x, 0)
+    }
+
+    /// The points of every cell that overlaps the box from `lo` to `hi` (x, y), row by row.
+    fn cells(&self, lo: [f64; 3], hi: [f64; 3]) -> impl Iterator<Item = &[Point]> + '_ {
+        let outside = self.points.is_empty()
+            || hi[0] < self.origin[0]
+            || hi[1] < self.origin[1]
+            || lo[0] > self.origin[0] + self.cell * self.size[0] as f64
+            || lo[1] > self.origin[1] + self.cell * self.size[1] as f64;
+        let (x0, x1) = (self.column(lo[0], 0), self.column(hi[0], 0));
+        let (y0, y1) = (self.column(lo[1], 1), self.column(hi[1], 1));
+        let rows = if outside { 0..0 } else { y0..y1 + 1 };
+        rows.map(move |y| {
+            let row = y * self.size[0];
+            &self.points[self.start[row + x0]..self.start[row + x1 + 1]]
+        })
     }
 }
 
@@ -197,54 +325,124 @@ impl Volume {
         finger | body
     }
 
-    /// Whether the segment from `q` (gripper frame) `len` mm along the unit direction `dir`
-    /// meets a finger or the body (exactly: the fingers are boxes, the body a cylinder about z).
-    fn meets(&self, q: [f64; 3], dir: [f64; 3], len: f64) -> bool {
-        if len <= 0.0 {
-            return self.holds(q[0], q[1], q[2]);
-        }
-        let (hy, hx) = (self.finger_half_y, self.finger_half_x);
-        let fingers = [self.finger_offset, -self.finger_offset].iter().any(|&cx| {
-            let lo = [cx - hx, -hy, self.finger_z.0];
-            let hi = [cx + hx, hy, self.finger_z.1];
-            (0..3)
-                .try_fold((0.0, len), |span, k| clip(span, q[k], dir[k], lo[k], hi[k]))
-                .is_some()
-        });
-        if fingers {
-            return true;
-        }
-        if self.body_radius_sq < 0.0 {
-            return false;
-        }
-        let Some((s0, s1)) = clip((0.0, len), q[2], dir[2], self.body_z.0, self.body_z.1) else {
-            return false;
+    /// The volume's box (gripper frame): (low corner, high corner).
+    fn bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let radius = self.body_radius_sq.max(0.0).sqrt();
+        let x = (self.finger_offset + self.finger_half_x.max(0.0)).max(radius);
+        let y = self.finger_half_y.max(0.0).max(radius);
+        let z = (self.finger_z.0.min(self.body_z.0), self.finger_z.1.max(self.body_z.1));
+        ([-x, -y, z.0], [x, y, z.1])
+    }
+
+    /// The boxes (gripper frame) of the +x finger, the −x finger and the body; an empty piece
+    /// (a clearance that leaves none of it) gets a box no point is over.
+    fn pieces(&self) -> [([f64; 3], [f64; 3]); 3] {
+        let none = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        let (hx, hy, (z0, z1)) = (self.finger_half_x, self.finger_half_y, self.finger_z);
+        let finger = |cx: f64| {
+            if hx >= 0.0 && hy >= 0.0 && z0 <= z1 {
+                ([cx - hx, -hy, z0], [cx + hx, hy, z1])
+            } else {
+                none
+            }
         };
+        let body = if self.body_radius_sq >= 0.0 && self.body_z.0 <= self.body_z.1 {
+            let r = self.body_radius_sq.sqrt();
+            ([-r, -r, self.body_z.0], [r, r, self.body_z.1])
+        } else {
+            none
+        };
+        [finger(self.finger_offset), finger(-self.finger_offset), body]
+    }
+
+    /// Whether the segment from `q` (gripper frame) `len` mm along the column meets the finger
+    /// on the `side` (±1) of x (exactly: a box).
+    #[inline]
+    fn meets_finger(&self, q: [f64; 3], column: &Column, len: f64, side: f64) -> bool {
+        let (hx, hy, (z0, z1)) = (self.finger_half_x, self.finger_half_y, self.finger_z);
+        if hx < 0.0 || hy < 0.0 || z0 > z1 {
+            return false;
+        }
+        let cx = side * self.finger_offset;
+        let span = slab((0.0, len), q[1], column.inv[1], -hy, hy);
+        let span = slab(span, q[2], column.inv[2], z0, z1);
+        let span = slab(span, q[0], column.inv[0], cx - hx, cx + hx);
+        span.0 <= span.1
+    }
+
+    /// Whether the segment from `q` (gripper frame) `len` mm along the column meets the body
+    /// (exactly: a cylinder about z).
+    #[inline]
+    fn meets_body(&self, q: [f64; 3], column: &Column, len: f64) -> bool {
+        if self.body_radius_sq < 0.0 || self.body_z.0 > self.body_z.1 {
+            return false;
+        }
+        let (s0, s1) = slab((0.0, len), q[2], column.inv[2], self.body_z.0, self.body_z.1);
+        if s0 > s1 {
+            return false;
+        }
         // The nearest approach of the segment's part within the body's length to its axis.
-        let along = dir[0] * dir[0] + dir[1] * dir[1];
-        let s = if along > 1e-12 {
-            (-(q[0] * dir[0] + q[1] * dir[1]) / along).clamp(s0, s1)
+        let d = column.dir;
+        let s = if column.along > 1e-12 {
+            (-(q[0] * d[0] + q[1] * d[1]) / column.along).clamp(s0, s1)
         } else {
             s0
         };
-        let (x, y) = (q[0] + s * dir[0], q[1] + s * dir[1]);
+        let (x, y) = (q[0] + s * d[0], q[1] + s * d[1]);
         x * x + y * y <= self.body_radius_sq
     }
 }
 
-/// The part `(s0, s1)` of a segment `q + s·dir` whose coordinate lies in `[lo, hi]` (None when
-/// none does, or the slab is empty).
+/// The base-frame box round the gripper-frame box (`lo`, `hi`) of a pose (`t`, the gripper's
+/// axes in the base frame).
+fn base_box(frame: &(Vector3<f64>, [Vector3<f64>; 3]), (lo, hi): ([f64; 3], [f64; 3])) -> ([f64; 3], [f64; 3]) {
+    let (t, axes) = frame;
+    let mut base_lo = [f64::INFINITY; 3];
+    let mut base_hi = [f64::NEG_INFINITY; 3];
+    if (0..3).any(|k| lo[k] > hi[k]) {
+        return (base_lo, base_hi);
+    }
+    for corner in 0..8 {
+        let c = [0, 1, 2].map(|k| if corner >> k & 1 == 0 { lo[k] } else { hi[k] });
+        let b = t + axes[0] * c[0] + axes[1] * c[1] + axes[2] * c[2];
+        for k in 0..3 {
+            base_lo[k] = base_lo[k].min(b[k]);
+            base_hi[k] = base_hi[k].max(b[k]);
+        }
+    }
+    (base_lo, base_hi)
+}
+
+/// A column's direction in the gripper frame (base −z turned into it), with what the segment
+/// tests need of it worked out once per pose.
+struct Column {
+    dir: [f64; 3],
+    /// 1 / dir (±∞ along an axis the column does not move along).
+    inv: [f64; 3],
+    /// dir's length squared across the gripper's axis.
+    along: f64,
+}
+
+impl Column {
+    fn new(dir: [f64; 3]) -> Self {
+        Self {
+            dir,
+            inv: dir.map(|v| if v.abs() < 1e-12 { f64::INFINITY } else { 1.0 / v }),
+            along: dir[0] * dir[0] + dir[1] * dir[1],
+        }
+    }
+}
+
+/// The part of `span` (a range of s) where `q + s·dir` lies in `[lo, hi]` along one axis, given
+/// `inv` = 1 / dir; empty (start > end) where none does. Along an axis the segment does not move
+/// (inv infinite), all of `span` or none.
 #[inline]
-fn clip(span: (f64, f64), q: f64, dir: f64, lo: f64, hi: f64) -> Option<(f64, f64)> {
-    if lo > hi {
-        return None;
+fn slab(span: (f64, f64), q: f64, inv: f64, lo: f64, hi: f64) -> (f64, f64) {
+    if inv.is_infinite() {
+        return if q >= lo && q <= hi { span } else { (1.0, 0.0) };
     }
-    if dir.abs() < 1e-12 {
-        return (q >= lo && q <= hi).then_some(span);
-    }
-    let (a, b) = ((lo - q) / dir, (hi - q) / dir);
-    let (s0, s1) = (span.0.max(a.min(b)), span.1.min(a.max(b)));
-    (s0 <= s1).then_some((s0, s1))
+    let (a, b) = ((lo - q) * inv, (hi - q) * inv);
+    (span.0.max(a.min(b)), span.1.min(a.max(b)))
 }
 
 #[cfg(test)]

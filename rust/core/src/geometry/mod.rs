@@ -13,6 +13,6 @@ pub use cloud::{
     centroid, check_count, check_finite, check_spread, covariance, covariance_of, eigen_ascending, extreme_axis,
     isometry_from_matrix, median, median_range, perpendicular_basis, principal_axes, thin, transform_points, Point,
 };
-pub use gripper::{Clearance, GripperShape, Sweep};
+pub use gripper::{Clearance, GripperShape, PointGrid, Sweep};
 pub use kabsch::kabsch;
 pub use plane::{BinBox, Plane};
