@@ -265,3 +265,28 @@ def test_the_gripper_volume_and_its_counts_at_many_poses_are_the_pieces_written_
         assert points_in_gripper(g, base, poses[k], gaps[k, 0]) == _occupied_by_hand(g, back, gaps[k, 0], 0, 0).sum()
     with pytest.raises(binpick.InvalidInputError, match="T_base_gripper"):
         g.hits(base, poses * 1.1, gaps[:, 0])
+    # The points bucketed once count the same, plain and swept.
+    scene = g.scene(base)
+    assert len(scene) == len(base)
+    assert g.hits(scene, poses, gaps[:, 0], 0.0, 2.0).tolist() == counts.tolist()
+    swept = dict(back_mm=30.0, floor_z_mm=float(base[:, 2].min()) - 1.0)
+    along = g.hits(base, poses, gaps[:, 0], 0.0, 2.0, **swept)
+    assert g.hits(scene, poses, gaps[:, 0], 0.0, 2.0, **swept).tolist() == along.tolist()
+    # Swept, every point in the gripper still counts, and more do (the approach, the columns),
+    # as a sampling of the motion finds them: the gripper slid back along its axis, each point
+    # pushed down its column (300 of the points, 1 mm steps).
+    assert (along >= counts).all() and (along > counts).any()
+    few = base[rng.choice(len(base), 300, replace=False)]
+    depths = np.arange(0.0, few[:, 2].max() - swept["floor_z_mm"] + 1.0, 1.0)
+    for k in range(6):
+        exact = int(g.hits(few, poses[k][None], gaps[k], 0.0, 2.0, **swept)[0])
+        column = few[None, :, :] - depths[:, None, None] * np.array([0.0, 0.0, 1.0])
+        above = column[..., 2] >= swept["floor_z_mm"]
+        local = (column - poses[k, :3, 3]) @ poses[k, :3, :3]
+        met = np.zeros(len(few), dtype=bool)
+        for slide in np.arange(0.0, 30.01, 1.0):
+            met |= (g.occupied(local + [0.0, 0.0, slide], gaps[k, 0], 0.0, 2.0) & above).any(axis=0)
+        assert abs(int(met.sum()) - exact) <= 2, (k, int(met.sum()), exact)
+    for bad, match in ((dict(back_mm=-1.0), "back_mm"), (dict(floor_z_mm=float("nan")), "floor_z_mm")):
+        with pytest.raises(binpick.InvalidInputError, match=match):
+            g.hits(base, poses, gaps[:, 0], **bad)

@@ -140,7 +140,11 @@ impl GripperShape {
                                 cell.iter()
                                     .filter(|p| {
                                         let over = pieces.map(|(lo, hi)| {
-                                            (p.x >= lo[0]) & (p.x <= hi[0]) & (p.y >= lo[1]) & (p.y <= hi[1]) & (p.z >= lo[2])
+                                            (p.x >= lo[0])
+                                                & (p.x <= hi[0])
+                                                & (p.y >= lo[1])
+                                                & (p.y <= hi[1])
+                                                & (p.z >= lo[2])
                                         });
                                         (over[0] | over[1] | over[2]) && {
                                             let d = p.coords - t;
