@@ -329,13 +329,13 @@ impl Volume {
         finger | body
     }
 
-    /// The volume's box (gripper frame): (low corner, high corner).
+    /// The volume's box (gripper frame): (low corner, high corner), round its pieces' boxes.
     fn bounds(&self) -> ([f64; 3], [f64; 3]) {
-        let radius = self.body_radius_sq.max(0.0).sqrt();
-        let x = (self.finger_offset + self.finger_half_x.max(0.0)).max(radius);
-        let y = self.finger_half_y.max(0.0).max(radius);
-        let z = (self.finger_z.0.min(self.body_z.0), self.finger_z.1.max(self.body_z.1));
-        ([-x, -y, z.0], [x, y, z.1])
+        self.pieces()
+            .iter()
+            .fold(([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), |(lo, hi), (a, b)| {
+                ([0, 1, 2].map(|k| lo[k].min(a[k])), [0, 1, 2].map(|k| hi[k].max(b[k])))
+            })
     }
 
     /// The boxes (gripper frame) of the +x finger, the −x finger and the body; an empty piece
