@@ -68,16 +68,19 @@ def gripper_hits(
     points_in: _F64 | GripperPoints,
     poses: _F64,
     openings: _F64,
+    closed: _F64 | None,
     shape: tuple[float, ...],
     margin: float,
     grow: float,
     back: float,
     floor: float | None,
+    limit: int | None,
     num_threads: int,
 ) -> _I64:
     """(K,) how many base-frame points the gripper meets at each pose (K, 4, 4), its fingers
     ``openings`` (K,) apart, coming in ``back`` mm along its axis, each point standing for what
-    lies straight below it down to ``floor`` (None: itself)."""
+    lies straight below it down to ``floor`` (None: itself), its fingers closing from there to
+    ``closed`` (K,) (None: not closing); a count stops at ``limit`` (None: every point)."""
 
 def gripper_widest(
     points_in: _F64, grasps: _F64, shape: tuple[float, ...], open_width: float, graze: float, num_threads: int

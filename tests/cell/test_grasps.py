@@ -287,6 +287,26 @@ def test_the_gripper_volume_and_its_counts_at_many_poses_are_the_pieces_written_
         for slide in np.arange(0.0, 30.01, 1.0):
             met |= (g.occupied(local + [0.0, 0.0, slide], gaps[k, 0], 0.0, 2.0) & above).any(axis=0)
         assert abs(int(met.sum()) - exact) <= 2, (k, int(met.sum()), exact)
-    for bad, match in ((dict(back_mm=-1.0), "back_mm"), (dict(floor_z_mm=float("nan")), "floor_z_mm")):
+    # Closing from their opening to a narrower width, the fingers meet what a sampling of the
+    # widths between meets (at the pose; the approach is made open), and counts stop at at_most.
+    shut = gaps[:, 0] * rng.uniform(0.2, 0.9, size=6)
+    closing = g.hits(base, poses, gaps[:, 0], 0.0, 2.0, closing_mm=shut)
+    assert (closing >= counts).all() and (closing > counts).any()
+    for k in range(6):
+        back = (base - poses[k, :3, 3]) @ poses[k, :3, :3]
+        met = np.zeros(len(base), dtype=bool)
+        for w in np.linspace(shut[k], gaps[k, 0], 200):
+            met |= g.occupied(back, w, 0.0, 2.0)
+        assert abs(int(met.sum()) - int(closing[k])) <= 2, (k, int(met.sum()), int(closing[k]))
+    capped = g.hits(scene, poses, gaps[:, 0], 0.0, 2.0, closing_mm=shut, at_most=5)
+    assert capped.tolist() == np.minimum(closing, 5).tolist()
+    for bad, match in (
+        (dict(back_mm=-1.0), "back_mm"),
+        (dict(floor_z_mm=float("nan")), "floor_z_mm"),
+        (dict(closing_mm=gaps[:, 0] + 1.0), "closing_mm"),
+        (dict(closing_mm=np.full(6, np.nan)), "closing_mm"),
+        (dict(closing_mm=np.ones(4)), "closing_mm"),
+        (dict(at_most=0), "at_most"),
+    ):
         with pytest.raises(binpick.InvalidInputError, match=match):
             g.hits(base, poses, gaps[:, 0], **bad)

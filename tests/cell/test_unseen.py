@@ -2,7 +2,8 @@
 surface out to the next line either side, so that a finger does not come down on an edge the
 lines missed (issue 38: the physics saw a finger corner touch a neighbour the planner counted 0
 points of). Nor does a scan see under a surface: each point stands for what lies below it, so
-that a tilted finger does not slide in under a neighbour's seen top onto its hidden side."""
+that a tilted finger does not slide in under a neighbour's seen top onto its hidden side. And the
+fingers close: a neighbour in the gap between the part and an open finger is in their way."""
 
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ import pytest
 import binpick
 from binpick.cell.grasp import GRAZE_MM, _unseen, line_step, plan_grasp
 from binpick.sim import SimulatedCell
+from binpick.transforms import rotation_about
 
 
 def _lines(step, n=10, x0=300.0):
@@ -111,3 +113,55 @@ def test_a_finger_is_not_planned_in_under_a_neighbours_seen_surface(lone_tee):
     columns = columns[columns[:, 2] >= floor]
     inside = g.hits(columns, other.T_base_gripper[None], [other.opening_mm], grow_mm=grow)[0]
     assert inside <= cfg.max_collision_points
+
+
+@pytest.fixture(scope="module")
+def tilted_flange():
+    """A cell for the pinned flange (its gripper opens a few mm wider than the part at each
+    grasp), and the flange tilted 15° above the middle of its bin: (the config, the arm's pose,
+    the flange's pose, its points at that pose)."""
+    model = binpick.parts.built_in("pinned_flange")
+    with SimulatedCell(model, count=1, seed=0, frames=4) as sim:
+        cfg, here = sim.cell.config, sim.robot_emulator.pose()
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in cfg.bin_bounds)
+    T = np.eye(4)
+    T[:3, :3] = rotation_about([1.0, 0.0, 0.0], np.radians(15.0))
+    T[:3, 3] = [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, 40.0]
+    return cfg, here, T, np.asarray(model.points) @ T[:3, :3].T + T[:3, 3]
+
+
+def test_the_fingers_do_not_close_onto_a_neighbour_in_the_gap(tilted_flange):
+    # The fingers come down open, clear of everything, then close onto the part: a neighbour
+    # lying in the gap between the part and an open finger is met as they close.
+    cfg, here, T, _ = tilted_flange
+    g = cfg.gripper
+    plan, hits = plan_grasp(cfg, T, np.zeros((0, 3)), here)
+    assert hits == 0
+    width = float(cfg.grip_widths([plan.grasp])[0])
+    assert plan.opening_mm - width >= 2 * 2.0 + 2 * GRAZE_MM, "a gap to put the neighbour in"
+    # A patch of a neighbour's seen edge, 1 mm out from where the +x finger closes on the part
+    # (a fifth of the way to the open finger, outside the grown open finger), over the finger's
+    # width, 5 mm short of its tip; more points than the cell tolerates.
+    x = width / 2 + 1.0
+    assert x < plan.opening_mm / 2 - cfg.scan_clearance_mm
+    local = np.array([[x, y, g.tip_depth_mm - 5.0] for y in np.linspace(-8.0, 8.0, 2 * cfg.max_collision_points)])
+    T_bg = plan.T_base_gripper
+    patch = local @ T_bg[:3, :3].T + T_bg[:3, 3]
+    grow = cfg.scan_clearance_mm
+    assert not g.occupied(local, plan.opening_mm, grow_mm=grow).any(), "clear of the open fingers"
+    assert g.occupied(local, width, grow_mm=grow).all(), "in the closed finger's way"
+    counted = dict(grow_mm=grow, back_mm=float(cfg.approach_distance_mm), floor_z_mm=float(cfg.bin_bounds[0][2]))
+    assert g.hits(patch, T_bg[None], [plan.opening_mm], **counted)[0] == 0
+    assert g.hits(patch, T_bg[None], [plan.opening_mm], closing_mm=[width], **counted)[0] == len(patch)
+    # That grasp is refused; the one planned instead does not close onto the patch.
+    with pytest.raises(binpick.cell.NoGraspError, match="collision"):
+        plan_grasp(cfg, T, patch, here, lambda T_bg_: np.allclose(T_bg_, T_bg, atol=1e-6))
+    other, hits = plan_grasp(cfg, T, patch, here)
+    assert hits <= cfg.max_collision_points
+    assert not np.allclose(other.T_base_gripper, T_bg, atol=1e-6)
+    other_width = float(cfg.grip_widths([other.grasp])[0])
+    back = (patch - other.T_base_gripper[:3, 3]) @ other.T_base_gripper[:3, :3]
+    met = np.zeros(len(patch), dtype=bool)
+    for w in np.linspace(other_width, other.opening_mm, 30):
+        met |= g.occupied(back, w, grow_mm=grow)
+    assert met.sum() <= cfg.max_collision_points

@@ -51,7 +51,7 @@ import numpy as np
 
 from ..errors import BinpickError
 from ..poses import verify_pose
-from .grasp import NoGraspError, line_step, scene_hits, staked_filter
+from .grasp import NoGraspError, scene_hits, staked_filter
 from .records import Located, PickPlan, PickRecord, ScanResult, Skipped
 from .rescan import clean_pick, part_box
 
@@ -219,7 +219,7 @@ def _confirm(cell: Any, located: Located, plan: PickPlan, scan: ScanResult) -> t
     idx = np.asarray(verdict.indices, dtype=np.int64)
     others[idx[(idx >= 0) & (idx < len(others))]] = False
     free = getattr(verdict, "free_axis", None) is not None
-    hits = scene_hits(cfg, plan, T_new, scan.points[others], free, line_step(scan.cloud))
+    hits = scene_hits(cfg, plan, T_new, scan.points[others], free, scan.line_step)
     if hits > cfg.max_collision_points:
         return None, f"{hits} points of the new scan lie inside the plan's gripper (at most {cfg.max_collision_points})"
     truth = cell._judge_located(verdict, T_new)

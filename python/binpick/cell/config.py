@@ -35,7 +35,7 @@ from ..devices import safety
 from ..errors import InvalidInputError, SafetyError
 from ..models import Model
 from ..transforms import laser_sweep, rotation_about, translation
-from .grasp import branch_grasps, grasp_openings, mesh_grasps, swept_points
+from .grasp import branch_grasps, grasp_widths, mesh_grasps, opening_for_width, swept_points
 from .symmetry import GraspMatcher, continuous_near_axis, continuous_symmetry
 from .views import turned_scan_poses
 
@@ -148,6 +148,8 @@ class GripperGeometry:
         *,
         back_mm: float = 0.0,
         floor_z_mm: Optional[float] = None,
+        closing_mm: Optional[np.ndarray] = None,
+        at_most: Optional[int] = None,
     ) -> np.ndarray:
         """How many of the points (N, 3, base frame; or :meth:`scene`'s) lie inside the gripper
         (:meth:`occupied`) at each of the poses ``T_base_grippers`` (K, 4, 4), its fingers
@@ -158,7 +160,10 @@ class GripperGeometry:
         behind each pose (the straight approach), and a point in its way counts; ``floor_z_mm`` —
         each point stands for everything straight below it down to that height (base z): what a
         scan cannot see under a seen surface, and what the gripper meets rising straight up from
-        anywhere on its approach."""
+        anywhere on its approach; ``closing_mm`` (K,) — at each pose the fingers close from their
+        opening to that width, sweeping every width between (a finger closing in under a part).
+        ``at_most``: a count stops there (a count of ``at_most`` means at least that many): for a
+        planner that refuses a pose past some number of points."""
         poses = np.ascontiguousarray(T_base_grippers, dtype=np.float64).reshape(-1, 4, 4)
         gaps = np.ascontiguousarray(np.broadcast_to(np.asarray(openings_mm, dtype=np.float64), (len(poses),)))
         if isinstance(points_base, _core.GripperPoints):
@@ -167,7 +172,21 @@ class GripperGeometry:
             pts = np.ascontiguousarray(points_base, dtype=np.float64).reshape(-1, 3)
         back = non_negative(back_mm, "back_mm", "mm")
         floor = None if floor_z_mm is None else number(floor_z_mm, "floor_z_mm", unit="mm")
-        return _core.gripper_hits(pts, poses, gaps, self.shape_mm, float(margin_mm), float(grow_mm), back, floor, 1)
+        cap = None if at_most is None else count(at_most, "at_most", 1)
+        shut = None
+        if closing_mm is not None:
+            shut = np.asarray(closing_mm, dtype=np.float64)
+            if shut.size != 1 and shut.shape != (len(poses),):
+                raise InvalidInputError(f"closing_mm: give one width per pose ({len(poses)}), got shape {shut.shape}")
+            shut = np.ascontiguousarray(np.broadcast_to(shut.reshape(-1)[:1] if shut.size == 1 else shut, len(poses)))
+            if not np.isfinite(shut).all() or (shut < 0.0).any() or (shut > gaps).any():
+                raise InvalidInputError(
+                    "closing_mm: give each pose a finite width (mm) from 0 up to its opening, the width its "
+                    "fingers close to"
+                )
+        return _core.gripper_hits(
+            pts, poses, gaps, shut, self.shape_mm, float(margin_mm), float(grow_mm), back, floor, cap, 1
+        )
 
     @staticmethod
     def scene(points_base: np.ndarray) -> Any:
@@ -471,14 +490,40 @@ class CellConfig:
         not fit between the open fingers; each grasp measured on first use and remembered.
         ``swept``: for the part at any turn about its continuous near-symmetry axis
         (:func:`~binpick.cell.grasp.swept_points`: its key or pin may be anywhere about it)."""
-        known = self._openings.setdefault(swept, {})
+        widths = self.grip_widths(names, swept=swept)
+        return np.array(
+            [
+                np.nan if (o := opening_for_width(self.gripper, None if np.isnan(w) else w)) is None else o
+                for w in widths.tolist()
+            ],
+            dtype=np.float64,
+        )
+
+    def grip_widths(self, names: Sequence[str], *, swept: bool = False) -> np.ndarray:
+        """The part's width (mm) across the fingers at each named grasp, what the fingers close to
+        (:func:`~binpick.cell.grasp.grasp_widths`), NaN where none of it lies between them; each
+        grasp measured on first use and remembered. ``swept`` as for :meth:`openings`."""
+        known = self._widths.setdefault(swept, {})
         todo = [n for n in dict.fromkeys(names) if n not in known]
         if todo:
             c0 = time.process_time()
             points = self.swept_points if swept else None
-            known.update(grasp_openings(self.gripper, self.model, {n: self.grasps[n] for n in todo}, points))
+            known.update(grasp_widths(self.gripper, self.model, {n: self.grasps[n] for n in todo}, points))
             self._openings_cpu[0] += time.process_time() - c0
         return np.array([np.nan if known[n] is None else known[n] for n in names], dtype=np.float64)
+
+    @cached_property
+    def grasp_frames(self) -> tuple[tuple[str, ...], np.ndarray]:
+        """The grasps' names and their ``T_object_gripper`` (G, 4, 4), stacked and inverted once
+        per cell: the planner turns every grasp to the located pose at each plan."""
+        names = tuple(self.grasps)
+        T_go = np.stack([np.asarray(self.grasps[n], dtype=np.float64) for n in names])
+        T_og = np.zeros_like(T_go)
+        T_og[:, :3, :3] = np.transpose(T_go[:, :3, :3], (0, 2, 1))
+        T_og[:, :3, 3] = -np.einsum("nji,nj->ni", T_go[:, :3, :3], T_go[:, :3, 3])
+        T_og[:, 3, 3] = 1.0
+        T_og.flags.writeable = False
+        return names, T_og
 
     @cached_property
     def swept_points(self) -> np.ndarray:
@@ -506,7 +551,7 @@ class CellConfig:
         )
 
     @cached_property
-    def _openings(self) -> dict[bool, dict[str, Optional[float]]]:
+    def _widths(self) -> dict[bool, dict[str, Optional[float]]]:
         return {}
 
     @cached_property

@@ -27,7 +27,7 @@ from .grasp_sets import branch_grasps, mesh_grasps
 from .records import PickPlan
 from .symmetry import GraspMatcher, continuous_near_axis, continuous_symmetry, symmetry_maps
 
-if TYPE_CHECKING:  # annotations only: config imports this module for grasp_openings
+if TYPE_CHECKING:  # annotations only: config imports this module for grasp_widths
     from .config import CellConfig, GripperGeometry
 
 __all__ = [
@@ -41,6 +41,7 @@ __all__ = [
     "bin_clash",
     "grip_width",
     "grasp_openings",
+    "grasp_widths",
     "plan_grasp",
     "scene_hits",
     "GraspTest",
@@ -197,12 +198,26 @@ def grasp_openings(
     gripper: GripperGeometry, model: Model, grasps: Mapping[str, np.ndarray], points: Optional[np.ndarray] = None
 ) -> dict[str, Optional[float]]:
     """Grasp name → the finger opening (mm) for it, or None when the part does not fit between
-    the open fingers there (a finger would come down on it).
+    the open fingers there (a finger would come down on it): :meth:`GripperGeometry.opening_for`
+    the width :func:`grasp_widths` measures."""
+    return {n: opening_for_width(gripper, w) for n, w in grasp_widths(gripper, model, grasps, points).items()}
 
-    The part's width across the fingers is twice the farthest of its points in the slab the
-    fingers sweep (more than :data:`GRAZE_MM` inside it: a finger's edge may graze the part),
-    out to the open fingers' outer faces (what lies beyond them is for the collision checks);
-    the opening is :meth:`GripperGeometry.opening_for` that width. Every grasp at once.
+
+def opening_for_width(gripper: GripperGeometry, width: Optional[float]) -> Optional[float]:
+    """The finger opening (mm) for a grasp across ``width`` mm of the part (None: nothing between
+    the fingers), or None when that is wider than the open fingers."""
+    if width is not None and width > gripper.open_width_mm:
+        return None
+    return gripper.opening_for(width)
+
+
+def grasp_widths(
+    gripper: GripperGeometry, model: Model, grasps: Mapping[str, np.ndarray], points: Optional[np.ndarray] = None
+) -> dict[str, Optional[float]]:
+    """Grasp name → the part's width (mm) across the fingers there, or None when none of it lies
+    between them: twice the farthest of its points in the slab the fingers sweep (more than
+    :data:`GRAZE_MM` inside it: a finger's edge may graze the part), out to the open fingers'
+    outer faces (what lies beyond them is for the collision checks). Every grasp at once.
     ``points``: the part's points to measure (default ``model.points``; :func:`swept_points` for
     a part whose turn about its near axis is open)."""
     names = list(grasps)
@@ -210,10 +225,7 @@ def grasp_openings(
         return {}
     pts = np.asarray(model.points if points is None else points, dtype=np.float64)
     widest = gripper.widest(pts, np.stack([np.asarray(grasps[n], dtype=np.float64) for n in names]), GRAZE_MM)
-    return {
-        n: (gripper.opening_for(2.0 * w if w >= 0.0 else None) if 2.0 * w <= gripper.open_width_mm else None)
-        for n, w in zip(names, widest.tolist())
-    }
+    return {n: (2.0 * w if w >= 0.0 else None) for n, w in zip(names, widest.tolist())}
 
 
 #: How far (mm) a point of the part must lie inside a finger's sweep to count as in its way: a
@@ -229,16 +241,12 @@ def _candidates(
     samples: dict[str, list],
     free_turn: bool = False,
 ) -> Iterator[tuple]:
-    """(tilt, name, T_base_gripper, T_base_flange, waypoints, opening) of every grasp within the tool-tilt
+    """(tilt, name, T_base_gripper, T_base_flange, waypoints, opening, closing: the width the fingers
+    close to) of every grasp within the tool-tilt
     limit whose gripper clears the bin's floor and walls along approach, grasp and lift, most
     vertical first; the others counted in ``rejected`` (a few kept in ``samples``). All grasps at
     once (one matrix product per check), so that thousands of grasps are planned in milliseconds."""
-    names = list(config.grasps)
-    T_go = np.stack([config.grasps[n] for n in names])
-    T_og = np.zeros_like(T_go)
-    T_og[:, :3, :3] = np.transpose(T_go[:, :3, :3], (0, 2, 1))
-    T_og[:, :3, 3] = -np.einsum("nji,nj->ni", T_go[:, :3, :3], T_go[:, :3, 3])
-    T_og[:, 3, 3] = 1.0
+    names, T_og = config.grasp_frames
     T_bo = np.asarray(T_base_object, dtype=np.float64)
     # About a continuous symmetry, or a near-symmetry whose turn the scan left open (a keyed shaft
     # with its keyway hidden), the grasps turn to the most upright: the located turn is arbitrary.
@@ -257,10 +265,13 @@ def _candidates(
     # (only for the grasps within the tilt limit: most are not).
     idx = np.flatnonzero(ok)
     openings = config.openings([names[i] for i in idx], swept=free_turn)
+    widths = config.grip_widths([names[i] for i in idx], swept=free_turn)
     fits = ~np.isnan(openings)
     rejected["width"] += int((~fits).sum())
     _keep_some(samples, "width", T_bg[idx[~fits]])
     idx, openings = idx[fits], openings[fits]
+    # The width the fingers close to (their opening where nothing lies between them).
+    closing = np.where(np.isnan(widths[fits]), openings, np.minimum(widths[fits], openings))
     R, t = T_bg[idx, :3, :3], T_bg[idx, :3, 3]
     at_grasp = np.einsum("kmj,kij->kmi", config.gripper.outlines(openings), R) + t[:, None]
     back = at_grasp - config.approach_distance_mm * R[:, None, :, 2]
@@ -272,7 +283,8 @@ def _candidates(
         free &= (below <= 1e-9) & ~wall
     rejected["bin"] += int((~free).sum())
     _keep_some(samples, "bin", T_bg[idx[~free]])
-    clear, opening_of = idx[free], dict(zip(idx[free].tolist(), openings[free].tolist()))
+    clear = idx[free]
+    opening_of = dict(zip(clear.tolist(), zip(openings[free].tolist(), closing[free].tolist())))
     for i in clear[np.argsort(tilt[clear], kind="stable")]:
         waypoints = pick_waypoints(
             T_bf[i],
@@ -281,7 +293,7 @@ def _candidates(
             clearance_z_mm=config.clearance_z_mm,
             drop_pose=config.drop_pose,
         )
-        yield float(tilt[i]), names[i], T_bg[i], T_bf[i], waypoints, opening_of[int(i)]
+        yield float(tilt[i]), names[i], T_bg[i], T_bf[i], waypoints, *opening_of[int(i)]
 
 
 def swept_points(model: Model) -> np.ndarray:
@@ -574,10 +586,10 @@ def _first_usable(
     counted in ``rejected`` (a few kept in ``samples``). None when none is usable."""
     clear = [c for c, h in batch if h <= config.max_collision_points]
     poses = np.array([c[2] for c in clear]).reshape(-1, 4, 4)
-    own = config.gripper.hits(part, poses, np.array([c[5] for c in clear]), GRAZE_MM)
+    own = config.gripper.hits(part, poses, np.array([c[5] for c in clear]), GRAZE_MM, at_most=1)
     own = dict(zip((id(c) for c in clear), own))
     for c, hits in batch:
-        tilt, name, T_bg, T_bf, waypoints, opening = c
+        tilt, name, T_bg, T_bf, waypoints, opening, _ = c
         why = _refusal(config, waypoints, hits, int(own.get(id(c), 0)), here)
         if why is not None:
             rejected[why] += 1
@@ -612,24 +624,36 @@ def scene_hits(
     T_base_object, scene, _ = plan_inputs(config, T_base_object, scene, plan.T_base_flange, "plan.T_base_flange")
     _, _, near = _reachable_scene(config, T_base_object, scene, free_turn, unseen_step)
     opening = config.gripper.open_width_mm if plan.opening_mm is None else float(plan.opening_mm)
+    width = float(config.grip_widths([plan.grasp], swept=free_turn)[0])
+    closing = opening if np.isnan(width) else min(width, opening)
     T_bg = np.asarray(plan.T_base_gripper, dtype=np.float64)[None]
-    return int(_motion_hits(config, near, T_bg, np.array([opening]))[0])
+    return int(_motion_hits(config, near, T_bg, np.array([opening]), np.array([closing]))[0])
 
 
-def _motion_hits(config: CellConfig, scene: np.ndarray, T_bg: np.ndarray, openings: np.ndarray) -> np.ndarray:
-    """How many ``scene`` points (base frame) the gripper, grown by ``config.scan_clearance_mm``,
-    meets on each pick's way in and out (:meth:`GripperGeometry.hits`): coming in along its axis
-    from the approach to the grasp ``T_bg`` (K, 4, 4), fingers ``openings`` (K,) apart, and
+def _motion_hits(
+    config: CellConfig,
+    points: Any,
+    T_bg: np.ndarray,
+    openings: np.ndarray,
+    closing: np.ndarray,
+    at_most: Optional[int] = None,
+) -> np.ndarray:
+    """How many scene ``points`` (base frame) the gripper meets on each pick's way in and out
+    (:meth:`GripperGeometry.hits`): coming in along its axis from the approach to the grasp
+    ``T_bg`` (K, 4, 4), fingers ``openings`` (K,) apart, closing there to ``closing`` (K,), and
     rising straight up from anywhere on that way (the descent to the approach and the lift), each
     point standing for what lies straight below it down to the bin's floor, which the scan did
-    not see: a finger may not reach in under a neighbour's seen surface."""
+    not see: a finger may not reach in under a seen surface, nor close onto a neighbour. The
+    gripper is grown by ``config.scan_clearance_mm``; ``at_most``: counts stop there."""
     return config.gripper.hits(
-        scene,
+        points,
         T_bg,
         openings,
         grow_mm=float(config.scan_clearance_mm),
         back_mm=float(config.approach_distance_mm),
         floor_z_mm=float(config.bin_bounds[0][2]),
+        closing_mm=closing,
+        at_most=at_most,
     )
 
 
@@ -699,7 +723,11 @@ def plan_grasp(
             batch = kept
         if not batch:
             continue
-        scene_hits = _motion_hits(config, scene, np.stack([c[2] for c in batch]), np.array([c[5] for c in batch]))
+        # Counted up to one past the most a grasp may have (more are refused whatever their number).
+        poses, openings, closing = np.stack([c[2] for c in batch]), [c[5] for c in batch], [c[6] for c in batch]
+        scene_hits = _motion_hits(
+            config, scene, poses, np.array(openings), np.array(closing), at_most=config.max_collision_points + 1
+        )
         now = []
         for c, h in zip(batch, scene_hits.tolist()):
             if 0 < h <= config.max_collision_points:

@@ -55,7 +55,7 @@ from ..vision import describe_frames, triangulate
 from .ahead import PlanAhead
 from .config import CellConfig, check_static_poses
 from .frames import FrameSource, Sweep
-from .grasp import NoGraspError, line_step, plan_grasp, staked_filter
+from .grasp import NoGraspError, plan_grasp, staked_filter
 from .nudge import nudge_blocked
 from .plan_check import PICK_MOVES, check_plan
 from .progress import ProgressPrinter, quiet
@@ -476,7 +476,7 @@ class Cell:
                 self.robot.read_pose(),
                 accept,
                 free,
-                line_step(located.scan.cloud),
+                located.scan.line_step,
             )
         except NoGraspError as exc:
             if accept is not None and exc.reason.startswith("none") and "ambiguous" in exc.reason:

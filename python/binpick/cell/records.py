@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from types import MappingProxyType
 from typing import Any, Optional
 
@@ -66,6 +67,14 @@ class ScanResult:
     def points(self) -> np.ndarray:
         """(N, 3) points, mm, base frame."""
         return self.cloud.points
+
+    @cached_property
+    def line_step(self) -> Optional[np.ndarray]:
+        """The step from one laser line to the next (:func:`binpick.cell.grasp.line_step`),
+        worked out once per scan: every part planned on it asks."""
+        from .grasp import line_step  # grasp's planners take records' results: imported when first asked
+
+        return line_step(self.cloud)
 
     def seen_again(self, indices: Any) -> float:
         """The share of the points ``indices`` this scan saw itself (not carried over), 1 for none."""

@@ -164,20 +164,23 @@ impl GripperPoints {
 /// How many `points_in` (base frame: an (N, 3) array or a `GripperPoints`) the gripper of `shape`
 /// meets at each pose `T_base_gripper` (K, 4, 4), its fingers `openings[k]` apart, coming in
 /// `back` mm along its axis, each point standing for what lies below it down to `floor` (None:
-/// itself); see `GripperShape::hits_in`.
+/// itself), its fingers closing from there to `closed[k]` (None: not closing), each count stopping
+/// at `limit` (None: every point); see `GripperShape::hits_in`.
 #[pyfunction]
-#[pyo3(signature = (points_in, poses, openings, shape, margin, grow, back, floor, num_threads))]
+#[pyo3(signature = (points_in, poses, openings, closed, shape, margin, grow, back, floor, limit, num_threads))]
 #[allow(clippy::too_many_arguments)]
 fn gripper_hits<'py>(
     py: Python<'py>,
     points_in: &Bound<'py, PyAny>,
     poses: numpy::PyReadonlyArray3<'py, f64>,
     openings: PyReadonlyArray1<'py, f64>,
+    closed: Option<PyReadonlyArray1<'py, f64>>,
     shape: [f64; 6],
     margin: f64,
     grow: f64,
     back: f64,
     floor: Option<f64>,
+    limit: Option<usize>,
     num_threads: usize,
 ) -> PyResult<Bound<'py, numpy::PyArray1<i64>>> {
     let grid = match points_in.cast::<GripperPoints>() {
@@ -190,12 +193,31 @@ fn gripper_hits<'py>(
         return Err(invalid("floor", "a finite height in mm, or None"));
     }
     let sweep = Sweep { back, floor };
+    let limit = limit.unwrap_or(usize::MAX);
     let openings = one_each(&openings, poses.len(), "pose")?;
+    let closed = match closed {
+        Some(widths) => {
+            let widths = widths.as_slice()?.to_vec();
+            if widths.len() != poses.len() || widths.iter().any(|w| !w.is_finite() || *w < 0.0) {
+                return Err(invalid("closed", "one finite width ≥ 0 mm per pose"));
+            }
+            widths
+        }
+        None => Vec::new(),
+    };
     let num_threads = threads(num_threads)?;
     let counts = run(py, move || {
         Ok(with_threads(num_threads, || match &grid {
-            Grid::Shared(grid) => shape.hits_in(grid, &poses, &openings, clearance, sweep),
-            Grid::Points(pts) => shape.hits_swept(pts, &poses, &openings, clearance, sweep),
+            Grid::Shared(grid) => shape.hits_in(grid, &poses, &openings, &closed, clearance, sweep, limit),
+            Grid::Points(pts) => shape.hits_in(
+                &PointGrid::new(pts),
+                &poses,
+                &openings,
+                &closed,
+                clearance,
+                sweep,
+                limit,
+            ),
         }))
     })?;
     Ok(numpy::PyArray1::from_vec(

@@ -55,7 +55,7 @@ impl GripperShape {
     /// Whether `p` (gripper frame) lies inside a finger, the fingers `opening` mm apart, or the body.
     #[inline]
     pub fn occupied(&self, p: &Point, opening: f64, clearance: Clearance) -> bool {
-        Volume::new(self, opening, clearance, 0.0).holds(p.x, p.y, p.z)
+        Volume::new(self, opening, opening, clearance, 0.0).holds(p.x, p.y, p.z)
     }
 
     /// How many of `points` (base frame) lie inside the gripper at each pose `T_base_gripper`,
@@ -82,25 +82,44 @@ impl GripperShape {
         clearance: Clearance,
         sweep: Sweep,
     ) -> Vec<usize> {
-        self.hits_in(&PointGrid::new(points), poses, openings, clearance, sweep)
+        self.hits_in(
+            &PointGrid::new(points),
+            poses,
+            openings,
+            &[],
+            clearance,
+            sweep,
+            usize::MAX,
+        )
     }
 
     /// [`hits_swept`](Self::hits_swept) of points bucketed once ([`PointGrid`]): for a planner
     /// that counts the same scene at batch after batch of poses. Each pose looks only at the
-    /// points over its volume's footprint (a tilted gripper covers a part of the bin).
+    /// points over its volume's footprint (a tilted gripper covers a part of the bin). `closed`:
+    /// empty, or for each pose the width its fingers close to from `openings` (the fingers then
+    /// sweep every width between). A pose's count stops at `limit` (`limit` means at least that
+    /// many): a planner that refuses a pose past some number of points need not count the rest
+    /// of a pile it would plunge into.
+    #[allow(clippy::too_many_arguments)]
     pub fn hits_in(
         &self,
         grid: &PointGrid,
         poses: &[Isometry3<f64>],
         openings: &[f64],
+        closed: &[f64],
         clearance: Clearance,
         sweep: Sweep,
+        limit: usize,
     ) -> Vec<usize> {
         poses
             .par_iter()
             .zip(openings.par_iter())
-            .map(|(pose, &opening)| {
-                let volume = Volume::new(self, opening, clearance, sweep.back.max(0.0));
+            .enumerate()
+            .map(|(k, (pose, &opening))| {
+                let shut = closed.get(k).map_or(opening, |&w| w.min(opening));
+                let moving = Volume::new(self, opening, opening, clearance, sweep.back.max(0.0));
+                // The fingers' sweep as they close, at the pose only (none when they do not).
+                let closing = (shut < opening).then(|| Volume::new(self, opening, shut, clearance, 0.0));
                 // Gripper-frame coordinates: R's columns dotted with p − t (Rᵀ (p − t)).
                 let r = pose.rotation.to_rotation_matrix().into_inner();
                 let t = pose.translation.vector;
@@ -109,55 +128,62 @@ impl GripperShape {
                     r.column(1).into_owned(),
                     r.column(2).into_owned(),
                 );
-                // The base-frame box round the volume's own box: no point outside it (in x, y,
+                // The base-frame box round the volumes' own boxes: no point outside it (in x, y,
                 // and below it; above it too for points that stand for themselves) is met.
                 let frame = (t, [ax, ay, az]);
-                let (base_lo, base_hi) = base_box(&frame, volume.bounds());
+                let none = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+                let [shut_plus, shut_minus, _] = closing.as_ref().map_or([none; 3], Volume::pieces);
+                let own = moving.pieces();
+                let boxes = [own[0], own[1], own[2], shut_plus, shut_minus];
+                let (base_lo, base_hi) = base_box(&frame, union(&boxes));
                 let cells = grid.cells(base_lo, base_hi);
                 match sweep.floor {
                     // Branch-free within a cell (every test evaluated, `&` not `&&`): the points
                     // come in no order, and a mispredicted branch costs more than the arithmetic
                     // it would skip.
-                    None => cells
-                        .map(|cell| {
-                            cell.iter()
-                                .map(|p| {
-                                    let d = p.coords - t;
-                                    usize::from(volume.holds(ax.dot(&d), ay.dot(&d), az.dot(&d)))
-                                })
-                                .sum::<usize>()
-                        })
-                        .sum(),
+                    None => count_upto(cells, limit, |cell| {
+                        cell.iter()
+                            .map(|p| {
+                                let d = p.coords - t;
+                                let q = (ax.dot(&d), ay.dot(&d), az.dot(&d));
+                                let shut_in = closing.as_ref().is_some_and(|c| c.holds(q.0, q.1, q.2));
+                                usize::from(moving.holds(q.0, q.1, q.2) | shut_in)
+                            })
+                            .sum::<usize>()
+                    }),
                     Some(floor) => {
                         // Base −z in the gripper frame: the way each point's column runs.
                         let down = Column::new([-ax.z, -ay.z, -az.z]);
                         // Each piece's own base box: a column can meet a piece only from over
                         // its footprint and no lower than its lowest point (most points are below
                         // the body, and beside the fingers).
-                        let pieces = volume.pieces().map(|b| base_box(&frame, b));
-                        cells
-                            .map(|cell| {
-                                cell.iter()
-                                    .filter(|p| {
-                                        let over = pieces.map(|(lo, hi)| {
-                                            (p.x >= lo[0])
-                                                & (p.x <= hi[0])
-                                                & (p.y >= lo[1])
-                                                & (p.y <= hi[1])
-                                                & (p.z >= lo[2])
-                                        });
-                                        (over[0] | over[1] | over[2]) && {
-                                            let d = p.coords - t;
-                                            let q = [ax.dot(&d), ay.dot(&d), az.dot(&d)];
-                                            let len = (p.z - floor).max(0.0);
-                                            (over[0] && volume.meets_finger(q, &down, len, 1.0))
-                                                || (over[1] && volume.meets_finger(q, &down, len, -1.0))
-                                                || (over[2] && volume.meets_body(q, &down, len))
-                                        }
-                                    })
-                                    .count()
-                            })
-                            .sum()
+                        let pieces = boxes.map(|b| base_box(&frame, b));
+                        count_upto(cells, limit, |cell| {
+                            cell.iter()
+                                .filter(|p| {
+                                    let over = pieces.map(|(lo, hi)| {
+                                        (p.x >= lo[0])
+                                            & (p.x <= hi[0])
+                                            & (p.y >= lo[1])
+                                            & (p.y <= hi[1])
+                                            & (p.z >= lo[2])
+                                    });
+                                    (over[0] | over[1] | over[2] | over[3] | over[4]) && {
+                                        let d = p.coords - t;
+                                        let q = [ax.dot(&d), ay.dot(&d), az.dot(&d)];
+                                        let len = (p.z - floor).max(0.0);
+                                        let shut_meets = |side: f64| {
+                                            closing.as_ref().is_some_and(|c| c.meets_finger(q, &down, len, side))
+                                        };
+                                        (over[0] && moving.meets_finger(q, &down, len, 1.0))
+                                            || (over[1] && moving.meets_finger(q, &down, len, -1.0))
+                                            || (over[2] && moving.meets_body(q, &down, len))
+                                            || (over[3] && shut_meets(1.0))
+                                            || (over[4] && shut_meets(-1.0))
+                                    }
+                                })
+                                .count()
+                        })
                     }
                 }
             })
@@ -298,8 +324,9 @@ struct Volume {
 
 impl Volume {
     /// The gripper's volume at `opening` and `clearance`, drawn out `back` mm along −z (the
-    /// volume it sweeps coming in along its axis).
-    fn new(shape: &GripperShape, opening: f64, clearance: Clearance, back: f64) -> Self {
+    /// volume it sweeps coming in along its axis), its fingers closing from `opening` to `closed`
+    /// (each finger then the box it sweeps: from the closed inner face to the open outer one).
+    fn new(shape: &GripperShape, opening: f64, closed: f64, clearance: Clearance, back: f64) -> Self {
         let m = clearance.margin;
         let side = m - clearance.grow;
         let top = shape.tip_depth - shape.finger_length;
@@ -309,8 +336,8 @@ impl Volume {
         Self {
             finger_z,
             finger_half_y: shape.finger_width / 2.0 - side,
-            finger_offset: opening / 2.0 + shape.finger_thickness / 2.0,
-            finger_half_x: shape.finger_thickness / 2.0 - side,
+            finger_offset: (closed / 2.0 + opening / 2.0 + shape.finger_thickness) / 2.0,
+            finger_half_x: (opening / 2.0 - closed / 2.0 + shape.finger_thickness) / 2.0 - side,
             body_z,
             body_radius_sq: if radius >= 0.0 { radius * radius } else { -1.0 },
         }
@@ -327,15 +354,6 @@ impl Volume {
                 | ((x + self.finger_offset).abs() <= self.finger_half_x));
         let body = (z < self.body_z.1) & (z >= self.body_z.0) & (x * x + y * y <= self.body_radius_sq);
         finger | body
-    }
-
-    /// The volume's box (gripper frame): (low corner, high corner), round its pieces' boxes.
-    fn bounds(&self) -> ([f64; 3], [f64; 3]) {
-        self.pieces()
-            .iter()
-            .fold(([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), |(lo, hi), (a, b)| {
-                ([0, 1, 2].map(|k| lo[k].min(a[k])), [0, 1, 2].map(|k| hi[k].max(b[k])))
-            })
     }
 
     /// The boxes (gripper frame) of the +x finger, the −x finger and the body; an empty piece
@@ -395,6 +413,27 @@ impl Volume {
         let (x, y) = (q[0] + s * d[0], q[1] + s * d[1]);
         x * x + y * y <= self.body_radius_sq
     }
+}
+
+/// The box (low corner, high corner) round `boxes` (an empty box adds nothing).
+fn union(boxes: &[([f64; 3], [f64; 3])]) -> ([f64; 3], [f64; 3]) {
+    boxes
+        .iter()
+        .fold(([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), |(lo, hi), (a, b)| {
+            ([0, 1, 2].map(|k| lo[k].min(a[k])), [0, 1, 2].map(|k| hi[k].max(b[k])))
+        })
+}
+
+/// The sum of `count` over `cells`, stopping once it reaches `limit` (then `limit`).
+fn count_upto<'a>(cells: impl Iterator<Item = &'a [Point]>, limit: usize, count: impl Fn(&[Point]) -> usize) -> usize {
+    let mut n = 0usize;
+    for cell in cells {
+        n = n.saturating_add(count(cell));
+        if n >= limit {
+            return limit;
+        }
+    }
+    n
 }
 
 /// The base-frame box round the gripper-frame box (`lo`, `hi`) of a pose (`t`, the gripper's
@@ -462,6 +501,34 @@ mod tests {
         body_radius: 45.0,
         body_length: 60.0,
     };
+
+    /// `n` points uniform in x, y within ±`half` and z in [0, `height`).
+    fn random_points(rng: &mut crate::Rng, n: usize, half: f64, height: f64) -> Vec<Point> {
+        (0..n)
+            .map(|_| {
+                Point::new(
+                    rng.uniform() * 2.0 * half - half,
+                    rng.uniform() * 2.0 * half - half,
+                    rng.uniform() * height,
+                )
+            })
+            .collect()
+    }
+
+    /// A gripper pose pointing down (gripper z = base −z) tilted up to `tilt` rad about a random
+    /// horizontal axis, shifted up to `shift` mm in x and y, its TCP `z0` to 1.5 `z0` mm up.
+    fn tilted_down(rng: &mut crate::Rng, shift: f64, z0: f64, tilt: f64) -> Isometry3<f64> {
+        let axis = Vector3::new(rng.uniform() - 0.5, rng.uniform() - 0.5, 0.0).normalize();
+        Isometry3::from_parts(
+            Translation3::new(
+                rng.uniform() * shift,
+                rng.uniform() * shift,
+                z0 + rng.uniform() * z0 / 2.0,
+            ),
+            UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(axis), tilt * rng.uniform())
+                * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+        )
+    }
 
     #[test]
     fn a_point_is_in_a_finger_the_body_or_the_gap() {
@@ -569,27 +636,83 @@ mod tests {
     }
 
     #[test]
+    fn closing_fingers_meet_what_lies_between_their_open_and_closed_faces() {
+        let none = Clearance::default();
+        let down = Isometry3::rotation(Vector3::x() * std::f64::consts::PI);
+        // Gripper-frame points on the +x side, 5 mm short of the tips: inside the closed fingers'
+        // inner face (x 10), between the closed and the open inner faces (x 14), in the open
+        // finger (x 24), and past its outer face (x 29).
+        let at = |x: f64| down.transform_point(&Point::new(x, 0.0, 5.0));
+        let grid = PointGrid::new(&[at(5.0), at(14.0), at(24.0), at(29.0)]);
+        let count = |closed: &[f64], floor: Option<f64>| {
+            let sweep = Sweep { back: 0.0, floor };
+            SHAPE.hits_in(&grid, &[down], &[40.0], closed, none, sweep, usize::MAX)[0]
+        };
+        for floor in [None, Some(-100.0)] {
+            assert_eq!(count(&[], floor), 1, "open only: the finger's own box");
+            assert_eq!(count(&[40.0], floor), 1, "closing to the opening is not closing");
+            assert_eq!(count(&[20.0], floor), 2, "closing to 20 mm sweeps x 10 to 20");
+            assert_eq!(count(&[60.0], floor), 1, "a width past the opening is the opening");
+        }
+        // Random tilted poses, closing widths and points: the count is that of the open fingers'
+        // motion or of the fingers at any width between, sampled every 0.25 mm.
+        let mut rng = crate::Rng::new(5);
+        let points = random_points(&mut rng, 3000, 40.0, 60.0);
+        let grid = PointGrid::new(&points);
+        for k in 0..8 {
+            let pose = tilted_down(&mut rng, 10.0, 20.0, 0.5);
+            let (opening, closed) = (40.0, 10.0 + 25.0 * rng.uniform());
+            let clearance = Clearance {
+                margin: 0.0,
+                grow: if k % 2 == 0 { 0.0 } else { 2.0 },
+            };
+            let capped = |limit| {
+                SHAPE.hits_in(
+                    &grid,
+                    &[pose],
+                    &[opening],
+                    &[closed],
+                    clearance,
+                    Sweep::default(),
+                    limit,
+                )[0]
+            };
+            let exact = capped(usize::MAX);
+            let widths: Vec<f64> = (0..=((opening - closed) / 0.25) as usize)
+                .map(|i| (closed + i as f64 * 0.25).min(opening))
+                .collect();
+            let sampled = points
+                .iter()
+                .filter(|p| {
+                    let local = pose.inverse_transform_point(p);
+                    widths.iter().any(|&w| SHAPE.occupied(&local, w, clearance))
+                        || SHAPE.occupied(&local, opening, clearance)
+                })
+                .count();
+            assert!(
+                exact.abs_diff(sampled) <= 2,
+                "pose {k}: exact {exact}, sampled {sampled}"
+            );
+            assert!(
+                exact > SHAPE.hits(&points, &[pose], &[opening], clearance)[0],
+                "pose {k}: closing meets more"
+            );
+            // The count stops at the limit, and is exact below it.
+            assert_eq!(capped(3), 3.min(exact));
+            assert_eq!(capped(exact + 1), exact);
+            assert_eq!(capped(exact), exact);
+        }
+    }
+
+    #[test]
     fn swept_counts_agree_with_dense_sampling_of_the_columns() {
         // Each point's column sampled every 0.05 mm against `occupied`, over random tilted poses:
         // the exact segment test counts the same points (up to points within a sample of an edge).
         let mut rng = crate::Rng::new(11);
-        let points: Vec<Point> = (0..400)
-            .map(|_| {
-                Point::new(
-                    rng.uniform() * 160.0 - 80.0,
-                    rng.uniform() * 160.0 - 80.0,
-                    rng.uniform() * 150.0,
-                )
-            })
-            .collect();
+        let points = random_points(&mut rng, 400, 80.0, 150.0);
         let floor = 0.0;
         for k in 0..6 {
-            let axis = Vector3::new(rng.uniform() - 0.5, rng.uniform() - 0.5, 0.0).normalize();
-            let pose = Isometry3::from_parts(
-                Translation3::new(rng.uniform() * 20.0, rng.uniform() * 20.0, 40.0 + rng.uniform() * 20.0),
-                UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(axis), 0.8 * rng.uniform())
-                    * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
-            );
+            let pose = tilted_down(&mut rng, 20.0, 40.0, 0.8);
             let clearance = Clearance {
                 margin: 0.0,
                 grow: if k % 2 == 0 { 0.0 } else { 3.0 },
