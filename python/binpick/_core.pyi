@@ -489,6 +489,8 @@ def sim_render_checkerboard(
     noise_args: _NoiseArgs,
     supersample: int,
     seed: int,
+    window: tuple[int, int, int, int] | None = None,
 ) -> _U8:
     """(H, W, 3) RGB image of a checkerboard (board = squares along x, squares along y, square mm,
-    margin mm) at ``t_camera_board``, with the laser line at ``angle`` if ``laser_args``."""
+    margin mm) at ``t_camera_board``, with the laser line at ``angle`` if ``laser_args``; with
+    ``window`` (u0, v0, u1, v1), only those pixels drawn (the rest the background)."""

@@ -407,6 +407,23 @@ def frozen_copy(arr: np.ndarray) -> np.ndarray:
     return arr
 
 
+def pixel_window(value: Any, name: str, width: int, height: int, *, span: int, whole: str) -> tuple[int, int, int, int]:
+    """A rectangle of an image ``width`` × ``height`` px, (u0, v0, u1, v1) half-open, as four
+    ints spanning at least ``span`` pixels each way, or InvalidInputError naming ``name`` (whose
+    fix says ``whole``: what None does instead)."""
+    r = np.asarray(value)
+    if r.shape != (4,) or r.dtype.kind not in "iu":
+        raise InvalidInputError(f"{name}: expected four integers (u0, v0, u1, v1) in pixels, got {value!r:.60}")
+    u0, v0, u1, v1 = (int(x) for x in r)
+    if not (0 <= u0 <= u1 - span and u1 <= width and 0 <= v0 <= v1 - span and v1 <= height):
+        raise InvalidInputError(
+            f"{name}: ({u0}, {v0}, {u1}, {v1}) must satisfy 0 ≤ u0 < u1 ≤ {width} and 0 ≤ v0 < v1 ≤ {height} "
+            f"(the image's width and height) and span at least {span} pixel{'s' if span > 1 else ''} each way; "
+            f"pass None to {whole}"
+        )
+    return u0, v0, u1, v1
+
+
 def as_box(value: Any, name: str = "bin") -> tuple[np.ndarray, np.ndarray]:
     """An axis-aligned box ((xmin, ymin, zmin), (xmax, ymax, zmax)) in mm as its two corners, or
     InvalidInputError naming ``name``."""

@@ -123,6 +123,39 @@ def test_checkerboard_corners_are_found_where_they_project():
     assert min(d.max(), d_rev.max()) < 0.2
 
 
+def test_a_checkerboard_drawn_in_a_window_is_the_whole_images_there():
+    # The simulated camera draws the board only over the pixels that see it: those pixels (and
+    # their noise) must be what the whole image has there, the laser line on the board included.
+    cam = sim.Camera(width=320, height=240, fx=400.0, fy=400.0, cx=159.5, cy=119.5)
+    T = np.eye(4)
+    T[:3, 3] = (-80.0, -50.0, 500.0)
+    kw = dict(pattern=(7, 5), square=20.0, laser=sim.Laser(), angle=0.05, seed=3)
+    whole = sim.render_checkerboard(cam, T, **kw)
+    u0, v0, u1, v1 = 40, 30, 211, 175
+    part = sim.render_checkerboard(cam, T, window=(u0, v0, u1, v1), **kw)
+    np.testing.assert_array_equal(part[v0:v1, u0:u1], whole[v0:v1, u0:u1])
+    assert np.ptp(whole[v0:v1, u0:u1].astype(int)) > 100, "the window shows the board"
+    # Beside it the background, with its noise on the window's rows and none on the others.
+    beside = np.ones(part.shape[:2], dtype=bool)
+    beside[v0:v1, u0:u1] = False
+    beside[:v0] = beside[v1:] = False
+    background = sim.render_checkerboard(cam, T @ _far_away(), **kw)
+    np.testing.assert_array_equal(part[beside], background[beside])
+    quiet = sim.render_checkerboard(cam, T @ _far_away(), **kw, noise=sim.SensorNoise.none())
+    np.testing.assert_array_equal(part[:v0], quiet[:v0])
+    np.testing.assert_array_equal(part[v1:], quiet[v1:])
+    for bad in ((0, 0, 321, 10), (10, 10, 10, 20), (0.0, 0, 5, 5), (1, 2, 3)):
+        with pytest.raises(binpick.InvalidInputError, match="window"):
+            sim.render_checkerboard(cam, T, window=bad, **kw)
+
+
+def _far_away() -> np.ndarray:
+    """Moves a board out of the picture (behind the camera's view): only the background is left."""
+    T = np.eye(4)
+    T[:3, 3] = (1e5, 0.0, 0.0)
+    return T
+
+
 def test_bad_render_input_is_rejected():
     with pytest.raises(binpick.InvalidInputError):
         sim.Camera(width=0)

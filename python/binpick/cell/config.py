@@ -161,7 +161,8 @@ class GripperGeometry:
         each point stands for everything straight below it down to that height (base z): what a
         scan cannot see under a seen surface, and what the gripper meets rising straight up from
         anywhere on its approach; ``closing_mm`` (K,) — at each pose the fingers close from their
-        opening to that width, sweeping every width between (a finger closing in under a part).
+        opening to that width, sweeping every width between (a finger closing onto a neighbour in
+        the gap; ``grow_mm`` grows that sweep but for its inner face, which closes onto the part).
         ``at_most``: a count stops there (a count of ``at_most`` means at least that many): for a
         planner that refuses a pose past some number of points."""
         poses = np.ascontiguousarray(T_base_grippers, dtype=np.float64).reshape(-1, 4, 4)

@@ -73,6 +73,9 @@ class _BoardLayer:
         nearer = np.isnan(scene) | (depth < scene)
         self.mask = np.zeros((cam.height, cam.width), dtype=bool)
         self.mask[rows, cols] = (on & nearer).reshape(self.mask[rows, cols].shape)
+        # The board is drawn only over the mask's box: the rest of its image is not used.
+        v, u = np.flatnonzero(self.mask.any(axis=1)), np.flatnonzero(self.mask.any(axis=0))
+        self.window = (int(u[0]), int(v[0]), int(u[-1]) + 1, int(v[-1]) + 1) if len(u) else None
 
     @classmethod
     def of(cls, layout: Layout, view: View, T_base_flange: np.ndarray) -> Optional[_BoardLayer]:
@@ -100,6 +103,7 @@ class _BoardLayer:
             noise=lay.noise,
             supersample=_SUPERSAMPLE,
             seed=seed,
+            window=self.window,
         )
         return np.where(self.mask[:, :, None], img, rgb)
 

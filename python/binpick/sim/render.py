@@ -27,6 +27,7 @@ from .._validate import (
     instance_of,
     non_negative,
     number,
+    pixel_window,
     positive,
     thread_count,
 )
@@ -254,10 +255,14 @@ def render_checkerboard(
     noise: Optional[SensorNoise] = None,
     supersample: int = 3,
     seed: int = 0,
+    window: Optional[tuple[int, int, int, int]] = None,
 ) -> np.ndarray:
     """An RGB image (H, W, 3) uint8 of a checkerboard with ``pattern`` = (columns, rows) inner
     corners, ``square`` mm, at ``T_camera_board`` (OpenCV board frame: origin at the first inner
-    corner, corners at (i·square, j·square, 0)); with the laser line at ``angle`` if ``laser``."""
+    corner, corners at (i·square, j·square, 0)); with the laser line at ``angle`` if ``laser``.
+    ``window`` (u0, v0, u1, v1), pixels, half-open: only those pixels are drawn, each as in the
+    whole image (its noise too), the rest left the background's (without noise outside the
+    window's rows): for a view that shows the board in a part of the picture."""
     if not isinstance(pattern, (tuple, list)) or len(pattern) != 2:
         raise InvalidInputError(f"pattern: expected (columns, rows) of inner corners, got {pattern!r:.60}")
     cols, rows = (count(p, f"pattern[{i}]", 1, MAX_BOARD_CORNERS) for i, p in enumerate(pattern))
@@ -277,6 +282,9 @@ def render_checkerboard(
         noise._args(),
         count(supersample, "supersample", 1, MAX_SUPERSAMPLE),
         count(seed, "seed"),
+        None
+        if window is None
+        else pixel_window(window, "window", camera.width, camera.height, span=1, whole="draw the whole image"),
     )
 
 

@@ -8,7 +8,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from .._validate import as_image, choice, count, number, positive
+from .._validate import as_image, choice, count, number, pixel_window, positive
 from ..errors import InvalidInputError
 
 __all__ = ["extract_line", "laser_mask", "red_excess"]
@@ -108,7 +108,7 @@ def extract_line(
         max_jump = positive(max_jump, "max_jump", "pixels")
     img = as_image(image, "image")
     if roi is not None:
-        u0, v0, u1, v1 = _roi(roi, img.shape)
+        u0, v0, u1, v1 = pixel_window(roi, "roi", img.shape[1], img.shape[0], span=2, whole="search the whole image")
         img = img[v0:v1, u0:u1]
     signal = red_excess(img)
     if direction == "auto":
@@ -123,21 +123,6 @@ def extract_line(
     if roi is not None:
         uv += (u0, v0)
     return uv
-
-
-def _roi(roi: Any, shape: tuple[int, ...]) -> tuple[int, int, int, int]:
-    """``roi`` as four ints inside an image of ``shape``, or InvalidInputError naming it."""
-    r = np.asarray(roi)
-    if r.shape != (4,) or r.dtype.kind not in "iu":
-        raise InvalidInputError(f"roi: expected four integers (u0, v0, u1, v1) in pixels, got {roi!r}")
-    u0, v0, u1, v1 = (int(x) for x in r)
-    height, width = shape[:2]
-    if not (0 <= u0 <= u1 - 2 and u1 <= width and 0 <= v0 <= v1 - 2 and v1 <= height):
-        raise InvalidInputError(
-            f"roi: ({u0}, {v0}, {u1}, {v1}) must satisfy 0 ≤ u0 < u1 ≤ {width} and 0 ≤ v0 < v1 ≤ {height} "
-            "(the image's width and height) and span at least 2 pixels each way; pass None to search the whole image"
-        )
-    return u0, v0, u1, v1
 
 
 def _centres(

@@ -499,9 +499,10 @@ fn sim_default_laser(py: Python<'_>) -> PyResult<(Arr<'_>, f64, f64, f64, [f64; 
     ))
 }
 
-/// (H, W, 3) uint8 image of a checkerboard at `T_camera_board`, optionally with the laser line.
+/// (H, W, 3) uint8 image of a checkerboard at `T_camera_board`, optionally with the laser line;
+/// with `window` (u0, v0, u1, v1), only those pixels drawn.
 #[pyfunction]
-#[pyo3(signature = (camera_args, board, t_camera_board, lighting_args, laser_args, angle, noise_args, supersample, seed))]
+#[pyo3(signature = (camera_args, board, t_camera_board, lighting_args, laser_args, angle, noise_args, supersample, seed, window=None))]
 #[allow(clippy::too_many_arguments)]
 fn sim_render_checkerboard<'py>(
     py: Python<'py>,
@@ -514,6 +515,7 @@ fn sim_render_checkerboard<'py>(
     noise_args: NoiseArgs,
     supersample: usize,
     seed: u64,
+    window: Option<[usize; 4]>,
 ) -> PyResult<Bound<'py, PyArray3<u8>>> {
     let cam = camera(&camera_args)?;
     let (h, w) = (cam.height as usize, cam.width as usize);
@@ -536,6 +538,7 @@ fn sim_render_checkerboard<'py>(
             &n,
             supersample,
             seed,
+            window,
         )
     })?;
     Ok(image_out(py, img, h, w))

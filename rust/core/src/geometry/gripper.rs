@@ -97,7 +97,8 @@ impl GripperShape {
     /// that counts the same scene at batch after batch of poses. Each pose looks only at the
     /// points over its volume's footprint (a tilted gripper covers a part of the bin). `closed`:
     /// empty, or for each pose the width its fingers close to from `openings` (the fingers then
-    /// sweep every width between). A pose's count stops at `limit` (`limit` means at least that
+    /// sweep every width between; the clearance grows that sweep but for its inner face, which
+    /// closes onto the part). A pose's count stops at `limit` (`limit` means at least that
     /// many): a planner that refuses a pose past some number of points need not count the rest
     /// of a pile it would plunge into.
     #[allow(clippy::too_many_arguments)]
@@ -116,9 +117,13 @@ impl GripperShape {
             .zip(openings.par_iter())
             .enumerate()
             .map(|(k, (pose, &opening))| {
-                let shut = closed.get(k).map_or(opening, |&w| w.min(opening));
                 let moving = Volume::new(self, opening, opening, clearance, sweep.back.max(0.0));
-                // The fingers' sweep as they close, at the pose only (none when they do not).
+                // The fingers' sweep as they close, at the pose only (none when they do not). Its
+                // inner face is not grown: the fingers close onto the part's own surface there (a
+                // width the grown open fingers reach already adds nothing).
+                let shut = closed
+                    .get(k)
+                    .map_or(opening, |&w| (w + 2.0 * clearance.grow).min(opening));
                 let closing = (shut < opening).then(|| Volume::new(self, opening, shut, clearance, 0.0));
                 // Gripper-frame coordinates: R's columns dotted with p − t (Rᵀ (p − t)).
                 let r = pose.rotation.to_rotation_matrix().into_inner();
@@ -655,7 +660,8 @@ mod tests {
             assert_eq!(count(&[60.0], floor), 1, "a width past the opening is the opening");
         }
         // Random tilted poses, closing widths and points: the count is that of the open fingers'
-        // motion or of the fingers at any width between, sampled every 0.25 mm.
+        // motion or of the fingers at any width between, sampled every 0.25 mm (the clearance
+        // grows each finger but for the inner face, which closes onto the part).
         let mut rng = crate::Rng::new(5);
         let points = random_points(&mut rng, 3000, 40.0, 60.0);
         let grid = PointGrid::new(&points);
@@ -678,8 +684,9 @@ mod tests {
                 )[0]
             };
             let exact = capped(usize::MAX);
+            // Each width's finger grown but for its inner face: as if closed 2·grow wider.
             let widths: Vec<f64> = (0..=((opening - closed) / 0.25) as usize)
-                .map(|i| (closed + i as f64 * 0.25).min(opening))
+                .map(|i| (closed + i as f64 * 0.25 + 2.0 * clearance.grow).min(opening))
                 .collect();
             let sampled = points
                 .iter()

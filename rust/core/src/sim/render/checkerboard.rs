@@ -30,7 +30,10 @@ impl Default for Checkerboard {
 
 /// Renders a checkerboard at `t_camera_board` under `lighting` with `supersample`² samples per
 /// pixel, optionally with the laser line at an angle on it, and sensor noise: the images the
-/// camera and laser calibrations are computed from.
+/// camera and laser calibrations are computed from. `window` `[u0, v0, u1, v1]` (pixels,
+/// half-open): only those pixels are drawn, each as in the whole image (its noise too); the rest
+/// are the background's, noiseless outside the window's rows (a view that shows the board in a
+/// part of the picture).
 #[allow(clippy::too_many_arguments)]
 pub fn render_checkerboard(
     camera: &Camera,
@@ -41,9 +44,20 @@ pub fn render_checkerboard(
     noise: &SensorNoise,
     supersample: usize,
     seed: u64,
+    window: Option<[usize; 4]>,
 ) -> Result<Vec<u8>> {
     let table = pixel_ray_grid(camera)?;
     noise.validate()?;
+    let (w, h) = (camera.width as usize, camera.height as usize);
+    let [u_lo, v_lo, u_hi, v_hi] = window.unwrap_or([0, 0, w, h]);
+    if u_lo >= u_hi || v_lo >= v_hi || u_hi > w || v_hi > h {
+        return Err(Error::invalid(
+            "window",
+            format!(
+                "(u0, v0, u1, v1) must satisfy u0 < u1 ≤ {w} and v0 < v1 ≤ {h}, got ({u_lo}, {v_lo}, {u_hi}, {v_hi})"
+            ),
+        ));
+    }
     if board.cols < 2 || board.rows < 2 || !(board.square > 0.0) || !(board.margin >= 0.0) {
         return Err(Error::invalid(
             "board",
@@ -62,7 +76,6 @@ pub fn render_checkerboard(
             return Err(Error::invalid("angle", "must be finite"));
         }
     }
-    let (w, h) = (camera.width as usize, camera.height as usize);
     let n = t_camera_board.rotation * Vector3::z();
     let p0 = Point::from(t_camera_board.translation.vector);
     let t_board_camera = t_camera_board.inverse();
@@ -163,6 +176,9 @@ pub fn render_checkerboard(
             let table = &table;
             let (meet, region, radiance, laser_frame) = (&meet, &region, &radiance, &laser_frame);
             (0..w).map(move |u| {
+                if u < u_lo || u >= u_hi || v < v_lo || v >= v_hi {
+                    return [lighting.background as f32; 3];
+                }
                 let at = |uu: usize, vv: usize| table[vv * w + uu];
                 let c = at(u, v);
                 let (u0, u1) = (u.saturating_sub(1), (u + 1).min(w - 1));
@@ -231,5 +247,5 @@ pub fn render_checkerboard(
             })
         })
         .collect();
-    Ok(quantise(&img, w, noise, seed, 0xB0A2D))
+    Ok(quantise(&img, w, noise, seed, 0xB0A2D, v_lo..v_hi))
 }

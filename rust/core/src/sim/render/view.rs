@@ -142,8 +142,16 @@ pub(super) fn mix_seed(seed: u64, a: u64, b: u64) -> u64 {
 
 /// Adds sensor noise to a float image and quantises it to 8 bits, rows in parallel, each row's
 /// noise seeded from (`seed`, `salt`, row) so the result does not depend on the thread count.
-pub(super) fn quantise(img: &[[f32; 3]], width: usize, noise: &SensorNoise, seed: u64, salt: u64) -> Vec<u8> {
-    quantise_adding(img, &[], width, noise, seed, salt)
+/// Only the rows `noisy` get noise (the others are rounded as they are: rows not drawn).
+pub(super) fn quantise(
+    img: &[[f32; 3]],
+    width: usize,
+    noise: &SensorNoise,
+    seed: u64,
+    salt: u64,
+    noisy: std::ops::Range<usize>,
+) -> Vec<u8> {
+    quantise_adding(img, &[], width, noise, seed, salt, noisy)
 }
 
 /// [`quantise`] of `img` with light added at some pixels: `adds` (pixel, RGB), sorted by pixel,
@@ -156,6 +164,7 @@ pub(super) fn quantise_adding(
     noise: &SensorNoise,
     seed: u64,
     salt: u64,
+    noisy_rows: std::ops::Range<usize>,
 ) -> Vec<u8> {
     let mut out = vec![0u8; img.len() * 3];
     let noisy = noise.read_noise > 0.0 || noise.shot_noise > 0.0;
@@ -171,7 +180,7 @@ pub(super) fn quantise_adding(
                 *v += add;
             }
         }
-        if noisy {
+        if noisy && noisy_rows.contains(&row) {
             let mut rng = Rng::new(mix_seed(seed, salt, row as u64));
             for v in light.iter_mut() {
                 *v += (read2 + shot * v.max(0.0)).sqrt() * fast_normal(&mut rng);
@@ -226,7 +235,14 @@ impl View {
     /// The image under ambient light alone, with sensor noise.
     pub fn ambient_frame(&self, noise: &SensorNoise, seed: u64) -> Result<Vec<u8>> {
         noise.validate()?;
-        Ok(quantise(&self.shade, self.camera.width as usize, noise, seed, u64::MAX))
+        Ok(quantise(
+            &self.shade,
+            self.camera.width as usize,
+            noise,
+            seed,
+            u64::MAX,
+            0..usize::MAX,
+        ))
     }
 
     /// The RGB frame the camera grabs with the laser at motor angle `theta` (rad): the scene
@@ -327,7 +343,7 @@ impl View {
             self.add_reflections(&mut adds, &lit, laser, &o, noise.reflections);
         }
         adds.sort_by_key(|&(i, _)| i); // stable: each pixel's light in the order it came
-        Ok(quantise_adding(&self.shade, &adds, w, noise, seed, salt))
+        Ok(quantise_adding(&self.shade, &adds, w, noise, seed, salt, 0..usize::MAX))
     }
 
     /// The sheet index of this view for `laser` (built on first use, kept for the next frames).
