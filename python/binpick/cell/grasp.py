@@ -241,11 +241,11 @@ def _candidates(
     samples: dict[str, list],
     free_turn: bool = False,
 ) -> Iterator[tuple]:
-    """(tilt, name, T_base_gripper, T_base_flange, waypoints, opening, closing: the width the fingers
-    close to) of every grasp within the tool-tilt
-    limit whose gripper clears the bin's floor and walls along approach, grasp and lift, most
-    vertical first; the others counted in ``rejected`` (a few kept in ``samples``). All grasps at
-    once (one matrix product per check), so that thousands of grasps are planned in milliseconds."""
+    """(tilt, name, T_base_gripper, T_base_flange, waypoints, opening, closing: the width the
+    fingers close to) of every grasp within the tool-tilt limit whose gripper clears the bin's
+    floor and walls along approach, grasp and lift, most vertical first; the others counted in
+    ``rejected`` (a few kept in ``samples``). All grasps at once (one matrix product per check),
+    so that thousands of grasps are planned in milliseconds."""
     names, T_og = config.grasp_frames
     T_bo = np.asarray(T_base_object, dtype=np.float64)
     # About a continuous symmetry, or a near-symmetry whose turn the scan left open (a keyed shaft
@@ -270,8 +270,7 @@ def _candidates(
     rejected["width"] += int((~fits).sum())
     _keep_some(samples, "width", T_bg[idx[~fits]])
     idx, openings = idx[fits], openings[fits]
-    # The width the fingers close to (their opening where nothing lies between them).
-    closing = np.where(np.isnan(widths[fits]), openings, np.minimum(widths[fits], openings))
+    closing = _closing(widths[fits], openings)
     R, t = T_bg[idx, :3, :3], T_bg[idx, :3, 3]
     at_grasp = np.einsum("kmj,kij->kmi", config.gripper.outlines(openings), R) + t[:, None]
     back = at_grasp - config.approach_distance_mm * R[:, None, :, 2]
@@ -624,10 +623,15 @@ def scene_hits(
     T_base_object, scene, _ = plan_inputs(config, T_base_object, scene, plan.T_base_flange, "plan.T_base_flange")
     _, _, near = _reachable_scene(config, T_base_object, scene, free_turn, unseen_step)
     opening = config.gripper.open_width_mm if plan.opening_mm is None else float(plan.opening_mm)
-    width = float(config.grip_widths([plan.grasp], swept=free_turn)[0])
-    closing = opening if np.isnan(width) else min(width, opening)
+    closing = _closing(config.grip_widths([plan.grasp], swept=free_turn), np.array([opening]))
     T_bg = np.asarray(plan.T_base_gripper, dtype=np.float64)[None]
-    return int(_motion_hits(config, near, T_bg, np.array([opening]), np.array([closing]))[0])
+    return int(_motion_hits(config, near, T_bg, np.array([opening]), closing)[0])
+
+
+def _closing(widths: np.ndarray, openings: np.ndarray) -> np.ndarray:
+    """The widths the fingers close to from ``openings``: the part's ``widths`` across them
+    (:meth:`CellConfig.grip_widths`), their opening where nothing lies between them (NaN)."""
+    return np.where(np.isnan(widths), openings, np.minimum(widths, openings))
 
 
 def _motion_hits(
