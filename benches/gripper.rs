@@ -2,11 +2,12 @@
 //! gripper at each of a batch of poses (`GripperShape::hits`), and how many it meets along a
 //! pick's motion (`GripperShape::hits_swept`: the approach along its axis, each point standing
 //! for what lies below it — the planner's question for every grasp it weighs), at 10k to 400k
-//! scene points (a scan near a part, and the same spread between laser lines); and the part's
-//! width between the fingers at each of 1,152 grasps (`GripperShape::widest_between`, measured
-//! once per grasp and cell).
+//! scene points (a scan near a part, and the same spread between laser lines); the planner's
+//! own call (`GripperShape::hits_in`: the points bucketed once, the fingers closing to a width,
+//! a count stopping past the most a grasp may have); and the part's width between the fingers
+//! at each of 1,152 grasps (`GripperShape::widest_between`, measured once per grasp and cell).
 
-use binpick_core::{with_threads, Clearance, GripperShape, Point, Rng, Sweep};
+use binpick_core::{with_threads, Clearance, GripperShape, Point, PointGrid, Rng, Sweep};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use std::hint::black_box;
@@ -73,6 +74,38 @@ fn bench_hits(c: &mut Criterion) {
     }
 }
 
+fn bench_planner(c: &mut Criterion) {
+    // As the planner counts: the scene bucketed once (not timed), the swept count; then with the
+    // fingers closing from 40 to 30 mm; then that count stopping at 16 (the default cell refuses
+    // a grasp past 15 points).
+    let sweep = Sweep {
+        back: 40.0,
+        floor: Some(-150.0),
+    };
+    let mut rng = Rng::new(7);
+    let batch = poses(32, &mut rng);
+    let (openings, closed) = (vec![40.0; batch.len()], vec![30.0; batch.len()]);
+    let mut group = c.benchmark_group("gripper_hits_planner_32_poses");
+    for &n in &[10_000usize, 40_000, 400_000] {
+        let grid = PointGrid::new(&cloud(n, 150.0, &mut rng));
+        group.throughput(Throughput::Elements((n * batch.len()) as u64));
+        for (variant, shut, limit) in [
+            ("swept", &[][..], usize::MAX),
+            ("closing", &closed[..], usize::MAX),
+            ("closing_at_most_16", &closed[..], 16),
+        ] {
+            group.bench_with_input(BenchmarkId::new(variant, n), &grid, |b, grid| {
+                b.iter(|| {
+                    with_threads(1, || {
+                        black_box(SHAPE.hits_in(grid, &batch, &openings, shut, Clearance::default(), sweep, limit))
+                    })
+                })
+            });
+        }
+    }
+    group.finish();
+}
+
 fn bench_widest(c: &mut Criterion) {
     let mut rng = Rng::new(8);
     let grasps = poses(1152, &mut rng);
@@ -85,5 +118,5 @@ fn bench_widest(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench_hits, bench_widest);
+criterion_group!(benches, bench_hits, bench_planner, bench_widest);
 criterion_main!(benches);
