@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 
 import binpick
-from binpick.cell.grasp import GRAZE_MM, _unseen, line_step, plan_grasp
+from binpick.cell.grasp import GRAZE_MM, _unseen, plan_grasp
+from binpick.cell.records import line_step
 from binpick.sim import SimulatedCell
 from binpick.transforms import rotation_about
 

@@ -343,38 +343,9 @@ def _near(points: np.ndarray, centre: np.ndarray, radius: float) -> np.ndarray:
     return points[np.einsum("ij,ij->i", d, d) <= radius * radius]
 
 
-def line_step(cloud: Any) -> Optional[np.ndarray]:
-    """The step (3,) from one laser line to the next on the scanned surfaces of a swept scan
-    (``cloud`` a :class:`binpick.vision.Cloud`, whose ``frame`` numbers each point's line): the
-    median shift between the centres of consecutive lines, horizontal. None for a cloud that is
-    not a sweep of lines (one depth shot, a file), whose points lie a pixel apart.
-
-    What lies between two lines is not seen: an edge a line did not catch can stand out up to a
-    step beyond the last line that saw its part, and a finger there would come down on it."""
-    frame = np.asarray(getattr(cloud, "frame", ()), dtype=np.int64).reshape(-1)
-    points = np.asarray(getattr(cloud, "points", np.zeros((0, 3))), dtype=np.float64)
-    if len(frame) != len(points) or len(frame) == 0:
-        return None
-    ids, inverse_, counts = np.unique(frame, return_inverse=True, return_counts=True)
-    if len(ids) < 3:
-        return None
-    centres = np.stack([np.bincount(inverse_, weights=points[:, k]) / counts for k in range(2)], axis=1)
-    consecutive = np.flatnonzero((np.diff(ids) == 1) & (counts[:-1] >= 10) & (counts[1:] >= 10))
-    if len(consecutive) < 2:
-        return None
-    steps = centres[consecutive + 1] - centres[consecutive]
-    direction = np.median(steps, axis=0)
-    norm = float(np.linalg.norm(direction))
-    if norm <= 1e-9:
-        return None
-    u = direction / norm
-    size = float(np.median(np.abs(steps @ u)))
-    return np.array([u[0] * size, u[1] * size, 0.0])
-
-
 def _unseen(points: np.ndarray, step: Optional[np.ndarray]) -> np.ndarray:
     """The scene points, each standing for the surface it lies on out to (not onto) the next
-    laser line either side (``step`` of :func:`line_step`): copies of every point along the step,
+    laser line either side (``step`` of :func:`~binpick.cell.records.line_step`): copies of every point along the step,
     at most :data:`_UNSEEN_SPACING_MM` apart, out to :data:`GRAZE_MM` short of the next line, so
     that a finger coming down where an unseen edge may stand meets them."""
     if step is None or len(points) == 0:
@@ -681,7 +652,7 @@ def plan_grasp(
     ``free_turn``: the part's turn about its continuous near-symmetry axis is open (the result's
     ``free_axis``): the grasps turn to the most upright about it, and the fingers' opening and the
     part's own collisions are checked against the part at every turn (:func:`swept_points`).
-    ``unseen_step``: the step between the scan's laser lines (:func:`line_step`); each scene
+    ``unseen_step``: the step between the scan's laser lines (:func:`~binpick.cell.records.line_step`); each scene
     point then stands for its surface out to the next line either side, which the scan did not
     see. The part's own model may not lie more than :data:`GRAZE_MM` inside the gripper anywhere
     (the physics' measure of a touch); the scene may, by up to ``config.max_collision_points``

@@ -15,6 +15,7 @@ from ..transforms import inverse
 
 __all__ = [
     "ScanResult",
+    "line_step",
     "PoseTruth",
     "Located",
     "Skipped",
@@ -49,6 +50,35 @@ PICK_GRADE_DEG = 5.0
 PICK_GRADE_MM = 3.0
 
 
+def line_step(cloud: Any) -> Optional[np.ndarray]:
+    """The step (3,) from one laser line to the next on the scanned surfaces of a swept scan
+    (``cloud`` a :class:`binpick.vision.Cloud`, whose ``frame`` numbers each point's line): the
+    median shift between the centres of consecutive lines, horizontal. None for a cloud that is
+    not a sweep of lines (one depth shot, a file), whose points lie a pixel apart.
+
+    What lies between two lines is not seen: an edge a line did not catch can stand out up to a
+    step beyond the last line that saw its part, and a finger there would come down on it."""
+    frame = np.asarray(getattr(cloud, "frame", ()), dtype=np.int64).reshape(-1)
+    points = np.asarray(getattr(cloud, "points", np.zeros((0, 3))), dtype=np.float64)
+    if len(frame) != len(points) or len(frame) == 0:
+        return None
+    ids, inverse_, counts = np.unique(frame, return_inverse=True, return_counts=True)
+    if len(ids) < 3:
+        return None
+    centres = np.stack([np.bincount(inverse_, weights=points[:, k]) / counts for k in range(2)], axis=1)
+    consecutive = np.flatnonzero((np.diff(ids) == 1) & (counts[:-1] >= 10) & (counts[1:] >= 10))
+    if len(consecutive) < 2:
+        return None
+    steps = centres[consecutive + 1] - centres[consecutive]
+    direction = np.median(steps, axis=0)
+    norm = float(np.linalg.norm(direction))
+    if norm <= 1e-9:
+        return None
+    u = direction / norm
+    size = float(np.median(np.abs(steps @ u)))
+    return np.array([u[0] * size, u[1] * size, 0.0])
+
+
 @dataclass(frozen=True, eq=False)
 class ScanResult:
     """One scan: the cloud in the base frame, the motor angle (rad) and flange pose of every frame,
@@ -70,10 +100,8 @@ class ScanResult:
 
     @cached_property
     def line_step(self) -> Optional[np.ndarray]:
-        """The step from one laser line to the next (:func:`binpick.cell.grasp.line_step`),
-        worked out once per scan: every part planned on it asks."""
-        from .grasp import line_step  # grasp's planners take records' results: imported when first asked
-
+        """The step from one laser line to the next (:func:`line_step`), worked out once per
+        scan: every part planned on it asks."""
         return line_step(self.cloud)
 
     def seen_again(self, indices: Any) -> float:

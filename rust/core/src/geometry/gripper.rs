@@ -138,8 +138,8 @@ impl GripperShape {
                 let frame = (t, [ax, ay, az]);
                 let none = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
                 let [shut_plus, shut_minus, _] = closing.as_ref().map_or([none; 3], Volume::pieces);
-                let own = moving.pieces();
-                let boxes = [own[0], own[1], own[2], shut_plus, shut_minus];
+                let [finger_plus, finger_minus, body] = moving.pieces();
+                let boxes = [finger_plus, finger_minus, body, shut_plus, shut_minus];
                 let (base_lo, base_hi) = base_box(&frame, union(&boxes));
                 let cells = grid.cells(base_lo, base_hi);
                 match sweep.floor {
