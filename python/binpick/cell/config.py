@@ -491,14 +491,13 @@ class CellConfig:
         not fit between the open fingers; each grasp measured on first use and remembered.
         ``swept``: for the part at any turn about its continuous near-symmetry axis
         (:func:`~binpick.cell.grasp.swept_points`: its key or pin may be anywhere about it)."""
-        widths = self.grip_widths(names, swept=swept)
-        return np.array(
-            [
-                np.nan if (o := opening_for_width(self.gripper, None if np.isnan(w) else w)) is None else o
-                for w in widths.tolist()
-            ],
-            dtype=np.float64,
-        )
+        return self.openings_for(self.grip_widths(names, swept=swept))
+
+    def openings_for(self, widths: np.ndarray) -> np.ndarray:
+        """The finger opening (mm) for each of the part's ``widths`` across the fingers (NaN:
+        nothing between them), NaN where the part does not fit between the open fingers."""
+        out = [opening_for_width(self.gripper, None if np.isnan(w) else w) for w in np.asarray(widths).tolist()]
+        return np.array([np.nan if o is None else o for o in out], dtype=np.float64)
 
     def grip_widths(self, names: Sequence[str], *, swept: bool = False) -> np.ndarray:
         """The part's width (mm) across the fingers at each named grasp, what the fingers close to

@@ -264,8 +264,8 @@ def _candidates(
     # The outline at the grasp, shifted back along the approach and straight up for the lift
     # (only for the grasps within the tilt limit: most are not).
     idx = np.flatnonzero(ok)
-    openings = config.openings([names[i] for i in idx], swept=free_turn)
     widths = config.grip_widths([names[i] for i in idx], swept=free_turn)
+    openings = config.openings_for(widths)
     fits = ~np.isnan(openings)
     rejected["width"] += int((~fits).sum())
     _keep_some(samples, "width", T_bg[idx[~fits]])
