@@ -391,6 +391,26 @@ class SimPile:
         max_convex_hulls: int,
     ) -> SimPile:
         """Drops the parts (deterministic for ``seed``) and lets them settle."""
+    @staticmethod
+    def placed(
+        vertices: _F64,
+        faces: _I64,
+        poses: _F64,
+        bin_center: tuple[float, float],
+        bin_size: tuple[float, float, float],
+        floor_z: float,
+        wall_thickness: float,
+        friction: float,
+        restitution: float,
+        time_step: float,
+        max_settle_time: float,
+        skin: float,
+        decomposition_resolution: int,
+        max_convex_hulls: int,
+    ) -> SimPile:
+        """Places the parts at ``poses`` (T_base_object (N, 4, 4)) and lets them settle."""
+    def set_poses(self, poses: _F64) -> _SettleReport:
+        """Moves the remaining parts (in id order) to ``poses``, at rest, and settles."""
     def poses(self) -> tuple[_I64, _F64]:
         """(ids (N,), T_base_object (N, 4, 4)) of the parts still in the bin."""
     def remove(self, id: int) -> _SettleReport:

@@ -355,3 +355,76 @@ def test_a_part_a_push_leaves_out_of_the_bin_is_a_collision_of_that_cycle():
         sim._out_of_bin([pid], path, 0.0)
         (event,) = sim.take_collisions()
         assert event["with"].startswith(f"part {pid}, pushed out of the bin")
+
+
+# --------------------------------------------------------------------------- pushes the physics predicts
+
+
+def _against_wall(cfg, gap_mm=1.0):
+    """The plain shaft lying along x against the bin's −y wall, ``gap_mm`` from it (x from 335 to
+    485 mm: its ends 85 and 65 mm from the end walls), and what a scan from above sees of it (its
+    upper half) with the floor around it."""
+    T = np.eye(4)
+    T[:3, :3] = binpick.transforms.rotation_about((0.0, 1.0, 0.0), math.pi / 2)  # the axis along x
+    T[:3, 3] = (410.0, -100.0 + 12.0 + gap_mm, 12.0)
+    pts = np.asarray(cfg.model.points) @ T[:3, :3].T + T[:3, 3]
+    xs, ys = np.meshgrid(np.arange(252.0, 549.0, 4.0), np.arange(-98.0, 99.0, 4.0))
+    floor = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)])
+    floor = floor[~nudge._near(floor, pts, 3.0)]
+    return T, np.concatenate([pts[pts[:, 2] > 11.0], floor])
+
+
+def test_a_shaft_lying_along_a_wall_is_freed_by_a_push_the_physics_predicts():
+    from binpick.cell.grasp import NoGraspError, plan_grasp
+    from binpick.sim import Bin, Pile, sim_gripper
+
+    # The simulated cell's gripper: fingers long enough for the palm to clear the rim beside a wall.
+    cfg = replace(_raft_config(), gripper=sim_gripper())
+    T, scene = _against_wall(cfg)
+    here = cfg.scan_poses[0]
+    others = _others(scene, cfg, T)
+    # No grasp: every finger on the wall's side meets the wall; no straight push frees it (into
+    # the wall is refused, along it leaves it there).
+    with pytest.raises(NoGraspError):
+        plan_grasp(cfg, T, others, here)
+    assert nudge.plan_separating(cfg, T, scene, here) is None
+    plan = nudge.plan_predicted(cfg, T, scene, here)
+    assert plan is not None
+    assert nudge.check_nudge(cfg, list(plan.waypoints), here, others) is None
+    footprint = (np.asarray(cfg.model.points) @ T[:3, :3].T + T[:3, 3])[:, :2]
+    assert nudge._room(cfg, footprint, plan.direction) > nudge.WALL_MARGIN_MM  # never into the wall
+    # Run in the physics at a friction between the two the plan was predicted at (the twin's):
+    # the shaft comes off the wall and a grasp passes where it comes to rest.
+    lo, hi = cfg.bin_bounds
+    pile = Pile.placed(cfg.model, T[None], bin=Bin(size=tuple(hi - lo), center=tuple((lo[:2] + hi[:2]) / 2)))
+    tool = np.array([T_f @ cfg.gripper.T_flange_gripper for _, T_f, _ in plan.waypoints])
+    pile.push(cfg.gripper.boxes(0.0), tool, cfg.limits.max_linear_speed_mm_s)
+    T_rest = pile.poses[0]
+    verts = np.asarray(cfg.model.vertices) @ T_rest[:3, :3].T + T_rest[:3, 3]
+    assert verts[:, 1].max() - 8.0 > -100.0 + 24.0, verts[:, 1].max()  # off the wall: more than a finger there
+    after, _ = plan_grasp(cfg, T_rest, np.zeros((0, 3)), here)
+    assert after.grasp
+
+
+def test_no_predicted_push_for_a_part_a_grasp_passes_for_a_standing_part_or_with_no_room_in_the_bin():
+    from binpick.sim import sim_gripper
+
+    # Off the wall, a grasp passes where the shaft lies: whatever held it back (its pose's
+    # doubt), no push mends it.
+    cfg = replace(_raft_config(), gripper=sim_gripper())
+    T, scene = _against_wall(cfg, gap_mm=40.0)
+    assert nudge.plan_predicted(cfg, T, scene, cfg.scan_poses[0]) is None
+    assert nudge.plan_predicted(cfg, *_against_wall(cfg), cfg.scan_poses[0]) is not None
+    cfg = _raft_config()
+    standing = np.eye(4)
+    standing[:3, 3] = (400.0, 0.0, 75.0)
+    pts = np.asarray(cfg.model.points) + standing[:3, 3]
+    assert nudge.plan_predicted(cfg, standing, pts, cfg.scan_poses[0]) is None
+    # A bin 160 mm long and 40 mm wide holds the 150 mm shaft with nowhere to go.
+    cfg = _raft_config((320.0, 480.0))
+    cfg = replace(cfg, bin_bounds=((320.0, -20.0, 0.0), (480.0, 20.0, 80.0)))
+    T = np.eye(4)
+    T[:3, :3] = binpick.transforms.rotation_about((0.0, 1.0, 0.0), math.pi / 2)
+    T[:3, 3] = (400.0, 0.0, 12.0)
+    pts = np.asarray(cfg.model.points) @ T[:3, :3].T + T[:3, 3]
+    assert nudge.plan_predicted(cfg, T, pts[pts[:, 2] > 11.0], cfg.scan_poses[0], budget=8) is None

@@ -120,3 +120,36 @@ def test_a_low_poly_cad_part_falls_and_settles():
     assert max(tops) < hi[2], tops
     assert min(_world_vertices(plate, T)[:, 2].min() for T in pile.poses) < lo[2] + 1.0
     assert pile.max_interpenetration(spacing=1.0) <= 0.5
+
+
+def test_a_scene_placed_from_poses_settles_where_it_lies_and_can_be_set_back(pile, tee):
+    placed = sim.Pile.placed(tee, pile.poses)  # a settled pile's poses: a scene at rest
+    assert len(placed) == len(pile) and placed.last_settle.settled
+    np.testing.assert_allclose(placed.poses[:, :3, 3], pile.poses[:, :3, 3], atol=1.0)
+    # A part set in mid-air falls to the floor; set back, the scene is as placed.
+    lifted = pile.poses.copy()
+    lifted[0, 2, 3] += 60.0
+    placed.set_poses(lifted)
+    assert placed.poses[0, 2, 3] < lifted[0, 2, 3] - 30.0
+    placed.set_poses(pile.poses)
+    np.testing.assert_allclose(placed.poses[:, :3, 3], pile.poses[:, :3, 3], atol=1.0)
+
+
+@pytest.mark.parametrize(
+    "poses, match",
+    [
+        (np.zeros((0, 4, 4)), "poses"),
+        (np.eye(4), "poses"),
+        (np.full((1, 4, 4), np.nan), "poses"),
+        (np.tile(np.eye(4), (501, 1, 1)), "poses"),
+    ],
+)
+def test_bad_placed_poses_are_rejected(tee, poses, match):
+    with pytest.raises(binpick.InvalidInputError, match=match):
+        sim.Pile.placed(tee, poses)
+
+
+def test_set_poses_needs_one_pose_per_part(pile, tee):
+    placed = sim.Pile.placed(tee, pile.poses[:2])
+    with pytest.raises(binpick.InvalidInputError, match="one per remaining part"):
+        placed.set_poses(pile.poses[:1])

@@ -62,7 +62,15 @@ from .config import CellConfig
 from .grasp import NoGraspError, bin_clash, plan_grasp, plan_inputs
 from .symmetry import continuous_near_axis
 
-__all__ = ["NudgePlan", "NudgeRefused", "plan_nudge", "plan_separating", "check_nudge", "nudge_directions"]
+__all__ = [
+    "NudgePlan",
+    "NudgeRefused",
+    "plan_nudge",
+    "plan_predicted",
+    "plan_separating",
+    "check_nudge",
+    "nudge_directions",
+]
 
 #: How far outside the part's footprint the closed fingers go down, mm: the first distance
 #: tried, then the second (a part near a wall leaves a narrow gap between them).
@@ -93,6 +101,25 @@ WALL_MARGIN_MM = 2.0
 FLAT_RATIO = 1.25
 #: A part whose lowest point is within this of the floor rests on the floor, mm.
 FLAT_FLOOR_MM = 5.0
+
+#: The physics-predicted push (:func:`plan_predicted`): the frictions it must free the part at,
+PREDICT_FRICTIONS = (0.3, 0.7)
+#: how far past first contact it pushes (mm, the shortest first; within ``max_push_mm``),
+PREDICT_DISTANCES_MM = (25.0, 45.0, 70.0)
+#: how many directions it tries (:func:`nudge_directions`),
+PREDICT_DIRECTIONS = 16
+#: where across the part the closed fingers meet it (shares of its half-width across the push),
+PREDICT_OFFSETS = (0.0, -0.6, 0.6, -1.2, 1.2)
+#: the least a push must move some point of the part, mm,
+PREDICT_MIN_MOVE_MM = 5.0
+#: the most the physics may move the located part as it settles before any push, mm (more: the
+#: pose and the physics disagree on how it lies, and nothing is predicted),
+PREDICT_REST_MM = 3.0
+#: the least angle from along a wall at which a push heads into it (a shallower one slides the
+#: part along it), degrees,
+ALONG_WALL_DEG = 10.0
+#: and the most pushes it simulates for one part.
+PREDICT_BUDGET = 60
 
 
 class NudgeRefused(SafetyError):
@@ -131,18 +158,18 @@ class NudgePlan:
 
 
 def nudge_directions(
-    config: CellConfig, centre_xy: np.ndarray, *, first: Optional[np.ndarray] = None
+    config: CellConfig, centre_xy: np.ndarray, *, first: Optional[np.ndarray] = None, count: int = NUDGE_DIRECTIONS
 ) -> list[np.ndarray]:
     """Unit push directions for a part at ``centre_xy``: ``first`` if given, towards the bin's
-    centre, away from the nearest wall, then the rest of :data:`NUDGE_DIRECTIONS` evenly spaced
-    ones, nearest first."""
+    centre, away from the nearest wall, then the rest of ``count`` evenly spaced ones, nearest
+    first."""
     lo, hi = (np.asarray(b, dtype=float) for b in config.bin_bounds)
     to_centre = (lo[:2] + hi[:2]) / 2 - centre_xy
     gaps = [centre_xy[0] - lo[0], hi[0] - centre_xy[0], centre_xy[1] - lo[1], hi[1] - centre_xy[1]]
     away = [np.array(v, dtype=float) for v in ((1, 0), (-1, 0), (0, 1), (0, -1))][int(np.argmin(gaps))]
     towards = to_centre / np.linalg.norm(to_centre) if np.linalg.norm(to_centre) > 1.0 else away
     angle0 = math.atan2(towards[1], towards[0])
-    ring = [angle0 + 2 * math.pi * k / NUDGE_DIRECTIONS for k in range(1, NUDGE_DIRECTIONS)]
+    ring = [angle0 + 2 * math.pi * k / count for k in range(1, count)]
     ring.sort(key=lambda a: abs(math.remainder(a - angle0, 2 * math.pi)))
     out = [towards, away] + [np.array([math.cos(a), math.sin(a)]) for a in ring]
     if first is not None:
@@ -376,6 +403,119 @@ def plan_separating(config: CellConfig, T_base_object: Any, scene: Any, T_now: A
     return None
 
 
+def plan_predicted(
+    config: CellConfig, T_base_object: Any, scene: Any, T_now: Any, *, budget: int = PREDICT_BUDGET
+) -> Optional[NudgePlan]:
+    """A push of the located part ``T_base_object`` lying flat on the floor that the cell's own
+    physics (:meth:`binpick.sim.Pile.push`, the located part alone in the bin) predicts leaves
+    it where a grasp passes against ``scene`` (base frame; the part's own points left out) —
+    for a part no straight push frees (:func:`plan_separating`): a shaft lying along a wall,
+    turned off it by a push on its end; a disc in a corner, pushed out along a wall.
+
+    Pushes are tried along :data:`PREDICT_DIRECTIONS` directions (:func:`nudge_directions`'s
+    order), the closed fingers meeting the part at its middle or towards either side
+    (:data:`PREDICT_OFFSETS`, shares of its half-width across the push), over
+    :data:`PREDICT_DISTANCES_MM` past first contact (the shortest first). A push is taken when it
+    passes :func:`check_nudge`, its descent lands on none of the part's own points, and at both
+    of :data:`PREDICT_FRICTIONS` (a real bin's friction is not known better than that) the part
+    comes to rest at least :data:`PREDICT_MIN_MOVE_MM` from where it lay, its footprint in the
+    bin and clear of the other scanned parts at every quarter of the way there, and a grasp
+    passes where it rests (and none passes where it lies now: a part held back by its pose's doubt,
+    not by what is around it, is not pushed). ``budget``: most pushes simulated (each at both frictions) before
+    giving up. None when no push passes; nothing is sent. The cell scans again after the push and
+    plans on what it sees: the prediction chooses the push, nothing is picked on it."""
+    from ..sim.cell import Bin  # the physics only when a part is blocked: the real loop loads no simulator
+    from ..sim.pile import Pile
+
+    T, pts, T_now = plan_inputs(config, T_base_object, scene, T_now, "T_now")
+    verts = _vertices(config, T)
+    if not _lies_flat(config, verts):
+        return None
+    centre, part, others = _part_in_scan(config, T, pts, verts)
+    free_turn = continuous_near_axis(config.model) is not None
+    if _grasp_at(config, T, np.zeros(2), others, T_now, free_turn) is not None:
+        return None  # a grasp passes where it lies: what holds it back no push mends (its pose's doubt)
+    lo, hi = (np.asarray(b, dtype=float) for b in config.bin_bounds)
+    box = Bin(size=tuple(hi - lo), center=tuple((lo[:2] + hi[:2]) / 2), floor_z=float(lo[2]))
+    piles = [Pile.placed(config.model, T[None], bin=box, friction=f) for f in PREDICT_FRICTIONS]
+    rest = piles[0].poses[0]
+    if np.linalg.norm(rest[:3, 3] - T[:3, 3]) > PREDICT_REST_MM:
+        return None  # the physics does not let it lie where it was located: no prediction to trust
+    path = _PathMap(config, others)
+    tip_z, reach = _push_height(config, verts), _closed_reach(config)
+    speed = float(config.limits.max_linear_speed_mm_s)
+    xy = part[:, :2] - centre
+    plans = []  # (direction, offset): the first gap whose moves pass, with the rear of the part there
+    for d in nudge_directions(config, centre, count=PREDICT_DIRECTIONS):
+        e = np.array([-d[1], d[0]])
+        along, across = xy @ d, xy @ e
+        half = max(float(np.abs(across).max()), 1e-6)
+        for share in PREDICT_OFFSETS:
+            o = share * half
+            strip = np.abs(across - o) <= reach
+            if strip.sum() < 3:
+                continue
+            plans.append((d, e, o, float(along[strip].min())))
+    simulated = 0
+    for distance in PREDICT_DISTANCES_MM:
+        for d, e, o, rear in plans:
+            if simulated >= budget:
+                return None
+            if _toward_wall(config, part[:, :2], d, distance):
+                continue  # never into a wall: the arm would crush the part there
+            for gap in NUDGE_START_MM:
+                start = centre + o * e + (rear - reach - gap) * d
+                moves = _waypoints(config, start, start + (gap + distance) * d, tip_z)
+                if _descent_hits(config, moves[1][1], part) or check_nudge(config, moves, T_now, others):
+                    continue
+                simulated += 1
+                tool = np.array([T_f @ config.gripper.T_flange_gripper for _, T_f, _ in moves])
+                after = []
+                for pile in piles:
+                    pile.set_poses(T[None])
+                    pile.push(config.gripper.boxes(0.0), tool, speed)
+                    after.append(pile.poses[0])
+                if not all(_freed(path, part, T, A) and _lies_flat(config, _vertices(config, A)) for A in after):
+                    break
+                grasps = [_grasp_at(config, A, np.zeros(2), others, T_now, free_turn) for A in after]
+                if any(g is None for g in grasps):
+                    break
+                return NudgePlan(
+                    T_base_object=T,
+                    direction=d,
+                    tip_z_mm=tip_z,
+                    waypoints=tuple(moves),
+                    T_after=grasps[0][0],
+                    grasp_after=grasps[0][1].grasp,
+                )
+    return None
+
+
+def _toward_wall(config: CellConfig, footprint: np.ndarray, d: np.ndarray, distance: float) -> bool:
+    """Whether moving the footprint (the part's points' xy) ``distance`` mm along ``d`` would bring
+    it nearer than :data:`WALL_MARGIN_MM` to a wall ``d`` heads into (at more than
+    :data:`ALONG_WALL_DEG` from along it): a part pressed into a wall is crushed, or squirts out
+    where no physics can say."""
+    lo, hi = (np.asarray(b, dtype=float)[:2] for b in config.bin_bounds)
+    into = math.sin(math.radians(ALONG_WALL_DEG))
+    for axis in (0, 1):
+        if d[axis] < -into and float(footprint[:, axis].min()) + distance * d[axis] < lo[axis] + WALL_MARGIN_MM:
+            return True
+        if d[axis] > into and float(footprint[:, axis].max()) + distance * d[axis] > hi[axis] - WALL_MARGIN_MM:
+            return True
+    return False
+
+
+def _freed(path: _PathMap, part: np.ndarray, T: np.ndarray, T_after: np.ndarray) -> bool:
+    """Whether the part (its sample points ``part`` at ``T``, base frame) moved to ``T_after``
+    by at least :data:`PREDICT_MIN_MOVE_MM` somewhere, its footprint inside the bin and clear of
+    other parts at every quarter of the way (each point moved straight from where it was)."""
+    moved = part @ (T_after[:3, :3] @ T[:3, :3].T).T + (T_after[:3, 3] - T_after[:3, :3] @ T[:3, :3].T @ T[:3, 3])
+    if float(np.linalg.norm(moved - part, axis=1).max()) < PREDICT_MIN_MOVE_MM:
+        return False
+    return all(path.clear(part[:, :2] + k / 4 * (moved[:, :2] - part[:, :2]), np.zeros(2)) for k in range(1, 5))
+
+
 def _grasp_at(
     config: CellConfig, T: np.ndarray, offset: np.ndarray, others: np.ndarray, T_now: np.ndarray, free_turn: bool
 ) -> Optional[tuple[np.ndarray, Any]]:
@@ -476,21 +616,23 @@ def nudge_blocked(cell: Any, skipped: list, scan: Any, made: Sequence[NudgePlan]
     def planned() -> None:  # the planning's CPU, for the cycle's compute
         cell._cpu["cpu.nudge"] = cell._cpu.get("cpu.nudge", 0.0) + (cell._cpu_now() - c0) * 1e3
 
-    # A push that frees a part first: each part once (the looks' estimates of one part agree).
-    seen: list[np.ndarray] = []
+    # A push that frees a part first, each part once (the looks' estimates of one part agree):
+    # a straight one, then one the physics predicts.
+    parts: list[Any] = []
     for k in skipped:
-        t = k.T_base_object[:3, 3]
-        if any(np.linalg.norm(t - u) < OWN_POINT_MM for u in seen):
-            continue
-        seen.append(t)
-        plan = plan_separating(cfg, k.T_base_object, scan.points, T_now)
-        if plan is not None:
-            a = plan.T_after[:3, 3]
+        if not any(np.linalg.norm(k.T_base_object[:3, 3] - u.T_base_object[:3, 3]) < OWN_POINT_MM for u in parts):
+            parts.append(k)
+    for planner, how in ((plan_separating, "to free it"), (plan_predicted, "to free it, as the physics predicts")):
+        for k in parts:
+            plan = planner(cfg, k.T_base_object, scan.points, T_now)
+            if plan is None:
+                continue
+            t, a = k.T_base_object[:3, 3], plan.T_after[:3, 3]
             cell.progress(
                 "nudge",
-                f"pushing the {cfg.model.name} at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm "
-                f"{np.linalg.norm(a - t):.0f} mm towards {plan.heading_deg:.0f}° to free it (a grasp "
-                f"passes at ({a[0]:.1f}, {a[1]:.1f}) mm), fingertips {plan.tip_z_mm:.0f} mm up",
+                f"pushing the {cfg.model.name} at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm towards "
+                f"{plan.heading_deg:.0f}° {how} (a grasp passes at ({a[0]:.1f}, {a[1]:.1f}) mm, "
+                f"{np.linalg.norm(a - t):.0f} mm away), fingertips {plan.tip_z_mm:.0f} mm up",
             )
             planned()
             return plan if _execute(cell, plan) else _closed_on_something(cell)

@@ -65,8 +65,8 @@ def _transforms(value: Any, name: str) -> np.ndarray:
     return T
 
 
-#: Most parts one pile drops; beyond it the bin could not hold them and settling would take hours.
-MAX_PARTS = 1000
+#: Most parts one pile holds (the core's bound); beyond it settling would take hours.
+MAX_PARTS = 500
 
 #: Range of the physics time step, s: finer than a millisecond multiplies the steps (and the
 #: quiet steps a settled pile needs) without changing the pile; coarser than 50 ms the core refuses.
@@ -89,6 +89,27 @@ def _sample_spacing(model: Model, spacing: Any) -> float:
     s = number(spacing, "spacing", MIN_SPACING, MAX_SPACING, unit="mm")
     _check_spacing(model.vertices, model.faces, s)  # a spacing that would sample too many points
     return s
+
+
+def _mesh(model: Model) -> tuple[np.ndarray, np.ndarray]:
+    return (
+        np.ascontiguousarray(model.vertices, dtype=np.float64),
+        np.ascontiguousarray(model.faces, dtype=np.int64),
+    )
+
+
+def _bin_args(bin: Bin) -> tuple:
+    return tuple(bin.center), tuple(bin.size), float(bin.floor_z), float(bin.wall_thickness)
+
+
+def _physics(friction: Any, restitution: Any, time_step: Any, max_settle_time: Any, skin: Any) -> tuple:
+    return (
+        non_negative(friction, "friction"),
+        number(restitution, "restitution", 0.0, 1.0),
+        number(time_step, "time_step", *TIME_STEP_RANGE, unit="s"),
+        number(max_settle_time, "max_settle_time", 1e-3, MAX_SETTLE_TIME, unit="s"),
+        number(skin, "skin", 0.0, 5.0, unit="mm"),
+    )
 
 
 def _decomposition(resolution: Any, hulls: Any) -> tuple[int, int]:
@@ -125,21 +146,46 @@ class Pile:
         self.bin = Bin() if bin is None else instance_of(bin, Bin, "bin", "binpick.sim.Bin()")
         n = count(count_, "count", 1, MAX_PARTS)
         self._raw = _core.SimPile(
-            np.ascontiguousarray(self.model.vertices, dtype=np.float64),
-            np.ascontiguousarray(self.model.faces, dtype=np.int64),
+            *_mesh(self.model),
             n,
-            tuple(self.bin.center),
-            tuple(self.bin.size),
-            float(self.bin.floor_z),
-            float(self.bin.wall_thickness),
+            *_bin_args(self.bin),
             count(seed, "seed"),
-            non_negative(friction, "friction"),
-            number(restitution, "restitution", 0.0, 1.0),
-            number(time_step, "time_step", *TIME_STEP_RANGE, unit="s"),
-            number(max_settle_time, "max_settle_time", 1e-3, MAX_SETTLE_TIME, unit="s"),
-            number(skin, "skin", 0.0, 5.0, unit="mm"),
+            *_physics(friction, restitution, time_step, max_settle_time, skin),
             *_decomposition(decomposition_resolution, max_convex_hulls),
         )
+
+    @classmethod
+    def placed(
+        cls,
+        model: Model,
+        poses: Any,
+        *,
+        bin: Bin | None = None,
+        friction: float = 0.5,
+        restitution: float = 0.05,
+        time_step: float = 1.0 / 120.0,
+        max_settle_time: float = 6.0,
+        skin: float = 0.3,
+        decomposition_resolution: int = 48,
+        max_convex_hulls: int = 24,
+    ) -> Pile:
+        """Instances of ``model`` placed at ``poses`` (``T_base_object``, (N, 4, 4), mm) in
+        ``bin`` and left to settle — a scene as a scan located it, to predict what a push does
+        there (:meth:`push`). Ids run 0..N−1 in the order of ``poses``; parts placed overlapping
+        each other or the bin are pushed apart by the physics as it settles."""
+        pile = cls.__new__(cls)
+        pile.model = _model(model)
+        pile.bin = Bin() if bin is None else instance_of(bin, Bin, "bin", "binpick.sim.Bin()")
+        T = _transforms(poses, "poses")
+        count(len(T), "poses (their number)", 1, MAX_PARTS)
+        pile._raw = _core.SimPile.placed(
+            *_mesh(pile.model),
+            T,
+            *_bin_args(pile.bin),
+            *_physics(friction, restitution, time_step, max_settle_time, skin),
+            *_decomposition(decomposition_resolution, max_convex_hulls),
+        )
+        return pile
 
     @property
     def ids(self) -> np.ndarray:
@@ -165,6 +211,14 @@ class Pile:
     def remove(self, id: int) -> SettleReport:
         """Takes part ``id`` out (a pick) and lets the others settle again."""
         return SettleReport(self._raw.remove(count(id, "id")))
+
+    def set_poses(self, poses: Any) -> SettleReport:
+        """Moves the remaining parts (in the order of :attr:`ids`) to ``poses`` (N, 4, 4), at
+        rest, and lets them settle: the same scene tried again without rebuilding its shapes."""
+        T = _transforms(poses, "poses")
+        if len(T) != len(self):
+            raise InvalidInputError(f"poses: {len(T)} poses for {len(self)} parts; pass one per remaining part")
+        return SettleReport(self._raw.set_poses(T))
 
     def settle(self) -> SettleReport:
         """Steps the simulation until every part is at rest."""

@@ -40,6 +40,22 @@ fn report(r: SettleReport) -> (usize, f64, bool, f64) {
     (r.steps, r.simulated_time, r.settled, r.max_speed)
 }
 
+/// A pile's parameters: the seed, (friction, restitution, time step, settle time, skin) and the decomposition's.
+fn pile_params(seed: u64, physics: (f64, f64, f64, f64, f64), resolution: u32, hulls: u32) -> PileParams {
+    let (friction, restitution, time_step, max_settle_time, skin) = physics;
+    PileParams {
+        seed,
+        friction,
+        restitution,
+        time_step,
+        max_settle_time,
+        skin,
+        decomposition_resolution: resolution,
+        max_convex_hulls: hulls,
+        ..Default::default()
+    }
+}
+
 fn bin_spec(center: (f64, f64), size: (f64, f64, f64), floor_z: f64, wall_thickness: f64) -> BinSpec {
     BinSpec {
         center,
@@ -80,18 +96,39 @@ impl PySimPile {
     ) -> PyResult<Self> {
         let mesh = crate::convert::mesh_from_py(&vertices, &faces)?;
         let bin = bin_spec(bin_center, bin_size, floor_z, wall_thickness);
-        let params = PileParams {
-            seed,
-            friction,
-            restitution,
-            time_step,
-            max_settle_time,
-            skin,
-            decomposition_resolution,
-            max_convex_hulls,
-            ..Default::default()
-        };
+        let physics = (friction, restitution, time_step, max_settle_time, skin);
+        let params = pile_params(seed, physics, decomposition_resolution, max_convex_hulls);
         let inner = run_borrowed(py, move || Pile::drop(&mesh, count, &bin, &params))?;
+        Ok(PySimPile { inner })
+    }
+
+    /// Parts placed at `poses` (T_base_object (N, 4, 4)) and settled; the rest as `new`.
+    #[staticmethod]
+    #[pyo3(signature = (vertices, faces, poses, bin_center, bin_size, floor_z, wall_thickness, friction, restitution, time_step, max_settle_time, skin, decomposition_resolution, max_convex_hulls))]
+    #[allow(clippy::too_many_arguments)]
+    fn placed(
+        py: Python<'_>,
+        vertices: PyReadonlyArray2<'_, f64>,
+        faces: PyReadonlyArray2<'_, i64>,
+        poses: PyReadonlyArray3<'_, f64>,
+        bin_center: (f64, f64),
+        bin_size: (f64, f64, f64),
+        floor_z: f64,
+        wall_thickness: f64,
+        friction: f64,
+        restitution: f64,
+        time_step: f64,
+        max_settle_time: f64,
+        skin: f64,
+        decomposition_resolution: u32,
+        max_convex_hulls: u32,
+    ) -> PyResult<Self> {
+        let mesh = crate::convert::mesh_from_py(&vertices, &faces)?;
+        let poses = crate::convert::isometries(&poses, "poses")?;
+        let bin = bin_spec(bin_center, bin_size, floor_z, wall_thickness);
+        let physics = (friction, restitution, time_step, max_settle_time, skin);
+        let params = pile_params(0, physics, decomposition_resolution, max_convex_hulls);
+        let inner = run_borrowed(py, move || Pile::place(&mesh, &poses, &bin, &params))?;
         Ok(PySimPile { inner })
     }
 
@@ -107,6 +144,13 @@ impl PySimPile {
     fn remove(&mut self, py: Python<'_>, id: usize) -> PyResult<(usize, f64, bool, f64)> {
         let pile = &mut self.inner;
         Ok(report(run_borrowed(py, move || pile.remove(id))?))
+    }
+
+    /// Moves the remaining parts (in id order) to `poses` (N, 4, 4), at rest, and settles.
+    fn set_poses(&mut self, py: Python<'_>, poses: PyReadonlyArray3<'_, f64>) -> PyResult<(usize, f64, bool, f64)> {
+        let poses = crate::convert::isometries(&poses, "poses")?;
+        let pile = &mut self.inner;
+        Ok(report(run_borrowed(py, move || pile.set_poses(&poses))?))
     }
 
     /// Steps until at rest: (steps, simulated_time, settled, max_speed).

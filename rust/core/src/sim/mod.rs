@@ -6,11 +6,13 @@
 //! camera on the flange, turned about its own y axis by the motor.
 
 mod convert;
+mod hulls;
 mod pile;
 mod push;
 mod render;
 
-pub use pile::{convex_decomposition, max_interpenetration, BinSpec, Hull, Pile, PileParams, SettleReport};
+pub use hulls::{convex_decomposition, Hull};
+pub use pile::{max_interpenetration, BinSpec, Pile, PileParams, SettleReport, MAX_PARTS};
 pub use push::{
     PushReport, ToolBox, MAX_PATH_POSES, MAX_PUSH_TIME, MAX_TOOL_BOXES, MOVED_ANGLE, MOVED_DISTANCE, SPEED_RANGE,
 };

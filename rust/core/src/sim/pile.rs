@@ -1,23 +1,19 @@
 //! Physics piles: instances of one part dropped into a bin from random poses and left to settle
 //! (rapier3d), every instance's pose read back; a part can be removed and the pile settles again.
 //!
-//! Each instance collides through a compound of convex hulls: the mesh is simplified by vertex
-//! clustering, decomposed by V-HACD, and each piece is replaced by the exact convex hull of the
-//! mesh triangles it covers, so the hulls enclose the real surface and piled meshes do not
-//! interpenetrate beyond the solver's contact tolerance.
+//! Each instance collides through a compound of convex hulls enclosing its mesh (`hulls`).
 
 use super::convert;
+use super::hulls::{decomposition_shape, hulls_of, Hull};
 use crate::error::{Error, Result};
 use crate::geometry::Point;
 use crate::mesh::TriMesh;
 use crate::rng::Rng;
 use nalgebra::{Isometry3, Translation3, Vector3};
-use parry3d::math::{Pose, Vector};
+use parry3d::math::Vector;
 use parry3d::query::PointQuery;
 use parry3d::shape::{SharedShape, TriMeshFlags};
-use parry3d::transformation::vhacd::{VHACDParameters, VHACD};
 use rapier3d::prelude::{ColliderBuilder, PhysicsWorld, RigidBodyBuilder, RigidBodyHandle};
-use std::collections::HashMap;
 
 /// An open box standing on the floor of the robot's base frame (+z up). Its inner floor is the
 /// plane z = `floor_z`; the inner volume spans `center ± inner_size / 2` in x and y.
@@ -189,7 +185,7 @@ impl Default for PileParams {
 }
 
 impl PileParams {
-    fn validate(&self) -> Result<()> {
+    pub(super) fn validate(&self) -> Result<()> {
         let checks: [(&str, f64, bool); 9] = [
             ("friction", self.friction, self.friction >= 0.0),
             ("restitution", self.restitution, (0.0..=1.0).contains(&self.restitution)),
@@ -247,178 +243,8 @@ pub struct SettleReport {
     pub max_speed: f64,
 }
 
-/// Simplifies a mesh by clustering its vertices on a grid of `cell` mm (each cluster becomes the
-/// mean of its vertices) and dropping faces that collapse.
-pub fn simplify(mesh: &TriMesh, cell: f64) -> TriMesh {
-    if cell <= 0.0 {
-        return mesh.clone();
-    }
-    let mut index: HashMap<(i64, i64, i64), u32> = HashMap::new();
-    let mut sums: Vec<(Vector3<f64>, f64)> = Vec::new();
-    let remap: Vec<u32> = mesh
-        .vertices
-        .iter()
-        .map(|p| {
-            let key = (
-                (p.x / cell).floor() as i64,
-                (p.y / cell).floor() as i64,
-                (p.z / cell).floor() as i64,
-            );
-            let id = *index.entry(key).or_insert_with(|| {
-                sums.push((Vector3::zeros(), 0.0));
-                sums.len() as u32 - 1
-            });
-            sums[id as usize].0 += p.coords;
-            sums[id as usize].1 += 1.0;
-            id
-        })
-        .collect();
-    let vertices = sums.iter().map(|(s, n)| Point::from(s / *n)).collect();
-    let mut seen = std::collections::HashSet::new();
-    let faces = mesh
-        .faces
-        .iter()
-        .map(|f| f.map(|v| remap[v as usize]))
-        .filter(|f| f[0] != f[1] && f[1] != f[2] && f[0] != f[2])
-        .filter(|f| {
-            let mut k = *f;
-            k.sort_unstable();
-            seen.insert(k)
-        })
-        .collect();
-    TriMesh { vertices, faces }
-}
-
-/// A convex piece: its vertices and triangles.
-pub type Hull = (Vec<Point>, Vec<[u32; 3]>);
-
-/// Convex pieces (vertices, triangles) whose union encloses `mesh`: V-HACD on the simplified mesh,
-/// each piece the exact hull of the simplified triangles it covers.
-pub fn convex_decomposition(mesh: &TriMesh, params: &PileParams) -> Result<Vec<Hull>> {
-    params.validate()?;
-    let shape = decomposition_shape(mesh, params)?;
-    let compound = shape
-        .as_compound()
-        .ok_or_else(|| Error::invalid("mesh", "the convex decomposition failed"))?;
-    Ok(compound
-        .shapes()
-        .iter()
-        .filter_map(|(pos, s)| {
-            let (v, i) = s
-                .as_convex_polyhedron()
-                .or_else(|| s.as_round_convex_polyhedron().map(|r| &r.inner_shape))?
-                .to_trimesh();
-            Some((
-                v.into_iter().map(|p| convert::point(pos.transform_point(p))).collect(),
-                i,
-            ))
-        })
-        .collect())
-}
-
-fn decomposition_shape(mesh: &TriMesh, params: &PileParams) -> Result<SharedShape> {
-    if mesh.faces.len() < 4 {
-        return Err(Error::invalid(
-            "mesh",
-            format!("has {} faces; a part needs a closed mesh", mesh.faces.len()),
-        ));
-    }
-    let coarse = simplify(mesh, params.simplify_cell);
-    let mut coarse = if coarse.faces.len() >= 4 { coarse } else { mesh.clone() };
-    coarse.drop_degenerate_faces();
-    let verts: Vec<Vector> = coarse.vertices.iter().map(convert::point_vec).collect();
-    let vhacd = VHACDParameters {
-        resolution: params.decomposition_resolution,
-        max_convex_hulls: params.max_convex_hulls,
-        ..Default::default()
-    };
-    let pieces =
-        VHACD::decompose(&vhacd, &verts, &coarse.faces, false).compute_convex_hulls(vhacd.convex_hull_downsampling);
-    // V-HACD's hulls bound the voxelised volume: a voxel too fat in places, too thin in others.
-    // Each piece is rebuilt as the hull of the mesh's own vertices it holds (within a margin, so
-    // that neighbouring pieces overlap); a vertex no piece holds joins the piece it is least
-    // outside of. The union then encloses the mesh and hugs its surface.
-    let planes: Vec<Vec<(Vector, f32)>> = pieces
-        .iter()
-        .map(|(v, f)| {
-            let c = v.iter().fold(Vector::ZERO, |a, p| a + *p) / v.len().max(1) as f32;
-            f.iter()
-                .filter_map(|t| {
-                    let (a, b, d) = (v[t[0] as usize], v[t[1] as usize], v[t[2] as usize]);
-                    let mut n = (b - a).cross(d - a).try_normalize()?;
-                    if n.dot(a - c) < 0.0 {
-                        n = -n;
-                    }
-                    Some((n, n.dot(a)))
-                })
-                .collect()
-        })
-        .collect();
-    if planes.is_empty() {
-        return Err(Error::invalid(
-            "mesh",
-            "the convex decomposition produced no piece; pass a closed, non-flat mesh",
-        ));
-    }
-    let (lo, hi) = mesh.bounds();
-    let margin = (0.5 * (hi - lo).max() / params.decomposition_resolution as f64) as f32;
-    let mut points: Vec<Vec<Vector>> = vec![Vec::new(); planes.len()];
-    let outside = |p: Vector| -> Vec<f32> {
-        planes
-            .iter()
-            .map(|pl| pl.iter().map(|(n, d)| n.dot(p) - d).fold(f32::NEG_INFINITY, f32::max))
-            .collect()
-    };
-    for p in mesh.vertices.iter().map(convert::point_vec) {
-        let out = outside(p);
-        let mut held = false;
-        for (i, o) in out.iter().enumerate() {
-            if *o <= margin {
-                points[i].push(p);
-                held = true;
-            }
-        }
-        if !held {
-            let best = out
-                .iter()
-                .enumerate()
-                .min_by(|a, b| a.1.total_cmp(b.1))
-                .map(|(i, _)| i)
-                .expect("a piece");
-            points[best].push(p);
-        }
-    }
-    // A low-poly CAD mesh (a box-like bracket: a dozen vertices) leaves pieces with too few of
-    // its vertices to span a volume (a flat hull has no mass and never falls); points sampled
-    // over the faces fill those pieces.
-    const FEW: usize = 16;
-    if points.iter().any(|p| p.len() < FEW) {
-        let spacing = (4.0 * margin as f64).max(1e-3 * (hi - lo).max());
-        let surface =
-            crate::mesh::sample::sample_surface(mesh, crate::mesh::sample::Density::Spacing(spacing), params.seed)?
-                .points;
-        let sparse: Vec<bool> = points.iter().map(|p| p.len() < FEW).collect();
-        for p in surface.iter().map(convert::point_vec) {
-            for (i, o) in outside(p).iter().enumerate() {
-                if sparse[i] && *o <= margin {
-                    points[i].push(p);
-                }
-            }
-        }
-    }
-    let parts: Vec<(Pose, SharedShape)> = points
-        .iter()
-        .filter(|p| p.len() >= 4)
-        .filter_map(|pts| SharedShape::round_convex_hull(pts, params.skin as f32).map(|s| (Pose::IDENTITY, s)))
-        .collect();
-    if parts.is_empty() {
-        return Err(Error::invalid(
-            "mesh",
-            "the convex decomposition produced no piece; pass a closed, non-flat mesh",
-        ));
-    }
-    Ok(SharedShape::compound(parts))
-}
+/// Most parts one pile holds.
+pub const MAX_PARTS: usize = 500;
 
 /// A settled pile of parts in a bin, simulated by rapier. Instance ids are 0..count in drop order
 /// and stay valid after other parts are removed.
@@ -450,10 +276,10 @@ impl Pile {
         if count == 0 {
             return Err(Error::invalid("count", "must be at least 1"));
         }
-        if count > 500 {
+        if count > MAX_PARTS {
             return Err(Error::invalid(
                 "count",
-                format!("{count} parts is more than the simulator supports (500)"),
+                format!("{count} parts is more than the simulator supports ({MAX_PARTS})"),
             ));
         }
         let hull_shape = decomposition_shape(mesh, params)?;
@@ -492,6 +318,48 @@ impl Pile {
             poses.push(t);
         }
         let top = drops.iter().map(|d| d.z + radius).fold(bhi.z, f64::max);
+        let mut pile = Pile::build(hull_shape, &poses, bin, params, top);
+        pile.settle();
+        Ok(pile)
+    }
+
+    /// Instances of `mesh` placed at `poses` (`T_base_object`, mm) in `bin` and left to settle:
+    /// a scene as a scan located it, for predicting what a motion through it does. Parts placed
+    /// overlapping each other or the bin are pushed apart by the physics as it settles.
+    pub fn place(mesh: &TriMesh, poses: &[Isometry3<f64>], bin: &BinSpec, params: &PileParams) -> Result<Pile> {
+        bin.validate()?;
+        params.validate()?;
+        if poses.is_empty() || poses.len() > MAX_PARTS {
+            return Err(Error::invalid(
+                "poses",
+                format!("{} poses; place 1 to {MAX_PARTS} parts", poses.len()),
+            ));
+        }
+        let (_, bhi) = bin.inner_bounds();
+        let (lo, hi) = mesh.bounds();
+        let radius = 0.5 * (hi - lo).norm();
+        let mut top = bhi.z;
+        for (i, t) in poses.iter().enumerate() {
+            let finite = t
+                .translation
+                .vector
+                .iter()
+                .chain(t.rotation.coords.iter())
+                .all(|v| v.is_finite());
+            if !finite {
+                return Err(Error::invalid("poses", format!("pose {i} is not finite")));
+            }
+            top = top.max(t.translation.vector.z + radius);
+        }
+        let hull_shape = decomposition_shape(mesh, params)?;
+        let mut pile = Pile::build(hull_shape, poses, bin, params, top);
+        pile.settle();
+        Ok(pile)
+    }
+
+    /// The physics world: the bin's walls reaching above `top` and a body per pose.
+    fn build(hull_shape: SharedShape, poses: &[Isometry3<f64>], bin: &BinSpec, params: &PileParams, top: f64) -> Pile {
+        let count = poses.len();
 
         let mut world = PhysicsWorld::new();
         world.gravity = Vector::new(0.0, 0.0, -9810.0);
@@ -521,7 +389,7 @@ impl Pile {
             world.insert_collider(collider, Some(fixed));
         }
         let mut bodies = Vec::with_capacity(count);
-        for t in &poses {
+        for t in poses {
             let body = RigidBodyBuilder::dynamic()
                 .pose(convert::pose(t))
                 .ccd_enabled(true)
@@ -537,7 +405,7 @@ impl Pile {
             let (h, _) = world.insert(body, collider);
             bodies.push(Some(h));
         }
-        let mut pile = Pile {
+        Pile {
             world,
             bodies,
             params: params.clone(),
@@ -549,9 +417,7 @@ impl Pile {
                 settled: false,
                 max_speed: 0.0,
             },
-        };
-        pile.settle();
-        Ok(pile)
+        }
     }
 
     /// Steps the simulation until every part is at rest (or `max_settle_time` passes).
@@ -636,6 +502,38 @@ impl Pile {
         Ok(self.settle())
     }
 
+    /// Moves the remaining parts (in id order) to `poses`, at rest, and lets them settle: the
+    /// same scene tried again without rebuilding its collision shapes.
+    pub fn set_poses(&mut self, poses: &[Isometry3<f64>]) -> Result<SettleReport> {
+        let handles: Vec<RigidBodyHandle> = self.bodies.iter().flatten().copied().collect();
+        if poses.len() != handles.len() {
+            return Err(Error::invalid(
+                "poses",
+                format!(
+                    "{} poses for {} parts; pass one per remaining part",
+                    poses.len(),
+                    handles.len()
+                ),
+            ));
+        }
+        for (h, t) in handles.iter().zip(poses) {
+            if !t
+                .translation
+                .vector
+                .iter()
+                .chain(t.rotation.coords.iter())
+                .all(|v| v.is_finite())
+            {
+                return Err(Error::invalid("poses", "a pose is not finite"));
+            }
+            let body = &mut self.world.bodies[*h];
+            body.set_position(convert::pose(t), true);
+            body.set_linvel(Vector::ZERO, true);
+            body.set_angvel(Vector::ZERO, true);
+        }
+        Ok(self.settle())
+    }
+
     /// The deepest penetration between any two colliders (parts and bin) in the physics
     /// state, mm: how far the convex pieces overlap, before the skin is taken off. 0 when none do.
     pub fn max_contact_penetration(&self) -> f64 {
@@ -650,22 +548,7 @@ impl Pile {
 
     /// The convex pieces every part collides with, in the model frame.
     pub fn collision_hulls(&self) -> Vec<Hull> {
-        let Some(c) = self.hull_shape.as_compound() else {
-            return Vec::new();
-        };
-        c.shapes()
-            .iter()
-            .filter_map(|(pos, s)| {
-                let (v, i) = s
-                    .as_convex_polyhedron()
-                    .or_else(|| s.as_round_convex_polyhedron().map(|r| &r.inner_shape))?
-                    .to_trimesh();
-                Some((
-                    v.into_iter().map(|p| convert::point(pos.transform_point(p))).collect(),
-                    i,
-                ))
-            })
-            .collect()
+        hulls_of(&self.hull_shape)
     }
 }
 
@@ -722,6 +605,7 @@ pub fn max_interpenetration(mesh: &TriMesh, poses: &[Isometry3<f64>], samples: &
 pub(super) mod tests {
     use super::*;
     use crate::mesh::parts::{tee, TeeParams};
+    use crate::sim::hulls::convex_decomposition;
 
     pub(in crate::sim) fn small_tee() -> TriMesh {
         tee(&TeeParams {
@@ -784,6 +668,38 @@ pub(super) mod tests {
                 );
             }
         }
+    }
+
+    #[test]
+    fn a_settled_scene_placed_again_stays_and_can_be_set_back() {
+        let m = small_tee();
+        let bin = BinSpec::default();
+        let params = PileParams::default();
+        let dropped: Vec<Isometry3<f64>> = Pile::drop(&m, 3, &bin, &params)
+            .unwrap()
+            .poses()
+            .into_iter()
+            .map(|(_, t)| t)
+            .collect();
+        let mut placed = Pile::place(&m, &dropped, &bin, &params).unwrap();
+        let close = |a: &[(usize, Isometry3<f64>)]| {
+            a.iter().zip(&dropped).all(|((_, t), u)| {
+                (t.translation.vector - u.translation.vector).norm() < 1.0 && t.rotation.angle_to(&u.rotation) < 0.02
+            })
+        };
+        assert!(close(&placed.poses()), "{:?}", placed.poses());
+        // Moved away and set back: the same scene, the same place.
+        let mut shifted = dropped.clone();
+        shifted[0].translation.vector.x += 20.0;
+        placed.set_poses(&shifted).unwrap();
+        placed.set_poses(&dropped).unwrap();
+        assert!(close(&placed.poses()));
+        assert!(placed.set_poses(&dropped[..2]).is_err());
+        let mut bad = dropped.clone();
+        bad[1].translation.vector.y = f64::NAN;
+        assert!(placed.set_poses(&bad).is_err());
+        assert!(Pile::place(&m, &bad, &bin, &params).is_err());
+        assert!(Pile::place(&m, &[], &bin, &params).is_err());
     }
 
     #[test]
