@@ -13,6 +13,14 @@ other scanned part on its way (it would shove them too), and a grasp plan
 cell scans again after any nudge and plans the pick on what it sees then: the prediction
 chooses the push, nothing is picked on it.
 
+Next, a push the cell's own physics predicts (:func:`plan_predicted`) for a part resting on the
+floor that no straight push frees — a shaft lying along a wall, which no finger can get behind and
+pushing along the wall only slides, is turned off it by a push on its end. The located part
+alone is placed in the bin in the simulator's physics (:meth:`binpick.sim.Pile.placed`), pushed
+by the closed fingers along each candidate path at a low and a high friction, and the push is
+taken where both leave it clear of the other scanned parts and a grasp passes where it rests.
+As for a freeing push, the cell scans again and plans on what it sees.
+
 Otherwise, a push that topples or shifts a blocked part:
 
 A nudge of a located part (``T_base_object``) is planned with the tool pointing straight down:
@@ -112,12 +120,15 @@ PREDICT_DIRECTIONS = 16
 PREDICT_OFFSETS = (0.0, -0.6, 0.6, -1.2, 1.2)
 #: the least a push must move some point of the part, mm,
 PREDICT_MIN_MOVE_MM = 5.0
-#: the most the physics may move the located part as it settles before any push, mm (more: the
-#: pose and the physics disagree on how it lies, and nothing is predicted),
-PREDICT_REST_MM = 3.0
+#: the most the physics may move the located part as it settles before any push, mm: a part
+#: balanced on an edge or a boss rolls off it a few millimetres, and is pushed from there; one
+#: that falls farther lay on something the scan did not show, and nothing is predicted for it,
+PREDICT_REST_MM = 8.0
 #: the least angle from along a wall at which a push heads into it (a shallower one slides the
 #: part along it), degrees,
 ALONG_WALL_DEG = 10.0
+#: the tallest a part it pushes may stand, as a share of its length (a taller one topples),
+PREDICT_HEIGHT_SHARE = 0.5
 #: and the most pushes it simulates for one part.
 PREDICT_BUDGET = 60
 
@@ -336,6 +347,22 @@ def _room(config: CellConfig, footprint: np.ndarray, d: np.ndarray) -> float:
     return max(room, 0.0)
 
 
+def _on_floor(config: CellConfig, verts: np.ndarray) -> bool:
+    """Whether the part whose vertices (base frame) are ``verts`` rests on the bin's floor: its
+    lowest point within :data:`FLAT_FLOOR_MM` of it (beyond the floor clearance)."""
+    floor = float(config.bin_bounds[0][2]) + config.floor_clearance_mm
+    return float(verts[:, 2].min()) <= floor + FLAT_FLOOR_MM
+
+
+def _lying(config: CellConfig, verts: np.ndarray) -> bool:
+    """Whether the part whose vertices (base frame) are ``verts`` lies on the floor (:func:`_on_floor`),
+    no taller than :data:`PREDICT_HEIGHT_SHARE` of its length: pushed, it slides and rolls, as
+    the physics can predict; a part standing up topples, which it cannot."""
+    centred = verts - verts.mean(axis=0)
+    longest = float(np.ptp(centred @ np.linalg.eigh(centred.T @ centred)[1][:, 2]))
+    return float(np.ptp(verts[:, 2])) <= PREDICT_HEIGHT_SHARE * longest and _on_floor(config, verts)
+
+
 def _lies_flat(config: CellConfig, verts: np.ndarray) -> bool:
     """Whether the part whose vertices (base frame) are ``verts`` lies on the bin's floor on its
     broad side (its height no more than :data:`FLAT_RATIO` times its thinnest extent, its bottom
@@ -343,9 +370,7 @@ def _lies_flat(config: CellConfig, verts: np.ndarray) -> bool:
     as :func:`plan_separating` plans; a part standing up or lying on others topples instead."""
     centred = verts - verts.mean(axis=0)
     thinnest = float(np.ptp(centred @ np.linalg.eigh(centred.T @ centred)[1][:, 0]))
-    floor = float(config.bin_bounds[0][2]) + config.floor_clearance_mm
-    height = float(np.ptp(verts[:, 2]))
-    return height <= FLAT_RATIO * thinnest and float(verts[:, 2].min()) <= floor + FLAT_FLOOR_MM
+    return float(np.ptp(verts[:, 2])) <= FLAT_RATIO * thinnest and _on_floor(config, verts)
 
 
 def plan_separating(config: CellConfig, T_base_object: Any, scene: Any, T_now: Any) -> Optional[NudgePlan]:
@@ -406,11 +431,11 @@ def plan_separating(config: CellConfig, T_base_object: Any, scene: Any, T_now: A
 def plan_predicted(
     config: CellConfig, T_base_object: Any, scene: Any, T_now: Any, *, budget: int = PREDICT_BUDGET
 ) -> Optional[NudgePlan]:
-    """A push of the located part ``T_base_object`` lying flat on the floor that the cell's own
+    """A push of the located part ``T_base_object`` lying on the floor (:func:`_lying`) that the cell's own
     physics (:meth:`binpick.sim.Pile.push`, the located part alone in the bin) predicts leaves
     it where a grasp passes against ``scene`` (base frame; the part's own points left out) —
     for a part no straight push frees (:func:`plan_separating`): a shaft lying along a wall,
-    turned off it by a push on its end; a disc in a corner, pushed out along a wall.
+    turned off it by a push on its end.
 
     Pushes are tried along :data:`PREDICT_DIRECTIONS` directions (:func:`nudge_directions`'s
     order), the closed fingers meeting the part at its middle or towards either side
@@ -429,7 +454,7 @@ def plan_predicted(
 
     T, pts, T_now = plan_inputs(config, T_base_object, scene, T_now, "T_now")
     verts = _vertices(config, T)
-    if not _lies_flat(config, verts):
+    if not _lying(config, verts):
         return None
     centre, part, others = _part_in_scan(config, T, pts, verts)
     free_turn = continuous_near_axis(config.model) is not None
@@ -475,7 +500,7 @@ def plan_predicted(
                     pile.set_poses(T[None])
                     pile.push(config.gripper.boxes(0.0), tool, speed)
                     after.append(pile.poses[0])
-                if not all(_freed(path, part, T, A) and _lies_flat(config, _vertices(config, A)) for A in after):
+                if not all(_freed(path, part, T, A) and _on_floor(config, _vertices(config, A)) for A in after):
                     break
                 grasps = [_grasp_at(config, A, np.zeros(2), others, T_now, free_turn) for A in after]
                 if any(g is None for g in grasps):
