@@ -311,9 +311,9 @@ class _PathMap:
         self.occupied[ij[:, 0], ij[:, 1]] = True
 
     def clear(self, footprint: np.ndarray, offset: np.ndarray) -> bool:
-        """Whether the part's footprint (its points' xy) moved by ``offset`` lies inside the
-        bin's walls (:data:`WALL_MARGIN_MM` from them, or as near as it lies now) on cells no
-        other part stands on."""
+        """Whether the part's footprint (its points' xy) moved by ``offset`` (one xy, or one per
+        point) lies inside the bin's walls (:data:`WALL_MARGIN_MM` from them, or as near as it
+        lies now) on cells no other part stands on."""
         xy = footprint + offset
         # No nearer a wall than the margin, or than the part already lies (a part against a
         # wall may slide along it).
@@ -321,7 +321,8 @@ class _PathMap:
         hi = np.maximum(self.hi - WALL_MARGIN_MM, footprint.max(axis=0))
         if (xy < lo).any() or (xy > hi).any():
             return False
-        ij = ((xy - self.lo) // PATH_CELL_MM).astype(int)
+        # A part located a hair past a wall lies in the edge cells, not wrapped round the map.
+        ij = np.clip(((xy - self.lo) // PATH_CELL_MM).astype(int), 0, np.array(self.shape) - 1)
         return not bool(self.occupied[ij[:, 0], ij[:, 1]].any())
 
 
@@ -429,7 +430,13 @@ def plan_separating(config: CellConfig, T_base_object: Any, scene: Any, T_now: A
 
 
 def plan_predicted(
-    config: CellConfig, T_base_object: Any, scene: Any, T_now: Any, *, budget: int = PREDICT_BUDGET
+    config: CellConfig,
+    T_base_object: Any,
+    scene: Any,
+    T_now: Any,
+    *,
+    ambiguous: bool = False,
+    budget: int = PREDICT_BUDGET,
 ) -> Optional[NudgePlan]:
     """A push of the located part ``T_base_object`` lying on the floor (:func:`_lying`) that the cell's own
     physics (:meth:`binpick.sim.Pile.push`, the located part alone in the bin) predicts leaves
@@ -446,7 +453,9 @@ def plan_predicted(
     comes to rest at least :data:`PREDICT_MIN_MOVE_MM` from where it lay, its footprint in the
     bin and clear of the other scanned parts at every quarter of the way there, and a grasp
     passes where it rests (and none passes where it lies now: a part held back by its pose's doubt,
-    not by what is around it, is not pushed). ``budget``: most pushes simulated (each at both frictions) before
+    not by what is around it, is not pushed — unless ``ambiguous``: the part's pose has
+    alternatives, and none of the grasps the same on all of them passed, those that do pass here
+    being the others). ``budget``: most pushes simulated (each at both frictions) before
     giving up. None when no push passes; nothing is sent. The cell scans again after the push and
     plans on what it sees: the prediction chooses the push, nothing is picked on it."""
     from ..sim.cell import Bin  # the physics only when a part is blocked: the real loop loads no simulator
@@ -458,7 +467,7 @@ def plan_predicted(
         return None
     centre, part, others = _part_in_scan(config, T, pts, verts)
     free_turn = continuous_near_axis(config.model) is not None
-    if _grasp_at(config, T, np.zeros(2), others, T_now, free_turn) is not None:
+    if not ambiguous and _grasp_at(config, T, np.zeros(2), others, T_now, free_turn) is not None:
         return None  # a grasp passes where it lies: what holds it back no push mends (its pose's doubt)
     lo, hi = (np.asarray(b, dtype=float) for b in config.bin_bounds)
     box = Bin(size=tuple(hi - lo), center=tuple((lo[:2] + hi[:2]) / 2), floor_z=float(lo[2]))
@@ -470,7 +479,7 @@ def plan_predicted(
     tip_z, reach = _push_height(config, verts), _closed_reach(config)
     speed = float(config.limits.max_linear_speed_mm_s)
     xy = part[:, :2] - centre
-    plans = []  # (direction, offset): the first gap whose moves pass, with the rear of the part there
+    plans = []  # (direction, across it, offset across, the part's rear along it in that strip)
     for d in nudge_directions(config, centre, count=PREDICT_DIRECTIONS):
         e = np.array([-d[1], d[0]])
         along, across = xy @ d, xy @ e
@@ -538,7 +547,7 @@ def _freed(path: _PathMap, part: np.ndarray, T: np.ndarray, T_after: np.ndarray)
     moved = part @ (T_after[:3, :3] @ T[:3, :3].T).T + (T_after[:3, 3] - T_after[:3, :3] @ T[:3, :3].T @ T[:3, 3])
     if float(np.linalg.norm(moved - part, axis=1).max()) < PREDICT_MIN_MOVE_MM:
         return False
-    return all(path.clear(part[:, :2] + k / 4 * (moved[:, :2] - part[:, :2]), np.zeros(2)) for k in range(1, 5))
+    return all(path.clear(part[:, :2], k / 4 * (moved[:, :2] - part[:, :2])) for k in range(1, 5))
 
 
 def _grasp_at(
@@ -647,9 +656,15 @@ def nudge_blocked(cell: Any, skipped: list, scan: Any, made: Sequence[NudgePlan]
     for k in skipped:
         if not any(np.linalg.norm(k.T_base_object[:3, 3] - u.T_base_object[:3, 3]) < OWN_POINT_MM for u in parts):
             parts.append(k)
-    for planner, how in ((plan_separating, "to free it"), (plan_predicted, "to free it, as the physics predicts")):
+    predicted = "to free it, as the physics predicts"
+    for how in ("to free it", predicted):
         for k in parts:
-            plan = planner(cfg, k.T_base_object, scan.points, T_now)
+            if how == predicted:
+                # "ambiguous: …": no grasp the same on every alternative passed (the loop's plan).
+                doubt = k.reason.startswith("ambiguous")
+                plan = plan_predicted(cfg, k.T_base_object, scan.points, T_now, ambiguous=doubt)
+            else:
+                plan = plan_separating(cfg, k.T_base_object, scan.points, T_now)
             if plan is None:
                 continue
             t, a = k.T_base_object[:3, 3], plan.T_after[:3, 3]
