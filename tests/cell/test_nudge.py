@@ -428,3 +428,19 @@ def test_no_predicted_push_for_a_part_a_grasp_passes_for_a_standing_part_or_with
     T[:3, 3] = (400.0, 0.0, 12.0)
     pts = np.asarray(cfg.model.points) @ T[:3, :3].T + T[:3, 3]
     assert nudge.plan_predicted(cfg, T, pts[pts[:, 2] > 11.0], cfg.scan_poses[0], budget=8) is None
+
+
+def test_the_path_map_keeps_a_moved_footprint_in_the_bin_and_off_other_parts():
+    cfg = _raft_config()
+    # A neighbour's point 50 mm up the bin, and one against the far (+x) wall.
+    other = np.array([[400.0, 50.0, 10.0], [550.0, 0.0, 10.0]])
+    path = nudge._PathMap(cfg, other)
+    footprint = np.array([[400.0, 0.0], [410.0, 0.0]])
+    assert path.clear(footprint, np.array([0.0, 20.0]))
+    assert not path.clear(footprint, np.array([0.0, 50.0]))  # onto the neighbour
+    assert not path.clear(footprint, np.array([160.0, 0.0]))  # through the +x wall
+    # One offset per point (a part turning as it moves): the far point swings into the wall.
+    assert not path.clear(footprint, np.array([[0.0, 0.0], [0.0, -120.0]]))
+    # A part located a hair past the −x wall may stay there: its points lie in the edge cells
+    # there, not in the far wall's (wrapped round the map).
+    assert path.clear(np.array([[249.5, 0.0]]), np.zeros(2))
