@@ -127,6 +127,9 @@ PREDICT_REST_MM = 8.0
 #: the least angle from along a wall at which a push heads into it (a shallower one slides the
 #: part along it), degrees,
 ALONG_WALL_DEG = 10.0
+#: the most the physics may let it sink as it settles, mm (more: it lay on a part the physics,
+#: which holds the located part alone, does not have),
+PREDICT_DROP_MM = 3.0
 #: the tallest a part it pushes may stand, as a share of its length (a taller one topples),
 PREDICT_HEIGHT_SHARE = 0.5
 #: and the most pushes it simulates for one part.
@@ -471,10 +474,12 @@ def plan_predicted(
         return None  # a grasp passes where it lies: what holds it back no push mends (its pose's doubt)
     lo, hi = (np.asarray(b, dtype=float) for b in config.bin_bounds)
     box = Bin(size=tuple(hi - lo), center=tuple((lo[:2] + hi[:2]) / 2), floor_z=float(lo[2]))
-    piles = [Pile.placed(config.model, T[None], bin=box, friction=f) for f in PREDICT_FRICTIONS]
+    piles = [Pile.placed(config.model, T[None], bin=box, friction=PREDICT_FRICTIONS[0])]
     rest = piles[0].poses[0]
-    if np.linalg.norm(rest[:3, 3] - T[:3, 3]) > PREDICT_REST_MM:
+    settled = rest[:3, 3] - T[:3, 3]
+    if np.linalg.norm(settled) > PREDICT_REST_MM or -settled[2] > PREDICT_DROP_MM:
         return None  # the physics does not let it lie where it was located: no prediction to trust
+    piles += [Pile.placed(config.model, T[None], bin=box, friction=f) for f in PREDICT_FRICTIONS[1:]]
     path = _PathMap(config, others)
     tip_z, reach = _push_height(config, verts), _closed_reach(config)
     speed = float(config.limits.max_linear_speed_mm_s)
@@ -509,7 +514,7 @@ def plan_predicted(
                     pile.set_poses(T[None])
                     pile.push(config.gripper.boxes(0.0), tool, speed)
                     after.append(pile.poses[0])
-                if not all(_freed(path, part, T, A) and _on_floor(config, _vertices(config, A)) for A in after):
+                if not all(_freed(path, part, T, rest, A) and _on_floor(config, _vertices(config, A)) for A in after):
                     break
                 grasps = [_grasp_at(config, A, np.zeros(2), others, T_now, free_turn) for A in after]
                 if any(g is None for g in grasps):
@@ -540,12 +545,18 @@ def _toward_wall(config: CellConfig, footprint: np.ndarray, d: np.ndarray, dista
     return False
 
 
-def _freed(path: _PathMap, part: np.ndarray, T: np.ndarray, T_after: np.ndarray) -> bool:
-    """Whether the part (its sample points ``part`` at ``T``, base frame) moved to ``T_after``
-    by at least :data:`PREDICT_MIN_MOVE_MM` somewhere, its footprint inside the bin and clear of
-    other parts at every quarter of the way (each point moved straight from where it was)."""
-    moved = part @ (T_after[:3, :3] @ T[:3, :3].T).T + (T_after[:3, 3] - T_after[:3, :3] @ T[:3, :3].T @ T[:3, 3])
-    if float(np.linalg.norm(moved - part, axis=1).max()) < PREDICT_MIN_MOVE_MM:
+def _freed(path: _PathMap, part: np.ndarray, T: np.ndarray, T_rest: np.ndarray, T_after: np.ndarray) -> bool:
+    """Whether the push moved the part (its sample points ``part`` at ``T``, base frame) from
+    where the physics let it rest (``T_rest``) to ``T_after`` by at least
+    :data:`PREDICT_MIN_MOVE_MM` somewhere, its footprint inside the bin and clear of other parts
+    at every quarter of the way from ``T`` (each point moved straight from where it was)."""
+
+    def at(T_to: np.ndarray) -> np.ndarray:
+        R = T_to[:3, :3] @ T[:3, :3].T
+        return part @ R.T + (T_to[:3, 3] - R @ T[:3, 3])
+
+    moved = at(T_after)
+    if float(np.linalg.norm(moved - at(T_rest), axis=1).max()) < PREDICT_MIN_MOVE_MM:
         return False
     return all(path.clear(part[:, :2], k / 4 * (moved[:, :2] - part[:, :2])) for k in range(1, 5))
 
