@@ -438,7 +438,6 @@ def plan_predicted(
     scene: Any,
     T_now: Any,
     *,
-    ambiguous: bool = False,
     budget: int = PREDICT_BUDGET,
 ) -> Optional[NudgePlan]:
     """A push of the located part ``T_base_object`` lying on the floor (:func:`_lying`) that the cell's own
@@ -456,9 +455,7 @@ def plan_predicted(
     comes to rest at least :data:`PREDICT_MIN_MOVE_MM` from where it lay, its footprint in the
     bin and clear of the other scanned parts at every quarter of the way there, and a grasp
     passes where it rests (and none passes where it lies now: a part held back by its pose's doubt,
-    not by what is around it, is not pushed — unless ``ambiguous``: the part's pose has
-    alternatives, and none of the grasps the same on all of them passed, those that do pass here
-    being the others). ``budget``: most pushes simulated (each at both frictions) before
+    not by what is around it, is not pushed). ``budget``: most pushes simulated (each at both frictions) before
     giving up. None when no push passes; nothing is sent. The cell scans again after the push and
     plans on what it sees: the prediction chooses the push, nothing is picked on it."""
     from ..sim.cell import Bin  # the physics only when a part is blocked: the real loop loads no simulator
@@ -470,7 +467,7 @@ def plan_predicted(
         return None
     centre, part, others = _part_in_scan(config, T, pts, verts)
     free_turn = continuous_near_axis(config.model) is not None
-    if not ambiguous and _grasp_at(config, T, np.zeros(2), others, T_now, free_turn) is not None:
+    if _grasp_at(config, T, np.zeros(2), others, T_now, free_turn) is not None:
         return None  # a grasp passes where it lies: what holds it back no push mends (its pose's doubt)
     lo, hi = (np.asarray(b, dtype=float) for b in config.bin_bounds)
     box = Bin(size=tuple(hi - lo), center=tuple((lo[:2] + hi[:2]) / 2), floor_z=float(lo[2]))
@@ -671,9 +668,7 @@ def nudge_blocked(cell: Any, skipped: list, scan: Any, made: Sequence[NudgePlan]
     for how in ("to free it", predicted):
         for k in parts:
             if how == predicted:
-                # "ambiguous: …": no grasp the same on every alternative passed (the loop's plan).
-                doubt = k.reason.startswith("ambiguous")
-                plan = plan_predicted(cfg, k.T_base_object, scan.points, T_now, ambiguous=doubt)
+                plan = plan_predicted(cfg, k.T_base_object, scan.points, T_now)
             else:
                 plan = plan_separating(cfg, k.T_base_object, scan.points, T_now)
             if plan is None:
