@@ -458,9 +458,6 @@ def plan_predicted(
     not by what is around it, is not pushed). ``budget``: most pushes simulated (each at both frictions) before
     giving up. None when no push passes; nothing is sent. The cell scans again after the push and
     plans on what it sees: the prediction chooses the push, nothing is picked on it."""
-    from ..sim.cell import Bin  # the physics only when a part is blocked: the real loop loads no simulator
-    from ..sim.pile import Pile
-
     T, pts, T_now = plan_inputs(config, T_base_object, scene, T_now, "T_now")
     verts = _vertices(config, T)
     if not _lying(config, verts):
@@ -469,14 +466,12 @@ def plan_predicted(
     free_turn = continuous_near_axis(config.model) is not None
     if _grasp_at(config, T, np.zeros(2), others, T_now, free_turn) is not None:
         return None  # a grasp passes where it lies: what holds it back no push mends (its pose's doubt)
-    lo, hi = (np.asarray(b, dtype=float) for b in config.bin_bounds)
-    box = Bin(size=tuple(hi - lo), center=tuple((lo[:2] + hi[:2]) / 2), floor_z=float(lo[2]))
-    piles = [Pile.placed(config.model, T[None], bin=box, friction=PREDICT_FRICTIONS[0])]
+    piles = [_physics_for(config, f) for f in PREDICT_FRICTIONS]
+    piles[0].set_poses(T[None])
     rest = piles[0].poses[0]
     settled = rest[:3, 3] - T[:3, 3]
     if np.linalg.norm(settled) > PREDICT_REST_MM or -settled[2] > PREDICT_DROP_MM:
         return None  # the physics does not let it lie where it was located: no prediction to trust
-    piles += [Pile.placed(config.model, T[None], bin=box, friction=f) for f in PREDICT_FRICTIONS[1:]]
     path = _PathMap(config, others)
     tip_z, reach = _push_height(config, verts), _closed_reach(config)
     speed = float(config.limits.max_linear_speed_mm_s)
@@ -525,6 +520,30 @@ def plan_predicted(
                     grasp_after=grasps[0][1].grasp,
                 )
     return None
+
+
+#: The predicted push's physics, one pile per (part, bin, friction), built once (a part's
+#: collision hulls take up to a second) and moved to each located pose with ``set_poses``.
+_PHYSICS: dict = {}
+
+
+def _physics_for(config: CellConfig, friction: float) -> Any:
+    """The cell's part alone in its bin in the simulator's physics at ``friction``."""
+    from ..sim.cell import Bin  # the physics only when a part is blocked: the real loop loads no simulator
+    from ..sim.pile import Pile
+
+    lo, hi = (np.asarray(b, dtype=float) for b in config.bin_bounds)
+    key = (id(config.model), tuple(lo), tuple(hi), friction)
+    pile = _PHYSICS.get(key)
+    if pile is None or pile.model is not config.model:
+        if len(_PHYSICS) >= 8:
+            _PHYSICS.clear()
+        box = Bin(size=tuple(hi - lo), center=tuple((lo[:2] + hi[:2]) / 2), floor_z=float(lo[2]))
+        # Placed anywhere: every use sets the pose it predicts from.
+        T = np.eye(4)
+        T[:3, 3] = ((lo + hi) / 2)[:3]
+        pile = _PHYSICS[key] = Pile.placed(config.model, T[None], bin=box, friction=friction)
+    return pile
 
 
 def _toward_wall(config: CellConfig, footprint: np.ndarray, d: np.ndarray, distance: float) -> bool:
