@@ -1,7 +1,9 @@
 """The real laser-motor drivers over ptys: Dynamixel Protocol 2.0 (default) and the AI motor."""
 
+import errno
 import math
 import struct
+import termios
 import time
 
 import pytest
@@ -154,6 +156,26 @@ def test_port_disappearing(dxl_motor, dxl_emulator):
     dxl_emulator.inject(Fault.CLOSE_PORT)
     with pytest.raises(PortClosedError):
         dxl_motor.ping()
+
+
+def test_a_signal_interrupting_the_wait_for_a_write_to_drain_loses_nothing(dxl_motor, dxl_emulator):
+    # A signal to the process (a child exiting, a profiler attaching: seen under py-spy) makes
+    # tcdrain fail with EINTR after the bytes were written; the driver waits again.
+    ser, real = dxl_motor.bus.link._ser, dxl_motor.bus.link._ser.flush
+    interrupted = []
+
+    def flush() -> None:
+        if len(interrupted) < 3:
+            interrupted.append(1)
+            raise termios.error(errno.EINTR, "Interrupted system call")
+        real()
+
+    ser.flush = flush
+    dxl_motor.enable()
+    dxl_motor.move_to(math.radians(30.0))
+    assert len(interrupted) == 3
+    assert math.degrees(dxl_motor.present_angle()) == pytest.approx(30.0, abs=1.0)
+    assert dxl_emulator.failures == []
 
 
 def test_unknown_id_times_out(dxl_emulator):

@@ -132,8 +132,15 @@ ALONG_WALL_DEG = 10.0
 PREDICT_DROP_MM = 3.0
 #: the tallest a part it pushes may stand, as a share of its length (a taller one topples),
 PREDICT_HEIGHT_SHARE = 0.5
-#: and the most pushes it simulates for one part.
+#: the most pushes it simulates for one part,
 PREDICT_BUDGET = 60
+#: the longest the physics may take to bring the part to rest, simulated s (a shaft rolls for
+#: seconds after a push; a part still moving after this rocks on a pose the physics cannot hold,
+#: and no prediction for it is trusted),
+PREDICT_SETTLE_S = 6.0
+#: and how high above the part's top the simulated fingers start their descent and end their
+#: retreat, mm (above it they meet nothing the physics holds: the rest of the way is not simulated).
+PREDICT_ABOVE_MM = 10.0
 
 
 class NudgeRefused(SafetyError):
@@ -467,13 +474,18 @@ def plan_predicted(
     if _grasp_at(config, T, np.zeros(2), others, T_now, free_turn) is not None:
         return None  # a grasp passes where it lies: what holds it back no push mends (its pose's doubt)
     piles = [_physics_for(config, f) for f in PREDICT_FRICTIONS]
-    piles[0].set_poses(T[None])
-    rest = piles[0].poses[0]
-    settled = rest[:3, 3] - T[:3, 3]
-    if np.linalg.norm(settled) > PREDICT_REST_MM or -settled[2] > PREDICT_DROP_MM:
-        return None  # the physics does not let it lie where it was located: no prediction to trust
+    rests = []
+    for pile in piles:
+        if not pile.set_poses(T[None]).settled:
+            return None  # the physics cannot bring it to rest there: no prediction to trust
+        rest = pile.poses[0]
+        settled = rest[:3, 3] - T[:3, 3]
+        if np.linalg.norm(settled) > PREDICT_REST_MM or -settled[2] > PREDICT_DROP_MM:
+            return None  # the physics does not let it lie where it was located: no prediction to trust
+        rests.append(rest)
     path = _PathMap(config, others)
     tip_z, reach = _push_height(config, verts), _closed_reach(config)
+    top = float(verts[:, 2].max())
     speed = float(config.limits.max_linear_speed_mm_s)
     xy = part[:, :2] - centre
     plans = []  # (direction, across it, offset across, the part's rear along it in that strip)
@@ -501,13 +513,11 @@ def plan_predicted(
                     continue
                 simulated += 1
                 tool = np.array([T_f @ config.gripper.T_flange_gripper for _, T_f, _ in moves])
-                after = []
-                for pile in piles:
-                    pile.set_poses(T[None])
-                    pile.push(config.gripper.boxes(0.0), tool, speed)
-                    after.append(pile.poses[0])
-                if not all(_freed(path, part, T, rest, A) and _on_floor(config, _vertices(config, A)) for A in after):
+                # The fingers simulated from just above the part's top down and back up to it.
+                tool[:, 2, 3] = np.minimum(tool[:, 2, 3], tool[1, 2, 3] + top - tip_z + PREDICT_ABOVE_MM)
+                if not all(_predicts_freed(config, p, r, tool, speed, path, part, T) for p, r in zip(piles, rests)):
                     break
+                after = [pile.poses[0] for pile in piles]
                 grasps = [_grasp_at(config, A, np.zeros(2), others, T_now, free_turn) for A in after]
                 if any(g is None for g in grasps):
                     break
@@ -542,7 +552,9 @@ def _physics_for(config: CellConfig, friction: float) -> Any:
         # Placed anywhere: every use sets the pose it predicts from.
         T = np.eye(4)
         T[:3, 3] = ((lo + hi) / 2)[:3]
-        pile = _PHYSICS[key] = Pile.placed(config.model, T[None], bin=box, friction=friction)
+        pile = _PHYSICS[key] = Pile.placed(
+            config.model, T[None], bin=box, friction=friction, max_settle_time=PREDICT_SETTLE_S
+        )
     return pile
 
 
@@ -559,6 +571,25 @@ def _toward_wall(config: CellConfig, footprint: np.ndarray, d: np.ndarray, dista
         if d[axis] > into and float(footprint[:, axis].max()) + distance * d[axis] > hi[axis] - WALL_MARGIN_MM:
             return True
     return False
+
+
+def _predicts_freed(
+    config: CellConfig,
+    pile: Any,
+    rest: np.ndarray,
+    tool: np.ndarray,
+    speed: float,
+    path: _PathMap,
+    part: np.ndarray,
+    T: np.ndarray,
+) -> bool:
+    """Whether ``tool`` (``T_base_gripper`` poses) pushing the part in ``pile`` from ``rest`` at
+    ``speed`` leaves it at rest, freed (:func:`_freed`) and on the floor."""
+    pile.set_poses(rest[None])
+    if not pile.push(config.gripper.boxes(0.0), tool, speed).settle.settled:
+        return False  # still moving: where it ends is not known
+    A = pile.poses[0]
+    return _freed(path, part, T, rest, A) and _on_floor(config, _vertices(config, A))
 
 
 def _freed(path: _PathMap, part: np.ndarray, T: np.ndarray, T_rest: np.ndarray, T_after: np.ndarray) -> bool:

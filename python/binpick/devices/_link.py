@@ -8,6 +8,7 @@ a reply that stops part-way becomes :class:`~binpick.errors.TruncatedReplyError`
 
 from __future__ import annotations
 
+import errno
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -21,9 +22,11 @@ try:
 
     _PORT_ERRORS: tuple = (serial.SerialException, OSError, termios.error)
     _SETTINGS_REFUSED: tuple = (termios.error,)
+    _INTERRUPTED: tuple = (termios.error, InterruptedError)
 except ImportError:  # pragma: no cover - not POSIX
     _PORT_ERRORS = (serial.SerialException, OSError)
     _SETTINGS_REFUSED = ()
+    _INTERRUPTED = (InterruptedError,)
 
 from .._validate import check_int, check_number
 from ..errors import (
@@ -45,6 +48,8 @@ _SLICE_S = 0.01  # the port's read timeout: reads return at least this often to 
 #: Opens of a port whose line settings are refused, and the pause between them (see SerialLink._open).
 _OPEN_ATTEMPTS = 5
 _OPEN_RETRY_S = 0.02
+#: Waits for a write to drain made when signals keep interrupting them (see SerialLink._drain).
+_DRAIN_ATTEMPTS = 5
 
 _PARITIES = {
     "N": serial.PARITY_NONE,
@@ -198,12 +203,25 @@ class SerialLink:
         with self._io():
             try:
                 self._ser.write(data)
-                self._ser.flush()
+                self._drain()
             except serial.SerialTimeoutException:
                 raise DeviceTimeout(
                     f"{self.device}: writing to {self.port_name} did not finish in "
                     f"{self.settings.write_timeout_s} s; check the line and flow control"
                 ) from None
+
+    def _drain(self) -> None:
+        """Waits until the written bytes have left (``tcdrain``). A signal to this process
+        (a child exiting, a profiler attaching) interrupts the wait with EINTR, which Python does
+        not retry for ``termios`` calls: the bytes are written, so the wait is made again."""
+        for _ in range(_DRAIN_ATTEMPTS - 1):
+            try:
+                self._ser.flush()
+                return
+            except _INTERRUPTED as exc:
+                if getattr(exc, "args", (None,))[0] != errno.EINTR:
+                    raise
+        self._ser.flush()
 
     def read_some(self, n: int, deadline: float) -> bytes:
         """Up to ``n`` bytes: whatever arrives first, or b'' once the deadline has passed.
