@@ -166,8 +166,11 @@ class SimCamera(FrameSource):
         pile = self.sim.pile
         ids, poses = pile.ids, pile.poses
         key = (np.asarray(ids).tobytes(), np.asarray(poses, dtype=np.float64).tobytes())
-        if key != self._world_key:  # the meshes placed again only when a part has moved or left
-            self._world, self._world_key = World.of_pile(pile), key
+        if self._world is None:
+            self._world = World.of_pile(pile)
+        elif key != self._world_key:  # the parts placed again only when one has moved or left
+            self._world.place_parts(pile.model, ids, poses)
+        self._world_key = key
         actual = self.sim.robot_emulator.pose()
         self._view = self._world.view(self.sim.layout, actual, num_threads=self.sim.num_threads)
         self._board = _BoardLayer.of(self.sim.layout, self._view, actual)

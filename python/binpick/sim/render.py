@@ -138,6 +138,25 @@ class World:
         for i, T in zip(ids, poses):
             self.add_instance(self._meshes[key], T, i)
 
+    def place_parts(self, model: Model, ids: Sequence[int], poses: Any) -> None:
+        """The instances of ``model`` made exactly ``ids`` at ``poses`` (N, 4, 4): those placed
+        are moved, those not listed removed and new ones added (the mesh and its ray-casting
+        tree kept: a pile after a pick is rendered without building them again)."""
+        poses = as_float_array(poses, "poses")
+        if len(ids) != len(poses):
+            raise InvalidInputError(f"ids/poses: {len(ids)} ids but {len(poses)} poses")
+        keep = {int(i) for i in ids}
+        for i in self.ids:
+            if i >= 0 and i not in keep:
+                self.remove(i)
+        placed = set(self.ids)
+        new = [k for k, i in enumerate(ids) if int(i) not in placed]
+        for i, T in zip(ids, poses):
+            if int(i) in placed:
+                self.set_pose(int(i), T)
+        if new:
+            self.add_parts(model, [ids[k] for k in new], poses[new])
+
     def set_pose(self, id: int, T_base_object: Any) -> None:
         """Moves instance ``id``."""
         self._scene.set_pose(count(id, "id", *ID_RANGE), as_transform(T_base_object, "T_base_object"))

@@ -270,3 +270,36 @@ fn the_sheet_index_lights_exactly_the_pixels_trying_every_one_would() {
         );
     }
 }
+
+#[test]
+fn pixel_noise_has_the_read_and_shot_noise_asked_for_and_rows_do_not_repeat() {
+    // A flat grey image: the noise's mean, spread and row-to-row independence as asked for.
+    let (w, h) = (400usize, 200usize);
+    let level = 100.0f32;
+    let img = vec![[level; 3]; w * h];
+    for (read, shot) in [(2.0, 0.0), (1.0, 0.09)] {
+        let noise = SensorNoise {
+            read_noise: read,
+            shot_noise: shot,
+            ..SensorNoise::none()
+        };
+        let out = view::quantise(&img, w, &noise, 7, 11, 0..usize::MAX);
+        let values: Vec<f64> = out.iter().map(|&v| v as f64).collect();
+        let n = values.len() as f64;
+        let mean = values.iter().sum::<f64>() / n;
+        let var = values.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n;
+        // The variance asked for, plus a twelfth for the rounding to whole levels.
+        let want = read * read + shot * level as f64 + 1.0 / 12.0;
+        assert!((mean - level as f64).abs() < 0.02, "mean {mean}");
+        assert!((var / want - 1.0).abs() < 0.02, "variance {var}, want {want}");
+        // Neighbouring rows are drawn from their own seeds: uncorrelated.
+        let row = 3 * w;
+        let cov = values[..n as usize - row]
+            .iter()
+            .zip(&values[row..])
+            .map(|(a, b)| (a - mean) * (b - mean))
+            .sum::<f64>()
+            / (n - row as f64);
+        assert!((cov / var).abs() < 0.01, "row-to-row correlation {}", cov / var);
+    }
+}
