@@ -33,14 +33,20 @@ def _nearest_part(sim, T: np.ndarray) -> int:
 def _planned_ahead(sim):
     """A part located and planned on a scan, "lifted" (taken out of the pile), and the pick
     after it planned ahead on that scan: (the planner, the lifted part's clean record, the part
-    and plan made ahead)."""
+    and plan made ahead). A scan whose rest shows no part the planner confirms (its noise hides
+    one: NoObjectFound, as a cell would report it) is followed by another, at most three."""
     cell = sim.cell
-    scan = cell.scan()
-    located, plan = cell.locate_and_plan(scan)
-    ahead = PlanAhead(cell)
-    ahead.start(located, [])
-    ahead._thread.join()
-    assert "found" in ahead._done, ahead._done.get("why")
+    why = []
+    for _ in range(3):
+        scan = cell.scan()
+        located, plan = cell.locate_and_plan(scan)
+        ahead = PlanAhead(cell)
+        ahead.start(located, [])
+        ahead._thread.join()
+        if "found" in ahead._done:
+            break
+        why.append(ahead._done.get("why"))
+    assert "found" in ahead._done, why
     sim.pile.remove(_nearest_part(sim, located.T_base_object))
     record = PickRecord(index=1, success=True, T_base_object=located.T_base_object, held=True)
     return ahead, record, ahead._done["found"]
@@ -115,7 +121,9 @@ def test_the_planning_thread_has_no_device_and_no_truth(sim, monkeypatch):
 
 
 def test_a_run_picks_with_plans_made_during_the_carry_where_the_next_scan_confirms_them(sim):
-    report = sim.cell.run(3)
+    # Five picks: a plan made ahead is dropped where the new scan leaves its part's pose open or
+    # does not show it where planned (two of these five), and used where it confirms it.
+    report = sim.cell.run(5)
     assert all(r.success for r in report.records), [r.error for r in report.records]
     used = [r for r in report.records if r.timings.get("ahead.used")]
     assert used, [m for s, m in sim.lines if s == "plan"]
