@@ -16,7 +16,7 @@
 use super::fit::{thinned_sigma, FREE_RATIO};
 use crate::geometry::Point;
 use crate::pose::judge::Judge;
-use crate::pose::model::{turns_of, Constraints, PoseModel};
+use crate::pose::model::{near_turns, turns_of, Constraints, PoseModel};
 use crate::pose::surface::{plane_residuals, thin};
 use crate::pose::types::{Alternative, FeatureEvidence, TrustParams};
 use crate::registration::{icp, Convergence, IcpConfig};
@@ -205,6 +205,13 @@ fn unseen_turns_from(
     let known_pose = |t: &Isometry3<f64>, found: &[Alternative]| {
         same(t, t_scene_model) || same(t, baseline) || found.iter().chain(known).any(|a| same(&a.t_scene_model, t))
     };
+    // The near-symmetric turns of the baseline are the trust stage's to weigh, on the feature
+    // that tells them apart (a plate's cut corner, 0.3 % of its surface, fits the claimed points
+    // "as well" wherever it is put).
+    let near_poses: Vec<Isometry3<f64>> = near_turns(model, trust)
+        .iter()
+        .map(|(turn, _)| baseline * turn)
+        .collect();
     let few = thin(&sample, QUICK_POINTS);
     let quick = IcpConfig {
         max_iterations: QUICK_ITERATIONS,
@@ -254,7 +261,7 @@ fn unseen_turns_from(
             };
             t = m;
         }
-        if known_pose(&t, &found) {
+        if known_pose(&t, &found) || near_poses.iter().any(|n| same(&t, n)) {
             continue;
         }
         // A slide refined into a turn about a near-symmetry's axis is the trust stage's too.
