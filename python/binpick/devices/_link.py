@@ -219,7 +219,7 @@ class SerialLink:
                 self._ser.flush()
                 return
             except _INTERRUPTED as exc:
-                if getattr(exc, "args", (None,))[0] != errno.EINTR:
+                if exc.args[:1] != (errno.EINTR,):
                     raise
         self._ser.flush()
 

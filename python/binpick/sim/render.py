@@ -150,10 +150,12 @@ class World:
             if i >= 0 and i not in keep:
                 self.remove(i)
         placed = set(self.ids)
-        new = [k for k, i in enumerate(ids) if int(i) not in placed]
-        for i, T in zip(ids, poses):
+        new = []
+        for k, (i, T) in enumerate(zip(ids, poses)):
             if int(i) in placed:
                 self.set_pose(int(i), T)
+            else:
+                new.append(k)
         if new:
             self.add_parts(model, [ids[k] for k in new], poses[new])
 

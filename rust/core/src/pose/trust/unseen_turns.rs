@@ -16,7 +16,7 @@
 use super::fit::{thinned_sigma, FREE_RATIO};
 use crate::geometry::Point;
 use crate::pose::judge::Judge;
-use crate::pose::model::{near_turns, turns_of, Constraints, PoseModel};
+use crate::pose::model::{near_turns, Constraints, PoseModel};
 use crate::pose::surface::{plane_residuals, thin};
 use crate::pose::types::{Alternative, FeatureEvidence, TrustParams};
 use crate::registration::{icp, Convergence, IcpConfig};
@@ -79,6 +79,12 @@ impl Move {
             Move::Slide(v) => Isometry3::from_parts(Translation3::from(s * v), UnitQuaternion::identity()),
         }
     }
+}
+
+/// Whether poses `a` and `b` are one pick-grade pose of `model` (modulo its symmetries).
+fn same_pose(model: &PoseModel, trust: &TrustParams, a: &Isometry3<f64>, b: &Isometry3<f64>) -> bool {
+    let (r, d) = model.symmetries.pose_error(a, b);
+    r < trust.pick_rotation && d < trust.pick_translation
 }
 
 /// The weakest slide of the point-to-plane constraints of `q` (model-frame points with their
@@ -198,10 +204,7 @@ fn unseen_turns_from(
     let seen_through_ok =
         e0.violated + SEEN_THROUGH_MARGIN.max((SEEN_THROUGH_SHARE * (e0.seen + e0.violated) as f64).round() as usize);
     let refine = IcpConfig::robust_plane(3.0 * tol, Convergence::UNSEEN_TURN);
-    let same = |a: &Isometry3<f64>, b: &Isometry3<f64>| {
-        let (r, d) = model.symmetries.pose_error(a, b);
-        r < trust.pick_rotation && d < trust.pick_translation
-    };
+    let same = |a: &Isometry3<f64>, b: &Isometry3<f64>| same_pose(model, trust, a, b);
     let known_pose = |t: &Isometry3<f64>, found: &[Alternative]| {
         same(t, t_scene_model) || same(t, baseline) || found.iter().chain(known).any(|a| same(&a.t_scene_model, t))
     };
@@ -322,17 +325,15 @@ pub(super) fn unseen_turns_of_all(
         t_scene_model: *t_scene_model,
         evidence: FeatureEvidence::default(),
     });
-    let same = |a: &Isometry3<f64>, b: &Isometry3<f64>| {
-        let (r, d) = model.symmetries.pose_error(a, b);
-        r < trust.pick_rotation && d < trust.pick_translation
-    };
-    let flips: Vec<Isometry3<f64>> = model
-        .near_symmetries
-        .iter()
-        .flat_map(|n| turns_of(n, trust))
+    let flips: Vec<Isometry3<f64>> = near_turns(model, trust)
+        .into_iter()
         .filter(|(_, continuous)| !continuous)
         .map(|(turn, _)| t_scene_model * turn)
-        .filter(|f| !alternatives.iter().any(|a| same(&a.t_scene_model, f)))
+        .filter(|f| {
+            !alternatives
+                .iter()
+                .any(|a| same_pose(model, trust, &a.t_scene_model, f))
+        })
         .collect();
     let starts = alternatives.iter().map(|a| (a.t_scene_model, a.t_scene_model));
     for (start, baseline) in starts.chain(flips.into_iter().map(|f| (f, *t_scene_model))) {

@@ -181,13 +181,19 @@ fn hidden_stem_scene() -> (Isometry3<f64>, Vec<Point>) {
     (truth, seen_from_above(mesh, &truth, &[floor, slab], 9, 4))
 }
 
-#[test]
-fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_turns() {
-    // Read with the stem swung 40° up under the slab and flipped by the tee's near half-turn
-    // (the boss is hidden): no turn of that pose about the run reaches the truth, which is a
-    // turn of its flip, the alternative. A 40° turn back is probed as 30° (10° short: not
-    // pick-grade) and 60° (20° into the floor: refused); halved back from 60° until it clears
-    // the floor, it comes within a few degrees of the truth, which rests on the floor.
+/// The tee of [`hidden_stem_scene`] read with its stem swung 40° up under the slab and flipped
+/// by its near half-turn about the stem (the boss is hidden): (the truth, the judge, the pose
+/// read turned but not flipped, the pose read, its claimed points). The scan refutes none of
+/// the three poses.
+struct FlippedRead {
+    truth: Isometry3<f64>,
+    judge: crate::pose::judge::Judge,
+    wrong: Isometry3<f64>,
+    flipped: Isometry3<f64>,
+    claimed: Vec<Point>,
+}
+
+fn flipped_read() -> FlippedRead {
     let (model, _) = tee_model();
     let cfg = config(CoarseMethod::Ppf);
     let (truth, scene_pts) = hidden_stem_scene();
@@ -213,10 +219,37 @@ fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_tu
         .into_iter()
         .map(|i| scene_pts[i])
         .collect();
-    let grade = |t: &Isometry3<f64>| {
-        let (r, d) = model.symmetries.pose_error(t, &truth);
-        r < 5f64.to_radians() && d < 3.0
-    };
+    FlippedRead {
+        truth,
+        judge,
+        wrong,
+        flipped,
+        claimed,
+    }
+}
+
+/// Whether `t` is pick-grade against `truth` (5°, 3 mm).
+fn pick_grade(model: &PoseModel, t: &Isometry3<f64>, truth: &Isometry3<f64>) -> bool {
+    let (r, d) = model.symmetries.pose_error(t, truth);
+    r < 5f64.to_radians() && d < 3.0
+}
+
+#[test]
+fn a_flip_read_turned_about_the_seen_run_has_the_truth_among_its_alternatives_turns() {
+    // No turn of the pose read about the run reaches the truth, which is a turn of its flip,
+    // the alternative. A 40° turn back is probed as 30° (10° short: not pick-grade) and 60°
+    // (20° into the floor: refused); halved back from 60° until it clears the floor, it comes
+    // within a few degrees of the truth, which rests on the floor.
+    let (model, _) = tee_model();
+    let cfg = config(CoarseMethod::Ppf);
+    let FlippedRead {
+        truth,
+        judge,
+        wrong,
+        flipped,
+        claimed,
+    } = flipped_read();
+    let grade = |t: &Isometry3<f64>| pick_grade(model, t, &truth);
     let alternative = Alternative {
         t_scene_model: wrong,
         evidence: FeatureEvidence::default(),
@@ -289,28 +322,14 @@ fn a_flip_the_scan_rules_out_as_it_stands_is_still_turned_about_the_seen_run() {
     // on a simulated pile was lifted at confidence 0.91, 180° off.
     let (model, _) = tee_model();
     let cfg = config(CoarseMethod::Ppf);
-    let (truth, scene_pts) = hidden_stem_scene();
-    let (kept, planes) = scene::remove_bin(&scene_pts, model, &cfg, true, 0.0).unwrap();
-    let pts: Vec<Point> = kept.iter().map(|&i| scene_pts[i]).collect();
-    let judge = tests::judge_of(&scene_pts, &pts, planes, model, &cfg);
-    let near = model
-        .near_symmetries
-        .iter()
-        .find(|n| (n.axis.dot(&Vector3::y())).abs() > 0.99)
-        .expect("the tee's near half-turn about its stem");
-    let up = Isometry3::from_parts(
-        Translation3::identity(),
-        UnitQuaternion::from_scaled_axis(Vector3::x() * 40f64.to_radians()),
-    );
-    let flipped = truth * up * near.transform(0.0);
-    let claimed: Vec<Point> = scene::scene_indices(&scene_pts, model, &flipped, judge.depth.tol)
-        .into_iter()
-        .map(|i| scene_pts[i])
-        .collect();
-    let grade = |t: &Isometry3<f64>| {
-        let (r, d) = model.symmetries.pose_error(t, &truth);
-        r < 5f64.to_radians() && d < 3.0
-    };
+    let FlippedRead {
+        truth,
+        judge,
+        flipped,
+        claimed,
+        ..
+    } = flipped_read();
+    let grade = |t: &Isometry3<f64>| pick_grade(model, t, &truth);
     let own = unseen_turns(&claimed, model, &flipped, &judge, &cfg.trust, None, &[]);
     assert!(
         !own.iter().any(|a| grade(&a.t_scene_model)),

@@ -142,9 +142,9 @@ fn fast_normals(x: u64) -> [f32; 2] {
     const BYTES: u64 = 0x00FF_00FF_00FF_00FF;
     const HALVES: u64 = 0x0000_FFFF_0000_FFFF;
     let pairs = (x & BYTES) + ((x >> 8) & BYTES); // four 16-bit sums of two bytes
-    let quads = (pairs & HALVES) + ((pairs >> 16) & HALVES); // two 32-bit sums of four bytes
-                                                             // Each sum has mean 510 and variance 4 · (256² − 1) / 12 = 21845.
+                                                  // Each sum of four bytes has mean 510 and variance 4 · (256² − 1) / 12 = 21845.
     const SCALE: f32 = 1.0 / 147.800_54;
+    let quads = (pairs & HALVES) + ((pairs >> 16) & HALVES); // two 32-bit sums of four bytes
     [
         ((quads & 0xFFFF_FFFF) as i32 as f32 - 510.0) * SCALE,
         ((quads >> 32) as i32 as f32 - 510.0) * SCALE,
