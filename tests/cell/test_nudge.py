@@ -14,6 +14,7 @@ import pytest
 import binpick
 from binpick.cell import nudge
 from binpick.cell.records import Skipped, cycle_stages_s
+from binpick.cell.scene import near_part
 from binpick.errors import SafetyError
 from binpick.sim import SimulatedCell
 
@@ -318,7 +319,7 @@ def test_no_freeing_push_for_a_row_with_no_room_to_slide_a_standing_part_or_one_
 
 def _others(scene, cfg, T):
     """The scene without the points of the part at ``T`` (as the nudge and the cell leave them out)."""
-    own = nudge._near(scene, np.asarray(cfg.model.points) @ T[:3, :3].T + T[:3, 3], nudge.OWN_POINT_MM)
+    own = near_part(scene, np.asarray(cfg.model.points) @ T[:3, :3].T + T[:3, 3])
     return scene[~own]
 
 
@@ -370,7 +371,7 @@ def _against_wall(cfg, gap_mm=1.0):
     pts = np.asarray(cfg.model.points) @ T[:3, :3].T + T[:3, 3]
     xs, ys = np.meshgrid(np.arange(252.0, 549.0, 4.0), np.arange(-98.0, 99.0, 4.0))
     floor = np.column_stack([xs.ravel(), ys.ravel(), np.zeros(xs.size)])
-    floor = floor[~nudge._near(floor, pts, 3.0)]
+    floor = floor[~near_part(floor, pts, 3.0)]
     return T, np.concatenate([pts[pts[:, 2] > 11.0], floor])
 
 

@@ -15,6 +15,8 @@ import pytest
 import binpick
 from binpick.cell.grasp import GRAZE_MM, _unseen, plan_grasp
 from binpick.cell.records import line_step
+from binpick.cell.scene import planner_scene
+from binpick.models import nearest_distances
 from binpick.sim import SimulatedCell
 from binpick.transforms import rotation_about
 
@@ -166,3 +168,29 @@ def test_the_fingers_do_not_close_onto_a_neighbour_in_the_gap(tilted_flange):
     for w in np.linspace(other_width, other.opening_mm, 30):
         met |= g.occupied(back, w, grow_mm=grow)
     assert met.sum() <= cfg.max_collision_points
+
+
+def test_the_parts_own_surface_left_out_of_its_indices_does_not_stand_for_a_column_through_it(lone_tee):
+    # A ring-screw heap had no usable grasp: the segmentation left a few points of each ring's
+    # surface out of its indices, and each stood in the planner's scene for a column down through
+    # the ring, which a tilted finger closing on the ring met. The planner's scene leaves out
+    # every scanned point on the located part's surface; a neighbour's points stay.
+    cfg, here, T = lone_tee
+    tilted = lambda T_bg: -T_bg[2, 2] < np.cos(np.radians(25.0))  # noqa: E731
+    plan, hits = plan_grasp(cfg, T, np.zeros((0, 3)), here, tilted)
+    assert hits == 0
+    part = np.asarray(cfg.model.points) @ T[:3, :3].T + T[:3, 3]
+    seen = part[part[:, 2] >= part[:, 2].max() - 20.0]  # its upper side, as a scan sees it
+    seen = seen + np.random.default_rng(3).normal(0.0, 0.3, seen.shape)
+    with pytest.raises(binpick.cell.NoGraspError):
+        plan_grasp(cfg, T, seen, here, tilted)
+    # A neighbour's patch 10 mm beside the part's highest point, out of the gripper's way.
+    lo = part[np.argmax(part[:, 2])]
+    side = np.array([-T[1, 0], T[0, 0], 0.0]) / max(np.hypot(T[0, 0], T[1, 0]), 1e-9)
+    neighbour = lo + 60.0 * side + np.array([[dx, dy, 0.0] for dx in (-1.0, 0.0, 1.0) for dy in (-1.0, 0.0, 1.0)])
+    assert nearest_distances(neighbour, part).min() > 10.0
+    scan = np.concatenate([neighbour, seen])
+    scene = planner_scene(scan, [], T, cfg.model)
+    assert len(scene) == len(neighbour) and (scene == neighbour).all()
+    same, _ = plan_grasp(cfg, T, scene, here, tilted)
+    assert same.grasp == plan.grasp

@@ -54,6 +54,7 @@ from ..poses import verify_pose
 from .grasp import NoGraspError, scene_hits, staked_filter
 from .records import Located, PickPlan, PickRecord, ScanResult, Skipped
 from .rescan import clean_pick, part_box
+from .scene import planner_scene
 
 __all__ = ["PlanAhead", "SAME_POSE_DEG", "SAME_POSE_MM"]
 
@@ -215,13 +216,12 @@ def _confirm(cell: Any, located: Located, plan: PickPlan, scan: ScanResult) -> t
             None,
             "the new scan leaves the part's pose open, and the plan's grasp is not the same on every alternative",
         )
-    others = np.ones(len(scan.points), dtype=bool)
     idx = np.asarray(verdict.indices, dtype=np.int64)
-    others[idx[(idx >= 0) & (idx < len(others))]] = False
+    own = np.unique(idx[(idx >= 0) & (idx < len(scan.points))])
     free = getattr(verdict, "free_axis", None) is not None
-    hits = scene_hits(cfg, plan, T_new, scan.points[others], free, scan.line_step)
+    hits = scene_hits(cfg, plan, T_new, planner_scene(scan.points, own, T_new, cfg.model), free, scan.line_step)
     if hits > cfg.max_collision_points:
         return None, f"{hits} points of the new scan lie inside the plan's gripper (at most {cfg.max_collision_points})"
     truth = cell._judge_located(verdict, T_new)
-    found = Located(scan=scan, result=verdict, T_base_object=T_new, indices=np.flatnonzero(~others), truth=truth)
+    found = Located(scan=scan, result=verdict, T_base_object=T_new, indices=own, truth=truth)
     return found, f"the new scan scores the part {verdict.score:.2f} where it was planned, {hits} points in the gripper"

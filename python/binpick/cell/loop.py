@@ -75,6 +75,7 @@ from .records import (
     with_earlier,
 )
 from .rescan import SEEN_AGAIN, RescanBasis, basis_after, part_box, rescan
+from .scene import planner_scene
 from .shots import DepthSource, depth_scan
 from .sweeps import sweep_laser
 from .symmetry import continuous_near_axis
@@ -462,9 +463,7 @@ class Cell:
         the located part's own other branches, and whose whole motion passes the safety rules —
         the one with the fewest scene points inside the gripper, the most vertical among equals
         (:func:`binpick.cell.grasp.plan_grasp`); NoGraspError when none is."""
-        pts = np.asarray(located.scan.points)
-        others = np.ones(len(pts), dtype=bool)
-        others[located.indices] = False
+        scene = planner_scene(located.scan.points, located.indices, located.T_base_object, self.config.model)
         res = located.result
         accept = staked_filter(self.config, res)  # a grasp the same on every alternative stakes confidence_any
         try:
@@ -472,7 +471,7 @@ class Cell:
             plan, hits = plan_grasp(
                 self.config,
                 located.T_base_object,
-                pts[others],
+                scene,
                 self.robot.read_pose(),
                 accept,
                 free,

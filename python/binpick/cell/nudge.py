@@ -64,10 +64,10 @@ import numpy as np
 
 from ..devices import safety
 from ..errors import BinpickError, SafetyError
-from ..models import nearest_distances
 from ..transforms import inverse, look_down
 from .config import CellConfig
 from .grasp import NoGraspError, bin_clash, plan_grasp, plan_inputs
+from .scene import OWN_POINT_MM, near_part
 from .symmetry import continuous_near_axis
 
 __all__ = [
@@ -90,8 +90,6 @@ NUDGE_DIRECTIONS = 8
 #: A part pushed once and still blocked is pushed next in a direction at least this far from
 #: the first push's, where one passes the checks, degrees.
 RETRY_APART_DEG = 45.0
-#: Scanned points within this distance of the located part's model belong to the part, mm.
-OWN_POINT_MM = 4.0
 #: A part whose top (highest third) lies this far or more past its bottom (lowest third) leans, mm.
 LEAN_MM = 5.0
 #: The fingertips stay at least this far above the floor (beyond ``floor_clearance_mm``), mm.
@@ -286,10 +284,10 @@ def _part_in_scan(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The located part at ``T`` (its vertices there ``verts``) against the scan ``pts`` (base
     frame): the centre of its box over the floor (xy), its sample points, and the scan's points
-    that are not its own (farther than :data:`OWN_POINT_MM` from it)."""
+    that are not its own (farther than :data:`~binpick.cell.scene.OWN_POINT_MM` from it)."""
     part = np.asarray(config.model.points) @ T[:3, :3].T + T[:3, 3]
     centre = (verts[:, :2].min(axis=0) + verts[:, :2].max(axis=0)) / 2
-    return centre, part, pts[~_near(pts, part, OWN_POINT_MM)]
+    return centre, part, pts[~near_part(pts, part)]
 
 
 def _push_height(config: CellConfig, verts: np.ndarray) -> float:
@@ -685,15 +683,6 @@ def _topple(config: CellConfig, verts: np.ndarray, reach: float) -> Optional[np.
         verts[:, 2] <= bottom + height / 3.0, :2
     ].mean(axis=0)
     return towards if float(lean @ -towards) >= LEAN_MM else None
-
-
-def _near(points: np.ndarray, model_points: np.ndarray, radius: float) -> np.ndarray:
-    """Which ``points`` lie within ``radius`` of a model point (only those in the model's box are measured)."""
-    lo, hi = model_points.min(axis=0) - radius, model_points.max(axis=0) + radius
-    out = np.zeros(len(points), dtype=bool)
-    cand = np.flatnonzero(((points >= lo) & (points <= hi)).all(axis=1))
-    out[cand] = nearest_distances(points[cand], model_points) <= radius
-    return out
 
 
 def nudge_blocked(cell: Any, skipped: list, scan: Any, made: Sequence[NudgePlan] = ()) -> Optional[NudgePlan]:
