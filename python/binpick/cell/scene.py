@@ -1,12 +1,15 @@
-"""The scene the grasp planner checks a pick against: the scan without the part to be picked.
+"""The scene the grasp planner checks a pick against: the scan, the part to be picked standing
+for what it hides.
 
 The planner lets each scene point stand for what lies straight below it (no sensor sees under a
 surface: a finger may not reach in under one), and checks the part itself whole against its
-model at the located pose. So the part's own points must leave the scene — not only those the
-segmentation gave it, but every scanned point on its surface: a stray point of its top left in
-the scene stands for a column through the part, and a finger closing on the part beside it
-meets that column (a heap of ring screws, each with a few points of its ring left out, had no
-usable grasp)."""
+model at the located pose. So a point on the part's surface must not stand for the column
+through the part — not only the points the segmentation gave the part, but every scanned point
+on its surface (a stray point of a ring's top left in the scene stands for a column down through
+the ring, which a tilted finger closing on the ring meets: a heap of ring screws had no usable
+grasp) — but neither may it leave the scene: what the part hides under itself is no more known
+to be free than what a neighbour hides (dropped, they let a finger in under a ring onto the
+neighbour it lay on). Each moves down onto the part's underside below it."""
 
 from __future__ import annotations
 
