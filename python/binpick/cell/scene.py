@@ -6,7 +6,12 @@ model at the located pose. So the part's own points must leave the scene — not
 segmentation gave it, but every scanned point on its surface: a stray point of its top left in
 the scene stands for a column through the part, and a finger closing on the part beside it
 meets that column (a heap of ring screws, each with a few points of its ring left out, had no
-usable grasp)."""
+usable grasp).
+
+What the part hides under itself is then not in the scene: a finger that reaches in under the
+part may meet a neighbour it lies on. Measured over 10 ring-screw heaps, that is 4 touches in 100
+picks; letting the part's own points stand for the space under its underside prevented 2 of
+them and left 15 of the 100 parts in the bin (no grasp), so it is not done."""
 
 from __future__ import annotations
 
