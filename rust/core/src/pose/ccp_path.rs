@@ -242,7 +242,7 @@ impl<'a> Checks<'a> {
         Checks {
             model,
             params: p,
-            heights: HeightMap::new(ctx.scene, ctx.view, (1.5 * s.across).max(0.5)),
+            heights: HeightMap::new(ctx.scene, ctx.view, (1.5 * s.across).max(0.5)).seen_from(ctx.cfg.viewpoint),
             probe,
             sample,
             tol,

@@ -197,7 +197,7 @@ impl PoseModel {
             })
             .fold(f64::INFINITY, f64::min);
         // Only CCP's coarse checks use the nearest field: a model without branches does not pay for it.
-        let mut target = IcpTarget::new(points, Some(normals))?;
+        let mut target = IcpTarget::new(points, Some(normals))?.with_spacing(spacing);
         if layout.is_some() {
             target = target.with_field(diameter / FIELD_CELLS, FIELD_MARGIN * diameter);
         }

@@ -344,13 +344,10 @@ fn a_pile_of_another_part_is_no_object() {
     );
 }
 
-#[test]
-fn the_judge_refuses_a_pose_through_the_floor_and_accepts_the_truth() {
-    let (model, mesh) = tee_model();
-    let mut rng = Rng::new(5);
-    let truth = random_pose(&mut rng);
-    let mut scene = top_view(mesh, &truth, 5);
-    let floor_z = scene.iter().map(|p| p.z).fold(f64::INFINITY, f64::min) - 0.5;
+/// The judge (PPF's configuration) of the tee's `scene` with a floor at `floor_z` added around
+/// the tee at `truth`, outside its reach; the floor is removed as a support plane.
+fn judged_on_a_floor(mut scene: Vec<Point>, truth: &Isometry3<f64>, floor_z: f64) -> Judge {
+    let (model, _) = tee_model();
     let c = truth * model.symmetries.center;
     for i in -80..80 {
         for j in -80..80 {
@@ -363,7 +360,17 @@ fn the_judge_refuses_a_pose_through_the_floor_and_accepts_the_truth() {
     let cfg = config(CoarseMethod::Ppf);
     let (kept, removed) = remove_bin(&scene, model, &cfg, true, 0.0).unwrap();
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
-    let judge = judge_of(&scene, &pts, removed, model, &cfg);
+    judge_of(&scene, &pts, removed, model, &cfg)
+}
+
+#[test]
+fn the_judge_refuses_a_pose_through_the_floor_and_accepts_the_truth() {
+    let (model, mesh) = tee_model();
+    let mut rng = Rng::new(5);
+    let truth = random_pose(&mut rng);
+    let scene = top_view(mesh, &truth, 5);
+    let floor_z = scene.iter().map(|p| p.z).fold(f64::INFINITY, f64::min) - 0.5;
+    let judge = judged_on_a_floor(scene, &truth, floor_z);
     assert!(!judge.depth.supports.is_empty(), "the floor is a support");
     assert!(judge.verdict(model, &truth).is_ok());
     let sunk = Translation3::new(0.0, 0.0, -0.5 * model.thickness) * truth;
@@ -371,6 +378,40 @@ fn the_judge_refuses_a_pose_through_the_floor_and_accepts_the_truth() {
         Err(Error::NoObjectFound { reason }) => assert!(reason.contains("floor"), "{reason}"),
         other => panic!("a pose half through the floor passed: {other:?}"),
     }
+}
+
+/// A tee lying on the floor with its boss up, judged in the pose turned about its stem (the
+/// boss down, through the floor, a turn PPF can land on: the rest of the tee maps onto
+/// itself): the judge refuses that pose for the floor and keeps its turn, the truth.
+#[test]
+fn a_pose_with_its_feature_turned_into_the_floor_is_judged_as_its_turn() {
+    let (model, mesh) = tee_model();
+    let yaw = UnitQuaternion::from_scaled_axis(Vector3::z() * 0.7);
+    let lying = Isometry3::from_parts(Translation3::new(400.0, 10.0, 0.0), yaw);
+    let bottom = transform_points(&lying, &mesh.vertices)
+        .iter()
+        .map(|p| p.z)
+        .fold(f64::INFINITY, f64::min);
+    let truth = Translation3::new(0.0, 0.0, -bottom) * lying;
+    let judge = judged_on_a_floor(top_view(mesh, &truth, 6), &truth, 0.0);
+    let c = truth * model.symmetries.center;
+    let flip = model
+        .near_symmetries
+        .iter()
+        .map(|n| truth * n.transform(0.0))
+        .find(|t| (t * model.symmetries.center - c).norm() < 1.0 && judge.depth.through_supports(model, t) > 0.02)
+        .expect("a near half-turn puts the boss through the floor");
+    match judge.check(&judge.depth.evidence(model, &flip), model, &flip) {
+        Err(Error::NoObjectFound { reason }) => assert!(reason.contains("floor"), "{reason}"),
+        other => panic!("the boss through the floor passed: {other:?}"),
+    }
+    let (kept, _) = judge.verdict(model, &flip).expect("its turn is the truth");
+    let (rot, shift) = model.symmetries.pose_error(&kept, &truth);
+    assert!(
+        rot.to_degrees() < 0.5 && shift < 0.5,
+        "{:.2}° {shift:.2} mm",
+        rot.to_degrees()
+    );
 }
 
 /// A tee whose side branch the scan shows 14 mm shorter than the model's (the floor seen where

@@ -27,6 +27,8 @@ pub struct IcpTarget {
     search: CorrespondenceTree,
     center: Point,
     field: Option<NearestField>,
+    /// The samples' spacing, mm, where the maker of the target knows it ([`IcpTarget::with_spacing`]).
+    spacing: Option<f64>,
 }
 
 impl IcpTarget {
@@ -61,7 +63,19 @@ impl IcpTarget {
             search,
             center,
             field: None,
+            spacing: None,
         })
+    }
+
+    /// The target, knowing its samples lie about `spacing` mm apart (a surface sampled evenly).
+    pub fn with_spacing(mut self, spacing: f64) -> Self {
+        self.spacing = (spacing.is_finite() && spacing > 0.0).then_some(spacing);
+        self
+    }
+
+    /// The samples' spacing, mm, where known.
+    pub fn spacing(&self) -> Option<f64> {
+        self.spacing
     }
 
     /// The target's points.

@@ -28,6 +28,9 @@ pub struct HeightMap {
     pub up: Vector3<f64>,
     /// The optical centre of a perspective map.
     eye: Option<Point>,
+    /// Where the sensor's lines of sight come from, where known: a perspective map's centre, or
+    /// the viewpoint given to an orthographic map ([`HeightMap::seen_from`]).
+    sensor: Option<Point>,
     /// A perspective map's lateral coordinates are those at this range, mm (its cells' size there).
     focal: f64,
     cell: f64,
@@ -85,6 +88,7 @@ impl HeightMap {
             e2,
             up,
             eye,
+            sensor: eye,
             focal,
             cell: 1.0,
             origin: (0.0, 0.0),
@@ -195,6 +199,54 @@ impl HeightMap {
         self.eye.is_none()
     }
 
+    /// This map, knowing that the scan was seen from `viewpoint` (an orthographic map's cells
+    /// stay columns along `up`; the sight lines of [`HeightMap::sight_blocked`] run to the
+    /// viewpoint). A perspective map keeps its own centre.
+    pub fn seen_from(mut self, viewpoint: Option<Point>) -> Self {
+        if self.eye.is_none() {
+            self.sensor = viewpoint;
+        }
+        self
+    }
+
+    /// Whether the line of sight to the scan point `at` passes through the surface `target`
+    /// (posed by `t_model_scene`, scene → model) before it rises to height `until`: walked from
+    /// `at` toward the sensor (along `up` where it is not known) in steps of `r` (of the target's
+    /// sample spacing where that is larger), each step asking for a surface sample within 1.5
+    /// steps (a line crossing a surface sampled a step apart passes that near a sample on one of
+    /// its steps). A scan point whose sight line misses the posed
+    /// part was seen beside it, not through it: a coarse cell can hold the floor beside a
+    /// steep side together with probes on that side.
+    pub fn sight_blocked(
+        &self,
+        target: &IcpTarget,
+        t_model_scene: &Isometry3<f64>,
+        at: &Point,
+        until: f64,
+        r: f64,
+    ) -> bool {
+        let dir = match self.sensor {
+            Some(s) => (s - at).try_normalize(1e-12).unwrap_or(self.up),
+            None => self.up,
+        };
+        // Height gained per millimetre along the sight line.
+        let rise = if self.eye.is_some() { 1.0 } else { dir.dot(&self.up) };
+        let r = r.max(target.spacing().unwrap_or(0.0));
+        if !(rise > 0.05 && r > 0.0) {
+            return true;
+        }
+        let steps = ((until - self.height(at)) / rise / r).ceil().min(MAX_SIGHT_STEPS);
+        // From two steps out: the samples of the surface `at` itself lies on are within one.
+        let reach = 1.5 * r;
+        (2..=steps as usize).any(|i| {
+            let m = t_model_scene * (at + dir * (i as f64 * r));
+            target
+                .search()
+                .nearest_within(&[m.x, m.y, m.z], reach * reach)
+                .is_some()
+        })
+    }
+
     /// The grid's size in cells along its two axes.
     pub fn size(&self) -> (usize, usize) {
         self.size
@@ -245,6 +297,9 @@ impl HeightMap {
         Some((h as f64, Point::new(t[0] as f64, t[1] as f64, t[2] as f64)))
     }
 }
+
+/// The most steps [`HeightMap::sight_blocked`] walks (a sight line that long has left any part).
+const MAX_SIGHT_STEPS: f64 = 400.0;
 
 /// What the scan says about one posed model.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -351,7 +406,12 @@ pub fn depth_evidence_with(
             None if c >= 0.7 => e.missing += 1,
             None => {}
             Some((top, _)) if (top - h).abs() <= slack => e.seen += 1,
-            Some((top, _)) if top < h - slack => {
+            // The sensor saw below the predicted surface: through it, where its line of sight
+            // to what it saw crosses the posed part; else beside it, which says nothing here.
+            Some((top, at)) if top < h - slack => {
+                if !heights.sight_blocked(target, &t_model_scene, &at, h + slack, tol) {
+                    continue;
+                }
                 e.violated += 1;
                 on_violated(q);
             }
@@ -547,5 +607,69 @@ mod perspective_tests {
         let down = HeightMap::new(&scan, Orientation::TowardDirection(Vector3::z()), 0.5);
         let e = depth_evidence(&target, &down, &at(0.0, 10.0), 1, 0.5, true);
         assert!(e.violated > 0 || e.missing > 0, "{e:?}");
+    }
+
+    /// A tube of radius 10 lying along y (0..40) on a floor at z = 0, seen by a sensor at
+    /// `eye`: where the sensor's rays to the floor first meet the tube or the floor, without the
+    /// tube's flanks steeper than 37° (a laser's shadow leaves them unscanned).
+    fn tube_seen_from(eye: &Point) -> Vec<Point> {
+        let mut out = Vec::new();
+        for i in -60..60 {
+            for j in 0..80 {
+                let floor = Point::new(i as f64 * 0.5, j as f64 * 0.5, 0.0);
+                let d = floor - eye;
+                // (ex + s dx)² + (ez + s dz − 10)² = 100: the first s in [0, 1].
+                let (ox, oz) = (eye.x, eye.z - 10.0);
+                let (a, b, c) = (
+                    d.x * d.x + d.z * d.z,
+                    2.0 * (ox * d.x + oz * d.z),
+                    ox * ox + oz * oz - 100.0,
+                );
+                let disc = b * b - 4.0 * a * c;
+                let s = (disc >= 0.0)
+                    .then(|| (-b - disc.sqrt()) / (2.0 * a))
+                    .filter(|s| (0.0..1.0).contains(s));
+                match s.map(|s| eye + d * s) {
+                    Some(hit) if (hit.z - 10.0) / 10.0 >= 0.8 => out.push(hit),
+                    Some(_) => {}
+                    None => out.push(floor),
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn columns_told_where_the_sensor_is_count_only_what_it_saw_through_the_part() {
+        // In vertical columns of 4 mm (a sparse laser-line scan's), the floor the sensor saw
+        // under the tube's near side shares cells with the tube's unscanned flank and lies
+        // below it there.
+        let eye = Point::new(-200.0, 20.0, 300.0);
+        let scan = tube_seen_from(&eye);
+        let (mut tube, mut normals) = (Vec::new(), Vec::new());
+        for k in 0..126 {
+            let phi = k as f64 * 0.05;
+            for y in 0..40 {
+                tube.push(Point::new(10.0 * phi.sin(), y as f64, 10.0 + 10.0 * phi.cos()));
+                normals.push(Vector3::new(phi.sin(), 0.0, phi.cos()));
+            }
+        }
+        let target = IcpTarget::new(tube, Some(normals)).unwrap();
+        let at = |z: f64| Isometry3::from_parts(Translation3::new(0.0, 0.0, z), UnitQuaternion::identity());
+        let columns = || HeightMap::new(&scan, Orientation::TowardDirection(Vector3::z()), 4.0);
+        let blind = depth_evidence(&target, &columns(), &at(0.0), 1, 0.5, true);
+        // Told where the sensor is: its sight lines to that floor pass beside the tube.
+        let told = columns().seen_from(Some(eye));
+        let e = depth_evidence(&target, &told, &at(0.0), 1, 0.5, true);
+        assert!(blind.violated > 200 && e.violated == 0, "{blind:?} {e:?}");
+        assert_eq!(e.seen, blind.seen);
+        // The tube lifted 10 mm: the sight lines to what the sensor saw under it cross it.
+        let lifted = depth_evidence(&target, &told, &at(10.0), 1, 0.5, true);
+        assert!(lifted.violated > 1000, "{lifted:?}");
+        // Without a sensor position the sight lines run along up: the columns' verdict.
+        assert_eq!(
+            depth_evidence(&target, &columns().seen_from(None), &at(0.0), 1, 0.5, true),
+            blind
+        );
     }
 }

@@ -92,7 +92,8 @@ impl DepthTest {
             None => with_nothing_below(remaining, &seen_planes, tol),
         };
         DepthTest {
-            heights: HeightMap::fitted(ctx.scene, ctx.view, (0.5 * voxel_size(step)).max(1.0)),
+            heights: HeightMap::fitted(ctx.scene, ctx.view, (0.5 * voxel_size(step)).max(1.0))
+                .seen_from(ctx.cfg.viewpoint),
             tol,
             supports,
             seen_planes,

@@ -187,8 +187,13 @@ impl Judge {
         let Err(refused) = self.check(&e, model, t_scene_model) else {
             return Ok((*t_scene_model, e));
         };
-        if self.check_patch(&e, model, t_scene_model).is_ok() {
-            return Err(refused); // an earlier test failed: a turn of the feature does not mend it
+        // The pose puts material where the sensor saw free space, or into a support the part
+        // rests on: with its feature turned the other way it may fit. Any other test failed: a
+        // turn of the feature does not mend it.
+        let misplaced = self.depth.through_supports(model, t_scene_model) >= MAX_THROUGH
+            || self.check_patch(&e, model, t_scene_model).is_err();
+        if !misplaced {
+            return Err(refused);
         }
         self.near_turns
             .iter()
