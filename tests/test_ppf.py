@@ -184,6 +184,26 @@ def test_estimate_poses_finds_distinct_instances_most_pickable_first(bracket_pil
     assert (labels == first).mean() > 0.9
 
 
+def test_points_set_aside_are_not_searched_but_stay_in_the_scan(bracket_pile):
+    model, cell, pile, scene, ids = bracket_pile
+    first = binpick.estimate_poses(scene, model, bin=cell.bin.bounds, max_instances=1, method="ppf")[0]
+    part = np.bincount(ids[first.indices][ids[first.indices] >= 0]).argmax()
+    aside = ids == part  # every point of the part found first, as a cell that tried it sets them aside
+    found = binpick.estimate_poses(scene, model, bin=cell.bin.bounds, max_instances=4, method="ppf", exclude=aside)
+    assert found
+    for r in found:
+        assert not aside[r.indices].any()
+        rot, shift = symmetric_pose_error(r.T_scene_model, pile.pose(int(part)), rotations=[np.eye(3)])
+        assert rot > 5 or shift > 3, "the part set aside was found again"
+    # Everything set aside: nothing is left to search, and the error says why.
+    with pytest.raises(binpick.NoObjectFound, match="excluded"):
+        binpick.estimate_poses(scene, model, bin=cell.bin.bounds, method="ppf", exclude=np.ones(len(scene), bool))
+    with pytest.raises(binpick.DTypeError, match="exclude"):
+        binpick.estimate_poses(scene, model, exclude=aside.astype(np.int8))
+    with pytest.raises(binpick.ShapeError, match="exclude"):
+        binpick.estimate_poses(scene, model, exclude=aside[:-1])
+
+
 def test_the_feature_table_is_cached_on_disk_and_a_corrupt_cache_is_rebuilt(tmp_path, monkeypatch):
     monkeypatch.setenv("BINPICK_CACHE_DIR", str(tmp_path))
     a = make_part("bracket")

@@ -342,8 +342,11 @@ class PoseEstimate:
 #: The largest depth noise pose estimation takes, mm.
 MAX_NOISE_MM: float
 
-def estimate_poses(scene: _F64, model: PreparedModel, config: PoseConfig) -> list[PoseEstimate]:
-    """Up to ``config.max_instances`` verified instances, most pickable first."""
+def estimate_poses(
+    scene: _F64, model: PreparedModel, config: PoseConfig, exclude: npt.NDArray[np.bool_] | None = None
+) -> list[PoseEstimate]:
+    """Up to ``config.max_instances`` verified instances, most pickable first; the search leaves
+    out the points ``exclude`` flags, which the judge still reads."""
 
 def verify_pose(scene: _F64, model: PreparedModel, config: PoseConfig, t_scene_model: _F64) -> PoseEstimate:
     """The verdict on a given pose, judged as found ones are (unrefined)."""

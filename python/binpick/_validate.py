@@ -272,6 +272,19 @@ def as_indices(value: Any, name: str) -> np.ndarray:
     return arr.astype(np.int64)
 
 
+def as_mask(value: Any, name: str, size: int) -> np.ndarray:
+    """A 1-D bool array of ``size`` flags (one per point), or DTypeError (ShapeError) naming ``name``."""
+    try:
+        arr = np.asarray(value)
+    except Exception as exc:  # ragged lists and the like
+        raise DTypeError(f"{name}: cannot be read as a mask ({exc}); pass a 1-D bool array") from None
+    if arr.dtype != np.bool_:
+        raise DTypeError(f"{name}: dtype {arr.dtype}; a mask must be bool (one True or False per point)")
+    if arr.shape != (size,):
+        raise ShapeError(f"{name}: expected {size} flags, one per point, got shape {arr.shape}")
+    return np.ascontiguousarray(arr)
+
+
 def instance_of(value: Any, cls: type, name: str, example: str = "") -> Any:
     """``value`` when it is a ``cls``, else InvalidTypeError naming ``name`` (and how to make one)."""
     if not isinstance(value, cls):

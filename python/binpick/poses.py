@@ -11,6 +11,7 @@ import numpy as np
 from . import _core
 from ._validate import (
     as_float_array,
+    as_mask,
     as_points,
     as_transform,
     as_vector,
@@ -342,9 +343,16 @@ def estimate_poses(
     max_hypotheses: Optional[int] = None,
     search_instances: int = _POSE.search_instances,
     num_threads: int = _POSE.num_threads,
+    exclude: Any = None,
 ) -> list[PoseResult]:
     """Up to ``max_instances`` (at most 1000) verified instances of ``model`` in ``scene``, most
     pickable first. ``num_threads``: 0 = all cores, at most 256 (clamped to the machine's cores).
+
+    ``exclude`` (optional, one bool per scene point) sets points aside from the search — the parts
+    a cell has tried already — while the judge still reads them as surfaces the sensor saw, which
+    no pose may claim was free space. Removed from ``scene`` instead, they would leave a hole in
+    which a pose could hide a branch the scan shows elsewhere. The instances' ``indices`` never
+    include them.
 
     ``scene`` is an (N, 3) cloud in mm. ``viewpoint`` (optional, and worth giving) is the sensor's
     optical centre in the scene frame: the depth test then looks along the sensor's own rays, as a
@@ -417,7 +425,8 @@ def estimate_poses(
             "declare them with Model.declare_branches, or use method='ppf'"
         )
     pts = as_points(scene, "scene", min_points=10)
-    return [PoseResult._from_native(e) for e in _core.estimate_poses(pts, model.prepared(), config)]
+    mask = None if exclude is None else as_mask(exclude, "exclude", len(pts))
+    return [PoseResult._from_native(e) for e in _core.estimate_poses(pts, model.prepared(), config, mask)]
 
 
 def _check_model(model: Any) -> None:

@@ -305,12 +305,13 @@ class Cell:
         self, scan: Optional[ScanResult] = None, *, exclude: Optional[np.ndarray] = None, max_instances: int = 0
     ) -> list[Located]:
         """Every distinct part :func:`binpick.estimate_poses` finds in ``scan`` (a new scan when
-        None), most pickable first, up to ``max_instances`` (0: ``config.max_candidates``), leaving
-        out the points where ``exclude`` is true and poses scoring below ``config.min_score``;
-        NoObjectFound when there is none."""
+        None), most pickable first, up to ``max_instances`` (0: ``config.max_candidates``), searched
+        without the points where ``exclude`` is true (the judge still reads them) and without poses
+        scoring below ``config.min_score``; NoObjectFound when there is none."""
         scan = self.scan() if scan is None else scan
         cfg = self.config
-        keep = np.arange(len(scan.points)) if exclude is None else np.flatnonzero(~np.asarray(exclude, dtype=bool))
+        aside = None if exclude is None else np.asarray(exclude, dtype=bool)  # still the judge's evidence
+        keep = np.arange(len(scan.points)) if aside is None else np.flatnonzero(~aside)
         if len(keep) < 10:
             seen = describe_frames(scan.frames.values())
             raise NoObjectFound(f"the scan holds {len(keep)} usable points ({seen}; see scan_contact_sheet.png)")
@@ -323,7 +324,7 @@ class Cell:
         wanted = count(max_instances, "max_instances") or cfg.max_candidates
         c0 = self._cpu_now()
         results = estimate_poses(
-            scan.points[keep], cfg.model, bin=cfg.bin_bounds, max_instances=wanted, **self.pose_options(scan)
+            scan.points, cfg.model, bin=cfg.bin_bounds, max_instances=wanted, exclude=aside, **self.pose_options(scan)
         )
         self._cpu["cpu.pose"] = self._cpu.get("cpu.pose", 0.0) + (self._cpu_now() - c0) * 1e3
         found = []
@@ -339,7 +340,7 @@ class Cell:
                     scan=scan,
                     result=result,
                     T_base_object=T,
-                    indices=keep[idx[(idx >= 0) & (idx < len(keep))]],
+                    indices=idx[(idx >= 0) & (idx < len(scan.points))],
                     truth=truth,
                 )
             )

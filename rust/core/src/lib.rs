@@ -55,9 +55,9 @@ pub use noise::scan_noise;
 pub use normals::{estimate_normals, Orientation};
 pub use parallel::with_threads;
 pub use pose::{
-    estimate_pose, estimate_poses, stage_totals, verify_pose, Alternative, CcpPathParams, CheckIcpParams, CoarseMethod,
-    FeatureEvidence, FineIcpParams, FitQuality, FreeMotion, PoseConfig, PoseEstimate, PoseModel, SensorModel, Timings,
-    TrustParams, MAX_NOISE_MM,
+    estimate_pose, estimate_poses, estimate_poses_excluding, stage_totals, verify_pose, Alternative, CcpPathParams,
+    CheckIcpParams, CoarseMethod, FeatureEvidence, FineIcpParams, FitQuality, FreeMotion, PoseConfig, PoseEstimate,
+    PoseModel, SensorModel, Timings, TrustParams, MAX_NOISE_MM,
 };
 pub use registration::ccp::{ccp, BranchLayout, CcpConfig, CcpResult};
 pub use registration::ppf::{DetectConfig, PpfConfig, PpfModel};

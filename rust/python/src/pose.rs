@@ -7,8 +7,8 @@ use crate::convert::{
 use crate::convert::{points, points_to_py, real_number, rotations_to_rows, threads, vector3, vectors, whole_number};
 use crate::errors::{run, to_py};
 use binpick_core::{
-    estimate_poses as core_estimate, isometry_from_matrix, CcpConfig, CoarseMethod, DetectConfig, FreeMotion,
-    SensorModel,
+    estimate_poses as core_estimate, estimate_poses_excluding, isometry_from_matrix, CcpConfig, CoarseMethod,
+    DetectConfig, FreeMotion, SensorModel,
 };
 use binpick_core::{stage_totals, FeatureEvidence, FitQuality, PoseModel, PpfConfig, PpfModel};
 use nalgebra::{Point3, Vector3};
@@ -602,18 +602,25 @@ impl PoseEstimate {
     }
 }
 
-/// Estimates up to `config.max_instances` instances, most pickable first.
+/// Estimates up to `config.max_instances` instances, most pickable first; the search leaves out
+/// the points `exclude` flags (one bool per point), which the judge still reads.
 #[pyfunction]
+#[pyo3(signature = (scene, model, config, exclude=None))]
 fn estimate_poses(
     py: Python<'_>,
     scene: PyReadonlyArray2<'_, f64>,
     model: &PreparedModel,
     config: &PoseConfig,
+    exclude: Option<PyReadonlyArray1<'_, bool>>,
 ) -> PyResult<Vec<PoseEstimate>> {
     let pts = points(&scene, "scene")?;
+    let exclude: Option<Vec<bool>> = exclude.map(|e| e.as_array().iter().copied().collect());
     let cfg = config.inner.clone();
     let model = model.inner.clone();
-    let found = run(py, move || core_estimate(&pts, &model, &cfg))?;
+    let found = run(py, move || match &exclude {
+        Some(x) => estimate_poses_excluding(&pts, &model, &cfg, x),
+        None => core_estimate(&pts, &model, &cfg),
+    })?;
     Ok(found.into_iter().map(|inner| PoseEstimate { inner }).collect())
 }
 

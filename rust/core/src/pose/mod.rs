@@ -65,7 +65,32 @@ pub fn estimate_pose(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Re
 /// baseline find the top object only; PPF finds every instance it can confirm.
 pub fn estimate_poses(scene: &[Point], model: &PoseModel, cfg: &PoseConfig) -> Result<Vec<PoseEstimate>> {
     cfg.validate()?;
-    crate::parallel::with_threads(cfg.num_threads, || dispatch(scene, model, cfg, None))
+    crate::parallel::with_threads(cfg.num_threads, || dispatch(scene, model, cfg, None, None))
+}
+
+/// [`estimate_poses`] searching only the points of `scene` where `exclude` is false (the parts a
+/// cell has tried already), while the judge reads the whole scan: a point set aside is still a
+/// surface the sensor saw, where no pose may put free space and under which a pose's surface is
+/// hidden. Setting the points aside instead of removing them keeps a pose from placing what the
+/// scan showed there (a part's hidden branch) where those points were.
+pub fn estimate_poses_excluding(
+    scene: &[Point],
+    model: &PoseModel,
+    cfg: &PoseConfig,
+    exclude: &[bool],
+) -> Result<Vec<PoseEstimate>> {
+    cfg.validate()?;
+    if exclude.len() != scene.len() {
+        return Err(Error::invalid(
+            "exclude",
+            format!(
+                "has {} entries but the scene has {} points: pass one flag per scene point",
+                exclude.len(),
+                scene.len()
+            ),
+        ));
+    }
+    crate::parallel::with_threads(cfg.num_threads, || dispatch(scene, model, cfg, None, Some(exclude)))
 }
 
 /// Judges a given pose `t_scene_model` of `model` in `scene` exactly as [`estimate_poses`] judges
@@ -84,8 +109,10 @@ pub fn verify_pose(
     {
         return Err(Error::invalid("T_scene_model", "must be a finite rigid transform"));
     }
-    crate::parallel::with_threads(cfg.num_threads, || dispatch(scene, model, cfg, Some(t_scene_model)))
-        .map(|mut found| found.swap_remove(0))
+    crate::parallel::with_threads(cfg.num_threads, || {
+        dispatch(scene, model, cfg, Some(t_scene_model), None)
+    })
+    .map(|mut found| found.swap_remove(0))
 }
 
 /// The judge's tolerance (three standard deviations of the scan's depth noise) may be at most this
@@ -102,12 +129,14 @@ fn resolve_method(method: CoarseMethod, model: &PoseModel) -> CoarseMethod {
     }
 }
 
-/// The pipeline of one call: a search with the configured method, or (`given`) the verdict on a pose.
+/// The pipeline of one call: a search with the configured method, or (`given`) the verdict on a
+/// pose; the search leaves out the points `exclude` flags (see [`estimate_poses_excluding`]).
 fn dispatch(
     scene: &[Point],
     model: &PoseModel,
     cfg: &PoseConfig,
     given: Option<&Isometry3<f64>>,
+    exclude: Option<&[bool]>,
 ) -> Result<Vec<PoseEstimate>> {
     let up = check_scene(scene, model, cfg)?;
     let method = match given {
@@ -138,7 +167,8 @@ fn dispatch(
         cfg,
         matches!(method, CoarseMethod::Ccp | CoarseMethod::Centroid | CoarseMethod::Given),
         noise,
-    )?;
+    )
+    .and_then(|(kept, removed)| Ok((searched(kept, exclude)?, removed)))?;
     timings.push(("bin_removal", clock.elapsed().as_secs_f64() * 1e3));
     crate::cancel::check()?;
     let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
@@ -163,7 +193,7 @@ fn dispatch(
             let (found, prepared) = detect_instances(&ctx, &mut timings)?;
             (found, prepared.judge)
         }
-        CoarseMethod::Auto => auto(&ctx, &mut timings)?,
+        CoarseMethod::Auto => auto(&ctx, exclude, &mut timings)?,
         CoarseMethod::Given => {
             let judge = Judge::new(&ctx, &pts, removed);
             let t = given.ok_or_else(|| Error::invalid("method", "\"given\" is verify_pose's: pass the pose to it"))?;
@@ -182,6 +212,22 @@ fn dispatch(
             ..e
         })
         .collect())
+}
+
+/// The points bin removal `kept` that the search may use: all of them, or those `exclude` does
+/// not flag (`NoObjectFound` when fewer than ten are left).
+fn searched(kept: Vec<usize>, exclude: Option<&[bool]>) -> Result<Vec<usize>> {
+    let Some(exclude) = exclude else { return Ok(kept) };
+    let left: Vec<usize> = kept.into_iter().filter(|&i| !exclude[i]).collect();
+    if left.len() < 10 {
+        return Err(Error::NoObjectFound {
+            reason: format!(
+                "only {} points of the bin are left to search once the excluded ones are set aside",
+                left.len()
+            ),
+        });
+    }
+    Ok(left)
 }
 
 /// A given pose as the judge sees it, unrefined: `NoObjectFound` where it fails a test.
@@ -222,13 +268,14 @@ pub const AUTO_CCP_REGIONS: usize = 1;
 
 /// Auto with a branch layout: PPF over the pile and CCP on the top object (the next objects
 /// down too when PPF finds nothing); the verified winner leads.
-fn auto(ctx: &Context<'_>, timings: &mut Timings) -> Result<(Vec<PoseEstimate>, Judge)> {
+fn auto(ctx: &Context<'_>, exclude: Option<&[bool]>, timings: &mut Timings) -> Result<(Vec<PoseEstimate>, Judge)> {
     let detected = detect_instances(ctx, timings);
     let clock = Instant::now();
     let (ccp_kept, removed) = if ctx.cfg.bin.is_some() {
         (ctx.kept.to_vec(), Vec::new())
     } else {
-        remove_bin(ctx.scene, ctx.model, ctx.cfg, true, ctx.noise)?
+        let (kept, removed) = remove_bin(ctx.scene, ctx.model, ctx.cfg, true, ctx.noise)?;
+        (searched(kept, exclude)?, removed)
     };
     let ccp_pts: Vec<Point> = ccp_kept.iter().map(|&i| ctx.scene[i]).collect();
     // One judge for both paths: PPF's, when it prepared the scene; CCP's own only without it.

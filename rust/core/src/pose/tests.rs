@@ -550,3 +550,23 @@ fn noise_larger_than_the_part_can_resolve_is_no_object_and_says_so() {
         other => panic!("expected NoObjectFound, got {other:?}"),
     }
 }
+
+#[test]
+fn an_exclusion_mask_must_flag_every_scene_point() {
+    let (model, mesh) = tee_model();
+    let truth = random_pose(&mut Rng::new(4));
+    let scene = top_view(mesh, &truth, 4);
+    let cfg = config(CoarseMethod::Ppf);
+    match estimate_poses_excluding(&scene, model, &cfg, &vec![false; scene.len() - 1]) {
+        Err(Error::InvalidInput { arg, .. }) => assert_eq!(arg, "exclude"),
+        other => panic!("a short mask was taken: {other:?}"),
+    }
+    // Nothing set aside: the same estimate as without a mask.
+    let plain = estimate_poses(&scene, model, &cfg).unwrap();
+    let masked = estimate_poses_excluding(&scene, model, &cfg, &vec![false; scene.len()]).unwrap();
+    assert_eq!(plain[0].t_scene_model, masked[0].t_scene_model);
+    assert!(matches!(
+        estimate_poses_excluding(&scene, model, &cfg, &vec![true; scene.len()]),
+        Err(Error::NoObjectFound { .. })
+    ));
+}
