@@ -209,14 +209,15 @@ impl HeightMap {
         self
     }
 
-    /// Whether the line of sight to the scan point `at` passes through the surface `target`
-    /// (posed by `t_model_scene`, scene → model) before it rises to height `until`: walked from
-    /// `at` toward the sensor (along `up` where it is not known) in steps of `r` (of the target's
-    /// sample spacing where that is larger), each step asking for a surface sample within 1.5
-    /// steps (a line crossing a surface sampled a step apart passes that near a sample on one of
-    /// its steps). A scan point whose sight line misses the posed
-    /// part was seen beside it, not through it: a coarse cell can hold the floor beside a
-    /// steep side together with probes on that side.
+    /// Whether the line of sight to the scan point `at` passes through the part whose surface is
+    /// `target` (posed by `t_model_scene`, scene → model) before it rises to height `until`:
+    /// walked from `at` toward the sensor (along `up` where it is not known) in half steps of
+    /// `r` (of the target's sample spacing where that is larger), it is blocked where a point of
+    /// it lies behind the surface of the sample nearest to it, within a step (inside the part).
+    /// A sight line that only passes near the surface — past a silhouette, within the pose's
+    /// tolerance — is not blocked. A scan point whose sight line misses the posed part was seen
+    /// beside it, not through it: a coarse cell can hold the floor beside a steep side together
+    /// with probes on that side. Without the target's normals, a point near it blocks.
     pub fn sight_blocked(
         &self,
         target: &IcpTarget,
@@ -235,15 +236,17 @@ impl HeightMap {
         if !(rise > 0.05 && r > 0.0) {
             return true;
         }
-        let steps = ((until - self.height(at)) / rise / r).ceil().min(MAX_SIGHT_STEPS);
-        // From two steps out: the samples of the surface `at` itself lies on are within one.
-        let reach = 1.5 * r;
+        let step = 0.5 * r;
+        let steps = ((until - self.height(at)) / rise / step).ceil().min(MAX_SIGHT_STEPS);
+        let (points, normals) = (target.points(), target.normals());
+        // From two steps out: the samples of the surface `at` itself lies on are within reach.
         (2..=steps as usize).any(|i| {
-            let m = t_model_scene * (at + dir * (i as f64 * r));
-            target
-                .search()
-                .nearest_within(&[m.x, m.y, m.z], reach * reach)
-                .is_some()
+            let m = t_model_scene * (at + dir * (i as f64 * step));
+            match (target.search().nearest_within(&[m.x, m.y, m.z], r * r), normals) {
+                (None, _) => false,
+                (Some((k, _)), Some(n)) => (m - points[k]).dot(&n[k]) < 0.0,
+                (Some(_), None) => true,
+            }
         })
     }
 
@@ -671,5 +674,12 @@ mod perspective_tests {
             depth_evidence(&target, &columns().seen_from(None), &at(0.0), 1, 0.5, true),
             blind
         );
+        // Straight up from the floor: through the tube under its axis, past it 1 mm beside its
+        // widest point (within any pose's tolerance of its surface, but outside it).
+        let up = columns().seen_from(None);
+        let pose = at(0.0).inverse();
+        assert!(up.sight_blocked(&target, &pose, &Point::new(3.0, 20.0, 0.0), 30.0, 1.0));
+        assert!(!up.sight_blocked(&target, &pose, &Point::new(-11.0, 20.0, 0.0), 30.0, 1.0));
+        assert!(!up.sight_blocked(&target, &pose, &Point::new(11.0, 20.0, 0.0), 30.0, 1.0));
     }
 }
