@@ -236,6 +236,9 @@ def test_bad_requests_raise_clear_errors(parts):
         binpick.estimate_poses(scene, model, reference_fraction=1.5)
     with pytest.raises(binpick.InvalidInputError, match="viewpoint"):
         binpick.estimate_poses(scene, model, viewpoint=(0, 0))
+    for light in ((0, 0), (0, np.nan, 500)):
+        with pytest.raises(binpick.InvalidInputError, match="light"):
+            binpick.estimate_poses(scene, model, light=light)
     with pytest.raises(binpick.InvalidInputError, match="sampling_ratio"):
         model.prepared(ppf=binpick.PpfParams(sampling_ratio=0.9))
 

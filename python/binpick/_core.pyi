@@ -241,6 +241,7 @@ class PoseConfig:
         method: str | None = None,
         viewpoint: _F64 | None = None,
         along_rays: bool | None = None,
+        light: _F64 | None = None,
         noise_mm: float | None = None,
         noise_per_m2: float | None = None,
         d_star: float | None = None,
@@ -272,6 +273,8 @@ class PoseConfig:
     def method(self) -> str: ...
     @property
     def viewpoint(self) -> tuple[float, float, float] | None: ...
+    @property
+    def light(self) -> tuple[float, float, float] | None: ...
     @property
     def d_star(self) -> float | None: ...
     @property

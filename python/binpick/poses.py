@@ -329,6 +329,7 @@ def estimate_poses(
     up: Any = None,
     viewpoint: Any = None,
     along_rays: bool = _POSE.along_rays,
+    light: Any = None,
     sensor: Optional[SensorModel] = None,
     noise_mm: Optional[float] = None,
     d_star: Optional[float] = None,
@@ -369,6 +370,12 @@ def estimate_poses(
     +z); without it, support planes much larger than the part (floor, walls) are found and
     removed.
 
+    ``light`` (optional) is where the light that made the scan came from, when not from the
+    camera: a laser-line projector's origin (the cell gives it). A point the scan holds was lit as
+    well as seen, so a pose standing between it and the light is refused too; without ``light``
+    the depth test asks the camera's line of sight alone, and a laser scan's points in a pose's
+    shadow say nothing against it.
+
     ``sensor`` (a :class:`SensorModel`) or ``noise_mm`` (its ``noise_mm`` alone) declares the
     sensor's depth noise; by default binpick reads it from the scan. Every tolerance derives from
     it (the depth test takes 3σ, and no less than 1 mm), so a noisier sensor is judged at its own
@@ -403,6 +410,7 @@ def estimate_poses(
         method=method,
         viewpoint=viewpoint,
         along_rays=flag(along_rays, "along_rays"),
+        light=light,
         sensor=sensor,
         noise_mm=noise_mm,
         d_star=optional_number(d_star, "d_star"),
@@ -436,7 +444,9 @@ def _check_model(model: Any) -> None:
         )
 
 
-def _pose_config(*, bin: Any, up: Any, viewpoint: Any, sensor: Any, noise_mm: Any, **checked: Any) -> Any:
+def _pose_config(
+    *, bin: Any, up: Any, viewpoint: Any, sensor: Any, noise_mm: Any, light: Any = None, **checked: Any
+) -> Any:
     """The native pose configuration of a call: the scene's frame and sensor checked here, the
     other options as the caller checked them."""
     noise = _sensor_model(sensor, noise_mm)
@@ -445,6 +455,7 @@ def _pose_config(*, bin: Any, up: Any, viewpoint: Any, sensor: Any, noise_mm: An
         bin=None if bin is None else as_float_array(bin, "bin"),
         up=None if up is None else as_vector(up, "up"),
         viewpoint=None if viewpoint is None else as_vector(viewpoint, "viewpoint"),
+        light=None if light is None else as_vector(light, "light"),
         noise_mm=noise.noise_mm,
         noise_per_m2=noise.noise_per_m2,
         **checked,
@@ -460,6 +471,7 @@ def verify_pose(
     up: Any = None,
     viewpoint: Any = None,
     along_rays: bool = _POSE.along_rays,
+    light: Any = None,
     sensor: Optional[SensorModel] = None,
     noise_mm: Optional[float] = None,
     min_coverage: float = _POSE.min_coverage,
@@ -480,6 +492,7 @@ def verify_pose(
         up=up,
         viewpoint=viewpoint,
         along_rays=flag(along_rays, "along_rays"),
+        light=light,
         sensor=sensor,
         noise_mm=noise_mm,
         min_coverage=number(min_coverage, "min_coverage"),

@@ -352,16 +352,16 @@ class Cell:
         return found
 
     def pose_options(self, scan: ScanResult) -> dict[str, Any]:
-        """The options ``scan`` is judged with: the camera orients the normals (up, for looks from
-        several poses joined); a sweep is judged along up (its lines, millimetres apart, alias a
-        grid of the camera's rays), a fixed camera's shot along its rays; config.estimate_options."""
+        """The options ``scan`` is judged with: the camera orients the normals, the laser lit it (for
+        looks from several poses joined: up, no light); a sweep is judged along up (its lines alias
+        a grid of the camera's rays), a fixed camera's shot along its rays; config.estimate_options."""
         cfg = self.config
-        cameras = (np.asarray(scan.T_base_flanges) @ cfg.calibration.T_flange_camera)[:, :3, 3]
-        camera = cameras[0] if np.ptp(cameras, axis=0).max() < 1.0 else None
+        T_base_cameras = np.asarray(scan.T_base_flanges) @ cfg.calibration.T_flange_camera
+        origins = (T_base_cameras[:, :3, 3], (T_base_cameras @ cfg.calibration.T_camera_laser)[:, :3, 3])
+        camera, laser = (x[0] if np.ptp(x, axis=0).max() < 1.0 else None for x in origins)
         fixed = getattr(scan.cloud, "viewpoint", None)
-        defaults = dict(num_threads=cfg.num_threads, search_instances=cfg.max_candidates, viewpoint=camera)
-        if fixed is not None:
-            defaults["viewpoint"] = fixed
+        camera, laser = (camera, laser) if fixed is None else (fixed, None)  # a fixed camera's shot: no laser
+        defaults = dict(num_threads=cfg.num_threads, search_instances=cfg.max_candidates, viewpoint=camera, light=laser)
         return {**defaults, "along_rays": fixed is not None, **cfg.estimate_options}
 
     def _judge_located(self, result: Any, T: np.ndarray) -> Optional[PoseTruth]:

@@ -233,7 +233,7 @@ pub struct PoseConfig {
 impl PoseConfig {
     /// Keyword-only; see `binpick.estimate_poses` for each argument.
     #[new]
-    #[pyo3(signature = (*, bin=None, up=None, method=None, viewpoint=None, along_rays=None, noise_mm=None, noise_per_m2=None, d_star=None, min_points=None, max_normal_angle=None, inlier_distance=None, min_fitness=None, min_coverage=None, ccp_closer_radius=None, ccp_tau=None, reference_fraction=None, max_hypotheses=None, max_instances=None, search_instances=None, num_threads=None))]
+    #[pyo3(signature = (*, bin=None, up=None, method=None, viewpoint=None, along_rays=None, light=None, noise_mm=None, noise_per_m2=None, d_star=None, min_points=None, max_normal_angle=None, inlier_distance=None, min_fitness=None, min_coverage=None, ccp_closer_radius=None, ccp_tau=None, reference_fraction=None, max_hypotheses=None, max_instances=None, search_instances=None, num_threads=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         bin: Option<PyReadonlyArrayDyn<'_, f64>>,
@@ -241,6 +241,7 @@ impl PoseConfig {
         method: Option<&str>,
         viewpoint: Option<PyReadonlyArray1<'_, f64>>,
         along_rays: Option<bool>,
+        light: Option<PyReadonlyArray1<'_, f64>>,
         noise_mm: Option<f64>,
         noise_per_m2: Option<f64>,
         d_star: Option<f64>,
@@ -289,6 +290,10 @@ impl PoseConfig {
                 None => d.viewpoint,
             },
             along_rays: along_rays.unwrap_or(d.along_rays),
+            light: match light {
+                Some(v) => Some(Point3::from(vector3(&v, "light")?)),
+                None => d.light,
+            },
             sensor: SensorModel {
                 noise_mm: noise_mm.or(d.sensor.noise_mm),
                 noise_per_m2: noise_per_m2.unwrap_or(d.sensor.noise_per_m2),
@@ -334,6 +339,11 @@ impl PoseConfig {
     #[getter]
     fn viewpoint(&self) -> Option<(f64, f64, f64)> {
         self.inner.viewpoint.map(|p| triple(&p.coords))
+    }
+    /// Where the scan's light came from in the scene frame, mm, or None.
+    #[getter]
+    fn light(&self) -> Option<(f64, f64, f64)> {
+        self.inner.light.map(|p| triple(&p.coords))
     }
     /// d* of segmentation, mm (None: derived from the scan).
     #[getter]

@@ -242,7 +242,9 @@ impl<'a> Checks<'a> {
         Checks {
             model,
             params: p,
-            heights: HeightMap::new(ctx.scene, ctx.view, (1.5 * s.across).max(0.5)).seen_from(ctx.cfg.viewpoint),
+            heights: HeightMap::new(ctx.scene, ctx.view, (1.5 * s.across).max(0.5))
+                .seen_from(ctx.cfg.viewpoint)
+                .lit_from(ctx.cfg.light),
             probe,
             sample,
             tol,

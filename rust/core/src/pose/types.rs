@@ -196,6 +196,11 @@ pub struct PoseConfig {
     /// several millimetres apart, alias a grid of the camera's rays); the normals face the
     /// viewpoint either way.
     pub along_rays: bool,
+    /// Where the light that made the scan comes from, mm, when the sensor lights the scene from
+    /// elsewhere than its camera (a laser-line projector's origin): a point the scan holds must
+    /// have been lit as well as seen, so a pose that stands between it and the light is
+    /// contradicted by it too. Without it the depth test asks the camera's line of sight alone.
+    pub light: Option<Point>,
     /// The sensor's depth noise (declared, or read from the scan).
     pub sensor: SensorModel,
     /// Instances returned by [`estimate_poses`](super::estimate_poses).
@@ -225,6 +230,7 @@ impl Default for PoseConfig {
             detect: DetectConfig::default(),
             trust: TrustParams::default(),
             viewpoint: None,
+            light: None,
             along_rays: true,
             sensor: SensorModel::default(),
             max_instances: 1,
@@ -277,6 +283,11 @@ impl PoseConfig {
         if let Some(v) = self.viewpoint {
             if !v.coords.iter().all(|c| c.is_finite()) {
                 return Err(Error::invalid("viewpoint", "must be a finite point"));
+            }
+        }
+        if let Some(v) = self.light {
+            if !v.coords.iter().all(|c| c.is_finite()) {
+                return Err(Error::invalid("light", "must be a finite point"));
             }
         }
         self.sensor.validate(self.viewpoint.as_ref())

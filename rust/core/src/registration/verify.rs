@@ -31,6 +31,9 @@ pub struct HeightMap {
     /// Where the sensor's lines of sight come from, where known: a perspective map's centre, or
     /// the viewpoint given to an orthographic map ([`HeightMap::seen_from`]).
     sensor: Option<Point>,
+    /// Where the light that lit the scan comes from, when not from the sensor (a laser-line
+    /// projector's origin, [`HeightMap::lit_from`]).
+    light: Option<Point>,
     /// A perspective map's lateral coordinates are those at this range, mm (its cells' size there).
     focal: f64,
     cell: f64,
@@ -89,6 +92,7 @@ impl HeightMap {
             up,
             eye,
             sensor: eye,
+            light: None,
             focal,
             cell: 1.0,
             origin: (0.0, 0.0),
@@ -209,7 +213,14 @@ impl HeightMap {
         self
     }
 
-    /// Whether the line of sight to the scan point `at` passes through the part whose surface is
+    /// This map, knowing that the scan was lit from `light` (see [`HeightMap::sight_blocked`]).
+    pub fn lit_from(mut self, light: Option<Point>) -> Self {
+        self.light = light;
+        self
+    }
+
+    /// Whether the line of sight to the scan point `at` — or its line of light, where the map
+    /// knows where the light came from — passes through the part whose surface is
     /// `target` (posed by `t_model_scene`, scene → model) before it rises to height `until`:
     /// walked from `at` toward the sensor (along `up` where it is not known) in half steps of
     /// `r` (of the target's sample spacing where that is larger), it is blocked where a point of
@@ -226,12 +237,33 @@ impl HeightMap {
         until: f64,
         r: f64,
     ) -> bool {
-        let dir = match self.sensor {
+        let sight = match self.sensor {
             Some(s) => (s - at).try_normalize(1e-12).unwrap_or(self.up),
             None => self.up,
         };
-        // Height gained per millimetre along the sight line.
-        let rise = if self.eye.is_some() { 1.0 } else { dir.dot(&self.up) };
+        let lit = self.light.and_then(|l| (l - at).try_normalize(1e-12));
+        std::iter::once(sight)
+            .chain(lit)
+            .any(|dir| self.line_blocked(target, t_model_scene, at, &dir, until, r))
+    }
+
+    /// Whether the line from `at` along `dir` passes inside the posed part before it rises to
+    /// height `until` (see [`HeightMap::sight_blocked`]).
+    fn line_blocked(
+        &self,
+        target: &IcpTarget,
+        t_model_scene: &Isometry3<f64>,
+        at: &Point,
+        dir: &Vector3<f64>,
+        until: f64,
+        r: f64,
+    ) -> bool {
+        // Height gained per millimetre along the line (a perspective map's height is minus the
+        // range from its centre).
+        let rise = match self.eye {
+            Some(eye) => dir.dot(&(eye - at).try_normalize(1e-12).unwrap_or(self.up)),
+            None => dir.dot(&self.up),
+        };
         let r = r.max(target.spacing().unwrap_or(0.0));
         if !(rise > 0.05 && r > 0.0) {
             return true;
@@ -681,5 +713,18 @@ mod perspective_tests {
         assert!(up.sight_blocked(&target, &pose, &Point::new(3.0, 20.0, 0.0), 30.0, 1.0));
         assert!(!up.sight_blocked(&target, &pose, &Point::new(-11.0, 20.0, 0.0), 30.0, 1.0));
         assert!(!up.sight_blocked(&target, &pose, &Point::new(11.0, 20.0, 0.0), 30.0, 1.0));
+        // Lit from up and aside (a laser beside the camera): the floor beside the tube was in its
+        // shadow, and a point the scan holds there says the tube is not where the pose has it.
+        let lit = columns().seen_from(None).lit_from(Some(Point::new(300.0, 20.0, 300.0)));
+        assert!(lit.sight_blocked(&target, &pose, &Point::new(-11.0, 20.0, 0.0), 30.0, 1.0));
+        assert!(!lit.sight_blocked(&target, &pose, &Point::new(11.0, 20.0, 0.0), 30.0, 1.0));
+        // The oblique scan's floor seen under the tube's near side was lit from the sensor's side;
+        // a light on the far side could not have reached it past the tube as posed.
+        let far = columns()
+            .seen_from(Some(eye))
+            .lit_from(Some(Point::new(200.0, 20.0, 300.0)));
+        assert!(depth_evidence(&target, &far, &at(0.0), 1, 0.5, true).violated > 200);
+        let near = columns().seen_from(Some(eye)).lit_from(Some(eye));
+        assert_eq!(depth_evidence(&target, &near, &at(0.0), 1, 0.5, true), e);
     }
 }

@@ -93,7 +93,8 @@ impl DepthTest {
         };
         DepthTest {
             heights: HeightMap::fitted(ctx.scene, ctx.view, (0.5 * voxel_size(step)).max(1.0))
-                .seen_from(ctx.cfg.viewpoint),
+                .seen_from(ctx.cfg.viewpoint)
+                .lit_from(ctx.cfg.light),
             tol,
             supports,
             seen_planes,
