@@ -129,6 +129,7 @@ class Scene:
     viewpoint: Optional[np.ndarray]
     render: Any = None  # render(index, mesh) -> points of the scene with instance `index` drawn as `mesh`
     extra: dict = field(default_factory=dict)
+    light: Optional[np.ndarray] = None  # where the laser that lit a swept scan came from
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
@@ -195,6 +196,7 @@ def sim_scene(name: str, kind: str, model, poses: np.ndarray, cell: sim.Cell, fr
     scene = Scene(
         f"sim/{kind}/{name}_{tag}", name, "sim", kind, pts, poses, cell.bin.bounds, cell.T_base_camera[:3, 3], render
     )
+    scene.light = (cell.T_base_camera @ cell.calibration().T_camera_laser)[:3, 3]
     scene.extra["instance_points"] = lambda i: pts[(ids == i) & (dist < 1.0)]
     return scene
 
@@ -304,9 +306,16 @@ def judge(scene: Scene, model, base, group=None) -> dict:
     """Runs ``estimate_pose`` on the scene and judges the first pose."""
     start = time.perf_counter()
     try:
-        # As the cell asks for a swept laser scan: normals toward the camera, judged along up.
+        # As the cell asks for a swept laser scan: normals toward the camera, judged along up, lit
+        # from the laser's origin.
         res = binpick.estimate_pose(
-            scene.points, model, bin=scene.bin, viewpoint=scene.viewpoint, along_rays=False, num_threads=1
+            scene.points,
+            model,
+            bin=scene.bin,
+            viewpoint=scene.viewpoint,
+            along_rays=False,
+            light=scene.light,
+            num_threads=1,
         )
     except binpick.NoObjectFound:
         res = None
