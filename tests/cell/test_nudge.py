@@ -91,25 +91,43 @@ def test_the_last_tee_standing_against_a_wall_is_found_though_a_flip_through_the
     assert deg < 2.0 and mm < 1.0 and found.confidence > 0.8, (deg, mm, found)
 
 
-def test_after_a_nudge_the_cell_looks_from_the_scan_pose_and_the_best_turned_view_only(tee):
-    # A tee the gripper cannot take (fingers opening 12 mm, narrower than any of its branches):
-    # every look is a dead end. Before the nudge the cell looks from the scan pose and from every
-    # turned view; after it, from the scan pose and from the one turned view that best tells the
-    # part apart — the others were just tried, and only the pushed part has moved.
+def _narrow_dead_end(tee, **overrides):
+    """A lone tee the gripper cannot take (fingers opening 12 mm, narrower than any of its
+    branches): every look is a dead end; the cell nudges it once. The run's record and the
+    stages of its looks and nudge, in order."""
     lines = []
     square = binpick.cell.branch_grasps(tee, end_pitches_deg=())
     narrow = binpick.cell.GripperGeometry(open_width_mm=12.0)
     progress = lambda stage, msg: lines.append((stage, msg))  # noqa: E731
-    sim = SimulatedCell(tee, count=1, seed=0, frames=30, grasps=square, gripper=narrow, max_nudges=1, progress=progress)
+    sim = SimulatedCell(
+        tee, count=1, seed=0, frames=36, grasps=square, gripper=narrow, max_nudges=1, progress=progress, **overrides
+    )
     with sim:
-        turned = len(sim.cell.config.look_again_poses)
+        assert len(sim.cell.config.look_again_poses) == 4
         report = sim.cell.run(1)
         assert sim.emulator_failures == []
     (record,) = report.records
-    assert turned == 4 and record.failure == "no grasp" and len(record.nudges) == 1, report.stopped
-    stages = [s for s, m in lines if s in ("look", "nudge") and not m.startswith("the ambiguous")]
-    assert record.looks == 1 + turned + 2, stages
-    assert stages.index("nudge") == turned and stages.count("look") == turned + 1, stages
+    assert record.failure == "no grasp" and len(record.nudges) == 1, report.stopped
+    return record, [s for s, m in lines if s in ("look", "nudge") and not m.startswith("the ambiguous")]
+
+
+def test_after_a_nudge_the_cell_looks_from_the_scan_pose_and_the_best_turned_view_only(tee):
+    # Refused for its confidence (a min_confidence no pose reaches), a reason another view may
+    # change: before the nudge the cell looks from the scan pose and from every turned view;
+    # after it, from the scan pose and from the one turned view that best tells the part apart —
+    # the others were just tried, and only the pushed part has moved.
+    record, stages = _narrow_dead_end(tee, min_confidence=1.0)
+    assert record.looks == 1 + 4 + 2, stages
+    assert stages.index("nudge") == 4 and stages.count("look") == 4 + 1, stages
+
+
+def test_a_part_refused_only_for_where_it_lies_is_nudged_without_looking_again(tee):
+    # Decided and refused by every grasp for its tilt and width alone, with nothing else in the
+    # bin: no view can change that, so the cell nudges it right after the first look (after the
+    # nudge, a second look only where the scan pose's found nothing).
+    record, stages = _narrow_dead_end(tee)
+    assert stages[0] == "nudge" and record.looks == 2 + stages.count("look") <= 3, stages
+    assert all(k.settled for k in record.skipped) and record.skipped, record.skipped
 
 
 def test_a_nudge_through_the_floor_into_a_wall_or_out_of_reach_is_refused_with_nothing_sent(tee):
@@ -445,3 +463,21 @@ def test_the_path_map_keeps_a_moved_footprint_in_the_bin_and_off_other_parts():
     # A part located a hair past the −x wall may stay there: its points lie in the edge cells
     # there, not in the far wall's (wrapped round the map).
     assert path.clear(np.array([[249.5, 0.0]]), np.zeros(2))
+
+
+def test_with_no_nudge_to_make_the_cell_takes_the_views_it_left_out_before_it_stops(tee):
+    # An arm that reaches nothing below 300 mm: every grasp of the lone tee is refused for reach,
+    # a reason no view changes, so the first look goes straight to the nudge; no nudge reaches
+    # either, and the cell then looks from the scan pose and every turned view before it stops.
+    lines = []
+    high = lambda T: bool(T[2, 3] > 300.0)  # noqa: E731
+    progress = lambda stage, msg: lines.append((stage, msg))  # noqa: E731
+    with SimulatedCell(tee, count=1, seed=0, frames=36, reachable=high, progress=progress) as sim:
+        turned = len(sim.cell.config.look_again_poses)
+        report = sim.cell.run(1)
+        assert sim.emulator_failures == []
+    (record,) = report.records
+    assert turned == 4 and record.failure == "no grasp" and not record.nudges, report.stopped
+    assert report.stopped.endswith("(no nudge passes the checks)"), report.stopped
+    assert record.looks == 1 + 1 + turned and sum(s == "look" for s, _ in lines) == turned, lines
+    assert all(k.settled and "reach" in k.refused for k in record.skipped), record.skipped

@@ -337,9 +337,11 @@ class CellConfig:
             bin floor's centre toward each side); () = no second look.
         reachable: optional test ``T_base_flange → bool`` from the arm's kinematics; None = trust
             the controller (it refuses unreachable targets, and the cell then stops).
-        max_nudges: at a dead end (every view tried, the parts located but none pickable), how
+        max_nudges: at a dead end (the parts located but none pickable from any view), how
             many times per pick the closed gripper may push a blocked part over before the cell
-            looks again (:mod:`binpick.cell.nudge`); 0 = never.
+            looks again (:mod:`binpick.cell.nudge`); 0 = never. With a nudge to come, a look
+            whose parts were all refused for where they lie leaves out the other views
+            (:func:`binpick.cell.views.worth_another_look`); they are taken when none is found.
         symmetries: ``T_object_object`` maps of the part onto itself, for judging pose errors.
         min_score: a located pose scoring lower counts as not found.
         estimate_options: extra keyword arguments for :func:`binpick.estimate_pose`.

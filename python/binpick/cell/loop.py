@@ -42,14 +42,7 @@ from .._validate import as_transform, count, number
 from ..devices.gripper import Gripper
 from ..devices.motor import LaserMotor
 from ..devices.robot import Robot
-from ..errors import (
-    BinpickError,
-    DeviceError,
-    InvalidInputError,
-    InvalidTypeError,
-    NoObjectFound,
-    RunInterrupted,
-)
+from ..errors import BinpickError, DeviceError, InvalidInputError, InvalidTypeError, NoObjectFound, RunInterrupted
 from ..poses import estimate_poses
 from ..vision import describe_frames, triangulate
 from .ahead import PlanAhead
@@ -69,6 +62,7 @@ from .records import (
     Skipped,
     emptied_record,
     failed_record,
+    judge_located,
     located_line,
     pose_trust,
     with_collisions,
@@ -78,8 +72,7 @@ from .rescan import SEEN_AGAIN, RescanBasis, basis_after, part_box, rescan
 from .scene import planner_scene
 from .shots import DepthSource, depth_scan
 from .sweeps import sweep_laser
-from .symmetry import continuous_near_axis
-from .views import deciding_first, something_in_bin
+from .views import deciding_first, settled, something_in_bin, worth_another_look
 
 __all__ = ["Cell", "PICK_MOVES", "ProgressPrinter", "quiet"]
 
@@ -365,16 +358,8 @@ class Cell:
         return {**defaults, "along_rays": fixed is not None, **cfg.estimate_options}
 
     def _judge_located(self, result: Any, T: np.ndarray) -> Optional[PoseTruth]:
-        """The truth of a located pose (None without ground truth). For a pose flagged ambiguous
-        the best of it and its alternatives: :meth:`plan` picks such a pose only with a grasp
-        that grips every alternative the same way, so whichever of them is true, the pick is;
-        with a free axis, only across that axis, so any turn about it is as good."""
-        if self.truth is None:
-            return None
-        about = continuous_near_axis(self.config.model) if getattr(result, "free_axis", None) is not None else None
-        poses = [T, *(a.T_scene_model for a in result.alternatives)] if getattr(result, "ambiguous", False) else [T]
-        truths = [self.truth.judge(np.asarray(P, dtype=np.float64), turn_about=about) for P in poses]
-        return min(truths, key=lambda t: (not t.pick_grade, t.rotation_error_deg / 5.0 + t.translation_error_mm / 3.0))
+        """The truth of a located pose, None without ground truth (:func:`~binpick.cell.records.judge_located`)."""
+        return None if self.truth is None else judge_located(self.truth, self.config.model, result, T)
 
     def locate_and_plan(
         self, scan: ScanResult, skipped: Optional[list[Skipped]] = None, *, exclude: Optional[np.ndarray] = None
@@ -424,11 +409,12 @@ class Cell:
                 except NoGraspError as exc:
                     last = exc
                     res = located.result
-                    alternatives = tuple(
+                    alts = tuple(
                         np.asarray(a.T_scene_model, dtype=np.float64)
                         for a in (getattr(res, "alternatives", ()) if getattr(res, "ambiguous", False) else ())
                     )
-                    skipped.append(Skipped(located.T_base_object, exc.reason, located.truth, exc.refused, alternatives))
+                    final = settled(self.config, res, exc.refused)  # no other look can change it
+                    skipped.append(Skipped(located.T_base_object, exc.reason, located.truth, exc.refused, alts, final))
                     self.progress(
                         "skip", f"{self.config.model.name} at ({t[0]:.1f}, {t[1]:.1f}, {t[2]:.1f}) mm: {exc.reason}"
                     )
@@ -663,6 +649,7 @@ class Cell:
         nudges: list = []
         spent: dict[str, float] = {}  # the timings of the attempts and nudges before this one
         looks = 0
+        settle = True  # a look is cut short where a nudge follows, until a nudge is not found
 
         def whole(record: PickRecord) -> PickRecord:
             times = with_earlier(record.timings, spent)
@@ -672,7 +659,8 @@ class Cell:
             return replace(record, timings=MappingProxyType(times), looks=looks + record.looks, nudges=tuple(nudges))
 
         while True:
-            record, why = self._look_and_pick(i, None if nudges else before, nudged=bool(nudges))
+            short = settle and len(nudges) < self.config.max_nudges
+            record, why = self._look_and_pick(i, None if nudges else before, nudged=bool(nudges), settle=short)
             dead_end = why is not None and record.failure == "no grasp" and bool(record.skipped)
             if not dead_end or record.scan is None:
                 return whole(record), why
@@ -689,6 +677,9 @@ class Cell:
             if fault is not None:
                 error = f"nudge: {type(fault).__name__}: {fault}"
                 return replace(whole(record), failure="fault", fault=True, error=error), f"pick {i}: {error}"
+            if plan is None and self._cut_short:  # no nudge after all: the views not taken first
+                settle, spent, looks = False, dict(whole(record).timings), looks + record.looks
+                continue
             if plan is None:
                 return whole(record), f"{why} (no nudge passes the checks)"
             spent = dict(whole(record).timings)
@@ -696,15 +687,17 @@ class Cell:
             nudges.append(plan)
 
     def _look_and_pick(
-        self, i: int, before: Optional[PickRecord] = None, nudged: bool = False
+        self, i: int, before: Optional[PickRecord] = None, nudged: bool = False, settle: bool = False
     ) -> tuple[PickRecord, Optional[str]]:
         """Scan, locate and plan — looking again from each of ``config.look_again_poses`` while
-        nothing is pickable (from one only when neither look finds any part, or ``nudged``: after
-        a nudge, whose views were all just tried), each look judged together with the first — then
-        pick; the record, and why the run stops (None to go on). ``before``: the pick just made,
-        whose plan made ahead (:mod:`binpick.cell.ahead`) the first look may confirm."""
+        nothing is pickable (from one only when neither look finds any part, or, ``nudged``, when
+        the first finds parts: a nudge moved only the part it pushed; with ``settle`` — a nudge to
+        follow — from none when every part found was refused for where it lies, see
+        :func:`~binpick.cell.views.worth_another_look`), each look judged together with the first;
+        then pick. The record, and why the run stops (None to go on). ``before``: the pick just
+        made, whose plan made ahead (:mod:`binpick.cell.ahead`) the first look may confirm."""
         t0, c0 = time.perf_counter(), self.clock and self.clock()
-        self._cpu = {}
+        self._cpu, self._cut_short = {}, False
         scan = first = None  # the look now, and the first look each later one is judged with
         located: Optional[Located] = None
         skipped: list[Skipped] = []
@@ -715,6 +708,7 @@ class Cell:
         looks = 0
         try:
             for k, view in enumerate(views):
+                seen_before = len(skipped)
                 if k:
                     T = view[0]
                     self.progress(
@@ -748,14 +742,19 @@ class Cell:
                         times.pop("ahead.used", None)
                         located, plan = self.locate_and_plan(scan, skipped)
                 except (NoObjectFound, NoGraspError):
-                    # Two looks that found no part in a bin with nothing in it: the bin is empty,
-                    # as far as the cell can see; parts found but not pickable, or something in
-                    # the bin that no pose explains, are worth every view there is.
-                    if k == len(views) - 1 or (k >= 1 and not skipped and not something_in_bin(self.config, scan)):
+                    # Two looks that found no part in a bin with nothing in it: the bin is empty as
+                    # far as the cell can see; parts not pickable for a reason a view can change, or
+                    # something in the bin no pose explains, are worth every view there is.
+                    here, last = skipped[seen_before:], k == len(views) - 1
+                    empty = k >= 1 and not skipped and not something_in_bin(self.config, scan)
+                    self._cut_short = (
+                        settle and not last and bool(here) and not worth_another_look(self.config, scan, here)
+                    )
+                    if last or empty or self._cut_short:
                         raise
                     if k == 0:
                         views[1:] = deciding_first(self.config, views[1:], skipped, self.progress)
-                        views[2 if nudged else len(views) :] = []
+                        views[2 if nudged and skipped else len(views) :] = []
                     continue
                 finally:
                     times["locate+plan"] = times.get("locate+plan", 0.0) + _ms_since(t1)

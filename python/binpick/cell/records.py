@@ -12,6 +12,7 @@ from typing import Any, Optional
 import numpy as np
 
 from ..transforms import inverse
+from .symmetry import continuous_near_axis
 
 __all__ = [
     "ScanResult",
@@ -24,6 +25,7 @@ __all__ = [
     "RunReport",
     "FAILURE_KINDS",
     "with_collisions",
+    "judge_located",
     "PICK_GRADE_DEG",
     "PICK_GRADE_MM",
     "CYCLE_STAGES",
@@ -179,14 +181,16 @@ class Located:
 @dataclass(frozen=True, eq=False)
 class Skipped:
     """A located part the loop passed over: where, why (a few words), for the picture a few of
-    the refused gripper poses per reason (reason → (K, 4, 4) ``T_base_gripper``), and the
-    alternative poses the scan could not rule out when the pose was ambiguous."""
+    the refused gripper poses per reason (reason → (K, 4, 4) ``T_base_gripper``), the
+    alternative poses the scan could not rule out when the pose was ambiguous, and whether another
+    look cannot change why it was passed over (:func:`binpick.cell.views.settled`)."""
 
     T_base_object: np.ndarray
     reason: str
     truth: Optional[PoseTruth] = None
     refused: Mapping[str, np.ndarray] = field(default_factory=dict)
     alternatives: tuple[np.ndarray, ...] = ()
+    settled: bool = False
 
     def as_dict(self) -> dict:
         """A JSON-ready summary."""
@@ -500,3 +504,15 @@ def emptied_record(i: int, scan: ScanResult, times: dict[str, float], looks: int
         scan=scan,
         bin_empty=True,
     )
+
+
+def judge_located(truth: Any, model: Any, result: Any, T: np.ndarray) -> PoseTruth:
+    """The truth (``truth.judge``, the cell's ground truth) of the pose ``T`` located as
+    ``result`` of ``model``. For a pose flagged ambiguous the best of it and its alternatives: the
+    cell picks such a pose only with a grasp that grips every alternative the same way, so
+    whichever of them is true, the pick is; with a free axis, only across that axis, so any turn
+    about it is as good."""
+    about = continuous_near_axis(model) if getattr(result, "free_axis", None) is not None else None
+    poses = [T, *(a.T_scene_model for a in result.alternatives)] if getattr(result, "ambiguous", False) else [T]
+    truths = [truth.judge(np.asarray(P, dtype=np.float64), turn_about=about) for P in poses]
+    return min(truths, key=lambda t: (not t.pick_grade, t.rotation_error_deg / 5.0 + t.translation_error_mm / 3.0))

@@ -1,10 +1,11 @@
-"""Where the camera looks from: the scan poses of a second look, and which of them best shows
-what tells an ambiguous pose from its alternatives. Lengths in mm, transforms 4×4 ``T_to_from``."""
+"""Where the camera looks from: the scan poses of a second look, which of them best shows what
+tells an ambiguous pose from its alternatives, and whether another look is worth it at all.
+Lengths in mm, transforms 4×4 ``T_to_from``."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -18,11 +19,27 @@ from ..transforms import rotation_about
 if TYPE_CHECKING:  # annotations only: config imports this module
     from .config import CellConfig
 
-__all__ = ["IN_BIN_MM", "turned_scan_poses", "deciding_views", "deciding_first", "something_in_bin"]
+__all__ = [
+    "IN_BIN_MM",
+    "PLACE_REFUSALS",
+    "turned_scan_poses",
+    "deciding_views",
+    "deciding_first",
+    "something_in_bin",
+    "settled",
+    "worth_another_look",
+]
 
 #: Scan points more than this far (mm) inside the bin's walls and above its floor are something in
 #: the bin (many times the scan's noise, less than any part is thick): see :func:`something_in_bin`.
 IN_BIN_MM = 3.0
+
+#: The reasons a grasp is refused that depend only on where the part lies and on what the scan
+#: already shows around it (:func:`binpick.cell.grasp.plan_grasp`): the tool's tilt, the opening,
+#: the bin's walls, scene points in the gripper (a later look joins the first, so its points only
+#: add), the part's own other branches, the arm's reach and the safety rules. Another view of the
+#: same pose cannot lift them.
+PLACE_REFUSALS = frozenset({"tilt", "width", "bin", "collision", "self-collision", "reach", "safety"})
 
 
 def turned_scan_poses(config: CellConfig, *, tilt_deg: float = 20.0) -> tuple[np.ndarray, ...]:
@@ -121,8 +138,51 @@ def something_in_bin(config: CellConfig, scan: Any) -> bool:
     """Whether ``scan`` (a :class:`binpick.cell.records.ScanResult`) shows something standing in
     the bin: at least 10 points more than :data:`IN_BIN_MM` inside its walls and above its
     floor, spanning a fifth of the part's size (what the cell needs to search at all)."""
+    return _something(config, _in_bin(config, scan.points))
+
+
+def _in_bin(config: CellConfig, points: np.ndarray) -> np.ndarray:
+    """Those of ``points`` more than :data:`IN_BIN_MM` inside the bin's walls and above its floor."""
     lo, hi = config.bin_bounds
-    m = IN_BIN_MM
-    p = scan.points
-    inside = p[np.all(p[:, :2] > lo[:2] + m, axis=1) & np.all(p[:, :2] < hi[:2] - m, axis=1) & (p[:, 2] > lo[2] + m)]
+    m, p = IN_BIN_MM, np.asarray(points, dtype=np.float64)
+    return p[np.all(p[:, :2] > lo[:2] + m, axis=1) & np.all(p[:, :2] < hi[:2] - m, axis=1) & (p[:, 2] > lo[2] + m)]
+
+
+def _something(config: CellConfig, inside: np.ndarray) -> bool:
+    """Whether points in the bin (:func:`_in_bin`) are something: at least 10, spanning a fifth of the part."""
     return len(inside) >= 10 and float(np.linalg.norm(np.ptp(inside, axis=0))) >= 0.2 * config.model.diameter
+
+
+def settled(config: CellConfig, result: Any, refused: Mapping[str, Any]) -> bool:
+    """Whether another look cannot change why a located part was passed over: its pose is one
+    the cell would pick on (unambiguous, ``confidence`` at least ``config.min_confidence``) and
+    every grasp was refused for a reason of :data:`PLACE_REFUSALS` (``refused``: reason → the
+    refused gripper poses, as :class:`binpick.cell.grasp.NoGraspError` keeps them). A pose
+    refused for its confidence or its ambiguity, or one the scan leaves open, is not settled:
+    a view that decides it may change its grasps."""
+    if not refused or not set(refused) <= PLACE_REFUSALS:
+        return False
+    if getattr(result, "ambiguous", False) or getattr(result, "free_axis", None) is not None:
+        return False
+    return float(getattr(result, "confidence", 1.0)) >= config.min_confidence
+
+
+def worth_another_look(config: CellConfig, scan: Any, skipped: Sequence) -> bool:
+    """Whether looking from another pose may find a part to pick, after a look whose located
+    parts (``skipped``, :class:`binpick.cell.records.Skipped`) were all passed over: yes when one
+    of them is not :func:`settled`, or when ``scan`` shows something in the bin that none of them
+    explains (as :func:`something_in_bin` counts it: points farther than :data:`IN_BIN_MM` plus the
+    model's sample spacing from every located part's surface) — a part the search could not
+    locate from here. No when every part seen is settled and explained: the cell goes on to its
+    nudge at once instead of sweeping from every view."""
+    if not skipped or not all(k.settled for k in skipped):
+        return True
+    p = _in_bin(config, scan.points)
+    reach = IN_BIN_MM + float(config.model.spacing or 0.0)
+    surface = np.asarray(config.model.points, dtype=np.float64)
+    for k in skipped:
+        if not len(p):
+            break
+        T = np.asarray(k.T_base_object, dtype=np.float64)
+        p = p[nearest_distances(p, surface @ T[:3, :3].T + T[:3, 3]) > reach]
+    return _something(config, p)

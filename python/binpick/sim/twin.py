@@ -334,6 +334,7 @@ class TwinWorld:
         arm, and the part's symmetries (so that a grip of a part turned by one counts)."""
         overrides = dict(self.config_overrides)
         overrides.setdefault("symmetries", symmetry_maps(self.model.symmetries))
+        overrides.setdefault("reachable", _Reach(self.arm) if self.robot == "melfa" else self.arm.reaches)
         return CellConfig(
             calibration=self.layout.calibration(),
             model=self.model,
@@ -343,7 +344,6 @@ class TwinWorld:
             frames=self.frames,
             gripper=self.gripper_geometry,
             limits=limits,
-            reachable=_Reach(self.arm) if self.robot == "melfa" else self.arm.reaches,
             num_threads=self.num_threads,
             **overrides,
         )
