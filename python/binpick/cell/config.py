@@ -342,6 +342,8 @@ class CellConfig:
             looks again (:mod:`binpick.cell.nudge`); 0 = never. With a nudge to come, a look
             whose parts were all refused for where they lie leaves out the other views
             (:func:`binpick.cell.views.worth_another_look`); they are taken when none is found.
+            Default 5: a nudge then costs one look, not one per view, and parts lying flat side
+            by side (elbows) often need a fourth or fifth push before one can be gripped.
         symmetries: ``T_object_object`` maps of the part onto itself, for judging pose errors.
         min_score: a located pose scoring lower counts as not found.
         estimate_options: extra keyword arguments for :func:`binpick.estimate_pose`.
@@ -377,7 +379,7 @@ class CellConfig:
     max_candidates: int = 8
     look_again_poses: Optional[Sequence[Any]] = None
     reachable: Optional[Callable[[np.ndarray], bool]] = None
-    max_nudges: int = 3
+    max_nudges: int = 5
     symmetries: Sequence[Any] = ()
     min_score: float = 0.0
     estimate_options: Mapping[str, Any] = field(default_factory=dict)
