@@ -570,3 +570,94 @@ fn an_exclusion_mask_must_flag_every_scene_point() {
         Err(Error::NoObjectFound { .. })
     ));
 }
+
+/// A tee standing on its run's end against the +y wall of a bin, its stem along the wall under a
+/// slab: the view shows the run's top end alone, whose turn about the run it leaves open. Read
+/// with the stem swung through the wall, the pose is refused for the wall, and of its turns
+/// about the run the judge passes the truth alone (the others put the stem where the floor is
+/// seen, or into the wall).
+#[test]
+fn a_pose_through_a_wall_is_turned_about_the_axis_its_points_leave_open() {
+    let (model, mesh) = tee_model();
+    // The run (model x) up, the stem (model +y) along +x.
+    let up = UnitQuaternion::from_scaled_axis(Vector3::y() * (-PI / 2.0));
+    let stand = UnitQuaternion::from_scaled_axis(Vector3::z() * (-PI / 2.0));
+    let standing = Isometry3::from_parts(Translation3::new(400.0, 0.0, 0.0), stand * up);
+    let lowest = transform_points(&standing, &mesh.vertices)
+        .iter()
+        .map(|p| p.z)
+        .fold(f64::INFINITY, f64::min);
+    let truth = Translation3::new(0.0, 0.0, -lowest) * standing;
+    let posed = transform_points(&truth, &mesh.vertices);
+    let (lo, hi) = posed.iter().fold(
+        (
+            Point::new(f64::INFINITY, f64::INFINITY, f64::INFINITY),
+            Point::new(-f64::INFINITY, -f64::INFINITY, -f64::INFINITY),
+        ),
+        |(a, b), p| (a.inf(p), b.sup(p)),
+    );
+    let c = truth * model.symmetries.center;
+    assert!(
+        hi.z - lo.z > 70.0 && hi.x - c.x > 30.0,
+        "the run stands, the stem lies along +x"
+    );
+    // A slab over the stem, under the run's top; the floor around.
+    let slab = crate::mesh::test_box(
+        Point::new(c.x + 14.0, lo.y - 10.0, hi.z - 12.0),
+        Point::new(hi.x + 10.0, hi.y + 10.0, hi.z - 9.0),
+    );
+    let floor = crate::mesh::test_box(
+        Point::new(c.x - 100.0, c.y - 100.0, -3.0),
+        Point::new(c.x + 100.0, hi.y + 0.5, 0.0),
+    );
+    let mut v: Vec<Point> = posed.clone();
+    let mut f = mesh.faces.clone();
+    for b in [&slab, &floor] {
+        let base = v.len() as u32;
+        v.extend(b.vertices.iter().copied());
+        f.extend(b.faces.iter().map(|t| [t[0] + base, t[1] + base, t[2] + base]));
+    }
+    let world = crate::mesh::TriMesh::new(v, f).unwrap();
+    let scene = top_view(&world, &Isometry3::identity(), 7);
+    let mut cfg = config(CoarseMethod::Ccp);
+    cfg.bin = Some(BinBox {
+        min: Point::new(c.x - 100.0, c.y - 100.0, 0.0),
+        max: Point::new(c.x + 100.0, hi.y + 0.5, 150.0),
+    });
+    let (kept, removed) = remove_bin(&scene, model, &cfg, true, 0.0).unwrap();
+    let pts: Vec<Point> = kept.iter().map(|&i| scene[i]).collect();
+    let judge = judge_of(&scene, &pts, removed, model, &cfg);
+    assert!(judge.verdict(model, &truth).is_ok(), "the truth passes");
+    let claimed: Vec<Point> = scene::scene_indices(&scene, model, &truth, judge.depth.tol)
+        .into_iter()
+        .map(|i| scene[i])
+        .collect();
+    // Swung a quarter turn about the run: the stem through the wall.
+    let run = truth.rotation * Vector3::x();
+    let swung = Translation3::from(c.coords)
+        * UnitQuaternion::from_scaled_axis(run * (PI / 2.0))
+        * Translation3::from(-c.coords)
+        * truth;
+    let into_wall = if judge.depth.through_supports(model, &swung) > 0.02 {
+        swung
+    } else {
+        Translation3::from(c.coords)
+            * UnitQuaternion::from_scaled_axis(run * (-PI / 2.0))
+            * Translation3::from(-c.coords)
+            * truth
+    };
+    assert!(
+        judge.depth.through_supports(model, &into_wall) > 0.02,
+        "the stem through the wall"
+    );
+    assert!(judge.verdict(model, &into_wall).is_err());
+    let (kept, _) = judge
+        .turned_clear(&claimed, model, &into_wall)
+        .expect("a turn about the run passes");
+    let (rot, shift) = model.symmetries.pose_error(&kept, &truth);
+    assert!(
+        rot.to_degrees() < 2.0 && shift < 1.0,
+        "{:.2}° {shift:.2} mm",
+        rot.to_degrees()
+    );
+}
