@@ -5,7 +5,7 @@
 //! model points on the scene), give the best few a short ICP, and the winner is refined on all
 //! of the object's points. Their tunables are [`CcpPathParams`].
 
-use super::judge::{Judge, MAX_THROUGH};
+use super::judge::Judge;
 use super::model::PoseModel;
 use super::scene::{scene_indices, Context};
 use super::types::NOISE_SIGMAS;
@@ -136,13 +136,7 @@ fn fit_region(
     let t_scene_model = t_model_scene.inverse();
     // The one judge every method passes: a pose the scan sees through, that shows too little of
     // itself or that lies through the bin is no pose, and the next region is tried.
-    // A pose through the bin may be the part turned about an axis its region leaves open.
-    let (t_scene_model, evidence) = match judge.verdict(model, &t_scene_model) {
-        Err(refused) if judge.depth.through_supports(model, &t_scene_model) >= MAX_THROUGH => {
-            judge.turned_clear(object, model, &t_scene_model).ok_or(refused)?
-        }
-        verdict => verdict?,
-    };
+    let (t_scene_model, evidence) = judge.verdict(model, &t_scene_model)?;
     let indices = scene_indices(ctx.pts, model, &t_scene_model, checks.tol);
     laps.lap("verification");
     Ok(PoseEstimate::verified(

@@ -22,7 +22,6 @@ mod extension_tests;
 pub(crate) mod outline;
 #[cfg(test)]
 mod outline_tests;
-pub(crate) mod turned;
 
 use crate::error::{Error, Result};
 use crate::geometry::{Plane, Point};
@@ -60,7 +59,7 @@ const MAX_BEYOND: f64 = 0.5;
 /// The largest share of a pose's surface that may lie beyond the bin's floor or walls or the
 /// removed support planes (more than twice the tolerance): a part rests on them, it does not
 /// pass through them.
-pub(crate) const MAX_THROUGH: f64 = 0.02;
+const MAX_THROUGH: f64 = 0.02;
 /// The fewest confirmed outline cells for the outline test to decide.
 const MIN_OUTLINE: usize = 4;
 

@@ -15,9 +15,6 @@
 
 use super::fit::{thinned_sigma, FREE_RATIO};
 use crate::geometry::Point;
-use crate::pose::judge::turned::{
-    on_model, turn_about, weak_axis, MARGIN_SHARE, MIN_MARGIN, REFINE_POINTS, TURNS_DEG, WEAK_SHARE,
-};
 use crate::pose::judge::Judge;
 use crate::pose::model::{near_turns, Constraints, PoseModel};
 use crate::pose::surface::{plane_residuals, thin};
@@ -25,9 +22,16 @@ use crate::pose::types::{Alternative, FeatureEvidence, TrustParams};
 use crate::registration::{icp, Convergence, IcpConfig};
 use nalgebra::{Isometry3, Translation3, Unit, UnitQuaternion, Vector3};
 
+/// The turn about the weakest axis is probed when the claimed points constrain it less than this
+/// share of the next weakest: the seen surface is then nearly a surface of revolution about it.
+const WEAK_SHARE: f64 = 0.3;
 /// A weak axis within about 10° of the axis of a near-symmetry of the part, or of its continuous
 /// symmetry, is that axis.
 const AXIS_COS: f64 = 0.985;
+/// The turns probed, degrees (both ways, and the half turn).
+const TURNS_DEG: [f64; 11] = [
+    30.0, 60.0, 90.0, 120.0, 150.0, 180.0, -30.0, -60.0, -90.0, -120.0, -150.0,
+];
 /// The slides probed along a weak slide, as shares of the part's diameter (both ways).
 const SLIDES: [f64; 3] = [0.05, 0.1, 0.2];
 /// A move the bin refuses is halved back towards the pose this many times (a 30° turn comes
@@ -36,10 +40,18 @@ const BIN_HALVINGS: usize = 4;
 /// A move may put this much more of the part's surface through the bin than the pose does:
 /// about two of the judge's 500 bin probes, the refinement's own jitter.
 pub(super) const BIN_SLACK: f64 = 0.005;
+/// Claimed points each turn is refined on, at most.
+const REFINE_POINTS: usize = 300;
 /// Claimed points and ICP iterations of the quick look that drops, before the full
 /// refinement, a move that falls back onto the pose or onto a known alternative.
 const QUICK_POINTS: usize = 150;
 const QUICK_ITERATIONS: usize = 5;
+/// A turn explains the claimed points as well when it loses at most this many of them from the
+/// judge's tolerance — twice the 15 points at which a feature counts as in view, as the trust
+/// stage's margin — …
+const MIN_MARGIN: f64 = 30.0;
+/// … or this share of them, when more …
+const MARGIN_SHARE: f64 = 0.02;
 /// … with residuals at most this many times the pose's own (or [`FREE_RATIO`] noise floors) …
 const SIGMA_SLACK: f64 = 1.5;
 /// … and it puts hardly more surface where the sensor saw free space: at most this share of
@@ -59,7 +71,11 @@ impl Move {
     /// The move scaled by `s` (the same axis, `s` times the angle; `s` times the slide), model frame.
     fn scaled(&self, s: f64) -> Isometry3<f64> {
         match *self {
-            Move::Turn(axis, x, angle) => turn_about(&axis, &x, s * angle),
+            Move::Turn(axis, x, angle) => {
+                Translation3::from(x.coords)
+                    * UnitQuaternion::from_axis_angle(&axis, s * angle)
+                    * Translation3::from(-x.coords)
+            }
             Move::Slide(v) => Isometry3::from_parts(Translation3::from(s * v), UnitQuaternion::identity()),
         }
     }
@@ -77,6 +93,35 @@ fn same_pose(model: &PoseModel, trust: &TrustParams, a: &Isometry3<f64>, b: &Iso
 pub(super) fn weak_slide(q: &[(Point, Vector3<f64>)]) -> Option<Unit<Vector3<f64>>> {
     let (values, vectors) = Constraints::of(q).slides();
     (values[1] > 0.0 && values[0] <= WEAK_SHARE * values[1]).then(|| Unit::new_normalize(vectors[0]))
+}
+
+/// The weakest rotation axis of the point-to-plane constraints of `q` (model-frame points with
+/// their model normals) and a point on it, model frame, when it is weak (see [`WEAK_SHARE`]).
+pub(super) fn weak_axis(q: &[(Point, Vector3<f64>)]) -> Option<(Unit<Vector3<f64>>, Point)> {
+    let c = Constraints::of(q);
+    let (values, vectors) = c.turns()?;
+    let (w0, w1) = (values[0], values[1]);
+    if !(w1 > 0.0) || w0 > WEAK_SHARE * w1 {
+        return None;
+    }
+    Some((Unit::new_normalize(vectors[0]), c.axis_point(&vectors[0])?))
+}
+
+/// Claimed points within `reach` of the posed model, with its normals, model frame.
+fn on_model(claimed: &[Point], model: &PoseModel, t: &Isometry3<f64>, reach: f64) -> Vec<(Point, Vector3<f64>)> {
+    let target = model.fine_target();
+    let Some(normals) = target.normals() else {
+        return Vec::new();
+    };
+    let inv = t.inverse();
+    claimed
+        .iter()
+        .filter_map(|p| {
+            let q = inv * p;
+            let (j, _) = target.search().nearest_within(&[q.x, q.y, q.z], reach * reach)?;
+            Some((q, normals[j]))
+        })
+        .collect()
 }
 
 /// In one pass over the claimed points: how many lie within `tol` of the posed model, and the

@@ -1,10 +1,9 @@
 //! Moves the scan cannot see: an elbow whose one leg lies under a slab can be turned about the
 //! other (seen) leg's axis without the scan telling; with both legs in view, it cannot.
 
-use super::unseen_turns::{unseen_turns, unseen_turns_of_all, weak_slide, BIN_SLACK};
+use super::unseen_turns::{unseen_turns, unseen_turns_of_all, weak_axis, weak_slide, BIN_SLACK};
 use crate::mesh::parts::{elbow, FittingParams};
 use crate::mesh::{sample_surface, test_box, Density, TriMesh};
-use crate::pose::judge::turned::weak_axis;
 use crate::pose::tests::{self, config, tee_model, top_view};
 use crate::pose::*;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
