@@ -225,3 +225,34 @@ def test_a_lift_on_a_wrong_pose_says_which_case(sim):
     kind, why = judged(PoseTruth(instance=11, rotation_error_deg=0.1, translation_error_mm=0.1), 5)
     assert kind == "wrong pose" and why == "part 5 left the bin, but the located pose was part 11's", why
     assert judged(PoseTruth(instance=11, rotation_error_deg=0.1, translation_error_mm=0.1), 11) == (None, None)
+
+
+def test_a_lift_on_a_pose_off_by_a_turn_the_grasp_does_not_care_about_is_a_pick(sim):
+    """A pose 10° off about the tee's run axis, gripped across the run: on the part as it truly
+    lies the grip is one of the cell's grasps (the same grip turned about the run), so the lift is
+    a pick; gripped across the side branch, the same error puts the fingers 10° round the run's
+    axis off the branch — a lift on a grasp the truth would not allow, a wrong pose."""
+    from binpick.cell.records import PoseTruth, grasp_fits_truth, pick_outcome
+    from binpick.transforms import inverse
+
+    cfg = sim.cell.config
+    (pid,) = sim.pile.ids.tolist()
+    T_true = sim.pile.pose(pid)
+    judged = sim.judge(T_true)
+    np.testing.assert_allclose(judged.T_base_truth, T_true)  # the truth carries the true pose
+    T_loc = _turned(T_true, (1.0, 0.0, 0.0), 10.0)
+    tcp = {name: inverse(G)[:3, 3] for name, G in cfg.grasps.items()}
+    run = next(n for n, p in tcp.items() if abs(p[1]) < 1.0 and abs(p[2]) < 1.0 and abs(p[0]) > 20.0)
+    side = next(n for n, p in tcp.items() if abs(p[1]) > 20.0 and abs(p[0]) < 1.0)
+    truth = PoseTruth(instance=pid, rotation_error_deg=10.0, translation_error_mm=0.0, T_base_truth=T_true)
+    assert not truth.pick_grade
+    across_run = grasp_fits_truth(cfg, T_loc @ inverse(cfg.grasps[run]), truth)
+    across_side = grasp_fits_truth(cfg, T_loc @ inverse(cfg.grasps[side]), truth)
+    assert across_run is True and across_side is False
+    assert pick_outcome(truth, pid, across_run) == (None, None)
+    kind, why = pick_outcome(truth, pid, across_side)
+    assert kind == "wrong pose" and "none of the cell's grasps" in why, why
+    assert (
+        grasp_fits_truth(cfg, np.eye(4), PoseTruth(instance=pid, rotation_error_deg=0.0, translation_error_mm=9.0))
+        is None
+    )

@@ -62,8 +62,10 @@ from .records import (
     Skipped,
     emptied_record,
     failed_record,
+    grasp_fits_truth,
     judge_located,
     located_line,
+    pick_outcome,
     pose_trust,
     with_collisions,
     with_earlier,
@@ -494,7 +496,8 @@ class Cell:
         if self.clock is not None:
             times["phys.motion"] = _phys_ms(self.clock, c3)
         picked = self.truth.take_picked() if self.truth is not None else None
-        failure, error = self.judge_pick(located, held, picked)
+        fits = grasp_fits_truth(self.config, plan.T_base_gripper, located.truth)
+        failure, error = self.judge_pick(located, held, picked, fits)
         ok = failure is None
         times["total"] = _ms_since(t0)
         self.progress(
@@ -517,6 +520,7 @@ class Cell:
             held=held,
             truth=located.truth,
             picked_instance=picked,
+            grasp_fits_truth=fits,
             error=error,
             failure=failure,
             timings=MappingProxyType(times),
@@ -541,26 +545,15 @@ class Cell:
         return located, plan
 
     def judge_pick(
-        self, located: Located, held: Optional[bool], picked: Optional[int]
+        self, located: Located, held: Optional[bool], picked: Optional[int], fits: Optional[bool] = None
     ) -> tuple[Optional[str], Optional[str]]:
         """The kind of failure of the pick (None when it succeeded, see :attr:`PickRecord.failure`)
-        and why; remembers where the gripper closed on nothing."""
+        and why; ``fits``: whether the grasp is one of the cell's on the true pose
+        (:func:`~binpick.cell.records.grasp_fits_truth`); remembers where the gripper closed on nothing."""
         if held is False:
             self._empty_grips.append(located.T_base_object.copy())
             return "empty grip", "the gripper closed on nothing (no part between the fingers)"
-        if self.truth is None:
-            return None, None
-        truth = located.truth
-        ok = picked is not None and truth is not None and picked == truth.instance and truth.pick_grade
-        if ok:
-            return None, None
-        if picked is None:
-            return "nothing lifted", "no part left the bin"
-        if truth is None or picked != truth.instance:
-            owner = "no part" if truth is None else f"part {truth.instance}"
-            return "wrong pose", f"part {picked} left the bin, but the located pose was {owner}'s"
-        off = f"{truth.rotation_error_deg:.1f}°, {truth.translation_error_mm:.1f} mm"
-        return "wrong pose", f"part {picked} left the bin, but its located pose was {off} off (not pick-grade)"
+        return (None, None) if self.truth is None else pick_outcome(located.truth, picked, fits)
 
     def check_plan(self, plan: PickPlan) -> dict[str, tuple[np.ndarray, bool]]:
         """The moves of ``plan`` as :meth:`pick` makes them, checked whole before the first

@@ -26,6 +26,8 @@ __all__ = [
     "FAILURE_KINDS",
     "with_collisions",
     "judge_located",
+    "grasp_fits_truth",
+    "pick_outcome",
     "PICK_GRADE_DEG",
     "PICK_GRADE_MM",
     "CYCLE_STAGES",
@@ -39,7 +41,8 @@ FAILURE_KINDS: tuple[str, ...] = (
     "no grasp",  # parts located, none with a usable grasp
     "empty grip",  # the gripper closed on nothing
     "nothing lifted",  # the gripper held, but no part left the bin
-    "wrong pose",  # a part left the bin, but the located pose was not pick-grade or not that part's
+    "wrong pose",  # a part left the bin, but the located pose was not that part's, or not pick-grade
+    # with a grasp none of the cell's on the part as it lay (grasp_fits_truth)
     "fault",  # a device fault or safety refusal stopped the arm
     "collision",  # the gripper touched a part other than the one it grasped, or the bin
 )
@@ -140,12 +143,15 @@ class ScanResult:
 @dataclass(frozen=True)
 class PoseTruth:
     """A located pose judged against ground truth: the nearest true instance, the errors
-    (minimised over the part's symmetries) and whether they are pick-grade (under
-    :data:`PICK_GRADE_DEG` and :data:`PICK_GRADE_MM`)."""
+    (minimised over the part's symmetries), whether they are pick-grade (under
+    :data:`PICK_GRADE_DEG` and :data:`PICK_GRADE_MM`) and the instance's true pose
+    (``T_base_truth``, when the truth gives it: what a grasp is judged against,
+    :func:`grasp_fits_truth`)."""
 
     instance: int
     rotation_error_deg: float
     translation_error_mm: float
+    T_base_truth: Optional[np.ndarray] = field(default=None, compare=False, repr=False)
 
     @property
     def pick_grade(self) -> bool:
@@ -288,8 +294,10 @@ def picks_per_hour(picked: int, cycle_times_s: Sequence[float]) -> Optional[floa
 class PickRecord:
     """What one pick attempt did.
 
-    ``success``: the part was lifted out (with ground truth: the removed part is the located one and
-    its pose was pick-grade); ``held``: what the gripper reported (None when it cannot tell);
+    ``success``: the part was lifted out (with ground truth: the removed part is the located one,
+    and its pose was pick-grade or the grasp is one of the cell's grasps on the part as it truly
+    lay — ``grasp_fits_truth``, :func:`grasp_fits_truth`: a pose the scan left off by a turn
+    or a slide the grip does not care about); ``held``: what the gripper reported (None when it cannot tell);
     ``error``: why the attempt failed, None on success; ``failure``: its kind, one of
     :data:`FAILURE_KINDS` (None on success); ``timings``: stage → ms (the whole attempt's, its
     nudges and the looks before and after them included); ``skipped``: the located parts passed
@@ -341,6 +349,7 @@ class PickRecord:
     free_axis_gripper: Optional[np.ndarray] = None
     collisions: tuple[Mapping[str, Any], ...] = ()
     bin_empty: bool = False
+    grasp_fits_truth: Optional[bool] = None
 
     @property
     def cycle_time_s(self) -> Optional[float]:
@@ -504,6 +513,36 @@ def emptied_record(i: int, scan: ScanResult, times: dict[str, float], looks: int
         scan=scan,
         bin_empty=True,
     )
+
+
+def grasp_fits_truth(config: Any, T_base_gripper: np.ndarray, truth: Optional[PoseTruth]) -> Optional[bool]:
+    """Whether the grasp ``T_base_gripper``, on the part where it truly lies (``truth.T_base_truth``),
+    is one of the cell's grasps (``config.ambiguity_matcher``: within the ambiguity tolerances,
+    modulo the part's symmetries and a turn about its near-symmetry axis) — the grip the cell
+    would have planned on the true pose, the test a grasp passes on every alternative of an
+    undecided pose; None without the true pose."""
+    if truth is None or truth.T_base_truth is None:
+        return None
+    T_gripper_object = inverse(np.asarray(T_base_gripper, dtype=np.float64)) @ truth.T_base_truth
+    return bool(config.ambiguity_matcher.matches(T_gripper_object[None])[0])
+
+
+def pick_outcome(
+    truth: Optional[PoseTruth], picked: Optional[int], fits: Optional[bool]
+) -> tuple[Optional[str], Optional[str]]:
+    """With ground truth, the kind of failure of a pick whose located pose was judged ``truth``,
+    that lifted the part ``picked`` (None: none) with a grasp that ``fits`` the true pose or not
+    (:func:`grasp_fits_truth`), and why; (None, None) for a pick that succeeded."""
+    if picked is not None and truth is not None and picked == truth.instance and (truth.pick_grade or fits):
+        return None, None
+    if picked is None:
+        return "nothing lifted", "no part left the bin"
+    if truth is None or picked != truth.instance:
+        owner = "no part" if truth is None else f"part {truth.instance}"
+        return "wrong pose", f"part {picked} left the bin, but the located pose was {owner}'s"
+    off = f"{truth.rotation_error_deg:.1f}°, {truth.translation_error_mm:.1f} mm"
+    grasp = "" if fits is None else " and the grasp is none of the cell's grasps on the part as it lay"
+    return "wrong pose", f"part {picked} left the bin, but its located pose was {off} off (not pick-grade){grasp}"
 
 
 def judge_located(truth: Any, model: Any, result: Any, T: np.ndarray) -> PoseTruth:

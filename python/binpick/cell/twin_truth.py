@@ -69,7 +69,9 @@ class TwinTruth:
             T_bo = np.asarray(part["T_base_object"], dtype=np.float64)
             deg, mm = self.model.pose_error(T_base_object, T_bo, turn_about=turn_about)
             if best is None or mm < best.translation_error_mm:
-                best = PoseTruth(instance=int(part["id"]), rotation_error_deg=deg, translation_error_mm=mm)
+                best = PoseTruth(
+                    instance=int(part["id"]), rotation_error_deg=deg, translation_error_mm=mm, T_base_truth=T_bo
+                )
         if best is None:
             raise NoObjectFound("the twin's bin is empty")
         return best

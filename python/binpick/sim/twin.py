@@ -613,7 +613,7 @@ class TwinWorld:
         for pid, T_bo in zip(self.pile.ids, self.pile.poses):
             deg, mm = self.model.pose_error(T_base_object, T_bo, turn_about=turn_about)
             if best is None or mm < best.translation_error_mm:
-                best = PoseTruth(instance=int(pid), rotation_error_deg=deg, translation_error_mm=mm)
+                best = PoseTruth(instance=int(pid), rotation_error_deg=deg, translation_error_mm=mm, T_base_truth=T_bo)
         if best is None:
             raise NoObjectFound("the simulated bin is empty")
         return best

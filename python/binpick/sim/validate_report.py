@@ -4,8 +4,10 @@ how they are defined, the table the command prints, ``report.json`` and ``summar
 Definitions (over the run's cycles: pick attempts; the look that finds a bin empty is none):
 
 * success rate — cycles whose outcome is ``picked`` (the part lifted out, the located one, its
-  pose pick-grade, nothing touched on the way) over all cycles, with the Wilson score interval
-  at 95 % (:func:`wilson`);
+  pose pick-grade or the grasp one of the cell's on the part as it truly lay, nothing touched on
+  the way) over all cycles, with the Wilson score interval at 95 % (:func:`wilson`);
+* picked off pose — picks whose located pose was not pick-grade, but off by a turn or a slide
+  the grasp does not care about (:func:`binpick.cell.records.grasp_fits_truth`);
 * bins emptied — piles whose every part left the bin;
 * failures by kind — the cycles of each :data:`binpick.cell.FAILURE_KINDS`;
 * cycle time — each cycle's physical ``cycle_time_s`` (:func:`binpick.cell.records.cycle_stages_s`:
@@ -87,6 +89,9 @@ def summarize(
         "parts_dropped": sum(int(p["dropped"]) for p in piles),
         "parts_removed": sum(int(p["removed"]) for p in piles),
         "failures": {k: sum(r["outcome"] == k for r in records) for k in kinds},
+        # Picks whose located pose was off the truth (not pick-grade) by a turn or a slide the grasp
+        # does not care about: the grasp, on the part as it lay, is one of the cell's.
+        "picked_off_pose": sum(r["outcome"] == "picked" and r.get("pick_grade") is False for r in records),
         "failure_pictures": dict(pictures or {}),
         "cycle_time_s": None
         if not len(times)
@@ -131,6 +136,10 @@ def table(summary: Mapping[str, Any]) -> str:
         f"  bins emptied      {s['bins_emptied']} of {s['piles']} "
         f"({s['parts_removed']} of {s['parts_dropped']} parts removed)"
     )
+    if s.get("picked_off_pose"):
+        lines.append(
+            f"  picked off pose   {s['picked_off_pose']} (the pose not pick-grade; the grasp one of the cell's on the truth)"
+        )
     for kind, k in s["failures"].items():
         pic = s["failure_pictures"].get(kind)
         where = f"  (picture: {pic['file']}, seed {pic['seed']} cycle {pic['cycle']})" if pic else ""

@@ -117,6 +117,7 @@ def cycle_record(seed: int, pile_size: int, record: Any, *, cpu_s: Optional[floa
         "rotation_error_deg": None if t is None else t.rotation_error_deg,
         "translation_error_mm": None if t is None else t.translation_error_mm,
         "pick_grade": None if t is None else t.pick_grade,
+        "grasp_fits_truth": record.grasp_fits_truth,
         "confidence": record.confidence,
         "confidence_any": record.confidence_any,
         "orientation_decided": record.orientation_decided,
