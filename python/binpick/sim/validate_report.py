@@ -138,7 +138,7 @@ def table(summary: Mapping[str, Any]) -> str:
     )
     if s.get("picked_off_pose"):
         lines.append(
-            f"  picked off pose   {s['picked_off_pose']} (the pose not pick-grade; the grasp one of the cell's on the truth)"
+            f"  picked off pose   {s['picked_off_pose']} (not pick-grade; the grasp one of the cell's on the truth)"
         )
     for kind, k in s["failures"].items():
         pic = s["failure_pictures"].get(kind)
