@@ -374,6 +374,16 @@ def test_a_part_a_push_leaves_out_of_the_bin_is_a_collision_of_that_cycle():
         sim._out_of_bin([pid], path, 0.0)
         (event,) = sim.take_collisions()
         assert event["with"].startswith(f"part {pid}, pushed out of the bin")
+        assert sim.lost == [] and pid in sim.pile.ids  # above its own bin: it falls back in
+        thrown = lifted.copy()
+        thrown[:3, 3] = (400.0, 4000.0, -5000.0)  # over a wall and falling: the physics threw it out
+        sim.pile.pose = lambda i: thrown if i == pid else None
+        sim._out_of_bin([pid], path, 0.0)
+        (event,) = sim.take_collisions()
+        assert "(400, 4000, -5000) mm" in event["with"]
+        assert sim.lost == [pid] and pid not in sim.pile.ids and sim.parts_left() == 0
+        sim._out_of_bin([pid], path, 0.0)  # recorded once, not again with the next push
+        assert sim.take_collisions() == []
 
 
 # --------------------------------------------------------------------------- pushes the physics predicts

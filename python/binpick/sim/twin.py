@@ -205,6 +205,9 @@ class TwinWorld:
         #: (the motion's start).
         self.collisions: list[dict] = []
         self._new_collisions: list[dict] = []
+        #: The parts a push threw over a wall or through the floor, in order: out of the pile
+        #: (and of the cell's reach), neither picked nor left in the bin.
+        self.lost: list[int] = []
         pts = np.asarray(model.points, dtype=np.float64)
         self._contact_points = pts[:: max(1, len(pts) // CONTACT_POINTS)]
         #: Every sweep of the closed, empty gripper through the bin the physics ran, in order.
@@ -554,7 +557,10 @@ class TwinWorld:
     def _out_of_bin(self, moved: list[int], path: np.ndarray, opening: float) -> None:
         """Records a collision for each of the parts ``moved`` by the push along ``path`` that
         came to rest out of the bin: over a wall, or higher above the rim than the part is long
-        (jammed against a wall and forced up it — a push a real arm would have crushed it in)."""
+        (jammed against a wall and forced up it — a push a real arm would have crushed it in). A
+        part over a wall or below the floor (thrown out, or through it: the physics squeezed it
+        between the fingers and the bin) leaves the pile, into :attr:`lost`: it is recorded once,
+        not again with every later push that finds it still falling."""
         lo, hi = (np.asarray(b, dtype=float) for b in self.layout.bin.bounds)
         T_fg = inverse(self.gripper_geometry.T_flange_gripper)
         for pid in moved:
@@ -575,6 +581,9 @@ class TwinWorld:
             self.collisions.append(event)
             self._new_collisions.append(event)
             self.progress("COLLISION", f"the push left {event['with']}")
+            if not ((c[:2] >= lo[:2]).all() and (c[:2] <= hi[:2]).all()) or c[2] < lo[2] - self.model.diameter:
+                self.pile.remove(pid)
+                self.lost.append(pid)
 
     def settle_pending(self, contacts: bool = True) -> None:
         """Runs the gripper's queued sweeps through the pile, takes a released part out of the

@@ -189,6 +189,7 @@ def run_pile(model: Any, spec: PileSpec) -> dict:
         setup_cpu = time.process_time() - cpu0
         report = sim.cell.run(ATTEMPTS_PER_PART * dropped + 1)
         left = sim.parts_left()
+        lost = len(sim.lost)
         end = (time.process_time(), time.perf_counter())
         spans = clock.spans(end)
         bin_bounds = sim.cell.config.bin_bounds
@@ -217,8 +218,10 @@ def run_pile(model: Any, spec: PileSpec) -> dict:
         "seed": spec.seed,
         "pile_size": spec.pile_size,
         "dropped": dropped,
-        "removed": dropped - left,
-        "emptied": left == 0,
+        "removed": dropped - left - lost,
+        # Thrown out of the bin by a push (a collision of the cycle that pushed): not removed.
+        "lost": lost,
+        "emptied": left == 0 and lost == 0,
         "cycles": len(cycles),
         "picked": sum(r.success for r in cycles),
         "failures": {
