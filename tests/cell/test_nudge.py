@@ -241,6 +241,23 @@ def test_a_part_against_a_wall_leaning_away_from_it_is_pushed_over_towards_the_w
         assert nudge.plan_nudge(cfg, elsewhere, nothing, T_now, tried=[first]).heading_deg == pytest.approx(
             -90.0, abs=1.0
         )
+        # Pushed each way in turn and found each time where it was (the pushes moved it less than
+        # PREDICT_MIN_MOVE_MM), no way is tried twice: the ways run out, and the refusal says why.
+        made = [first]
+        for _ in range(nudge.NUDGE_DIRECTIONS + 1):
+            try:
+                made.append(nudge.plan_nudge(cfg, against_wall(20.0), nothing, T_now, tried=made))
+            except nudge.NudgeRefused as exc:
+                assert "pushed that way already, it did not move" in str(exc)
+                break
+        else:
+            raise AssertionError("the same ways were tried again")
+        headings = [p.heading_deg for p in made]
+        assert all(
+            abs(math.remainder(a - b, 360.0)) >= nudge.RETRY_APART_DEG
+            for i, a in enumerate(headings)
+            for b in headings[:i]
+        )
         assert abs(heading(against_wall(-20.0)) + 90.0) > 30.0  # leaning towards the wall already
         assert abs(heading(against_wall(20.0, gap=60.0)) + 90.0) > 30.0  # room to push it off the wall
         flat = np.eye(4)

@@ -38,7 +38,8 @@ away from that wall (by ``LEAN_MM`` or more past its bottom) is pushed towards t
 push from the wall's side cannot start, a push along the wall only slides it, and every approach
 to its leaning top within the tool-tilt limit comes from the wall's side; pushed over towards
 the wall, it leans the other way and is grasped from the open side. A part pushed once and
-still blocked is pushed another way next (``RETRY_APART_DEG``).
+still blocked is pushed another way next (``RETRY_APART_DEG``); a way that moved it less than
+``PREDICT_MIN_MOVE_MM`` (the push met a wall, or the part only rocked) is not tried again for it.
 
 - every pose within the workspace and the tool-attitude limit, the whole sequence from the arm's
   pose now within the approach and push rules (:mod:`binpick.devices.safety`, rules 3 and 5);
@@ -627,7 +628,8 @@ def plan_nudge(
     scan's points (base frame); ``T_now``: the arm's flange pose now; ``tried``: the nudges
     already made in this pick — a direction within :data:`RETRY_APART_DEG` of one that already
     pushed this part (a nudged part within half its diameter of here) and left it blocked is
-    tried last, after the others."""
+    tried last, after the others, and not at all when that push moved no point of the part by
+    :data:`PREDICT_MIN_MOVE_MM` (the same push again does the same nothing)."""
     T, pts, T_now = plan_inputs(config, T_base_object, scene, T_now, "T_now")
     model = config.model
     verts = _vertices(config, T)
@@ -635,9 +637,14 @@ def plan_nudge(
     tip_z, reach = _push_height(config, verts), _closed_reach(config)
     why: list[str] = []
     directions = nudge_directions(config, centre, first=_topple(config, verts, reach))
-    before = [p.direction for p in tried if np.linalg.norm(p.T_base_object[:2, 3] - T[:2, 3]) < model.diameter / 2]
+    same = [p for p in tried if np.linalg.norm(p.T_base_object[:2, 3] - T[:2, 3]) < model.diameter / 2]
+    before = [p.direction for p in same]
     cos_apart = math.cos(math.radians(RETRY_APART_DEG))
     directions.sort(key=lambda d: any(float(d @ b) > cos_apart for b in before))  # stable: the order otherwise kept
+    stuck = [p.direction for p in same if _moved(part, p.T_base_object, T) < PREDICT_MIN_MOVE_MM]
+    for d in stuck:
+        why.append(f"{math.degrees(math.atan2(d[1], d[0])):.0f}°: pushed that way already, it did not move")
+    directions = [d for d in directions if not any(float(d @ b) > cos_apart for b in stuck)]
     # A part lying on the floor slides as far as it is pushed: never into a wall (the arm would
     # crush it there). One standing topples, and may be pushed over towards a wall.
     footprint = part[:, :2] if _lies_flat(config, verts) else None
@@ -663,6 +670,14 @@ def plan_nudge(
         f"no nudge of the {model.name} at ({T[0, 3]:.1f}, {T[1, 3]:.1f}, {T[2, 3]:.1f}) mm passes the checks "
         f"({'; '.join(why)}); nothing was sent"
     )
+
+
+def _moved(part: np.ndarray, T_before: np.ndarray, T: np.ndarray) -> float:
+    """How far the part's points ``part`` (at ``T``, base frame) are from where they were at
+    ``T_before``, at most, mm."""
+    R = T_before[:3, :3] @ T[:3, :3].T
+    then = part @ R.T + (T_before[:3, 3] - R @ T[:3, 3])
+    return float(np.linalg.norm(then - part, axis=1).max())
 
 
 def _topple(config: CellConfig, verts: np.ndarray, reach: float) -> Optional[np.ndarray]:
