@@ -20,7 +20,7 @@ from binpick.cell.records import CYCLE_STAGES
 from binpick.cli import main
 from binpick.errors import InvalidInputError
 from binpick.sim import validate as v
-from binpick.sim.validate_report import summarize, wilson
+from binpick.sim.validate_report import summarize, table, wilson
 from binpick.sim.validate_workers import MEASURED, PileSpec, run_pile
 
 ESTIMATE = {"d_star": 12.0, "min_points": 500}
@@ -165,11 +165,20 @@ def test_the_report_figures_of_handcrafted_records():
 
     outcomes = ["picked"] * 8 + ["empty grip", "collision"]
     records = [rec(i // 5, i % 5 + 1, o, float(i + 1), 2.0) for i, o in enumerate(outcomes)]
+    for r, looks, nudges in zip(records, [1] * 8 + [4, 3], [0] * 8 + [2, 1]):
+        r.update(looks=looks, nudges=nudges, pick_grade=r["outcome"] != "picked" or r["cycle"] != 2)
     piles = [
         {"seed": 0, "dropped": 5, "removed": 5, "emptied": True, "cpu_s": 12.0},
-        {"seed": 1, "dropped": 5, "removed": 3, "emptied": False, "cpu_s": 13.0},
+        {"seed": 1, "dropped": 5, "removed": 3, "lost": 1, "emptied": False, "cpu_s": 13.0},
     ]
     s = summarize(records, piles)
+    # Two picks on a pose off the truth by what the grasp does not care about (cycle 2 of each pile).
+    assert s["picked_off_pose"] == 2
+    assert s["looks_per_cycle"] == pytest.approx(15 / 10) and s["nudges_per_cycle"] == pytest.approx(3 / 10)
+    assert s["parts_lost"] == 1
+    text = table(s)
+    assert "1.50 looks, 0.30 nudges" in text and "1 thrown out of the bin by a push" in text
+    assert "picked off pose   2" in text
     # Wilson 95 % for 8 of 10, by hand: p = 0.8, z² = 3.8415, centre = (0.8 + 0.19207) / 1.38415 = 0.71682,
     # half-width = 1.95996 · √(0.016 + 0.0096036) / 1.38415 = 0.22657 → 0.4902 .. 0.9434.
     assert s["success_rate"] == 0.8

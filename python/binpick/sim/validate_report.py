@@ -8,7 +8,9 @@ Definitions (over the run's cycles: pick attempts; the look that finds a bin emp
   the way) over all cycles, with the Wilson score interval at 95 % (:func:`wilson`);
 * picked off pose — picks whose located pose was not pick-grade, but off by a turn or a slide
   the grasp does not care about (:func:`binpick.cell.records.grasp_fits_truth`);
-* bins emptied — piles whose every part left the bin;
+* bins emptied — piles whose every part was picked out of the bin (a part a push threw out of it,
+  ``parts_lost``, is neither removed nor does its bin count as emptied);
+* looks and nudges per cycle — the scans and the pushes of the closed gripper a cycle took, on average;
 * failures by kind — the cycles of each :data:`binpick.cell.FAILURE_KINDS`;
 * cycle time — each cycle's physical ``cycle_time_s`` (:func:`binpick.cell.records.cycle_stages_s`:
   the hardware's time on the simulated cell's clock and binpick's compute): mean, median, 90th
@@ -88,6 +90,9 @@ def summarize(
         "bins_emptied": sum(bool(p["emptied"]) for p in piles),
         "parts_dropped": sum(int(p["dropped"]) for p in piles),
         "parts_removed": sum(int(p["removed"]) for p in piles),
+        "parts_lost": sum(int(p.get("lost", 0)) for p in piles),
+        "looks_per_cycle": _mean_of(records, "looks"),
+        "nudges_per_cycle": _mean_of(records, "nudges"),
         "failures": {k: sum(r["outcome"] == k for r in records) for k in kinds},
         # Picks whose located pose was off the truth (not pick-grade) by a turn or a slide the grasp
         # does not care about: the grasp, on the part as it lay, is one of the cell's.
@@ -122,6 +127,12 @@ def summarize(
     }
 
 
+def _mean_of(records: Sequence[Mapping[str, Any]], key: str) -> Optional[float]:
+    """The mean of ``key`` over the records that have it, or None."""
+    values = [float(r[key]) for r in records if r.get(key) is not None]
+    return float(np.mean(values)) if values else None
+
+
 def table(summary: Mapping[str, Any]) -> str:
     """The short table ``binpick validate`` prints."""
     s = summary
@@ -132,10 +143,13 @@ def table(summary: Mapping[str, Any]) -> str:
             f"  success rate      {s['success_rate']:.1%} ({s['picked']} of {s['cycles']}; "
             f"95 % interval {lo:.1%}-{hi:.1%})"
         )
+    lost = f"; {s['parts_lost']} thrown out of the bin by a push" if s.get("parts_lost") else ""
     lines.append(
         f"  bins emptied      {s['bins_emptied']} of {s['piles']} "
-        f"({s['parts_removed']} of {s['parts_dropped']} parts removed)"
+        f"({s['parts_removed']} of {s['parts_dropped']} parts removed{lost})"
     )
+    if s.get("looks_per_cycle") is not None and s.get("nudges_per_cycle") is not None:
+        lines.append(f"  per cycle         {s['looks_per_cycle']:.2f} looks, {s['nudges_per_cycle']:.2f} nudges")
     if s.get("picked_off_pose"):
         lines.append(
             f"  picked off pose   {s['picked_off_pose']} (not pick-grade; the grasp one of the cell's on the truth)"
