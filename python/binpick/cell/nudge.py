@@ -641,7 +641,7 @@ def plan_nudge(
     before = [p.direction for p in same]
     cos_apart = math.cos(math.radians(RETRY_APART_DEG))
     directions.sort(key=lambda d: any(float(d @ b) > cos_apart for b in before))  # stable: the order otherwise kept
-    stuck = [p.direction for p in same if _moved(part, p.T_base_object, T) < PREDICT_MIN_MOVE_MM]
+    stuck = [p.direction for p in same if _moved(config, p.T_base_object, T) < PREDICT_MIN_MOVE_MM]
     for d in stuck:
         why.append(f"{math.degrees(math.atan2(d[1], d[0])):.0f}°: pushed that way already, it did not move")
     directions = [d for d in directions if not any(float(d @ b) > cos_apart for b in stuck)]
@@ -672,12 +672,13 @@ def plan_nudge(
     )
 
 
-def _moved(part: np.ndarray, T_before: np.ndarray, T: np.ndarray) -> float:
-    """How far the part's points ``part`` (at ``T``, base frame) are from where they were at
-    ``T_before``, at most, mm."""
-    R = T_before[:3, :3] @ T[:3, :3].T
-    then = part @ R.T + (T_before[:3, 3] - R @ T[:3, 3])
-    return float(np.linalg.norm(then - part, axis=1).max())
+def _moved(config: CellConfig, T_before: np.ndarray, T: np.ndarray) -> float:
+    """About how far the part located at ``T`` has moved since it was at ``T_before``, mm: its
+    pose error (modulo its symmetries and a turn about its near-symmetry axis: a look places a
+    hidden keyway anywhere round its shaft, and a part turned by a symmetry has not moved), the
+    rotation counted at half the part's diameter."""
+    deg, mm = config.model.pose_error(T, T_before, turn_about=continuous_near_axis(config.model))
+    return mm + math.radians(deg) * config.model.diameter / 2
 
 
 def _topple(config: CellConfig, verts: np.ndarray, reach: float) -> Optional[np.ndarray]:
