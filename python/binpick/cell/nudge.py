@@ -628,8 +628,8 @@ def plan_nudge(
     scan's points (base frame); ``T_now``: the arm's flange pose now; ``tried``: the nudges
     already made in this pick — a direction within :data:`RETRY_APART_DEG` of one that already
     pushed this part (a nudged part within half its diameter of here) and left it blocked is
-    tried last, after the others, and not at all when that push moved no point of the part by
-    :data:`PREDICT_MIN_MOVE_MM` (the same push again does the same nothing)."""
+    tried last, after the others, and not at all when that push left the part where it was
+    (:func:`_moved` less than :data:`PREDICT_MIN_MOVE_MM`: the same push again does the same nothing)."""
     T, pts, T_now = plan_inputs(config, T_base_object, scene, T_now, "T_now")
     model = config.model
     verts = _vertices(config, T)
