@@ -242,7 +242,7 @@ def test_a_part_against_a_wall_leaning_away_from_it_is_pushed_over_towards_the_w
             -90.0, abs=1.0
         )
         # Pushed each way in turn and found each time where it was (the pushes moved it less than
-        # PREDICT_MIN_MOVE_MM), no way is tried twice: the ways run out, and the refusal says why.
+        # UNMOVED_MM), no way is tried twice: the ways run out, and the refusal says why.
         made = [first]
         for _ in range(nudge.NUDGE_DIRECTIONS + 1):
             try:
@@ -397,7 +397,8 @@ def test_a_shaft_located_again_with_its_keyway_turned_has_not_moved():
     slid = T.copy()
     slid[:3, 3] += 10.0 * along
     assert nudge._moved(cfg, T, slid) == pytest.approx(10.0, abs=0.01)
-    assert nudge._moved(cfg, T, turned((1.0, 0.0, 0.0), 10.0)) > nudge.PREDICT_MIN_MOVE_MM
+    assert nudge._moved(cfg, T, turned((1.0, 0.0, 0.0), 10.0)) > nudge.UNMOVED_MM
+    assert nudge._moved(cfg, T, turned((0.0, 0.0, 1.0), 90.0)) < nudge.UNMOVED_MM
 
 
 def test_a_part_a_push_leaves_out_of_the_bin_is_a_collision_of_that_cycle():

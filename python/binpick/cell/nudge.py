@@ -38,8 +38,8 @@ away from that wall (by ``LEAN_MM`` or more past its bottom) is pushed towards t
 push from the wall's side cannot start, a push along the wall only slides it, and every approach
 to its leaning top within the tool-tilt limit comes from the wall's side; pushed over towards
 the wall, it leans the other way and is grasped from the open side. A part pushed once and
-still blocked is pushed another way next (``RETRY_APART_DEG``); a way that moved it less than
-``PREDICT_MIN_MOVE_MM`` (the push met a wall, or the part only rocked) is not tried again for it.
+still blocked is pushed another way next (``RETRY_APART_DEG``); a way that did not move it
+(``UNMOVED_MM``: the push met a wall, or the part only rocked) is not tried again for it.
 
 - every pose within the workspace and the tool-attitude limit, the whole sequence from the arm's
   pose now within the approach and push rules (:mod:`binpick.devices.safety`, rules 3 and 5);
@@ -91,6 +91,10 @@ NUDGE_DIRECTIONS = 8
 #: A part pushed once and still blocked is pushed next in a direction at least this far from
 #: the first push's, where one passes the checks, degrees.
 RETRY_APART_DEG = 45.0
+#: A part located again within this of where a push found it (:func:`_moved`) did not move: the
+#: located pose's own scatter is a few tenths of a millimetre, and pushes that each inch a part
+#: along by more add up, mm.
+UNMOVED_MM = 2.0
 #: A part whose top (highest third) lies this far or more past its bottom (lowest third) leans, mm.
 LEAN_MM = 5.0
 #: The fingertips stay at least this far above the floor (beyond ``floor_clearance_mm``), mm.
@@ -629,7 +633,7 @@ def plan_nudge(
     already made in this pick — a direction within :data:`RETRY_APART_DEG` of one that already
     pushed this part (a nudged part within half its diameter of here) and left it blocked is
     tried last, after the others, and not at all when that push left the part where it was
-    (:func:`_moved` less than :data:`PREDICT_MIN_MOVE_MM`: the same push again does the same nothing)."""
+    (:func:`_moved` less than :data:`UNMOVED_MM`: the same push again does the same nothing)."""
     T, pts, T_now = plan_inputs(config, T_base_object, scene, T_now, "T_now")
     model = config.model
     verts = _vertices(config, T)
@@ -641,7 +645,7 @@ def plan_nudge(
     before = [p.direction for p in same]
     cos_apart = math.cos(math.radians(RETRY_APART_DEG))
     directions.sort(key=lambda d: any(float(d @ b) > cos_apart for b in before))  # stable: the order otherwise kept
-    stuck = [p.direction for p in same if _moved(config, p.T_base_object, T) < PREDICT_MIN_MOVE_MM]
+    stuck = [p.direction for p in same if _moved(config, p.T_base_object, T) < UNMOVED_MM]
     for d in stuck:
         why.append(f"{math.degrees(math.atan2(d[1], d[0])):.0f}°: pushed that way already, it did not move")
     directions = [d for d in directions if not any(float(d @ b) > cos_apart for b in stuck)]
