@@ -382,13 +382,9 @@ def _lies_flat(config: CellConfig, verts: np.ndarray) -> bool:
     broad side (its height no more than :data:`FLAT_RATIO` times its thinnest extent, its bottom
     within :data:`FLAT_FLOOR_MM` of the floor): pushed, it slides or rolls where it is pushed,
     as :func:`plan_separating` plans; a part standing up or lying on others topples instead."""
-    return float(np.ptp(verts[:, 2])) <= FLAT_RATIO * _thinnest(verts) and _on_floor(config, verts)
-
-
-def _thinnest(verts: np.ndarray) -> float:
-    """The part's thinnest extent (along its least principal axis; ``verts`` its vertices), mm."""
     centred = verts - verts.mean(axis=0)
-    return float(np.ptp(centred @ np.linalg.eigh(centred.T @ centred)[1][:, 0]))
+    thinnest = float(np.ptp(centred @ np.linalg.eigh(centred.T @ centred)[1][:, 0]))
+    return float(np.ptp(verts[:, 2])) <= FLAT_RATIO * thinnest and _on_floor(config, verts)
 
 
 def plan_separating(config: CellConfig, T_base_object: Any, scene: Any, T_now: Any) -> Optional[NudgePlan]:
@@ -656,7 +652,6 @@ def plan_nudge(
     # A part lying on the floor slides as far as it is pushed: never into a wall (the arm would
     # crush it there). One standing topples, and may be pushed over towards a wall.
     footprint = part[:, :2] if _lies_flat(config, verts) else None
-    thin = _thinnest(verts)
     for d in directions:
         s = (verts[:, :2] - centre) @ d
         touch = float(s.min()) - reach  # the TCP's place along d where the fingers meet the part
@@ -667,14 +662,6 @@ def plan_nudge(
             capped = {min(e, touch + room) for e in ends}
             ends = sorted((e for e in capped if e - touch >= SEPARATE_STEP_MM), reverse=True)
             problem = "the part would be pushed into the bin's wall" if not ends else None
-        else:
-            # Pushed over towards a wall, the part needs room to lie between the fingers and the
-            # wall: they stop its thinnest extent short of it (a flange leaning on the wall it was
-            # pushed over against was squeezed between them and thrown out of the bin).
-            room = _room(config, centre[None], d) - reach - thin - WALL_MARGIN_MM
-            capped = {min(e, room) for e in ends}
-            ends = sorted((e for e in capped if e - touch >= SEPARATE_STEP_MM), reverse=True)
-            problem = "the part would be squeezed against the bin's wall" if not ends else None
         for gap in NUDGE_START_MM:
             start = centre + (touch - gap) * d
             for past in ends:
