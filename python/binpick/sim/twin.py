@@ -558,9 +558,9 @@ class TwinWorld:
         """Records a collision for each of the parts ``moved`` by the push along ``path`` that
         came to rest out of the bin: over a wall, or higher above the rim than the part is long
         (jammed against a wall and forced up it — a push a real arm would have crushed it in). A
-        part over a wall or below the floor (thrown out, or through it: the physics squeezed it
-        between the fingers and the bin) leaves the pile, into :attr:`lost`: it is recorded once,
-        not again with every later push that finds it still falling."""
+        part over a wall or below the floor (thrown out of the bin, or through its floor) leaves the
+        pile, into :attr:`lost`: it is recorded once, not again with every later push that finds
+        it still falling."""
         lo, hi = (np.asarray(b, dtype=float) for b in self.layout.bin.bounds)
         T_fg = inverse(self.gripper_geometry.T_flange_gripper)
         for pid in moved:
