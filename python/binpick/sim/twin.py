@@ -568,7 +568,8 @@ class TwinWorld:
                 continue
             T = self.pile.pose(pid)
             c = (self._contact_points @ T[:3, :3].T + T[:3, 3]).mean(axis=0)
-            if (c[:2] >= lo[:2]).all() and (c[:2] <= hi[:2]).all() and c[2] <= hi[2] + self.model.diameter:
+            over_floor = bool((c[:2] >= lo[:2]).all() and (c[:2] <= hi[:2]).all())
+            if over_floor and lo[2] - self.model.diameter <= c[2] <= hi[2] + self.model.diameter:
                 continue
             event = {
                 "with": f"part {pid}, pushed out of the bin (to ({c[0]:.0f}, {c[1]:.0f}, {c[2]:.0f}) mm)",
@@ -581,7 +582,7 @@ class TwinWorld:
             self.collisions.append(event)
             self._new_collisions.append(event)
             self.progress("COLLISION", f"the push left {event['with']}")
-            if not ((c[:2] >= lo[:2]).all() and (c[:2] <= hi[:2]).all()) or c[2] < lo[2] - self.model.diameter:
+            if not over_floor or c[2] < lo[2]:
                 self.pile.remove(pid)
                 self.lost.append(pid)
 

@@ -74,8 +74,6 @@ def summarize(
     picked = sum(r["outcome"] == "picked" for r in records)
     lo, hi = wilson(picked, n)
     times = np.array([r["cycle_time_s"] for r in records if r.get("cycle_time_s") is not None], dtype=np.float64)
-    cpu = [r["cpu_s"] for r in records if r.get("cpu_s") is not None]
-    own = [r["binpick_cpu_s"] for r in records if r.get("binpick_cpu_s") is not None]
     pile_cpu = sum(float(p["cpu_s"]) for p in piles)
     kinds = [k for k in FAILURE_KINDS if any(r["outcome"] == k for r in records)]
     kinds += sorted({r["outcome"] for r in records} - set(FAILURE_KINDS) - {"picked"})
@@ -113,8 +111,8 @@ def summarize(
         if any(r.get("stage_s") for r in records)
         else None,
         "picks_per_hour": picks_per_hour(picked, times.tolist()),
-        "cpu_s_per_cycle": float(np.mean(cpu)) if cpu else None,
-        "binpick_cpu_s_per_cycle": float(np.mean(own)) if own else None,
+        "cpu_s_per_cycle": _mean_of(records, "cpu_s"),
+        "binpick_cpu_s_per_cycle": _mean_of(records, "binpick_cpu_s"),
         "cpu_s_total": pile_cpu,
         "cycles_per_core_hour": 3600.0 * n / pile_cpu if pile_cpu > 0 else None,
         "emulator_failures": [f for p in piles for f in p.get("emulator_failures", [])],
